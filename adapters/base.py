@@ -1,0 +1,62 @@
+"""The adapter contract: the same small set of hooks for every solver (cf. LLNL Smith's BasePhysics).
+
+Hook order, once:      setup() -> [restart(path)] -> stable_dt()
+Hook order, per coupled step n -> n+1 (driven by the coupler, see orchestrator.coupler):
+    predict(dt)        internal + external forces, predictor velocity v* = v^{n-1/2} + dt M^-1 f
+    interface()        what the coupler needs to build the constraints (empty when uncoupled)
+    correct(impulse)   v^{n+1/2} = v* + M^-1 impulse; boundary conditions; positions, stresses
+    remap(fractions)   background only: advection restricted by the bodies' volume fractions
+    stable_dt()        the solver's own explicit limit for the next step (collective, same on all ranks)
+    diagnostics()      mass, momentum, energies (collective; meaningful on the group root)
+and when the coupler asks: write(index, step, time), checkpoint(path).
+Every hook is collective over the solver group's communicator `self.comm`.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from pathlib import Path
+
+import numpy as np
+
+
+class SolverAdapter(ABC):
+    role: str = ""
+
+    def __init__(self, comm, case: dict, out_dir: Path):
+        self.comm = comm
+        self.case = case
+        self.out_dir = Path(out_dir)
+
+    @abstractmethod
+    def setup(self) -> None: ...
+
+    @abstractmethod
+    def stable_dt(self) -> float: ...
+
+    @abstractmethod
+    def predict(self, dt: float, step: int, time: float) -> None: ...
+
+    def interface(self) -> dict[str, np.ndarray]:
+        return {}
+
+    @abstractmethod
+    def correct(self, impulse: dict[str, np.ndarray] | None = None) -> None: ...
+
+    def remap(self, fractions: np.ndarray | None = None) -> None:
+        return None
+
+    @abstractmethod
+    def diagnostics(self) -> dict[str, float]: ...
+
+    @abstractmethod
+    def write(self, index: int, step: int, time: float) -> None: ...
+
+    @abstractmethod
+    def checkpoint(self, path: Path) -> None: ...
+
+    @abstractmethod
+    def restart(self, path: Path) -> None: ...
+
+    @abstractmethod
+    def diagnostic_names(self) -> list[str]:
+        """Fixed order of the values diagnostics() returns (sent to the coupler as one float64 buffer)."""

@@ -1,0 +1,78 @@
+"""Adapter of the explicit Lagrangian FE solver (solvers.lagrange). Run by the launcher as
+`python -m adapters.lagrange --case DIR --out DIR --roles coupler,lagrange --role lagrange`."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from adapters.base import SolverAdapter
+from adapters.registry import register
+
+
+def _pad3(a: np.ndarray) -> np.ndarray:
+    if a.shape[1] == 3:
+        return a
+    return np.hstack([a, np.zeros((len(a), 3 - a.shape[1]))])
+
+
+@register
+class LagrangeAdapter(SolverAdapter):
+    role = "lagrange"
+
+    def setup(self) -> None:
+        from orchestrator import output
+        from solvers.lagrange.solver import LagrangeSolver
+
+        self.solver = LagrangeSolver(self.comm, self.case)
+        self._dt = None
+        if self.comm.rank == 0:
+            output.write_mesh(self.out_dir, self.role, self.solver.global_cells, self.solver.cell_type)
+
+    def stable_dt(self) -> float:
+        return self.solver.stable_dt()
+
+    def predict(self, dt: float, step: int, time: float) -> None:
+        self._step, self._time = step, time
+        self.solver.predict(dt)
+
+    def interface(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def correct(self, impulse=None) -> None:
+        self.solver.correct(impulse, step=self._step, time=self._time)
+
+    def diagnostic_names(self) -> list[str]:
+        return list(self.solver.diagnostics())
+
+    def diagnostics(self) -> dict[str, float]:
+        return self.solver.diagnostics()
+
+    def write(self, index: int, step: int, time: float) -> None:
+        from orchestrator import output
+
+        s = self.solver
+        x = s.gather_nodes(s.x)
+        v = s.gather_nodes(s.v)
+        X = s.gather_nodes(s.X)
+        cells = {k: s.gather_cells(a) for k, a in s.cell_fields().items()}
+        if self.comm.rank == 0:
+            output.write_step(
+                self.out_dir, self.role, index, step, time, _pad3(x),
+                point_data={"velocity": _pad3(v), "displacement": _pad3(x - X)},
+                cell_data=cells,
+            )
+
+    def checkpoint(self, path: Path) -> None:
+        if self.comm.rank == 0:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
+        self.solver.checkpoint(path)
+
+    def restart(self, path: Path) -> None:
+        self.solver.restart(path)
+
+
+if __name__ == "__main__":
+    from adapters.runtime import serve
+
+    serve(LagrangeAdapter)

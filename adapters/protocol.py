@@ -1,0 +1,92 @@
+"""What the coupler and the solver groups share: how processes find their role, the command and
+reply buffers exchanged every step (numpy float64, never pickles), and how a failing rank reports.
+
+Process layout: one MPMD job `mpiexec -n 1 coupler : -n Na role_a : -n Nb role_b ...`. Every process
+is told its role and the ordered role list; COMM_WORLD is split by role and the coupler holds one
+intercommunicator per solver group (group root = rank 0 of that group).
+"""
+from __future__ import annotations
+
+import os
+import sys
+import traceback
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+COUPLER = "coupler"
+
+# Commands the coupler broadcasts to a solver group: float64[CMD_LEN]
+CMD_STEP, CMD_WRITE, CMD_CHECKPOINT, CMD_STOP = 1.0, 2.0, 3.0, 4.0
+CMD_LEN = 6  # [command, dt, step (after the step), time (after the step), output index, spare]
+
+# Reply of a group root to the coupler after every command: float64[REPLY_HEAD + n_diagnostics]
+REPLY_HEAD = 2  # [status (0 ok), stable dt for the next step]
+
+
+@dataclass
+class Placement:
+    role: str
+    roles: list[str]  # coupler first, then the solver roles of this job
+    world: object
+    comm: object  # this role's own communicator
+    inter: dict  # coupler: {solver role: intercomm}; solver: {"coupler": intercomm}
+
+
+def join(role: str, roles: list[str]) -> Placement:
+    """Split COMM_WORLD by role and connect every solver group to the coupler."""
+    from mpi4py import MPI
+
+    world = MPI.COMM_WORLD
+    comm = world.Split(roles.index(role), world.rank)
+    placed = world.allgather((role, comm.rank))
+    leader = {r: i for i, (r, sub_rank) in enumerate(placed) if sub_rank == 0}
+    inter = {}
+    if role == COUPLER:
+        for r in roles[1:]:
+            inter[r] = comm.Create_intercomm(0, world, leader[r], tag=100 + roles.index(r))
+    else:
+        inter[COUPLER] = comm.Create_intercomm(0, world, leader[COUPLER], tag=100 + roles.index(role))
+    return Placement(role, roles, world, comm, inter)
+
+
+def run_dir(out_dir: Path) -> Path:
+    """Run-control files (pids, error reports) that `immerse run` watches."""
+    return Path(out_dir) / ".run"
+
+
+def register_process(out_dir: Path, role: str, rank: int) -> None:
+    """Record pid -> (role, rank) so the launcher can name a rank that dies without a word (SIGKILL)."""
+    d = run_dir(out_dir) / "pids"
+    d.mkdir(parents=True, exist_ok=True)
+    tmp = d / f".{os.getpid()}.tmp"
+    tmp.write_text(f"{role} {rank}\n")
+    os.replace(tmp, d / str(os.getpid()))
+
+
+def report_failure(out_dir: Path, role: str, rank: int, message: str) -> None:
+    line = f"{role} rank {rank}: {message}".replace("\n", " ")
+    try:
+        d = run_dir(out_dir)
+        d.mkdir(parents=True, exist_ok=True)
+        (d / f"error_{role}_{rank}.txt").write_text(line + "\n")
+    finally:
+        print(f"immerse: {line}", file=sys.stderr, flush=True)
+
+
+def install_fault_handler(out_dir: Path, role: str, rank: int) -> None:
+    """An uncaught exception on any rank: report it by role and rank, then bring the whole job down."""
+
+    def hook(exc_type, exc, tb):
+        traceback.print_exception(exc_type, exc, tb, file=sys.stderr)
+        report_failure(out_dir, role, rank, f"{exc_type.__name__}: {exc}")
+        from mpi4py import MPI
+
+        MPI.COMM_WORLD.Abort(1)
+
+    sys.excepthook = hook
+
+
+def command(cmd: float, dt: float = 0.0, step: int = 0, time: float = 0.0, index: int = -1) -> np.ndarray:
+    return np.array([cmd, dt, step, time, index, 0.0], dtype=np.float64)

@@ -1,0 +1,46 @@
+"""Adapters register themselves by role name (as meshio's register_format does for formats).
+
+The orchestrator never branches on solver names: it asks this registry which module serves a role
+and which table of case.toml says a case uses it.
+"""
+from __future__ import annotations
+
+import importlib
+
+_ADAPTERS: dict[str, type] = {}
+# role -> (module that registers it, top-level case.toml table whose presence means "used")
+_MODULES: dict[str, tuple[str, str]] = {}
+
+
+def declare(role: str, module: str, case_table: str) -> None:
+    """Make a role known without importing its (heavy) module."""
+    _MODULES[role] = (module, case_table)
+
+
+def register(cls):
+    """Class decorator: `@register` on an adapter class with a `role` attribute."""
+    _ADAPTERS[cls.role] = cls
+    return cls
+
+
+def roles() -> list[str]:
+    return sorted(_MODULES)
+
+
+def module_of(role: str) -> str:
+    return _MODULES[role][0]
+
+
+def roles_used(case: dict) -> list[str]:
+    """Solver roles a validated case uses: only those are launched."""
+    return [r for r, (_, table) in sorted(_MODULES.items()) if table in case]
+
+
+def adapter_class(role: str) -> type:
+    if role not in _ADAPTERS:
+        importlib.import_module(_MODULES[role][0])
+    return _ADAPTERS[role]
+
+
+# The solvers this project ships. A new solver adds one line here and an adapter module.
+declare("lagrange", "adapters.lagrange", "lagrange")

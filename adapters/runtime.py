@@ -1,0 +1,85 @@
+"""The command loop every solver process runs: join the job, set up the adapter, then obey the
+coupler's commands until told to stop. One implementation for every solver role."""
+from __future__ import annotations
+
+import argparse
+import os
+from pathlib import Path
+
+import numpy as np
+
+from adapters import protocol as P
+
+
+def parse_args(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--case", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--roles", required=True, help="comma-separated: coupler first")
+    ap.add_argument("--role", required=True)
+    ap.add_argument("--restart", default=None)
+    return ap.parse_args(argv)
+
+
+def restart_file(manifest: Path, role: str) -> Path:
+    """The role's own state file named by a coupler checkpoint manifest."""
+    import h5py
+
+    with h5py.File(manifest, "r") as h:
+        rel = h.attrs[f"file_{role}"]
+    return Path(manifest).parent / str(rel)
+
+
+def serve(adapter_cls, argv=None) -> None:
+    from orchestrator.case import load_case
+
+    args = parse_args(argv)
+    out = Path(args.out)
+    place = P.join(args.role, args.roles.split(","))
+    rank = place.comm.rank
+    P.install_fault_handler(out, args.role, rank)
+    P.register_process(out, args.role, rank)
+
+    case = load_case(args.case)
+    adapter = adapter_cls(place.comm, case, out)
+    adapter.setup()
+    if args.restart:
+        adapter.restart(restart_file(Path(args.restart), args.role))
+    ic = place.inter[P.COUPLER]
+    names = adapter.diagnostic_names()
+    reply = np.zeros(P.REPLY_HEAD + len(names))
+
+    def answer(with_diagnostics: bool) -> None:
+        dt = adapter.stable_dt()
+        diag = adapter.diagnostics() if with_diagnostics else None
+        if rank == 0:
+            reply[0] = 0.0
+            reply[1] = dt
+            if diag is not None:
+                reply[P.REPLY_HEAD:] = [diag[n] for n in names]
+            ic.Send(reply, dest=0, tag=7)
+
+    if rank == 0:  # once, at start-up: the names of the diagnostics (pickled; not a hot path)
+        ic.send(names, dest=0, tag=6)
+    answer(True)
+    cmd = np.empty(P.CMD_LEN)
+    while True:
+        ic.Bcast(cmd, root=0)
+        c, dt, step, time, index = cmd[0], cmd[1], int(cmd[2]), cmd[3], int(cmd[4])
+        if c == P.CMD_STEP:
+            adapter.predict(dt, step, time)
+            adapter.correct(None)
+            adapter.remap(None)
+            answer(bool(cmd[5]))
+        elif c == P.CMD_WRITE:
+            adapter.write(index, step, time)
+            answer(False)
+        elif c == P.CMD_CHECKPOINT:
+            adapter.checkpoint(out / "checkpoints" / f"step_{step:08d}" / f"{args.role}.h5")
+            answer(False)
+        elif c == P.CMD_STOP:
+            answer(True)
+            break
+    # a clean exit: the launcher must not take this process's end for a failure
+    pidfile = P.run_dir(out) / "pids" / str(os.getpid())
+    pidfile.unlink(missing_ok=True)

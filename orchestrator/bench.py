@@ -1,0 +1,140 @@
+"""Benchmarks (`immerse bench NAME`): medians of repeated runs, written as JSON
+{"results": [{"name", "metric", "value", "unit", "params"}], "machine": {...}}. Not timed tests."""
+from __future__ import annotations
+
+import json
+import os
+import platform
+import subprocess
+import sys
+import time
+import tracemalloc
+from pathlib import Path
+
+import numpy as np
+
+BENCHES = {}
+
+
+def bench(name):
+    def deco(fn):
+        BENCHES[name] = fn
+        return fn
+
+    return deco
+
+
+def machine() -> dict:
+    return {"host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
+            "numpy": np.__version__, "processor": platform.processor() or platform.machine()}
+
+
+ELASTIC = {"model": "linear_elastic", "density": 7850.0, "youngs_modulus": 200e9, "poisson_ratio": 0.3}
+J2 = {"model": "johnson_cook", "density": 7830.0, "youngs_modulus": 206.9e9, "poisson_ratio": 0.3,
+      "yield_stress": 806e6, "hardening_modulus": 614e6, "hardening_exponent": 0.168,
+      "strain_rate_coefficient": 0.0089, "reference_strain_rate": 1.0, "thermal_exponent": 1.1,
+      "melt_temperature": 1813.15, "room_temperature": 293.15, "specific_heat": 460.0,
+      "taylor_quinney": 0.9}
+
+
+def lagrange_case(n: int, material: dict, velocity: float) -> dict:
+    """A cube of n^3 hexahedra compressed by a velocity on one face (plastic flow for J2)."""
+    return {
+        "name": "bench", "case_dir": ".",
+        "run": {"dimension": 3, "end_time": 1.0},
+        "materials": {"m": dict(material)},
+        "lagrange": {"bodies": [{"name": "cube", "material": "m",
+                                 "mesh": {"box": {"lower": [0, 0, 0], "upper": [0.01] * 3, "cells": [n] * 3}},
+                                 "initial_velocity": [f"{-velocity}*z/0.01", 0.0, 0.0]}]},
+        "boundaries": [],
+    }
+
+
+def time_lagrange(comm, case: dict, steps: int, repeats: int) -> tuple[float, int]:
+    """Median seconds per element-cycle (whole solver step: forces, update, BCs, sums)."""
+    from solvers.lagrange.solver import LagrangeSolver
+
+    s = LagrangeSolver(comm, case)
+    ne = s.n_cells_global
+    dt = 0.5 * s.stable_dt()
+    for _ in range(3):  # warm-up (compilation is cached, first touches)
+        s.predict(dt)
+        s.correct(None)
+    samples = []
+    for _ in range(repeats):
+        comm.Barrier()
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            s.predict(dt)
+            s.correct(None)
+        comm.Barrier()
+        samples.append((time.perf_counter() - t0) / (steps * ne))
+    return float(np.median(samples)), ne
+
+
+def memory_per_element(case: dict) -> float:
+    from mpi4py import MPI
+
+    from solvers.lagrange.solver import LagrangeSolver
+
+    tracemalloc.start()
+    s = LagrangeSolver(MPI.COMM_SELF, case)
+    s.predict(0.5 * s.stable_dt())
+    s.correct(None)
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+    return peak / s.n_cells_global
+
+
+@bench("lagrange")
+def bench_lagrange(out: Path, quick: bool = False) -> Path:
+    from mpi4py import MPI
+
+    sizes = [10, 22] if quick else [22, 47]  # ~1e4 and ~1e5 elements (22^3 = 10648, 47^3 = 103823)
+    results = []
+    for label, mat, vel in (("elastic", ELASTIC, 1.0), ("j2_johnson_cook", J2, 200.0)):
+        for n in sizes:
+            case = lagrange_case(n, mat, vel)
+            steps = max(5, int(2e6 / n**3)) if not quick else 5
+            sec, ne = time_lagrange(MPI.COMM_SELF, case, steps, repeats=5)
+            results.append({"name": f"lagrange_hex8_{label}", "metric": "time_per_element_cycle",
+                            "value": sec * 1e6, "unit": "us", "params": {"elements": ne, "ranks": 1,
+                                                                         "steps": steps, "repeats": 5}})
+        mem = memory_per_element(lagrange_case(sizes[-1], mat, vel))
+        results.append({"name": f"lagrange_hex8_{label}", "metric": "memory_per_element",
+                        "value": mem, "unit": "B", "params": {"elements": sizes[-1] ** 3}})
+    # 2-rank speed-up at the largest size, measured in one run of mpiexec -n 2 against 1 rank
+    for label, mat, vel in (("elastic", ELASTIC, 1.0),):
+        n = sizes[-1]
+        one = next(r for r in results if r["name"] == f"lagrange_hex8_{label}"
+                   and r["metric"] == "time_per_element_cycle" and r["params"]["elements"] == n**3)
+        two = _two_ranks(n, label)
+        results.append({"name": f"lagrange_hex8_{label}", "metric": "time_per_element_cycle",
+                        "value": two * 1e6, "unit": "us", "params": {"elements": n**3, "ranks": 2}})
+        results.append({"name": f"lagrange_hex8_{label}", "metric": "speedup_2_ranks",
+                        "value": one["value"] / (two * 1e6), "unit": "x", "params": {"elements": n**3}})
+    doc = {"results": results, "machine": machine()}
+    out.write_text(json.dumps(doc, indent=2))
+    return out
+
+
+def _two_ranks(n: int, label: str) -> float:
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    r = subprocess.run([str(mpiexec), "-n", "2", sys.executable, "-m", "orchestrator.bench", "worker",
+                        str(n), label], capture_output=True, text=True, env=env, check=True)
+    return float(r.stdout.strip().splitlines()[-1])
+
+
+def _worker(n: int, label: str) -> None:
+    from mpi4py import MPI
+
+    mat = {"elastic": ELASTIC, "j2_johnson_cook": J2}[label]
+    case = lagrange_case(n, mat, 1.0 if label == "elastic" else 200.0)
+    sec, _ = time_lagrange(MPI.COMM_WORLD, case, max(5, int(2e6 / n**3)), repeats=5)
+    if MPI.COMM_WORLD.rank == 0:
+        print(sec)
+
+
+if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
+    _worker(int(sys.argv[2]), sys.argv[3])

@@ -1,0 +1,234 @@
+"""The coupler: rank 0 of the job, owner of the time loop.
+
+Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land on
+end_time), commands every group to advance, and collects their next stable step and diagnostics.
+It decides when to write output (then rebuilds the XDMF/HDF5 index) and checkpoints, keeps the
+diagnostics history and, at the end, writes summary.json with the case's own check.
+Constraint coupling between groups (Lagrange multipliers) slots in between predict and correct.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import socket
+import sys
+import time as _time
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from adapters import protocol as P
+
+
+class Coupler:
+    def __init__(self, place, case: dict, out: Path, restart: str | None):
+        self.place = place
+        self.case = case
+        self.out = out
+        self.roles = place.roles[1:]
+        self.inter = place.inter
+        run = case["run"]
+        self.end_time = float(run["end_time"])
+        self.dt_scale = float(run.get("dt_scale", 0.9))
+        self.output_interval = float(run.get("output_interval", self.end_time / 20))
+        self.checkpoint_interval = run.get("checkpoint_interval")
+        self.max_steps = int(run.get("max_steps", 10_000_000))
+        self.diag_every = int(run.get("diagnostics_every", 1))
+        self.logf = open(out / "log.txt", "a")
+        self.names = {r: self.inter[r].recv(source=0, tag=6) for r in self.roles}
+        self.reply = {r: np.zeros(P.REPLY_HEAD + len(self.names[r])) for r in self.roles}
+        self.history_t: list[float] = []
+        self.history_step: list[int] = []
+        self.history: dict[str, list[np.ndarray]] = {r: [] for r in self.roles}
+        self.t = 0.0
+        self.step = 0
+        self.out_index = 0
+        self.ckpt_index = 1
+        self.dt_min = np.inf
+        self.dt_max = 0.0
+        self._receive_all()
+        self._record()
+        if restart:
+            self._load(Path(restart))
+
+    # ---- messaging -----------------------------------------------------------------------------
+    def log(self, msg: str) -> None:
+        line = f"[{_time.strftime('%H:%M:%S')}] {msg}"
+        self.logf.write(line + "\n")
+        self.logf.flush()
+        if not os.environ.get("IMMERSE_TTY"):
+            print(line, flush=True)
+
+    def _broadcast(self, cmd: np.ndarray) -> None:
+        from mpi4py import MPI
+
+        for r in self.roles:
+            self.inter[r].Bcast(cmd, root=MPI.ROOT)
+
+    def _receive_all(self) -> None:
+        for r in self.roles:
+            self.inter[r].Recv(self.reply[r], source=0, tag=7)
+            if self.reply[r][0] != 0.0:
+                raise RuntimeError(f"{r} reported failure status {self.reply[r][0]}")
+
+    def _record(self) -> None:
+        self.history_t.append(self.t)
+        self.history_step.append(self.step)
+        for r in self.roles:
+            self.history[r].append(self.reply[r][P.REPLY_HEAD:].copy())
+
+    # ---- output and checkpoints ----------------------------------------------------------------
+    def write_output(self) -> None:
+        from orchestrator import output
+
+        self._broadcast(P.command(P.CMD_WRITE, step=self.step, time=self.t, index=self.out_index))
+        self._receive_all()
+        output.write_index(self.out)
+        self.out_index += 1
+
+    def checkpoint(self) -> None:
+        self._broadcast(P.command(P.CMD_CHECKPOINT, step=self.step, time=self.t))
+        self._receive_all()
+        d = self.out / "checkpoints"
+        path = d / f"checkpoint_{self.step:08d}.h5"
+        tmp = path.with_suffix(".tmp")
+        with h5py.File(tmp, "w") as h:
+            for k in ("t", "step", "out_index", "ckpt_index", "dt_min", "dt_max"):
+                h.attrs[k] = getattr(self, k)
+            for r in self.roles:
+                h.attrs[f"file_{r}"] = f"step_{self.step:08d}/{r}.h5"
+                h.create_dataset(f"history/{r}", data=np.array(self.history[r]))
+            h.create_dataset("history/t", data=np.array(self.history_t))
+            h.create_dataset("history/step", data=np.array(self.history_step))
+        os.replace(tmp, path)
+        self.ckpt_index += 1
+        self.log(f"checkpoint {path.relative_to(self.out)} at step {self.step}, t = {self.t:.6e} s")
+
+    def _load(self, path: Path) -> None:
+        with h5py.File(path, "r") as h:
+            self.t = float(h.attrs["t"])
+            self.step = int(h.attrs["step"])
+            self.out_index = int(h.attrs["out_index"])
+            self.ckpt_index = int(h.attrs["ckpt_index"])
+            self.dt_min = float(h.attrs["dt_min"])
+            self.dt_max = float(h.attrs["dt_max"])
+            self.history_t = list(h["history/t"][...])
+            self.history_step = [int(s) for s in h["history/step"][...]]
+            for r in self.roles:
+                self.history[r] = list(h[f"history/{r}"][...])
+        self.log(f"restarted from {path.name}: step {self.step}, t = {self.t:.6e} s")
+
+    # ---- the time loop ---------------------------------------------------------------------------
+    def run(self) -> dict:
+        from orchestrator.progress import Progress
+
+        wall0 = _time.perf_counter()
+        self.log(f"case {self.case['name']}: solvers {', '.join(self.roles)}; end time {self.end_time:g} s")
+        if self.out_index == 0:
+            self.write_output()
+        prog = Progress(self.end_time, self.t, bool(os.environ.get("IMMERSE_TTY")), self.log)
+        done = self.t >= self.end_time
+        while not done and self.step < self.max_steps:
+            stable = min(self.reply[r][1] for r in self.roles)
+            dt = self.dt_scale * stable
+            if not np.isfinite(dt) or dt <= 0.0:
+                raise RuntimeError(f"stable time step is {dt} at step {self.step}, t={self.t:.6g} s")
+            if self.t + dt >= self.end_time:
+                dt = self.end_time - self.t
+                t_new, done = self.end_time, True
+            else:
+                t_new = self.t + dt
+            self.step += 1
+            diag = done or self.step % self.diag_every == 0
+            self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
+            self._receive_all()
+            self.t = t_new
+            self.dt_min = min(self.dt_min, dt)
+            self.dt_max = max(self.dt_max, dt)
+            if diag:
+                self._record()
+            if self.t >= self.out_index * self.output_interval * (1 - 1e-12) or done:
+                self.write_output()
+            if self.checkpoint_interval and self.t >= self.ckpt_index * self.checkpoint_interval * (1 - 1e-12) and not done:
+                self.checkpoint()
+            prog.update(self.t, self.step)
+        prog.close()
+        self._broadcast(P.command(P.CMD_STOP))
+        self._receive_all()
+        wall = _time.perf_counter() - wall0
+        self.log(f"finished: {self.step} steps, t = {self.t:.6e} s, wall {wall:.2f} s")
+        return self.summary(wall)
+
+    # ---- summary -------------------------------------------------------------------------------
+    def diagnostics_history(self) -> dict[str, np.ndarray]:
+        hist = {"time": np.array(self.history_t), "step": np.array(self.history_step)}
+        for r in self.roles:
+            arr = np.array(self.history[r])
+            for j, n in enumerate(self.names[r]):
+                hist[f"{r}.{n}"] = arr[:, j]
+        return hist
+
+    def summary(self, wall: float) -> dict:
+        from orchestrator import checks
+
+        hist = self.diagnostics_history()
+        with h5py.File(self.out / "diagnostics.h5.tmp", "w") as h:
+            for k, a in hist.items():
+                h.create_dataset(k, data=a)
+        os.replace(self.out / "diagnostics.h5.tmp", self.out / "diagnostics.h5")
+        conservation = {}
+        for k, a in hist.items():
+            if k.endswith("_balance_rel"):
+                conservation[k.split(".", 1)[1].replace("_balance_rel", "_rel")] = float(np.max(np.abs(a)))
+        for r in self.roles:
+            m = hist.get(f"{r}.mass")
+            if m is not None and m[0] != 0:
+                conservation["mass_rel"] = float(np.max(np.abs(m / m[0] - 1)))
+        final = {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")}
+        s = {
+            "case": self.case["name"],
+            "wall_time_s": wall,
+            "steps": self.step,
+            "end_time": self.t,
+            "dt": {"min": self.dt_min if np.isfinite(self.dt_min) else None, "max": self.dt_max},
+            "ranks": {r: self.inter[r].Get_remote_size() for r in self.roles},
+            "conservation": conservation,
+            "final": final,
+            "machine": {"host": socket.gethostname(), "cores": os.cpu_count()},
+        }
+        if "check" in self.case:
+            s["check"] = checks.run_check(self.case, self.out, hist)
+        tmp = self.out / "summary.json.tmp"
+        tmp.write_text(json.dumps(s, indent=2))
+        os.replace(tmp, self.out / "summary.json")
+        if "check" in s:
+            for name, m in s["check"]["metrics"].items():
+                self.log(f"check {name}: {m['value']:.6g} vs {m['reference']:.6g} "
+                         f"(rel. error {m['rel_error']:.3g}, tolerance {m['tolerance']:g}) "
+                         f"{'passed' if m['passed'] else 'FAILED'}")
+        return s
+
+
+def main(argv=None) -> None:
+    from orchestrator.case import load_case
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--case", required=True)
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--roles", required=True)
+    ap.add_argument("--role", default=P.COUPLER)
+    ap.add_argument("--restart", default=None)
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    place = P.join(P.COUPLER, args.roles.split(","))
+    P.install_fault_handler(out, P.COUPLER, 0)
+    P.register_process(out, P.COUPLER, 0)
+    case = load_case(args.case)
+    Coupler(place, case, out, args.restart).run()
+    (P.run_dir(out) / "pids" / str(os.getpid())).unlink(missing_ok=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])

@@ -1,0 +1,155 @@
+"""Launch one MPMD mpiexec job for a validated case and watch it.
+
+Only the solvers the case uses are started. The job runs with hydra's auto-cleanup off so that the
+launcher, not hydra, sees which process died first: every rank records pid -> (role, rank) at start
+and removes the record on a clean exit, so a record whose process is gone names a failed rank (also
+one killed by SIGKILL, which leaves no message). The launcher then ends the whole job within
+seconds and reports that rank; a rank that failed with a Python error has written its own message.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from adapters import protocol as P
+from adapters import registry
+
+# outputs of a previous run that a fresh (non-restart) run replaces
+RUN_OUTPUTS = ("steps", "checkpoints", "pictures", ".run", "results.h5", "results.xdmf",
+               "summary.json", "log.txt", "diagnostics.h5")
+
+
+def venv_bin() -> Path:
+    return Path(sys.executable).parent
+
+
+def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None) -> list[str]:
+    roles = [P.COUPLER] + [r for r in registry.roles_used(case)]
+    common = ["--case", str(case["case_dir"]), "--out", str(out), "--roles", ",".join(roles)]
+    if restart:
+        common += ["--restart", str(restart)]
+    py = sys.executable
+    cmd = [str(venv_bin() / "mpiexec"), "-disable-auto-cleanup",
+           "-n", "1", py, "-m", "orchestrator.coupler", *common, "--role", P.COUPLER]
+    for r in roles[1:]:
+        cmd += [":", "-n", str(ranks[r]), py, "-m", registry.module_of(r), *common, "--role", r]
+    return cmd
+
+
+def prepare_out(out: Path, restart: str | None) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    names = (".run",) if restart else RUN_OUTPUTS
+    for n in names:
+        p = out / n
+        if p.is_dir():
+            shutil.rmtree(p)
+        elif p.exists():
+            p.unlink()
+    if restart:
+        import h5py
+
+        from orchestrator import output
+
+        with h5py.File(restart, "r") as h:
+            first_new = int(h.attrs["out_index"])
+        # steps the restarted run will write again: drop the old ones so the index never mixes runs
+        for f in (out / "steps").glob("*_[0-9]*.h5"):
+            if int(f.stem.rsplit("_", 1)[1]) >= first_new:
+                f.unlink()
+        output.write_index(out)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        with open(f"/proc/{pid}/stat") as fh:
+            return fh.read().split(") ", 1)[1][0] != "Z"
+    except (FileNotFoundError, ProcessLookupError, IndexError):
+        return False
+
+
+def _failed_ranks(out: Path) -> list[str]:
+    """Ranks whose pid record remains but whose process is gone."""
+    dead = []
+    d = P.run_dir(out) / "pids"
+    if d.is_dir():
+        for f in d.iterdir():
+            if f.name.isdigit() and not _alive(int(f.name)):
+                try:
+                    role, rank = f.read_text().split()
+                except (OSError, ValueError):
+                    continue
+                dead.append(f"{role} rank {rank}")
+    return dead
+
+
+def _error_reports(out: Path) -> list[str]:
+    d = P.run_dir(out)
+    return [f.read_text().strip() for f in sorted(d.glob("error_*.txt"))] if d.is_dir() else []
+
+
+def _stop(proc: subprocess.Popen, grace: float = 3.0) -> None:
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+        except ProcessLookupError:
+            return
+        try:
+            proc.wait(timeout=grace)
+            return
+        except subprocess.TimeoutExpired:
+            continue
+
+
+def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None) -> int:
+    """Run the job; return 0 on success, else a non-zero code after printing which rank failed."""
+    from orchestrator import output
+
+    prepare_out(out, restart)
+    cmd = build_command(case, out, ranks, restart)
+    env = dict(os.environ)
+    env.setdefault("NUMBA_NUM_THREADS", "1")
+    env.setdefault("OMP_NUM_THREADS", "1")
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    env["PYTHONUNBUFFERED"] = "1"
+    if sys.stderr.isatty():
+        env["IMMERSE_TTY"] = "1"
+    else:
+        env.pop("IMMERSE_TTY", None)
+    (out / "log.txt").open("a").write(f"command: {' '.join(cmd)}\n")
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True)
+    failed: list[str] = []
+    try:
+        while proc.poll() is None:
+            failed = _failed_ranks(out)
+            if failed or _error_reports(out):
+                # let a rank that is reporting an error finish its message, then end the job
+                try:
+                    proc.wait(timeout=1.0)
+                except subprocess.TimeoutExpired:
+                    _stop(proc)
+                failed = failed or _failed_ranks(out)
+                break
+            time.sleep(0.05)
+    except KeyboardInterrupt:
+        _stop(proc)
+        print("immerse: interrupted", file=sys.stderr)
+        return 130
+    rc = proc.wait()
+    if out.is_dir():
+        output.write_index(out)  # every completed step file, also those the coupler had no time to index
+    reports = _error_reports(out)
+    if rc == 0 and not failed and not reports:
+        return 0
+    why = "; ".join(reports) if reports else (
+        f"{', '.join(failed)} died (killed by a signal or exited without a message)" if failed
+        else f"mpiexec exited with code {rc}")
+    msg = f"immerse: run failed: {why}"
+    print(msg, file=sys.stderr)
+    with (out / "log.txt").open("a") as f:
+        f.write(msg + "\n")
+    return rc if rc not in (0, None) else 1

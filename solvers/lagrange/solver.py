@@ -1,0 +1,346 @@
+"""Explicit Lagrangian finite elements: central differences, lumped mass, one-point elements.
+
+Time stepping (step n -> n+1, dt = dt^{n+1/2}, previous dt_prev = dt^{n-1/2}):
+    predict:  v* = v^{n-1/2} + dt_avg M^-1 f^n,         dt_avg = (dt_prev + dt)/2  (dt/2 on the first step)
+    correct:  v^{n+1/2} = v* + M^-1 impulse, then boundary conditions (reaction R = M (v - v_before))
+              x^{n+1} = x^n + dt v^{n+1/2};  f^{n+1}, stresses at n+1 and the next stable step.
+Energy is accounted so that the discrete balance is exact: KE(v^{n+1/2}) - KE(v^{n-1/2}) equals the
+work of dt_avg f^n + R on the mean velocity (v^{n-1/2} + v^{n+1/2})/2, summed into W_int (internal
+forces) and W_ext (reactions and coupling impulses). The stress-power internal energy of the elements
+is reported beside it as an independent check.
+
+Runs on the ranks of `comm` with an element partition; forces and masses on shared nodes are summed.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from orchestrator.expressions import compile_expression
+from solvers.lagrange import kernels, materials
+from solvers.lagrange.boundary import BoundaryConditions
+from solvers.lagrange.mesh import box_mesh, concatenate, quarter_cylinder_mesh, read_mesh
+from solvers.lagrange.partition import partition
+
+
+class SolverError(RuntimeError):
+    """A physical failure (inverted element, NaN) with the element, step and time named."""
+
+
+def body_mesh(spec: dict, dim: int):
+    m = spec["mesh"]
+    if "box" in m:
+        b = m["box"]
+        return box_mesh(b["lower"], b["upper"], b["cells"])
+    if "quarter_cylinder" in m:
+        q = m["quarter_cylinder"]
+        return quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
+    return read_mesh(m["file"], dim)
+
+
+def _material_table(case: dict):
+    names = sorted(case["materials"])
+    codes, pars = [], []
+    for n in names:
+        props = dict(case["materials"][n])
+        code, par = materials.material_params(props.pop("model"), props)
+        codes.append(code)
+        pars.append(par)
+    return names, np.array(codes, dtype=np.int64), np.array(pars, dtype=np.float64)
+
+
+class LagrangeSolver:
+    # element fields written to output (name -> attribute); stress is (ne, 6) Voigt xx yy zz xy yz zx
+    CELL_FIELDS = ("stress", "plastic_strain", "temperature", "density", "bulk_viscosity")
+
+    def __init__(self, comm, case: dict):
+        self.comm = comm
+        self.case = case
+        run = case["run"]
+        self.dim = dim = int(run["dimension"])
+        opts = case.get("lagrange", {})
+        self.hg = float(opts.get("hourglass", 0.1))
+        self.q_lin = float(opts.get("bulk_viscosity_linear", 0.06))
+        self.q_quad = float(opts.get("bulk_viscosity_quadratic", 1.5))
+
+        bodies = case["lagrange"]["bodies"]
+        mesh, body_of_cell = concatenate([body_mesh(b, dim) for b in bodies])
+        self.global_points = mesh.points.astype(np.float64)
+        self.global_cells = mesh.cells.astype(np.int64)
+        self.cell_type = mesh.cell_type
+        self.n_nodes_global = len(mesh.points)
+        self.n_cells_global = len(mesh.cells)
+
+        part = partition(self.global_points, self.global_cells, comm.size, comm.rank)
+        self.part = part
+        self.conn = np.ascontiguousarray(part.conn)
+        X = self.global_points[part.nodes].copy()
+        self.X = X
+        self.x = X.copy()
+        nn, ne = len(X), len(part.cells)
+
+        mat_names, self.mat_code, self.mat_par = _material_table(case)
+        body_mat = np.array([mat_names.index(b["material"]) for b in bodies], dtype=np.int64)
+        my_body = body_of_cell[part.cells]
+        self.mat_id = body_mat[my_body]
+
+        self.gradN0, self.vol0 = kernels.reference_gradients(X, self.conn)
+        rho0 = self.mat_par[self.mat_id, materials.P_DENSITY]
+        self.mass_e = rho0 * self.vol0
+        node_mass = np.zeros(nn)
+        np.add.at(node_mass, self.conn.ravel(), np.repeat(self.mass_e / self.conn.shape[1], self.conn.shape[1]))
+        self.mass = self.sum_shared(node_mass)
+        self.inv_mass = 1.0 / self.mass
+
+        # initial velocity per body, evaluated at each node of that body (expressions in x, y, z)
+        self.v = np.zeros((nn, dim))
+        names = ("x", "y", "z")[:dim]
+        for b_index, b in enumerate(bodies):
+            nodes = np.unique(self.conn[my_body == b_index])
+            for c, comp in enumerate(b.get("initial_velocity", [0.0] * dim)):
+                if isinstance(comp, str):
+                    val = compile_expression(comp, names=names)(*X[nodes].T)
+                else:
+                    val = float(comp)
+                self.v[nodes, c] = val
+
+        self.sig = np.zeros((ne, 6))
+        self.eps_p = np.zeros(ne)
+        self.temp = np.zeros(ne)
+        for b_index, b in enumerate(bodies):
+            m = case["materials"][b["material"]]
+            t0 = b.get("initial_temperature", m.get("room_temperature", 293.15))
+            self.temp[my_body == b_index] = t0
+        self.e_int = np.zeros(ne)
+        self.q = np.zeros(ne)
+        self.f = np.zeros((nn, dim))
+
+        span = float(np.max(np.ptp(self.global_points, axis=0)))
+        self.bcs = BoundaryConditions(case.get("boundaries", []), X, tol=1e-9 * span)
+
+        self.dt_prev = 0.0
+        self.first_step = True
+        self.step = 0
+        self.time = 0.0
+        # balances: accumulated work and impulses (replicated on all ranks)
+        self.w_int = 0.0
+        self.w_ext = 0.0
+        self.impulse = np.zeros(dim)
+        self.ang_impulse = np.zeros(3 if dim == 3 else 1)
+        self.ke0 = None
+        self.p0 = None
+        self.l0 = None
+        self._dt_stable = self._forces(0.0)
+        self.ke0 = self.kinetic_energy()
+        self.p0 = self.momentum()
+        self.l0 = self.angular_momentum()
+
+    # ---- parallel sums -------------------------------------------------------------------------
+    def sum_shared(self, a: np.ndarray) -> np.ndarray:
+        """Sum the contributions of all ranks on nodes that lie on a partition cut (in place)."""
+        if self.comm.size == 1:
+            return a
+        p = self.part
+        buf = np.zeros((len(p.shared_global),) + a.shape[1:])
+        buf[p.shared_slot] = a[p.shared_local]
+        from mpi4py import MPI
+
+        self.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
+        a[p.shared_local] = buf[p.shared_slot]
+        return a
+
+    def _allsum(self, a):
+        """Global sum of per-node quantities, counting each shared node once."""
+        a = np.asarray(a, dtype=np.float64)
+        if self.comm.size == 1:
+            return a
+        from mpi4py import MPI
+
+        out = np.zeros_like(a)
+        self.comm.Allreduce(a, out, op=MPI.SUM)
+        return out
+
+    # ---- the step --------------------------------------------------------------------------------
+    def _forces(self, dt_prev: float) -> float:
+        self.f[:] = 0.0
+        dt_min, bad = kernels.element_forces(
+            self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
+            self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
+            self.hg, self.q_lin, self.q_quad, self.f,
+        )
+        if bad >= 0:
+            gid = int(self.part.cells[bad])
+            raise SolverError(
+                f"inverted or invalid element {gid} at step {self.step}, t={self.time:.6g} s "
+                f"(volume or stress not finite/positive)"
+            )
+        self.sum_shared(self.f)
+        return self._min(dt_min)
+
+    def _min(self, value: float) -> float:
+        if self.comm.size == 1:
+            return float(value)
+        from mpi4py import MPI
+
+        return float(self.comm.allreduce(float(value), op=MPI.MIN))
+
+    def stable_dt(self) -> float:
+        return self._dt_stable
+
+    def predict(self, dt: float) -> None:
+        self.dt = dt
+        self.dt_avg = 0.5 * dt if self.first_step else 0.5 * (self.dt_prev + dt)
+        self.v_old = self.v.copy()
+        self.v += self.dt_avg * self.f * self.inv_mass[:, None]
+
+    def correct(self, impulse: np.ndarray | None = None, step: int = 0, time: float = 0.0) -> None:
+        if impulse is not None:
+            self.v += impulse * self.inv_mass[:, None]
+        v_free = self.v + 0.0
+        self.bcs.apply(self.x, self.v, self.dt)
+        reaction = (self.v - v_free) * self.mass[:, None]
+        if impulse is not None:
+            reaction += impulse
+        if not np.isfinite(self.v).all():
+            node = int(self.part.nodes[np.flatnonzero(~np.isfinite(self.v).all(axis=1))[0]])
+            raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s")
+
+        # exact discrete work of this step on the mean velocity (shared nodes counted once)
+        vbar = 0.5 * (self.v_old + self.v)
+        w = self.part.owned.astype(np.float64)[:, None]
+        loc = np.array([
+            -self.dt_avg * np.sum(w * self.f * vbar),
+            np.sum(w * reaction * vbar),
+        ])
+        imp = np.sum(w * reaction, axis=0)
+        torque = self._cross(self.x, reaction * w).sum(axis=0)
+        tot = self._allsum(np.concatenate([loc, imp, np.atleast_1d(torque)]))
+        self.w_int -= tot[0]
+        self.w_ext += tot[1]
+        self.impulse += tot[2:2 + self.dim]
+        self.ang_impulse += tot[2 + self.dim:]
+
+        self.x += self.dt * self.v
+        self.step, self.time = step, time
+        self.first_step = False
+        self.dt_prev = self.dt
+        self._dt_stable = self._forces(self.dt)
+        del self.v_old
+
+    # ---- diagnostics -----------------------------------------------------------------------------
+    def _cross(self, a, b):
+        if self.dim == 3:
+            return np.cross(a, b)
+        return (a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])[:, None]
+
+    def kinetic_energy(self) -> float:
+        w = self.part.owned
+        return float(self._allsum(0.5 * np.sum(self.mass[w, None] * self.v[w] ** 2)))
+
+    def momentum(self) -> np.ndarray:
+        w = self.part.owned
+        return self._allsum(np.sum(self.mass[w, None] * self.v[w], axis=0))
+
+    def angular_momentum(self) -> np.ndarray:
+        """sum m x^{n+1} x v^{n+1/2} (equal to sum m x^n x v^{n+1/2}: conserved exactly by the scheme)."""
+        w = self.part.owned
+        return self._allsum(self._cross(self.x[w], self.mass[w, None] * self.v[w]).sum(axis=0))
+
+    def diagnostics(self) -> dict[str, float]:
+        ke = self.kinetic_energy()
+        p = self.momentum()
+        ang = self.angular_momentum()
+        e_int = float(self._allsum(self.e_int.sum()))
+        mass = float(self._allsum(self.mass[self.part.owned].sum()))
+        scale_e = max(abs(self.ke0), abs(ke), abs(self.w_int), abs(self.w_ext), 1e-300)
+        e_err = (ke + self.w_int - self.w_ext - self.ke0) / scale_e
+        p_scale = max(np.linalg.norm(self.p0), np.linalg.norm(p), np.linalg.norm(self.impulse), 1e-300)
+        p_err = np.linalg.norm(p - self.p0 - self.impulse) / p_scale
+        l_scale = max(np.linalg.norm(self.l0), np.linalg.norm(ang), np.linalg.norm(self.ang_impulse), 1e-300)
+        l_err = np.linalg.norm(ang - self.l0 - self.ang_impulse) / l_scale
+        d = {
+            "mass": mass,
+            "kinetic_energy": ke,
+            "internal_work": self.w_int,
+            "external_work": self.w_ext,
+            "stress_power_energy": e_int,
+            "energy_balance_rel": float(e_err),
+            "momentum_balance_rel": float(p_err),
+            "angular_momentum_balance_rel": float(l_err),
+        }
+        for c, name in enumerate("xyz"[: self.dim]):
+            d[f"momentum_{name}"] = float(p[c])
+        for c, name in enumerate(("x", "y", "z") if self.dim == 3 else ("z",)):
+            d[f"angular_momentum_{name}"] = float(ang[c])
+        return d
+
+    # ---- gathering for output and checkpoints -----------------------------------------------------
+    def gather_nodes(self, a: np.ndarray):
+        """Global (n_nodes, ...) array on rank 0 (None elsewhere), from the nodes each rank owns."""
+        w = self.part.owned
+        return self._gather(self.part.nodes[w], a[w], self.n_nodes_global)
+
+    def gather_cells(self, a: np.ndarray):
+        return self._gather(self.part.cells, a, self.n_cells_global)
+
+    def _gather(self, ids, values, n):
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        if self.comm.size == 1:
+            out = np.empty((n,) + values.shape[1:])
+            out[ids] = values
+            return out
+        all_ids = self.comm.gather(ids, root=0)
+        all_vals = self.comm.gather(values, root=0)
+        if self.comm.rank != 0:
+            return None
+        out = np.empty((n,) + values.shape[1:])
+        for i, v in zip(all_ids, all_vals):
+            out[i] = v
+        return out
+
+    def cell_fields(self) -> dict[str, np.ndarray]:
+        vol = kernels.current_volumes(self.x, self.conn)
+        return {
+            "stress": self.sig,
+            "plastic_strain": self.eps_p,
+            "temperature": self.temp,
+            "density": self.mass_e / vol,
+            "bulk_viscosity": self.q,
+        }
+
+    # ---- checkpoint / restart (global arrays, so any rank count can read; same count is bitwise) --
+    STATE_NODES = ("x", "v", "f")
+    STATE_CELLS = ("sig", "eps_p", "temp", "e_int", "q")
+    STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0")
+    STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0")
+
+    def checkpoint(self, path: Path) -> None:
+        nodes = {k: self.gather_nodes(getattr(self, k)) for k in self.STATE_NODES}
+        cells = {k: self.gather_cells(getattr(self, k)) for k in self.STATE_CELLS}
+        if self.comm.rank != 0:
+            return
+        tmp = Path(str(path) + ".tmp")
+        with h5py.File(tmp, "w") as h:
+            for k, a in {**nodes, **cells}.items():
+                h.create_dataset(k, data=a)
+            for k in self.STATE_SCALARS:
+                h.attrs[k] = getattr(self, k)
+            for k in self.STATE_VECTORS:
+                h.create_dataset(k, data=getattr(self, k))
+            h.attrs["ranks"] = self.comm.size
+        tmp.replace(path)
+
+    def restart(self, path: Path) -> None:
+        with h5py.File(path, "r") as h:
+            for k in self.STATE_NODES:
+                getattr(self, k)[:] = h[k][...][self.part.nodes]
+            for k in self.STATE_CELLS:
+                getattr(self, k)[:] = h[k][...][self.part.cells]
+            for k in self.STATE_SCALARS:
+                setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
+            for k in self.STATE_VECTORS:
+                setattr(self, k, h[k][...])
+        self.first_step = bool(self.first_step)
+        self.step = int(self.step)
