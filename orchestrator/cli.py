@@ -42,10 +42,10 @@ def cmd_check(args) -> int:
         case = load_case(args.case)
     except CaseError as e:
         return _fail(str(e))
-    from adapters import registry
+    from orchestrator.case import solvers_used
 
     print(f"{case['name']}: ok (dimension {case['run']['dimension']}, solvers: "
-          f"{', '.join(registry.roles_used(case))})")
+          f"{', '.join(solvers_used(case))})")
     return 0
 
 

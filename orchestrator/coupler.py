@@ -198,7 +198,7 @@ class Coupler:
             "final": final,
             "machine": {"host": socket.gethostname(), "cores": os.cpu_count()},
         }
-        if "check" in self.case:
+        if self.case.get("check"):
             s["check"] = checks.run_check(self.case, self.out, hist)
         tmp = self.out / "summary.json.tmp"
         tmp.write_text(json.dumps(s, indent=2))

@@ -29,7 +29,9 @@ def venv_bin() -> Path:
 
 
 def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None) -> list[str]:
-    roles = [P.COUPLER] + [r for r in registry.roles_used(case)]
+    from orchestrator.case import solvers_used
+
+    roles = [P.COUPLER] + solvers_used(case)
     common = ["--case", str(case["case_dir"]), "--out", str(out), "--roles", ",".join(roles)]
     if restart:
         common += ["--restart", str(restart)]

@@ -21,7 +21,7 @@ import numpy as np
 from orchestrator.expressions import compile_expression
 from solvers.lagrange import kernels, materials
 from solvers.lagrange.boundary import BoundaryConditions
-from solvers.lagrange.mesh import box_mesh, concatenate, quarter_cylinder_mesh, read_mesh
+from solvers.lagrange.mesh import box_mesh, cell_volumes, concatenate, quarter_cylinder_mesh, read_mesh
 from solvers.lagrange.partition import partition
 
 
@@ -87,7 +87,7 @@ class LagrangeSolver:
         self.mat_id = body_mat[my_body]
 
         self.gradN0, self.vol0 = kernels.reference_gradients(X, self.conn)
-        rho0 = self.mat_par[self.mat_id, materials.P_DENSITY]
+        rho0 = self.mat_par[self.mat_id, materials.P_RHO]
         self.mass_e = rho0 * self.vol0
         node_mass = np.zeros(nn)
         np.add.at(node_mass, self.conn.ravel(), np.repeat(self.mass_e / self.conn.shape[1], self.conn.shape[1]))
@@ -217,7 +217,7 @@ class LagrangeSolver:
         imp = np.sum(w * reaction, axis=0)
         torque = self._cross(self.x, reaction * w).sum(axis=0)
         tot = self._allsum(np.concatenate([loc, imp, np.atleast_1d(torque)]))
-        self.w_int -= tot[0]
+        self.w_int += tot[0]
         self.w_ext += tot[1]
         self.impulse += tot[2:2 + self.dim]
         self.ang_impulse += tot[2 + self.dim:]
@@ -301,7 +301,7 @@ class LagrangeSolver:
         return out
 
     def cell_fields(self) -> dict[str, np.ndarray]:
-        vol = kernels.current_volumes(self.x, self.conn)
+        vol = cell_volumes(self.x, self.conn)
         return {
             "stress": self.sig,
             "plastic_strain": self.eps_p,

@@ -1,0 +1,654 @@
+"""Load and validate a case directory (``<case_dir>/case.toml``).
+
+:func:`load_case` returns a normalised plain dict (defaults filled in, numbers as
+``float``/``int``, mesh file paths resolved to absolute :class:`~pathlib.Path`\\ s,
+expressions kept as strings but already checked to compile) or raises :class:`CaseError`
+whose message is ONE line ``"<dotted.key> = <value repr>: <what is allowed>"``.
+
+Validation happens in three stages, the first failure wins:
+
+1. TOML parsing (``tomllib``); a syntax error is reported on the key ``case.toml``;
+2. the JSON schema of :mod:`orchestrator.case_schema` (types, ranges, required keys,
+   enums, unknown keys); the best error (``jsonschema.exceptions.best_match``) is
+   translated into a :class:`CaseError` on its dotted key path;
+3. cross-field checks in Python: vector lengths vs ``run.dimension``, material references,
+   meshes (files exist, parse and hold the right cells), expressions, ranks roles, ...
+   Mesh files are read last so cheap mistakes are reported without waiting for a big mesh.
+
+Normalised layout (all keys always present)::
+
+    {"name": str, "case_dir": Path,
+     "run": {dimension, end_time, dt_scale, output_interval, checkpoint_interval (None if
+             unset), max_steps, diagnostics_every},
+     "ranks": {role: int}  (1 for every used solver unless given),
+     "materials": {name: {model, density, youngs_modulus, poisson_ratio, [johnson_cook keys]}},
+     "lagrange": {hourglass, bulk_viscosity_linear, bulk_viscosity_quadratic,
+                  "bodies": [{name, material, mesh, initial_velocity, initial_temperature}]},
+     "boundaries": [ {type, ...} ],
+     "check": None | {kind, params, metrics: {name: {reference, tolerance}}}}
+
+``mesh`` is exactly one of ``{"box": {lower, upper, cells}}``,
+``{"quarter_cylinder": {radius, length, radial_cells, axial_cells}}`` or
+``{"file": Path}``; ``initial_velocity`` holds ``dimension`` items, each a float or an
+expression string in the coordinates (``x, y`` in 2D, ``x, y, z`` in 3D).
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import math
+import os
+import re
+import tomllib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+from jsonschema.exceptions import ValidationError, best_match
+
+from .case_schema import (
+    CASE_SCHEMA,
+    DEFAULT_ROOM_TEMPERATURE,
+    KNOWN_ROLES,
+    LAGRANGE_DEFAULTS,
+    NAME_TEXT,
+    RUN_DEFAULTS,
+)
+from .expressions import BOOL, NUM, ExpressionError, compile_expression
+
+__all__ = [
+    "CaseError",
+    "MISSING",
+    "CASE_FILE",
+    "load_case",
+    "solvers_used",
+    "ranks_for",
+    "format_key",
+    "expression_names",
+]
+
+CASE_FILE = "case.toml"
+_MAX_VALUE_REPR = 160
+
+
+class _Missing:
+    """Value of a required key that is absent (repr ``<missing>``)."""
+
+    _instance = None
+
+    def __new__(cls):
+        if cls._instance is None:
+            cls._instance = super().__new__(cls)
+        return cls._instance
+
+    def __repr__(self) -> str:
+        return "<missing>"
+
+    def __reduce__(self):
+        return (_Missing, ())
+
+
+MISSING = _Missing()
+
+
+class _Abbreviated:
+    """Stand-in for a value whose repr is too long / multi-line for a one-line message."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __repr__(self) -> str:
+        return self.text
+
+    def __eq__(self, other):
+        return isinstance(other, _Abbreviated) and other.text == self.text
+
+    def __hash__(self):
+        return hash(self.text)
+
+
+def _one_line(text: Any) -> str:
+    return " ".join(str(text).split())
+
+
+class CaseError(ValueError):
+    """Invalid case: ``str(e) == f"{e.key} = {e.value!r}: {e.allowed}"``, always one line.
+
+    ``key`` is the dotted TOML path (``"materials.steel.poisson_ratio"``,
+    ``"lagrange.bodies[0].mesh.file"``), ``value`` the offending value (:data:`MISSING`
+    for an absent required key; replaced by an abbreviation when its repr would be longer
+    than 160 characters or span lines) and ``allowed`` a human description of what is
+    accepted.
+    """
+
+    def __init__(self, key: str, value: Any, allowed: str):
+        self.key = _one_line(key)
+        text = repr(value)
+        if len(text) > _MAX_VALUE_REPR or "\n" in text or "\r" in text:
+            text = _one_line(text)
+            if len(text) > _MAX_VALUE_REPR:
+                text = text[: _MAX_VALUE_REPR - 3] + "..."
+            value = _Abbreviated(text)
+        self.value = value
+        self.allowed = _one_line(allowed)
+        super().__init__(f"{self.key} = {self.value!r}: {self.allowed}")
+
+    def __str__(self) -> str:
+        return self.args[0]
+
+    def __reduce__(self):
+        return (CaseError, (self.key, self.value, self.allowed))
+
+
+# ----------------------------------------------------------------------------------
+# key paths
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def format_key(path: Iterable[str | int]) -> str:
+    """Dotted TOML key for a path: ``["lagrange", "bodies", 0, "mesh"]`` ->
+    ``lagrange.bodies[0].mesh``; non-bare keys are quoted as in TOML."""
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            part = str(part)
+            piece = part if _BARE_KEY.match(part) else json.dumps(part, ensure_ascii=False)
+            out = f"{out}.{piece}" if out else piece
+    return out
+
+
+# ----------------------------------------------------------------------------------
+# schema errors -> CaseError
+_VALIDATOR = jsonschema.Draft202012Validator
+_VALIDATOR.check_schema(CASE_SCHEMA)
+_SCHEMA_VALIDATOR = _VALIDATOR(CASE_SCHEMA)
+
+_TYPE_WORDS = {
+    "number": "a number",
+    "integer": "an integer",
+    "string": "a string",
+    "object": "a table",
+    "array": "an array",
+    "boolean": "a boolean (true/false)",
+}
+
+
+def _fmt_num(v: float) -> str:
+    return repr(v) if isinstance(v, float) and not float(v).is_integer() else f"{v:g}"
+
+
+def _unit(schema: Mapping) -> str:
+    unit = schema.get("x-unit") if isinstance(schema, Mapping) else None
+    return f" ({unit})" if unit else ""
+
+
+def _range_text(schema: Mapping) -> str:
+    parts = []
+    if "minimum" in schema:
+        parts.append(f">= {_fmt_num(schema['minimum'])}")
+    if "exclusiveMinimum" in schema:
+        parts.append(f"> {_fmt_num(schema['exclusiveMinimum'])}")
+    if "maximum" in schema:
+        parts.append(f"<= {_fmt_num(schema['maximum'])}")
+    if "exclusiveMaximum" in schema:
+        parts.append(f"< {_fmt_num(schema['exclusiveMaximum'])}")
+    kind = "an integer " if schema.get("type") == "integer" else ""
+    return f"must be {kind}" + " and ".join(parts)
+
+
+def _type_text(schema: Mapping) -> str:
+    types = schema.get("type")
+    if isinstance(types, list):
+        if set(types) == {"number", "string"}:
+            return "must be a number or an expression string"
+        return "must be " + " or ".join(_TYPE_WORDS.get(t, t) for t in types)
+    text = "must be " + _TYPE_WORDS.get(types, str(types))
+    if any(k in schema for k in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum")):
+        text += " " + _range_text(schema).removeprefix("must be ").removeprefix("an integer ")
+    elif "enum" in schema:
+        text += ", one of: " + ", ".join(repr(v) for v in schema["enum"])
+    return text
+
+
+def _items_text(schema: Mapping) -> str:
+    lo, hi = schema.get("minItems"), schema.get("maxItems")
+    if lo is not None and hi is not None:
+        if lo == hi:
+            return f"must have {lo} items"
+        return f"must have {lo} or {hi} items" if hi == lo + 1 else f"must have {lo} to {hi} items"
+    if lo is not None:
+        return f"must have at least {lo} item{'s' if lo != 1 else ''}"
+    return f"must have at most {hi} item{'s' if hi != 1 else ''}"
+
+
+def _schema_error_to_case_error(err: ValidationError) -> CaseError:
+    path = list(err.absolute_path)
+    schema = err.schema if isinstance(err.schema, Mapping) else {}
+    when = schema.get("x-when")
+    suffix = f" ({when})" if when else ""
+    v = err.validator
+    inst = err.instance
+
+    if v == "additionalProperties" and isinstance(inst, Mapping):
+        props = list(schema.get("properties", {}))
+        extras = [k for k in inst if k not in props]
+        if extras:
+            bad = extras[0]
+            allowed = ", ".join(props) if props else "(none)"
+            where = f" for {when}" if when else ""
+            return CaseError(format_key(path + [bad]), inst[bad],
+                             f"unknown key{where}; allowed: {allowed}")
+    if v == "required" and isinstance(inst, Mapping):
+        missing = [k for k in err.validator_value if k not in inst]
+        if missing:
+            return CaseError(format_key(path + [missing[0]]), MISSING,
+                             f"required key missing{suffix}")
+    if "propertyNames" in err.absolute_schema_path:
+        # a table key failed the name rule: jsonschema reports the inner validator
+        # ("pattern") with err.instance = the key itself and err.path = the enclosing table
+        return CaseError(format_key(path + [str(inst)]), inst, f"invalid name: {NAME_TEXT}")
+
+    key = format_key(path) or CASE_FILE
+    if "x-allowed" in schema and v not in ("type",):
+        return CaseError(key, inst, schema["x-allowed"] + _unit(schema))
+    if v == "type":
+        return CaseError(key, inst, _type_text(schema) + _unit(schema))
+    if v in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+        return CaseError(key, inst, _range_text(schema) + _unit(schema))
+    if v == "enum":
+        return CaseError(key, inst, "must be one of: " + ", ".join(repr(x) for x in err.validator_value))
+    if v == "const":
+        return CaseError(key, inst, f"must be {err.validator_value!r}")
+    if v in ("minItems", "maxItems"):
+        return CaseError(key, inst, _items_text(schema))
+    if v == "minLength":
+        return CaseError(key, inst, "must not be empty")
+    if v == "minProperties":
+        return CaseError(key, inst, f"must have at least {err.validator_value} entr"
+                                    f"{'y' if err.validator_value == 1 else 'ies'}")
+    if v == "maxProperties":
+        return CaseError(key, inst, f"must have at most {err.validator_value} entr"
+                                    f"{'y' if err.validator_value == 1 else 'ies'}")
+    return CaseError(key, inst, err.message)  # pragma: no cover - all validators above
+
+
+# ----------------------------------------------------------------------------------
+# public API
+def expression_names(dimension: int) -> tuple[str, ...]:
+    """Coordinate names usable in expressions of a ``dimension``-D case."""
+    return ("x", "y", "z")[:dimension]
+
+
+def solvers_used(case: Mapping) -> list[str]:
+    """Solver roles the case needs (the adapter registry knows which case table means which role)."""
+    from adapters import registry
+
+    return [r for r in registry.roles_used(case) if case.get(r)]
+
+
+def _rank_count(key: str, value: Any) -> int:
+    allowed = "must be an integer >= 1 (MPI ranks)"
+    if isinstance(value, bool):
+        raise CaseError(key, value, allowed)
+    if isinstance(value, str):
+        try:
+            value = int(value.strip(), 10)
+        except ValueError:
+            raise CaseError(key, value, allowed) from None
+    elif isinstance(value, float):
+        if not value.is_integer():
+            raise CaseError(key, value, allowed)
+        value = int(value)
+    elif not isinstance(value, int):
+        raise CaseError(key, value, allowed)
+    if value < 1:
+        raise CaseError(key, value, allowed)
+    return int(value)
+
+
+def _role_check(key: str, role: Any, n: Any, used: list[str]) -> None:
+    if role not in used:
+        if role in KNOWN_ROLES:
+            allowed = f"solver {role!r} is not used by this case; allowed: {', '.join(used)}"
+        else:
+            allowed = f"unknown role; allowed: {', '.join(used) or '(none)'}"
+        raise CaseError(key, n, allowed)
+
+
+def ranks_for(case: Mapping, overrides: Mapping[str, Any] | Iterable[str] | None = None
+              ) -> dict[str, int]:
+    """MPI ranks per used solver role: 1 each, then ``[ranks]`` of the case, then
+    ``overrides`` (from the CLI ``--ranks ROLE=N``; a mapping role -> N, or an iterable of
+    ``"ROLE=N"`` strings).  Overrides are validated like the case file, on the key
+    ``"--ranks ROLE"``; the result is ordered like :func:`solvers_used`."""
+    used = solvers_used(case)
+    result = {role: 1 for role in used}
+    for role, n in (case.get("ranks") or {}).items():
+        key = format_key(["ranks", role])
+        _role_check(key, role, n, used)
+        result[role] = _rank_count(key, n)
+    if overrides is None:
+        return result
+    if isinstance(overrides, Mapping):
+        items = list(overrides.items())
+    else:
+        items = []
+        for spec in overrides:
+            role, sep, n = str(spec).partition("=")
+            if not sep or not role.strip():
+                raise CaseError("--ranks", spec, "must be ROLE=N, e.g. lagrange=2; roles: "
+                                + ", ".join(used))
+            items.append((role.strip(), n))
+    for role, n in items:
+        key = f"--ranks {role}"
+        _role_check(key, role, n, used)
+        result[role] = _rank_count(key, n)
+    return result
+
+
+def load_case(case_dir: str | os.PathLike) -> dict:
+    """Parse and validate ``<case_dir>/case.toml``; return the normalised case dict.
+
+    ``case_dir`` may also be the path of the ``case.toml`` file itself.
+    Raises :class:`CaseError` (one-line message) for any problem.
+    """
+    case_dir = Path(case_dir).expanduser()
+    if case_dir.is_file() and case_dir.suffix == ".toml":
+        toml_path = case_dir.resolve()
+        case_dir = toml_path.parent
+    else:
+        if not case_dir.is_dir():
+            raise CaseError("case_dir", str(case_dir), "directory not found")
+        case_dir = case_dir.resolve()
+        toml_path = case_dir / CASE_FILE
+    data = _read_toml(toml_path)
+
+    errors = _SCHEMA_VALIDATOR.iter_errors(data)
+    err = best_match(errors)
+    if err is not None:
+        raise _schema_error_to_case_error(err)
+
+    case = _normalise(data, case_dir)
+    _check(case, data)
+    return case
+
+
+# ----------------------------------------------------------------------------------
+# stages
+_TOML_POS = re.compile(r"at line (\d+), column (\d+)")
+
+
+def _read_toml(path: Path) -> dict:
+    try:
+        raw = path.read_bytes()
+    except FileNotFoundError:
+        raise CaseError(CASE_FILE, str(path), "file not found") from None
+    except IsADirectoryError:
+        raise CaseError(CASE_FILE, str(path), "is a directory, expected a TOML file") from None
+    except OSError as exc:
+        raise CaseError(CASE_FILE, str(path), f"cannot read: {exc.strerror or exc}") from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise CaseError(CASE_FILE, str(path), f"not UTF-8 text (byte {exc.start})") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = _TOML_POS.search(msg)
+        value: Any = path.name
+        if m:
+            lines = text.splitlines()
+            lineno = int(m.group(1))
+            if 1 <= lineno <= len(lines):
+                value = lines[lineno - 1].strip()
+        raise CaseError(CASE_FILE, value, f"TOML syntax error: {msg}") from None
+
+
+def _f(v):
+    return float(v)
+
+
+def _num_or_expr(v):
+    return v if isinstance(v, str) else float(v)
+
+
+def _normalise(data: dict, case_dir: Path) -> dict:
+    """Fill defaults and convert numbers; assumes the schema validated ``data``."""
+    d = copy.deepcopy(data)
+    run_in = d["run"]
+    dim = int(run_in["dimension"])
+    end_time = _f(run_in["end_time"])
+    run = {
+        "dimension": dim,
+        "end_time": end_time,
+        "dt_scale": _f(run_in.get("dt_scale", RUN_DEFAULTS["dt_scale"])),
+        "output_interval": _f(run_in.get("output_interval", end_time / 20.0)),
+        "checkpoint_interval": (None if run_in.get("checkpoint_interval") is None
+                                else _f(run_in["checkpoint_interval"])),
+        "max_steps": int(run_in.get("max_steps", RUN_DEFAULTS["max_steps"])),
+        "diagnostics_every": int(run_in.get("diagnostics_every",
+                                            RUN_DEFAULTS["diagnostics_every"])),
+    }
+
+    materials = {}
+    for name, m in d["materials"].items():
+        materials[name] = {k: (v if k == "model" else _f(v)) for k, v in m.items()}
+
+    lag_in = d.get("lagrange", {})
+    bodies = []
+    for b in lag_in.get("bodies", []):
+        mesh_in = b["mesh"]
+        if "box" in mesh_in:
+            box = mesh_in["box"]
+            mesh = {"box": {"lower": [_f(v) for v in box["lower"]],
+                            "upper": [_f(v) for v in box["upper"]],
+                            "cells": [int(v) for v in box["cells"]]}}
+        elif "quarter_cylinder" in mesh_in:
+            q = mesh_in["quarter_cylinder"]
+            mesh = {"quarter_cylinder": {"radius": _f(q["radius"]), "length": _f(q["length"]),
+                                         "radial_cells": int(q["radial_cells"]),
+                                         "axial_cells": int(q["axial_cells"])}}
+        else:
+            mesh = {"file": (case_dir / mesh_in["file"]).resolve()}
+        mat = materials.get(b["material"], {})
+        t0 = b.get("initial_temperature", mat.get("room_temperature", DEFAULT_ROOM_TEMPERATURE))
+        bodies.append({
+            "name": b["name"],
+            "material": b["material"],
+            "mesh": mesh,
+            "initial_velocity": ([_num_or_expr(v) for v in b["initial_velocity"]]
+                                 if "initial_velocity" in b else [0.0] * dim),
+            "initial_temperature": _f(t0),
+        })
+    lagrange = {k: _f(lag_in.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
+    lagrange["bodies"] = bodies
+
+    boundaries = []
+    for bc in d.get("boundaries", []):
+        out = {"type": bc["type"]}
+        for k, v in bc.items():
+            if k == "type" or k == "region" or k == "axis":
+                out[k] = v
+            elif k == "velocity":
+                out[k] = {c: _f(x) for c, x in v.items()}
+            elif k == "at":
+                out[k] = _f(v)
+            elif k in ("point", "normal"):
+                out[k] = [_f(x) for x in v]
+        boundaries.append(out)
+
+    check = None
+    if "check" in d:
+        c = d["check"]
+        check = {
+            "kind": c["kind"],
+            "params": c.get("params", {}),
+            "metrics": {n: {"reference": _f(m["reference"]), "tolerance": _f(m["tolerance"])}
+                        for n, m in c.get("metrics", {}).items()},
+        }
+
+    case = {
+        "name": case_dir.name,
+        "case_dir": case_dir,
+        "run": run,
+        "ranks": {},
+        "materials": materials,
+        "lagrange": lagrange,
+        "boundaries": boundaries,
+        "check": check,
+    }
+    return case
+
+
+def _vec_len(key: str, value: list, dim: int) -> None:
+    if len(value) != dim:
+        raise CaseError(key, value, f"dimension mismatch: must have {dim} items "
+                                    f"(run.dimension = {dim})")
+
+
+def _expr(key: str, text: str, dim: int, kind: str) -> None:
+    try:
+        compile_expression(text, expression_names(dim), kind=kind)
+    except ExpressionError as exc:
+        raise CaseError(key, text, str(exc)) from None
+
+
+def _check(case: dict, data: dict) -> None:
+    """Cross-field checks; fills ``case["ranks"]``.  ``data`` is the raw TOML (for
+    reporting values exactly as written)."""
+    run = case["run"]
+    dim = run["dimension"]
+
+    # [run]
+    if run["output_interval"] > run["end_time"]:
+        raise CaseError("run.output_interval", data["run"]["output_interval"],
+                        f"must be <= run.end_time = {_fmt_num(data['run']['end_time'])} (s)")
+
+    # at least one body (of any solver; only lagrange bodies exist so far)
+    bodies = case["lagrange"]["bodies"]
+    if not bodies:
+        raw = data.get("lagrange", {}).get("bodies", MISSING)
+        raise CaseError("lagrange.bodies", raw,
+                        "at least one body is required ([[lagrange.bodies]])")
+
+    # [ranks] (roles only for the solvers this case uses)
+    case["ranks"] = ranks_for({"lagrange": case["lagrange"], "ranks": data.get("ranks", {})})
+
+    # [materials]
+    for name, m in case["materials"].items():
+        if m["model"] == "johnson_cook" and not m["melt_temperature"] > m["room_temperature"]:
+            raw = data["materials"][name]
+            raise CaseError(format_key(["materials", name, "melt_temperature"]),
+                            raw["melt_temperature"],
+                            f"must be > room_temperature = {_fmt_num(raw['room_temperature'])} (K)")
+
+    # [lagrange]
+    raw_bodies = data["lagrange"]["bodies"]
+    seen: dict[str, int] = {}
+    for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
+        base = ["lagrange", "bodies", i]
+        if body["name"] in seen:
+            raise CaseError(format_key(base + ["name"]), body["name"],
+                            f"duplicate body name (also lagrange.bodies[{seen[body['name']]}].name)")
+        seen[body["name"]] = i
+        if body["material"] not in case["materials"]:
+            defined = ", ".join(case["materials"]) or "(none)"
+            raise CaseError(format_key(base + ["material"]), body["material"],
+                            f"undefined material; defined: {defined}")
+        mesh = raw["mesh"]
+        if "box" in mesh:
+            box = mesh["box"]
+            for k in ("lower", "upper", "cells"):
+                _vec_len(format_key(base + ["mesh", "box", k]), box[k], dim)
+            for j, (lo, hi) in enumerate(zip(box["lower"], box["upper"])):
+                if not hi > lo:
+                    raise CaseError(format_key(base + ["mesh", "box", "upper"]), box["upper"],
+                                    f"must be > lower component-wise (component {j}: "
+                                    f"{_fmt_num(hi)} <= {_fmt_num(lo)})")
+        elif "quarter_cylinder" in mesh:
+            if dim != 3:
+                raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
+                                mesh["quarter_cylinder"],
+                                f"quarter_cylinder meshes are 3D only (run.dimension = {dim})")
+        if "initial_velocity" in raw:
+            v = raw["initial_velocity"]
+            _vec_len(format_key(base + ["initial_velocity"]), v, dim)
+            for j, item in enumerate(v):
+                if isinstance(item, str):
+                    _expr(format_key(base + ["initial_velocity", j]), item, dim, NUM)
+        mat = case["materials"][body["material"]]
+        if mat["model"] == "johnson_cook" and "initial_temperature" in raw:
+            if not body["initial_temperature"] < mat["melt_temperature"]:
+                raise CaseError(format_key(base + ["initial_temperature"]),
+                                raw["initial_temperature"],
+                                f"must be < melt_temperature = {_fmt_num(mat['melt_temperature'])}"
+                                f" of material {body['material']!r} (K)")
+
+    # [[boundaries]]
+    comps = expression_names(dim)
+    for i, (bc, raw) in enumerate(zip(case["boundaries"], data.get("boundaries", []))):
+        base = ["boundaries", i]
+        if "region" in raw:
+            _expr(format_key(base + ["region"]), raw["region"], dim, BOOL)
+        if "velocity" in raw:
+            for c in raw["velocity"]:
+                if c not in comps:
+                    raise CaseError(format_key(base + ["velocity", c]), raw["velocity"][c],
+                                    f"dimension mismatch: no {c} component in a {dim}D case; "
+                                    f"allowed: {', '.join(comps)}")
+        if "axis" in raw and raw["axis"] not in comps:
+            raise CaseError(format_key(base + ["axis"]), raw["axis"],
+                            f"dimension mismatch: must be one of {', '.join(comps)} in a "
+                            f"{dim}D case")
+        for k in ("point", "normal"):
+            if k in raw:
+                _vec_len(format_key(base + [k]), raw[k], dim)
+        if "normal" in raw and not math.fsum(float(c) ** 2 for c in raw["normal"]) > 0.0:
+            raise CaseError(format_key(base + ["normal"]), raw["normal"],
+                            "must be a non-zero vector")
+
+    # [check]: kind must be a registered check
+    if case["check"] is not None:
+        from orchestrator.checks import CHECKS  # lazy: the registry imports numpy etc.
+
+        kind = case["check"]["kind"]
+        if kind not in CHECKS:
+            raise CaseError("check.kind", kind, "unknown check kind; registered: "
+                            + ", ".join(sorted(CHECKS)))
+
+    # mesh files last: reading them may be slow
+    for i, body in enumerate(bodies):
+        if "file" in body["mesh"]:
+            _check_mesh_file(format_key(["lagrange", "bodies", i, "mesh", "file"]),
+                             raw_bodies[i]["mesh"]["file"], body["mesh"]["file"], dim)
+
+
+_CELL_TYPE = {2: "quad", 3: "hexahedron"}
+
+
+def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> None:
+    if not path.exists():
+        raise CaseError(key, raw, "file not found (paths are relative to the case directory)")
+    if not path.is_file():
+        raise CaseError(key, raw, "not a regular file")
+    if not os.access(path, os.R_OK):
+        raise CaseError(key, raw, "file is not readable (permission denied)")
+    from solvers.lagrange.mesh import MeshError, read_mesh  # lazy: heavy imports
+
+    expected = _CELL_TYPE[dim]
+
+    try:
+        mesh = read_mesh(path, dim)
+    except MeshError as exc:
+        raise CaseError(key, raw, f"must be a readable {expected} mesh ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - any reader failure is a bad input file
+        raise CaseError(key, raw, f"must be a readable {expected} mesh "
+                                  f"({type(exc).__name__}: {exc})") from None
+    if getattr(mesh, "cell_type", expected) != expected or len(mesh.cells) == 0:
+        raise CaseError(key, raw, f"must be a readable {expected} mesh (no {expected} cells "
+                                  f"for a {dim}D case)")

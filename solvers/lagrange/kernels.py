@@ -1,0 +1,659 @@
+"""Element kernels of the explicit Lagrangian finite-element solver.
+
+One-point (uniform-gradient) 4-node plane-strain quadrilaterals (unit thickness)
+and 8-node hexahedra with Flanagan-Belytschko viscous hourglass control.
+
+Geometry
+--------
+Uniform gradient (Flanagan & Belytschko 1981): ``B_I = (1/V) dV/dx_I``.  With
+``b_I = V B_I = dV/dx_I = int_Omega grad N_I dV = oint N_I n dA``:
+
+* hexahedron: every face is a bilinear patch ``x(s,t) = x0 + s e1 + t e2 + s t e3``
+  (s, t in [-1, 1]) with corners a(-1,-1), b(1,-1), c(1,1), d(-1,1) ordered
+  counter-clockwise seen from outside, so ``n dA = x_s x x_t ds dt =
+  (e1 x e2 + s e1 x e3 + t e3 x e2) ds dt``.  Since ``int N_a ds dt = 1`` and
+  ``int N_a s ds dt = s_a/3``, ``int N_a n dA = e1 x e2 + s_a/3 e1 x e3 +
+  t_a/3 e3 x e2`` exactly; ``b_I`` is the sum over the three faces holding I.
+  The volume follows from Euler's theorem for the cubic V(x):
+  ``V = (1/3) sum_I x_I . b_I`` (computed relative to the centroid).
+  The exact face-area vector of face f is ``4 e1 x e2`` (= half the cross product
+  of its diagonals).
+* quadrilateral: ``A = 1/2 sum_I (x_I y_{I+1} - x_{I+1} y_I)`` (exact for the
+  bilinear quad, straight edges) so ``b_I = (y_{I+1} - y_{I-1}, x_{I-1} - x_{I+1})/2``.
+
+Both satisfy ``sum_I b_I = 0`` and ``sum_I x_I (x) b_I = V I`` exactly.
+
+Kinematics: ``L = sum_I v_I (x) B_I(x^{n-1/2})`` evaluated at the mid-step
+configuration ``x^{n-1/2} = x^n - dt/2 v^{n-1/2}``; for a discrete rigid rotation
+this makes ``D = 0`` exactly (the mid-point velocity field is the Cayley
+transform of the rotation, a skew linear map of ``x^{n-1/2}``).
+
+Internal force (force ON the nodes): ``f_I = -V (sigma - q I) B_I =
+-(sigma - q I) b_I`` with b at x^n, plus the hourglass force.
+
+Hourglass (FB viscous, LS-DYNA type 2/3 form): with the base vectors Gamma_a
+(hex: eta zeta, zeta xi, xi eta, xi eta zeta; quad: xi eta) and
+``gamma_a = Gamma_a - (Gamma_a . x_i) B_i`` (orthogonal to every linear field),
+``g_ia = sum_I v_iI gamma_aI`` and ``f_iI = -a_h sum_a g_ia gamma_aI`` with
+``a_h = hg_coef rho c V^(2/3) / 4`` (hex) and ``a_h = hg_coef rho c A^(1/2) / 4``
+(quad, per unit thickness).  ``sum_I gamma_aI = 0`` and
+``sum_I x_I gamma_aI = 0`` give exact conservation of linear and angular momentum
+and zero force for any velocity field linear in x (rigid motion).
+
+Artificial bulk viscosity (LS-DYNA form): for ``div v < 0``
+``q = rho l (q_quad l (div v)^2 - q_lin c div v)``.
+
+Stable step: ``dt_e = l / (Q + sqrt(Q^2 + c^2))`` with
+``Q = q_lin c + q_quad l |div v|`` for ``div v < 0`` and ``Q = 0`` otherwise
+(LS-DYNA); c = dilatational wave speed at the current density (elastic moduli
+for Johnson-Cook, current tangent for neo-Hookean) and ``l = V / max face area``
+(hex, LS-DYNA) or ``l = A / max diagonal`` (quad, the conservative LS-DYNA shell
+option: for a square l = h/sqrt(2), the element eigenvalue bound 2/omega_max of
+the one-point quad in the incompressible limit).
+
+Stress update (dt_prev > 0): explicit Jaumann rate
+``sigma^n = sigma^{n-1} + dt (W sigma^{n-1} - sigma^{n-1} W) + dt C:D`` for the
+hypoelastic models (then a radial return for Johnson-Cook, temperature of the
+start of the step in the flow stress, adiabatic heating added afterwards);
+neo-Hookean stresses from ``F = sum_I x_I (x) gradN0_I`` at x^n.  Internal
+energy increment ``1/2 (sigma^{n-1} + sigma^n) : D  V^{n-1/2} dt``.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+import os
+
+import numpy as np
+from numba import njit
+
+from . import materials as _materials
+from .materials import (JOHNSON_COOK, LINEAR_ELASTIC, NEO_HOOKEAN, P_G, P_K, P_LAM,
+                        elastic_increment, jaumann_rotation, johnson_cook_update,
+                        neo_hookean_modulus, neo_hookean_stress)
+
+__all__ = ["element_forces", "reference_gradients", "hex_bvectors", "quad_bvectors",
+           "HEX_FACES", "HEX_HG", "QUAD_HG", "LINEAR_ELASTIC", "NEO_HOOKEAN", "JOHNSON_COOK"]
+
+# Hex faces (VTK node order), corners counter-clockwise seen from outside.
+HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4],
+                      [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]], dtype=np.int64)
+# Natural coordinates of the VTK hex nodes.
+_HEX_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
+                    [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=np.float64)
+# Hourglass base vectors: eta*zeta, zeta*xi, xi*eta, xi*eta*zeta.
+HEX_HG = np.ascontiguousarray(np.stack([
+    _HEX_XI[:, 1] * _HEX_XI[:, 2],
+    _HEX_XI[:, 2] * _HEX_XI[:, 0],
+    _HEX_XI[:, 0] * _HEX_XI[:, 1],
+    _HEX_XI[:, 0] * _HEX_XI[:, 1] * _HEX_XI[:, 2],
+]))
+QUAD_HG = np.array([1.0, -1.0, 1.0, -1.0])
+
+_THIRD = 1.0 / 3.0
+
+
+@njit(cache=True)
+def hex_bvectors(xe, b):
+    """b_I = dV/dx_I of a trilinear hexahedron (written into b (8,3)).
+
+    Returns ``(V, amax)``: exact volume and the largest face area (magnitude of
+    the face area vector).
+    """
+    for i in range(8):
+        b[i, 0] = 0.0
+        b[i, 1] = 0.0
+        b[i, 2] = 0.0
+    amax2 = 0.0
+    for fc in range(6):
+        ia = HEX_FACES[fc, 0]
+        ib = HEX_FACES[fc, 1]
+        ic = HEX_FACES[fc, 2]
+        id_ = HEX_FACES[fc, 3]
+        xa = xe[ia, 0]
+        ya = xe[ia, 1]
+        za = xe[ia, 2]
+        xb = xe[ib, 0]
+        yb = xe[ib, 1]
+        zb = xe[ib, 2]
+        xc = xe[ic, 0]
+        yc = xe[ic, 1]
+        zc = xe[ic, 2]
+        xd = xe[id_, 0]
+        yd = xe[id_, 1]
+        zd = xe[id_, 2]
+        # e1 = (-a + b + c - d)/4, e2 = (-a - b + c + d)/4, e3 = (a - b + c - d)/4
+        e1x = 0.25 * ((xb - xa) + (xc - xd))
+        e1y = 0.25 * ((yb - ya) + (yc - yd))
+        e1z = 0.25 * ((zb - za) + (zc - zd))
+        e2x = 0.25 * ((xd - xa) + (xc - xb))
+        e2y = 0.25 * ((yd - ya) + (yc - yb))
+        e2z = 0.25 * ((zd - za) + (zc - zb))
+        e3x = 0.25 * ((xa - xb) + (xc - xd))
+        e3y = 0.25 * ((ya - yb) + (yc - yd))
+        e3z = 0.25 * ((za - zb) + (zc - zd))
+        # c0 = e1 x e2 ; c1 = e1 x e3 / 3 ; c2 = e3 x e2 / 3
+        c0x = e1y * e2z - e1z * e2y
+        c0y = e1z * e2x - e1x * e2z
+        c0z = e1x * e2y - e1y * e2x
+        c1x = (e1y * e3z - e1z * e3y) * _THIRD
+        c1y = (e1z * e3x - e1x * e3z) * _THIRD
+        c1z = (e1x * e3y - e1y * e3x) * _THIRD
+        c2x = (e3y * e2z - e3z * e2y) * _THIRD
+        c2y = (e3z * e2x - e3x * e2z) * _THIRD
+        c2z = (e3x * e2y - e3y * e2x) * _THIRD
+        a2 = c0x * c0x + c0y * c0y + c0z * c0z
+        if a2 > amax2:
+            amax2 = a2
+        # corners a(-,-) b(+,-) c(+,+) d(-,+)
+        b[ia, 0] += c0x - c1x - c2x
+        b[ia, 1] += c0y - c1y - c2y
+        b[ia, 2] += c0z - c1z - c2z
+        b[ib, 0] += c0x + c1x - c2x
+        b[ib, 1] += c0y + c1y - c2y
+        b[ib, 2] += c0z + c1z - c2z
+        b[ic, 0] += c0x + c1x + c2x
+        b[ic, 1] += c0y + c1y + c2y
+        b[ic, 2] += c0z + c1z + c2z
+        b[id_, 0] += c0x - c1x + c2x
+        b[id_, 1] += c0y - c1y + c2y
+        b[id_, 2] += c0z - c1z + c2z
+    cx = 0.0
+    cy = 0.0
+    cz = 0.0
+    for i in range(8):
+        cx += xe[i, 0]
+        cy += xe[i, 1]
+        cz += xe[i, 2]
+    cx *= 0.125
+    cy *= 0.125
+    cz *= 0.125
+    vol = 0.0
+    for i in range(8):
+        vol += (xe[i, 0] - cx) * b[i, 0] + (xe[i, 1] - cy) * b[i, 1] + (xe[i, 2] - cz) * b[i, 2]
+    return vol * _THIRD, 4.0 * math.sqrt(amax2)
+
+
+@njit(cache=True)
+def quad_bvectors(xe, b):
+    """b_I = dA/dx_I of a bilinear quadrilateral (written into b (4,2)).
+
+    Returns ``(A, dmax)``: exact area and the longer diagonal.
+    """
+    for i in range(4):
+        ip = (i + 1) % 4
+        im = (i + 3) % 4
+        b[i, 0] = 0.5 * (xe[ip, 1] - xe[im, 1])
+        b[i, 1] = 0.5 * (xe[im, 0] - xe[ip, 0])
+    # A = 1/2 (x2 - x0) x (x3 - x1)
+    d1x = xe[2, 0] - xe[0, 0]
+    d1y = xe[2, 1] - xe[0, 1]
+    d2x = xe[3, 0] - xe[1, 0]
+    d2y = xe[3, 1] - xe[1, 1]
+    area = 0.5 * (d1x * d2y - d1y * d2x)
+    dm = max(d1x * d1x + d1y * d1y, d2x * d2x + d2y * d2y)
+    return area, math.sqrt(dm)
+
+
+@njit(cache=True)
+def reference_gradients(X, conn):
+    """Uniform gradients ``gradN0 (ne, nen, dim)`` and volumes ``vol0 (ne,)`` at X.
+
+    ``gradN0[e, I] = (1/V0) dV0/dX_I``; ``F = sum_I x_I (x) gradN0_I`` is then the
+    volume average of the deformation gradient of the element.
+    """
+    ne = conn.shape[0]
+    nen = conn.shape[1]
+    dim = X.shape[1]
+    grad = np.zeros((ne, nen, dim))
+    vol0 = np.zeros(ne)
+    xe = np.empty((nen, dim))
+    b = np.empty((nen, dim))
+    for e in range(ne):
+        for i in range(nen):
+            for k in range(dim):
+                xe[i, k] = X[conn[e, i], k]
+        if dim == 3:
+            vol, _ = hex_bvectors(xe, b)
+        else:
+            vol, _ = quad_bvectors(xe, b)
+        vol0[e] = vol
+        inv = 1.0 / vol
+        for i in range(nen):
+            for k in range(dim):
+                grad[e, i, k] = b[i, k] * inv
+    return grad, vol0
+
+
+@njit(cache=True)
+def _is_bad(s0, s1, s2, s3, s4, s5):
+    t = s0 + s1 + s2 + s3 + s4 + s5
+    return not (t - t == 0.0)
+
+
+@njit(cache=True)
+def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
+                temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+    ne = conn.shape[0]
+    xe = np.empty((8, 3))
+    ve = np.empty((8, 3))
+    xm = np.empty((8, 3))
+    b = np.empty((8, 3))
+    bm = np.empty((8, 3))
+    fe = np.empty((8, 3))
+    dt_min = np.inf
+    half_dt = 0.5 * dt
+    for e in range(ne):
+        for i in range(8):
+            nd = conn[e, i]
+            for k in range(3):
+                xe[i, k] = x[nd, k]
+                ve[i, k] = v[nd, k]
+        vol, amax = hex_bvectors(xe, b)
+        if not (vol > 0.0):
+            return dt_min, e
+        # velocity gradient at the mid-step configuration
+        if dt > 0.0:
+            for i in range(8):
+                for k in range(3):
+                    xm[i, k] = xe[i, k] - half_dt * ve[i, k]
+            vm, _ = hex_bvectors(xm, bm)
+            if not (vm > 0.0):
+                return dt_min, e
+            bg = bm
+        else:
+            vm = vol
+            bg = b
+        l00 = 0.0
+        l01 = 0.0
+        l02 = 0.0
+        l10 = 0.0
+        l11 = 0.0
+        l12 = 0.0
+        l20 = 0.0
+        l21 = 0.0
+        l22 = 0.0
+        for i in range(8):
+            vx = ve[i, 0]
+            vy = ve[i, 1]
+            vz = ve[i, 2]
+            bx = bg[i, 0]
+            by = bg[i, 1]
+            bz = bg[i, 2]
+            l00 += vx * bx
+            l01 += vx * by
+            l02 += vx * bz
+            l10 += vy * bx
+            l11 += vy * by
+            l12 += vy * bz
+            l20 += vz * bx
+            l21 += vz * by
+            l22 += vz * bz
+        ivm = 1.0 / vm
+        d0 = l00 * ivm
+        d1 = l11 * ivm
+        d2 = l22 * ivm
+        d3 = 0.5 * (l01 + l10) * ivm
+        d4 = 0.5 * (l12 + l21) * ivm
+        d5 = 0.5 * (l20 + l02) * ivm
+        wxy = 0.5 * (l01 - l10) * ivm
+        wyz = 0.5 * (l12 - l21) * ivm
+        wzx = 0.5 * (l20 - l02) * ivm
+        divv = d0 + d1 + d2
+
+        # constitutive update
+        mid = mat_id[e]
+        code = mat_code[mid]
+        rho = mass_e[e] / vol
+        o0 = sig[e, 0]
+        o1 = sig[e, 1]
+        o2 = sig[e, 2]
+        o3 = sig[e, 3]
+        o4 = sig[e, 4]
+        o5 = sig[e, 5]
+        s0, s1, s2, s3, s4, s5 = o0, o1, o2, o3, o4, o5
+        G = mat_par[mid, P_G]
+        if code == NEO_HOOKEAN:
+            f00 = 0.0
+            f01 = 0.0
+            f02 = 0.0
+            f10 = 0.0
+            f11 = 0.0
+            f12 = 0.0
+            f20 = 0.0
+            f21 = 0.0
+            f22 = 0.0
+            for i in range(8):
+                g0 = gradN0[e, i, 0]
+                g1 = gradN0[e, i, 1]
+                g2 = gradN0[e, i, 2]
+                f00 += xe[i, 0] * g0
+                f01 += xe[i, 0] * g1
+                f02 += xe[i, 0] * g2
+                f10 += xe[i, 1] * g0
+                f11 += xe[i, 1] * g1
+                f12 += xe[i, 1] * g2
+                f20 += xe[i, 2] * g0
+                f21 += xe[i, 2] * g1
+                f22 += xe[i, 2] * g2
+            lam = mat_par[mid, P_LAM]
+            jac, n0, n1, n2, n3, n4, n5 = neo_hookean_stress(f00, f01, f02, f10, f11, f12,
+                                                             f20, f21, f22, G, lam)
+            if not (jac > 0.0):
+                return dt_min, e
+            if dt > 0.0:
+                s0, s1, s2, s3, s4, s5 = n0, n1, n2, n3, n4, n5
+            csq = neo_hookean_modulus(jac, G, lam) / rho
+        else:
+            K = mat_par[mid, P_K]
+            if dt > 0.0:
+                if code == JOHNSON_COOK:
+                    s0, s1, s2, s3, s4, s5, dgp, dT = johnson_cook_update(
+                        o0, o1, o2, o3, o4, o5, d0, d1, d2, d3, d4, d5, wxy, wyz, wzx,
+                        dt, eps_p[e], temp[e], rho, mat_par[mid])
+                    eps_p[e] += dgp
+                    temp[e] += dT
+                else:
+                    s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
+                                                              wxy, wyz, wzx, dt)
+                    s0, s1, s2, s3, s4, s5 = elastic_increment(s0, s1, s2, s3, s4, s5, d0, d1,
+                                                               d2, d3, d4, d5, dt, G, K)
+            csq = (K + 4.0 / 3.0 * G) / rho
+        if _is_bad(s0, s1, s2, s3, s4, s5):
+            return dt_min, e
+        if dt > 0.0:
+            pw = ((o0 + s0) * d0 + (o1 + s1) * d1 + (o2 + s2) * d2
+                  + 2.0 * ((o3 + s3) * d3 + (o4 + s4) * d4 + (o5 + s5) * d5))
+            e_int[e] += 0.5 * pw * vm * dt
+            sig[e, 0] = s0
+            sig[e, 1] = s1
+            sig[e, 2] = s2
+            sig[e, 3] = s3
+            sig[e, 4] = s4
+            sig[e, 5] = s5
+
+        # bulk viscosity and stable step
+        c = math.sqrt(csq)
+        lc = vol / amax
+        q = 0.0
+        qq = 0.0
+        if divv < 0.0:
+            qq = q_lin * c - q_quad * lc * divv
+            q = rho * lc * qq * (-divv)
+        q_out[e] = q
+        dte = lc / (qq + math.sqrt(qq * qq + csq))
+        if dte < dt_min:
+            dt_min = dte
+
+        # stress divergence: f_I = -(sigma - q I) b_I
+        p0 = s0 - q
+        p1 = s1 - q
+        p2 = s2 - q
+        for i in range(8):
+            bx = b[i, 0]
+            by = b[i, 1]
+            bz = b[i, 2]
+            fe[i, 0] = -(p0 * bx + s3 * by + s5 * bz)
+            fe[i, 1] = -(s3 * bx + p1 * by + s4 * bz)
+            fe[i, 2] = -(s5 * bx + s4 * by + p2 * bz)
+
+        # Flanagan-Belytschko viscous hourglass control
+        if hg_coef > 0.0:
+            ah = hg_coef * rho * c * vol ** (2.0 / 3.0) * 0.25
+            ivol = 1.0 / vol
+            for a in range(4):
+                hx = 0.0
+                hy = 0.0
+                hz = 0.0
+                for i in range(8):
+                    gam = HEX_HG[a, i]
+                    hx += gam * xe[i, 0]
+                    hy += gam * xe[i, 1]
+                    hz += gam * xe[i, 2]
+                hx *= ivol
+                hy *= ivol
+                hz *= ivol
+                gx = 0.0
+                gy = 0.0
+                gz = 0.0
+                for i in range(8):
+                    gam = HEX_HG[a, i] - (hx * b[i, 0] + hy * b[i, 1] + hz * b[i, 2])
+                    xm[i, 0] = gam  # reuse xm as storage for gamma
+                    gx += gam * ve[i, 0]
+                    gy += gam * ve[i, 1]
+                    gz += gam * ve[i, 2]
+                gx *= ah
+                gy *= ah
+                gz *= ah
+                for i in range(8):
+                    gam = xm[i, 0]
+                    fe[i, 0] -= gam * gx
+                    fe[i, 1] -= gam * gy
+                    fe[i, 2] -= gam * gz
+
+        for i in range(8):
+            nd = conn[e, i]
+            f[nd, 0] += fe[i, 0]
+            f[nd, 1] += fe[i, 1]
+            f[nd, 2] += fe[i, 2]
+    return dt_min, -1
+
+
+@njit(cache=True)
+def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
+                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+    ne = conn.shape[0]
+    xe = np.empty((4, 2))
+    ve = np.empty((4, 2))
+    xm = np.empty((4, 2))
+    b = np.empty((4, 2))
+    bm = np.empty((4, 2))
+    fe = np.empty((4, 2))
+    dt_min = np.inf
+    half_dt = 0.5 * dt
+    for e in range(ne):
+        for i in range(4):
+            nd = conn[e, i]
+            for k in range(2):
+                xe[i, k] = x[nd, k]
+                ve[i, k] = v[nd, k]
+        vol, dmax = quad_bvectors(xe, b)
+        if not (vol > 0.0):
+            return dt_min, e
+        if dt > 0.0:
+            for i in range(4):
+                for k in range(2):
+                    xm[i, k] = xe[i, k] - half_dt * ve[i, k]
+            vm, _ = quad_bvectors(xm, bm)
+            if not (vm > 0.0):
+                return dt_min, e
+            bg = bm
+        else:
+            vm = vol
+            bg = b
+        l00 = 0.0
+        l01 = 0.0
+        l10 = 0.0
+        l11 = 0.0
+        for i in range(4):
+            l00 += ve[i, 0] * bg[i, 0]
+            l01 += ve[i, 0] * bg[i, 1]
+            l10 += ve[i, 1] * bg[i, 0]
+            l11 += ve[i, 1] * bg[i, 1]
+        ivm = 1.0 / vm
+        d0 = l00 * ivm
+        d1 = l11 * ivm
+        d3 = 0.5 * (l01 + l10) * ivm
+        wxy = 0.5 * (l01 - l10) * ivm
+        divv = d0 + d1
+
+        mid = mat_id[e]
+        code = mat_code[mid]
+        rho = mass_e[e] / vol
+        o0 = sig[e, 0]
+        o1 = sig[e, 1]
+        o2 = sig[e, 2]
+        o3 = sig[e, 3]
+        o4 = sig[e, 4]
+        o5 = sig[e, 5]
+        s0, s1, s2, s3, s4, s5 = o0, o1, o2, o3, o4, o5
+        G = mat_par[mid, P_G]
+        if code == NEO_HOOKEAN:
+            f00 = 0.0
+            f01 = 0.0
+            f10 = 0.0
+            f11 = 0.0
+            for i in range(4):
+                g0 = gradN0[e, i, 0]
+                g1 = gradN0[e, i, 1]
+                f00 += xe[i, 0] * g0
+                f01 += xe[i, 0] * g1
+                f10 += xe[i, 1] * g0
+                f11 += xe[i, 1] * g1
+            lam = mat_par[mid, P_LAM]
+            jac, n0, n1, n2, n3, n4, n5 = neo_hookean_stress(f00, f01, 0.0, f10, f11, 0.0,
+                                                             0.0, 0.0, 1.0, G, lam)
+            if not (jac > 0.0):
+                return dt_min, e
+            if dt > 0.0:
+                s0, s1, s2, s3, s4, s5 = n0, n1, n2, n3, n4, n5
+            csq = neo_hookean_modulus(jac, G, lam) / rho
+        else:
+            K = mat_par[mid, P_K]
+            if dt > 0.0:
+                if code == JOHNSON_COOK:
+                    s0, s1, s2, s3, s4, s5, dgp, dT = johnson_cook_update(
+                        o0, o1, o2, o3, o4, o5, d0, d1, 0.0, d3, 0.0, 0.0, wxy, 0.0, 0.0,
+                        dt, eps_p[e], temp[e], rho, mat_par[mid])
+                    eps_p[e] += dgp
+                    temp[e] += dT
+                else:
+                    s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
+                                                              wxy, 0.0, 0.0, dt)
+                    s0, s1, s2, s3, s4, s5 = elastic_increment(s0, s1, s2, s3, s4, s5, d0, d1,
+                                                               0.0, d3, 0.0, 0.0, dt, G, K)
+            csq = (K + 4.0 / 3.0 * G) / rho
+        if _is_bad(s0, s1, s2, s3, s4, s5):
+            return dt_min, e
+        if dt > 0.0:
+            pw = (o0 + s0) * d0 + (o1 + s1) * d1 + 2.0 * (o3 + s3) * d3
+            e_int[e] += 0.5 * pw * vm * dt
+            sig[e, 0] = s0
+            sig[e, 1] = s1
+            sig[e, 2] = s2
+            sig[e, 3] = s3
+            sig[e, 4] = s4
+            sig[e, 5] = s5
+
+        c = math.sqrt(csq)
+        lc = vol / dmax
+        q = 0.0
+        qq = 0.0
+        if divv < 0.0:
+            qq = q_lin * c - q_quad * lc * divv
+            q = rho * lc * qq * (-divv)
+        q_out[e] = q
+        dte = lc / (qq + math.sqrt(qq * qq + csq))
+        if dte < dt_min:
+            dt_min = dte
+
+        p0 = s0 - q
+        p1 = s1 - q
+        for i in range(4):
+            bx = b[i, 0]
+            by = b[i, 1]
+            fe[i, 0] = -(p0 * bx + s3 * by)
+            fe[i, 1] = -(s3 * bx + p1 * by)
+
+        if hg_coef > 0.0:
+            ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
+            ivol = 1.0 / vol
+            hx = 0.0
+            hy = 0.0
+            for i in range(4):
+                hx += QUAD_HG[i] * xe[i, 0]
+                hy += QUAD_HG[i] * xe[i, 1]
+            hx *= ivol
+            hy *= ivol
+            gx = 0.0
+            gy = 0.0
+            for i in range(4):
+                gam = QUAD_HG[i] - (hx * b[i, 0] + hy * b[i, 1])
+                xm[i, 0] = gam
+                gx += gam * ve[i, 0]
+                gy += gam * ve[i, 1]
+            gx *= ah
+            gy *= ah
+            for i in range(4):
+                fe[i, 0] -= xm[i, 0] * gx
+                fe[i, 1] -= xm[i, 0] * gy
+
+        for i in range(4):
+            nd = conn[e, i]
+            f[nd, 0] += fe[i, 0]
+            f[nd, 1] += fe[i, 1]
+    return dt_min, -1
+
+
+@njit(cache=True)
+def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
+                   eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+    """Stress update n-1 -> n, internal + hourglass forces at x^n, stable step.
+
+    Parameters
+    ----------
+    x : (nn, dim) positions at t^n;  v : (nn, dim) velocities at t^{n-1/2}
+    dt_prev : dt^{n-1/2}; 0 means no stress update (forces from the current stress)
+    conn : (ne, 4 | 8) int64 node ids (VTK order, positively oriented)
+    mat_id : (ne,) int64 ; mat_code : (nmat,) int64 ; mat_par : (nmat, NPAR)
+    gradN0 : (ne, nen, dim) reference uniform gradients (neo-Hookean F);
+    vol0 : (ne,) reference volumes (unused by the kernel, kept for the API)
+    mass_e : (ne,) element masses (current density = mass_e / V)
+    sig (ne, 6), eps_p, temp, e_int, q_out (ne,) : state, updated in place
+    hg_coef, q_lin, q_quad : hourglass and bulk-viscosity coefficients
+    f : (nn, dim) nodal forces, internal contributions are ADDED (M a = f)
+
+    Returns ``(dt_min, bad)``: the smallest element stable step and the first
+    element with non-positive volume (at x^n or at the mid-step configuration),
+    non-positive neo-Hookean J or non-finite stress (-1 if none).  On ``bad >= 0``
+    the call returns immediately (state and f are partially updated).
+    """
+    if x.shape[1] == 3:
+        return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
+                           mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f)
+    return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
+                        mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f)
+
+
+def _flush_stale_cache() -> None:
+    """Drop this module's numba cache when materials.py changed.
+
+    numba's on-disk cache of a function is keyed on the source file of that
+    function only; the constitutive functions of materials.py are compiled
+    *into* the kernels, so an edit of materials.py alone would silently reuse
+    stale machine code.  The hash of materials.py is stored next to the cache
+    index; on mismatch the index of every cached kernel is flushed.
+    """
+    try:
+        with open(_materials.__file__, "rb") as fh:
+            digest = hashlib.sha256(fh.read()).hexdigest()
+        disps = [hex_bvectors, quad_bvectors, reference_gradients, _is_bad, _forces_hex,
+                 _forces_quad, element_forces]
+        stamp = os.path.join(element_forces._cache.cache_path, "kernels.materials.sha256")
+        try:
+            with open(stamp) as fh:
+                if fh.read().strip() == digest:
+                    return
+        except OSError:
+            pass
+        for d in disps:
+            d._cache.flush()
+        tmp = f"{stamp}.{os.getpid()}.tmp"
+        with open(tmp, "w") as fh:
+            fh.write(digest)
+        os.replace(tmp, stamp)
+    except Exception:  # cache handling must never break the solver (read-only trees etc.)
+        pass
+
+
+_flush_stale_cache()

@@ -1,0 +1,30 @@
+"""Shared fixtures. The suite runs serially (`pytest tests`) and its `mpi` subset under
+`mpiexec -n 2 python -m pytest -m mpi tests` (each rank runs the same tests on COMM_WORLD)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+CASES = REPO / "cases"
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+
+def immerse(*args, timeout=600, **kw) -> subprocess.CompletedProcess:
+    """Run the `immerse` CLI of this venv in a subprocess (as a user would)."""
+    env = dict(os.environ)
+    env.pop("IMMERSE_TTY", None)
+    env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=kw.pop("cwd", REPO),
+                          capture_output=True, text=True, timeout=timeout, env=env, **kw)
+
+
+@pytest.fixture
+def run_immerse():
+    return immerse

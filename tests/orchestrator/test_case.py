@@ -1,0 +1,391 @@
+"""Tests of orchestrator.case: valid cases load with the right defaults, every bad case
+directory fails with a one-line CaseError on the exact dotted key."""
+
+import pickle
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from orchestrator.case import (
+    MISSING,
+    CaseError,
+    format_key,
+    load_case,
+    ranks_for,
+    solvers_used,
+)
+from orchestrator.case_schema import CASE_SCHEMA, MODEL_KEYS
+from orchestrator.expressions import compile_expression
+
+HERE = Path(__file__).parent
+VALID = HERE / "valid_cases"
+BAD = HERE / "bad_cases"
+
+
+def assert_one_line(err: CaseError):
+    msg = str(err)
+    assert "\n" not in msg and "\r" not in msg
+    assert msg == f"{err.key} = {err.value!r}: {err.allowed}"
+    return msg
+
+
+# --------------------------------------------------------------------------- valid cases
+def test_box3d_loads_with_values_and_defaults():
+    case = load_case(VALID / "box3d")
+    assert case["name"] == "box3d"
+    assert case["case_dir"] == (VALID / "box3d").resolve()
+    assert case["case_dir"].is_absolute()
+
+    run = case["run"]
+    assert run["dimension"] == 3 and isinstance(run["dimension"], int)
+    assert run["end_time"] == pytest.approx(2.0e-5, rel=1e-15)
+    assert run["dt_scale"] == 0.8
+    assert run["output_interval"] == pytest.approx(2.0e-5 / 20, rel=1e-15)  # default
+    assert run["checkpoint_interval"] == pytest.approx(1.0e-5, rel=1e-15)
+    assert run["max_steps"] == 10_000_000
+    assert run["diagnostics_every"] == 1
+
+    assert case["ranks"] == {"lagrange": 2}
+    assert solvers_used(case) == ["lagrange"]
+
+    cu = case["materials"]["copper"]
+    assert cu["model"] == "johnson_cook"
+    assert set(cu) == set(MODEL_KEYS["johnson_cook"])
+    assert cu["melt_temperature"] == 1356.0 and cu["room_temperature"] == 294.0
+    rubber = case["materials"]["rubber"]
+    assert rubber == {"model": "neo_hookean", "density": 1100.0, "youngs_modulus": 5e6,
+                      "poisson_ratio": 0.45}
+    assert all(isinstance(v, float) for v in rubber.values() if not isinstance(v, str))
+
+    lag = case["lagrange"]
+    assert lag["hourglass"] == 0.05
+    assert lag["bulk_viscosity_linear"] == 0.06      # default
+    assert lag["bulk_viscosity_quadratic"] == 1.5    # default
+    bar, pad = lag["bodies"]
+    assert bar["name"] == "bar" and bar["material"] == "copper"
+    assert bar["mesh"] == {"box": {"lower": [0.0, 0.0, 0.0], "upper": [0.004, 0.004, 0.02],
+                                   "cells": [2, 2, 8]}}
+    assert bar["initial_velocity"][:2] == [0.0, 0.0]
+    assert bar["initial_velocity"][2] == "-190.0 * where(z > 0.001, 1, 0.5)"  # kept as text
+    assert bar["initial_temperature"] == 294.0       # default: material room_temperature
+    assert pad["initial_velocity"] == [0.0, 0.0, 0.0]  # default zeros
+    assert pad["initial_temperature"] == 300.0
+    assert pad["mesh"]["box"]["lower"] == [0.0, 0.0, -0.01]
+
+    b = case["boundaries"]
+    assert [x["type"] for x in b] == ["symmetry", "fixed", "velocity", "rigid_wall"]
+    assert b[0] == {"type": "symmetry", "axis": "x", "at": 0.0}
+    assert b[2]["velocity"] == {"y": 0.0}
+    assert b[3]["normal"] == [0.0, 0.0, 1.0]
+
+    assert case["check"]["kind"] == "momentum"
+    assert case["check"]["params"]["samples"] == [1, 2, 3]
+    assert case["check"]["metrics"] == {"total_momentum_z": {"reference": -1.0,
+                                                             "tolerance": 0.01}}
+
+
+def test_box3d_expressions_evaluate():
+    case = load_case(VALID / "box3d")
+    z = np.array([0.0, 0.0005, 0.002, 0.02])
+    vz = compile_expression(case["lagrange"]["bodies"][0]["initial_velocity"][2])
+    np.testing.assert_allclose(vz(0 * z, 0 * z, z), [-95.0, -95.0, -190.0, -190.0], rtol=1e-15)
+    region = compile_expression(case["boundaries"][2]["region"], kind="boolean")
+    x = np.array([0.01, 0.01, 0.0, 0.01])
+    y = np.array([0.0, 0.011, 0.005, 0.01])
+    np.testing.assert_array_equal(region(x, y, 0 * x), [True, False, False, True])
+
+
+def test_box2d_loads_with_all_defaults():
+    case = load_case(VALID / "box2d")
+    assert case["name"] == "box2d"
+    assert case["run"] == {"dimension": 2, "end_time": 1e-4, "dt_scale": 0.9,
+                           "output_interval": pytest.approx(5e-6, rel=1e-15),
+                           "checkpoint_interval": None, "max_steps": 10_000_000,
+                           "diagnostics_every": 1}
+    assert case["ranks"] == {"lagrange": 1}
+    assert case["materials"] == {"steel": {"model": "linear_elastic", "density": 7850.0,
+                                           "youngs_modulus": 210e9, "poisson_ratio": 0.3}}
+    lag = case["lagrange"]
+    assert (lag["hourglass"], lag["bulk_viscosity_linear"], lag["bulk_viscosity_quadratic"]) \
+        == (0.1, 0.06, 1.5)
+    (plate,) = lag["bodies"]
+    assert plate["initial_velocity"] == [0.0, 0.0]
+    assert plate["initial_temperature"] == 293.15
+    assert plate["mesh"]["box"] == {"lower": [0.0, 0.0], "upper": [0.1, 0.02], "cells": [5, 1]}
+    assert case["boundaries"] == [{"type": "fixed", "region": "x < 1e-9"}]
+    assert case["check"] is None
+
+
+def test_file_mesh_path_is_resolved(tmp_path, monkeypatch):
+    case = load_case(VALID / "file3d")
+    path = case["lagrange"]["bodies"][0]["mesh"]["file"]
+    assert isinstance(path, Path) and path.is_absolute()
+    assert path == (VALID / "file3d" / "column.msh").resolve()
+    # relative to the case directory, not to the working directory
+    monkeypatch.chdir(tmp_path)
+    assert load_case(VALID / "file3d")["lagrange"]["bodies"][0]["mesh"]["file"] == path
+
+
+def test_file_mesh_2d(tmp_path):
+    (tmp_path / "sq.msh").write_text(
+        "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 1 1 0\n"
+        "4 0 1 0\n$EndNodes\n$Elements\n1\n1 3 2 0 0 1 2 3 4\n$EndElements\n")
+    (tmp_path / "case.toml").write_text(
+        (VALID / "box2d" / "case.toml").read_text().replace(
+            "mesh = { box = { lower = [0, 0], upper = [0.1, 0.02], cells = [5, 1] } }",
+            'mesh = { file = "sq.msh" }'))
+    case = load_case(tmp_path)
+    assert case["lagrange"]["bodies"][0]["mesh"] == {"file": (tmp_path / "sq.msh").resolve()}
+
+
+def test_case_toml_path_accepted():
+    assert load_case(VALID / "box2d" / "case.toml")["name"] == "box2d"
+
+
+def test_missing_directory_and_missing_case_toml(tmp_path):
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path / "nope")
+    assert ei.value.key == "case_dir"
+    assert_one_line(ei.value)
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == "case.toml" and "file not found" in str(ei.value)
+
+
+# --------------------------------------------------------------------------- bad cases
+BAD_CASES = [
+    # (directory, expected key, fragment of the "allowed" text)
+    ("missing_required_key", "run.end_time", "required key missing"),
+    ("unknown_top_level_key", "solver", "unknown key; allowed: run, ranks, materials"),
+    ("unknown_nested_key", "lagrange.bodies[0].velocity", "unknown key; allowed: name"),
+    ("key_of_other_model", "materials.steel.yield_stress", "model = 'linear_elastic'"),
+    ("negative_density", "materials.steel.density", "must be > 0 (kg/m^3)"),
+    ("poisson_ratio_half", "materials.steel.poisson_ratio", "must be > -1 and < 0.5"),
+    ("unknown_material_model", "materials.steel.model", "'johnson_cook'"),
+    ("undefined_material", "lagrange.bodies[0].material", "undefined material; defined: steel"),
+    ("missing_mesh_file", "lagrange.bodies[0].mesh.file", "file not found"),
+    ("corrupt_mesh_file", "lagrange.bodies[0].mesh.file", "readable hexahedron mesh"),
+    ("wrong_cell_type_mesh", "lagrange.bodies[0].mesh.file", "hexahedron"),
+    ("end_time_zero", "run.end_time", "must be > 0 (s)"),
+    ("end_time_negative", "run.end_time", "must be > 0 (s)"),
+    ("dimension_mismatch", "lagrange.bodies[0].initial_velocity", "dimension mismatch"),
+    ("box_dimension_mismatch", "lagrange.bodies[0].mesh.box.cells", "dimension mismatch"),
+    ("ranks_zero", "ranks.lagrange", ">= 1"),
+    ("unknown_rank_role", "ranks.fluid", "unknown role; allowed: lagrange"),
+    ("bad_region_expression", "boundaries[0].region", "is not allowed"),
+    ("region_not_boolean", "boundaries[0].region", "boolean"),
+    ("bad_velocity_expression", "lagrange.bodies[0].initial_velocity[1]", "name 'z'"),
+    ("toml_syntax_error", "case.toml", "TOML syntax error"),
+    ("wrong_type", "materials.steel.density", "must be a number"),
+    ("jc_missing_yield_stress", "materials.copper.yield_stress", "required key missing"),
+    ("jc_melt_below_room", "materials.copper.melt_temperature", "room_temperature"),
+    ("quarter_cylinder_2d", "lagrange.bodies[0].mesh.quarter_cylinder", "3D only"),
+    ("two_mesh_kinds", "lagrange.bodies[0].mesh", "exactly one of: box, quarter_cylinder, file"),
+    ("no_bodies", "lagrange.bodies", "at least one body"),
+    ("output_interval_too_long", "run.output_interval", "<= run.end_time"),
+    ("dimension_four", "run.dimension", "one of: 2, 3"),
+    ("symmetry_axis_z_2d", "boundaries[0].axis", "dimension mismatch"),
+    ("boundary_key_of_other_type", "boundaries[0].velocity", "type = 'fixed'"),
+    ("duplicate_body_name", "lagrange.bodies[1].name", "duplicate body name"),
+]
+
+
+def test_bad_case_table_covers_every_directory():
+    dirs = {p.name for p in BAD.iterdir() if p.is_dir()}
+    assert dirs == {name for name, _, _ in BAD_CASES}
+    assert len(dirs) >= 14
+    for d in dirs:  # each bad case documents its expected key
+        head = (BAD / d / "case.toml").read_text().splitlines()[:2]
+        key = dict((n, k) for n, k, _ in BAD_CASES)[d]
+        assert head[1] == f"# Expected CaseError key: {key}"
+
+
+@pytest.mark.parametrize("name, key, fragment", BAD_CASES, ids=[c[0] for c in BAD_CASES])
+def test_bad_case(name, key, fragment):
+    with pytest.raises(CaseError) as ei:
+        load_case(BAD / name)
+    err = ei.value
+    msg = assert_one_line(err)
+    assert err.key == key
+    assert msg.startswith(f"{key} = ")
+    assert fragment in err.allowed
+    assert isinstance(err, ValueError)
+
+
+def test_bad_case_values_are_reported():
+    def err(name):
+        with pytest.raises(CaseError) as ei:
+            load_case(BAD / name)
+        return ei.value
+    assert err("negative_density").value == -7850
+    assert err("poisson_ratio_half").value == 0.5
+    assert err("wrong_type").value == "7850"
+    assert err("missing_required_key").value is MISSING
+    assert str(err("missing_required_key")) == "run.end_time = <missing>: required key missing"
+    assert err("undefined_material").value == "stell"
+    assert err("bad_region_expression").value == "__import__('os').system('x')"
+    assert err("toml_syntax_error").value == "end_time 1e-5"   # the offending line
+    assert err("ranks_zero").value == 0
+
+
+# --------------------------------------------------------------------------- edits of a valid case
+def _edited(tmp_path, old, new, base="box3d"):
+    src = VALID / base
+    dst = tmp_path / base
+    shutil.copytree(src, dst)
+    text = (dst / "case.toml").read_text()
+    assert old in text, old
+    (dst / "case.toml").write_text(text.replace(old, new, 1))
+    return dst
+
+
+@pytest.mark.parametrize("old, new, key, fragment", [
+    ("[lagrange]\n", "[lagrange]\nhourglas = 0.1\n", "lagrange.hourglas", "unknown key"),
+    ("hourglass = 0.05", "hourglass = 1.5", "lagrange.hourglass", "must be >= 0 and <= 1"),
+    ("dt_scale = 0.8", "dt_scale = 0", "run.dt_scale", "must be > 0 and <= 1"),
+    ("dimension = 3", "dimension = 3.5", "run.dimension", "integer"),
+    ("dimension = 3", 'dimension = "3"', "run.dimension", "must be an integer"),
+    ("[materials.rubber]", '[materials."my rubber"]', 'materials."my rubber"', "invalid name"),
+    ("taylor_quinney = 0.9", "taylor_quinney = 1.1", "materials.copper.taylor_quinney",
+     "must be >= 0 and <= 1"),
+    ("taylor_quinney = 0.9", "taylor_quinney = 0.9\nwater = 1", "materials.copper.water",
+     "unknown key"),
+    ("poisson_ratio = 0.45", "poisson_ratio = -1.0", "materials.rubber.poisson_ratio", "> -1"),
+    ("cells = [2, 2, 8]", "cells = [2, 0, 8]", "lagrange.bodies[0].mesh.box.cells[1]", ">= 1"),
+    ("cells = [2, 2, 8]", "cells = [2, 2]", "lagrange.bodies[0].mesh.box.cells",
+     "dimension mismatch"),
+    ("upper = [0.004, 0.004, 0.02]", "upper = [0.004, 0.0, 0.02]",
+     "lagrange.bodies[0].mesh.box.upper", "must be > lower"),
+    ('initial_velocity = [0.0, 0.0, "-190.0 * where(z > 0.001, 1, 0.5)"]',
+     'initial_velocity = [0.0, 0.0, "open(\'/etc/passwd\')"]',
+     "lagrange.bodies[0].initial_velocity[2]", "call of 'open'"),
+    ('initial_velocity = [0.0, 0.0, "-190.0 * where(z > 0.001, 1, 0.5)"]',
+     'initial_velocity = [0.0, 0.0, "z > 1"]',
+     "lagrange.bodies[0].initial_velocity[2]", "numeric"),
+    ('initial_velocity = [0.0, 0.0, "-190.0 * where(z > 0.001, 1, 0.5)"]',
+     'initial_velocity = [0.0, 0.0, true]',
+     "lagrange.bodies[0].initial_velocity[2]", "a number or an expression string"),
+    ("initial_temperature = 300", "initial_temperature = 0", "lagrange.bodies[1].initial_temperature",
+     "> 0 (K)"),
+    ('name = "bar"\nmaterial = "copper"\n', 'name = "bar"\nmaterial = "copper"\n'
+     "initial_temperature = 2000\n", "lagrange.bodies[0].initial_temperature",
+     "< melt_temperature"),
+    ('type = "symmetry"', 'type = "mirror"', "boundaries[0].type", "one of: 'fixed'"),
+    ('axis = "x"\n', "", "boundaries[0].axis", "required key missing (type = 'symmetry')"),
+    ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, 0.0, 0.0]", "boundaries[3].normal", "non-zero"),
+    ("point = [0.0, 0.0, -0.02]", "point = [0.0, -0.02]", "boundaries[3].point",
+     "dimension mismatch"),
+    ("velocity = { y = 0.0 }", "velocity = {}", "boundaries[2].velocity", "at least 1"),
+    ("velocity = { y = 0.0 }", "velocity = { w = 0.0 }", "boundaries[2].velocity.w", "unknown key"),
+    ('kind = "momentum"\n', "", "check.kind", "required key missing"),
+    ('kind = "momentum"', 'kind = "momentun"', "check.kind", "unknown check kind; registered:"),
+    ('name = "bar"', 'name = "the bar"', "lagrange.bodies[0].name", "must start with a letter"),
+    ("tolerance = 0.01", "tolerance = 0", "check.metrics.total_momentum_z.tolerance", "> 0"),
+    ("lagrange = 2", 'lagrange = "2"', "ranks.lagrange", "integer"),
+    ("end_time = 2.0e-5", "end_time = 2.0e-5\nend_time = 3.0e-5", "case.toml",
+     "TOML syntax error"),
+    ('mesh.box = { lower = [0.0, 0.0, -0.01], upper = [0.01, 0.01, -0.005], cells = [2, 2, 1] }',
+     "mesh.quarter_cylinder = { radius = 0.01, length = 0.02, radial_cells = 1, axial_cells = 2 }",
+     "lagrange.bodies[1].mesh.quarter_cylinder.radial_cells", ">= 2"),
+])
+def test_edited_case(tmp_path, old, new, key, fragment):
+    case_dir = _edited(tmp_path, old, new)
+    with pytest.raises(CaseError) as ei:
+        load_case(case_dir)
+    assert_one_line(ei.value)
+    assert ei.value.key == key
+    assert fragment in ei.value.allowed
+
+
+def test_quarter_cylinder_in_3d_is_valid(tmp_path):
+    case_dir = _edited(
+        tmp_path,
+        'mesh.box = { lower = [0.0, 0.0, -0.01], upper = [0.01, 0.01, -0.005], cells = [2, 2, 1] }',
+        "mesh.quarter_cylinder = { radius = 0.01, length = 0.02, radial_cells = 3, axial_cells = 2 }")
+    mesh = load_case(case_dir)["lagrange"]["bodies"][1]["mesh"]
+    assert mesh == {"quarter_cylinder": {"radius": 0.01, "length": 0.02, "radial_cells": 3,
+                                         "axial_cells": 2}}
+
+
+def test_not_utf8(tmp_path):
+    (tmp_path / "case.toml").write_bytes(b"[run]\ndimension = 3\n\xff\xfe\n")
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == "case.toml" and "UTF-8" in ei.value.allowed
+
+
+# --------------------------------------------------------------------------- ranks
+def test_ranks_for_defaults_file_and_overrides():
+    case3 = load_case(VALID / "box3d")
+    case2 = load_case(VALID / "box2d")
+    assert ranks_for(case2, {}) == {"lagrange": 1}
+    assert ranks_for(case2, None) == {"lagrange": 1}
+    assert ranks_for(case3, {}) == {"lagrange": 2}          # from [ranks]
+    assert ranks_for(case3, {"lagrange": 4}) == {"lagrange": 4}
+    assert ranks_for(case3, {"lagrange": "3"}) == {"lagrange": 3}  # CLI strings
+    assert ranks_for(case3, ["lagrange=5"]) == {"lagrange": 5}
+
+
+@pytest.mark.parametrize("overrides, key, fragment", [
+    ({"sph": 2}, "--ranks sph", "unknown role; allowed: lagrange"),
+    ({"lagrange": 0}, "--ranks lagrange", ">= 1"),
+    ({"lagrange": -3}, "--ranks lagrange", ">= 1"),
+    ({"lagrange": "two"}, "--ranks lagrange", "integer"),
+    ({"lagrange": 1.5}, "--ranks lagrange", "integer"),
+    ({"lagrange": True}, "--ranks lagrange", "integer"),
+    (["lagrange"], "--ranks", "ROLE=N"),
+    (["fluid=2"], "--ranks fluid", "unknown role"),
+])
+def test_ranks_for_bad_overrides(overrides, key, fragment):
+    case = load_case(VALID / "box2d")
+    with pytest.raises(CaseError) as ei:
+        ranks_for(case, overrides)
+    assert_one_line(ei.value)
+    assert ei.value.key == key
+    assert fragment in ei.value.allowed
+
+
+# --------------------------------------------------------------------------- CaseError & schema
+def test_case_error_format_and_pickle():
+    e = CaseError("materials.steel.density", -1.0, "must be > 0 (kg/m^3)")
+    assert str(e) == "materials.steel.density = -1.0: must be > 0 (kg/m^3)"
+    assert (e.key, e.value, e.allowed) == ("materials.steel.density", -1.0, "must be > 0 (kg/m^3)")
+    assert isinstance(e, ValueError)
+    e2 = pickle.loads(pickle.dumps(e))
+    assert type(e2) is CaseError and str(e2) == str(e)
+    # multi-line "allowed" and very long values still give one line
+    e3 = CaseError("a.b", "x" * 1000, "first line\nsecond line")
+    assert str(e3) == f"{e3.key} = {e3.value!r}: {e3.allowed}"
+    assert "\n" not in str(e3) and len(str(e3)) < 300
+    assert e3.allowed == "first line second line"
+
+
+def test_format_key():
+    assert format_key(["lagrange", "bodies", 0, "mesh", "file"]) == "lagrange.bodies[0].mesh.file"
+    assert format_key(["materials", "my steel", "density"]) == 'materials."my steel".density'
+    assert format_key(["boundaries", 2]) == "boundaries[2]"
+
+
+def _walk(schema, path="#"):
+    if isinstance(schema, dict):
+        yield path, schema
+        for k, v in schema.items():
+            yield from _walk(v, f"{path}/{k}")
+    elif isinstance(schema, list):
+        for i, v in enumerate(schema):
+            yield from _walk(v, f"{path}/{i}")
+
+
+def test_schema_is_draft_2020_12_and_closed():
+    import jsonschema
+    jsonschema.Draft202012Validator.check_schema(CASE_SCHEMA)
+    assert CASE_SCHEMA["$schema"] == "https://json-schema.org/draft/2020-12/schema"
+    tables = 0
+    for path, node in _walk(CASE_SCHEMA):
+        if "properties" in node and isinstance(node["properties"], dict) \
+                and "/if" not in path:  # `if` conditions only test a discriminator
+            tables += 1
+            assert node.get("additionalProperties") is False, path
+    assert tables >= 10

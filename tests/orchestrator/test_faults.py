@@ -1,0 +1,84 @@
+"""Faults: a solver rank killed with SIGKILL mid-run brings the job down within 30 s with a non-zero
+exit naming role and rank, and every completed output step stays readable; a rank that hits a
+physical failure names the element, step and time."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+
+from tests.conftest import CASES, REPO
+
+
+def _spinning_case(tmp_path, **replace):
+    case = tmp_path / "case"
+    shutil.copytree(CASES / "spinning_block", case, ignore=shutil.ignore_patterns("out"))
+    text = (case / "case.toml").read_text()
+    for a, b in replace.items():
+        text = text.replace(a, b)
+    (case / "case.toml").write_text(text)
+    return case
+
+
+def _pids(out):
+    d = out / ".run" / "pids"
+    found = {}
+    for f in d.glob("[0-9]*"):
+        found[f.read_text().strip()] = int(f.name)
+    return found
+
+
+def test_sigkill_of_a_solver_rank(tmp_path):
+    case = _spinning_case(tmp_path, **{"max_steps = 10000": "max_steps = 100000000",
+                                       "output_interval = 0.2": "output_interval = 0.05"})
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
+                             "--ranks", "lagrange=2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline:
+            steps = list((out / "steps").glob("lagrange_[0-9]*.h5")) if (out / "steps").is_dir() else []
+            if len(steps) >= 3 and "lagrange 1" in _pids(out):
+                break
+            time.sleep(0.2)
+        else:
+            raise AssertionError("run did not produce output in time")
+        victim = _pids(out)["lagrange 1"]
+        t_kill = time.time()
+        os.kill(victim, signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=30)
+        elapsed = time.time() - t_kill
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode != 0
+    assert elapsed < 30
+    assert "lagrange rank 1" in stderr, stderr
+    # no process of the job survives
+    time.sleep(0.5)
+    for pid in _pids(out).values():
+        assert not os.path.exists(f"/proc/{pid}") or open(f"/proc/{pid}/stat").read().split(") ")[1][0] == "Z"
+    with h5py.File(out / "results.h5", "r") as h:
+        times = h["lagrange/times"][...]
+        assert len(times) >= 3
+        for key in h["lagrange"]:
+            if key not in ("times", "steps"):
+                assert h[f"lagrange/{key}/points"].shape[1] == 3
+
+
+def test_physical_failure_names_element_step_time(tmp_path, run_immerse):
+    """A step far above the stable limit (dt_scale is capped at 1, so use a huge spin instead)."""
+    case = _spinning_case(tmp_path, **{'"2 - 100*y", "1 + 100*x", "0.5"': '"-1e5*x", "0", "0"',
+                                       "max_steps = 10000": "max_steps = 1000",
+                                       "model = \"neo_hookean\"": "model = \"linear_elastic\""})
+    r = run_immerse("run", case, "--out", tmp_path / "out", timeout=300)
+    assert r.returncode != 0
+    assert "lagrange rank 0" in r.stderr
+    assert "element" in r.stderr and "step" in r.stderr and "t=" in r.stderr, r.stderr

@@ -1,0 +1,393 @@
+"""Tests for orchestrator/output.py: layout, index, XDMF, external links, kill safety."""
+
+import os
+import random
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from orchestrator.output import (
+    INDEX_H5,
+    INDEX_XDMF,
+    OutputError,
+    mesh_path,
+    read_mesh_file,
+    read_step,
+    read_step_attrs,
+    read_steps,
+    step_path,
+    von_mises,
+    write_index,
+    write_mesh,
+    write_step,
+)
+from solvers.lagrange.mesh import box_mesh
+
+REPO = Path(__file__).resolve().parents[2]
+ROLE = "lagrange"
+
+
+def fields(mesh, i):
+    nn, ne = mesh.num_points, mesh.num_cells
+    vel = np.full((nn, 3), float(i))
+    vel[:, 0] = np.arange(nn) + i
+    temp = 300.0 + i + np.zeros(nn)
+    stress = np.tile(np.arange(1.0, 7.0), (ne, 1)) * (i + 1)
+    return {"velocity": vel, "temperature": temp}, {"stress": stress, "plastic": np.arange(ne) % 2 == 0}
+
+
+def write_series(out, mesh, n=3, role=ROLE):
+    write_mesh(out, role, mesh.cells, mesh.cell_type)
+    for i in range(n):
+        pd, cd = fields(mesh, i)
+        write_step(out, role, i, 10 * i, 0.5 * i, mesh.points, pd, cd)
+    return write_index(out)
+
+
+def attr_of(grid, item):
+    return next(a for a in grid.findall("Attribute") if item in list(a.iter("DataItem")))
+
+
+def check_xdmf(xdmf: Path, expected_times=None):
+    """Every HDF DataItem must exist with the declared dimensions and number type."""
+    root = ET.parse(xdmf).getroot()
+    assert root.tag == "Xdmf" and root.get("Version") == "3.0"
+    domain = root.find("Domain")
+    colls = domain.findall("Grid")
+    assert colls
+    n_items = 0
+    for coll in colls:
+        assert coll.get("GridType") == "Collection" and coll.get("CollectionType") == "Temporal"
+        times = []
+        for grid in coll.findall("Grid"):
+            assert grid.get("GridType") == "Uniform"
+            times.append(float(grid.find("Time").get("Value")))
+            topo = grid.find("Topology")
+            ne = int(topo.get("NumberOfElements"))
+            npe = int(topo.get("NodesPerElement"))
+            assert topo.find("DataItem").get("Dimensions") == f"{ne} {npe}"
+            nn = int(grid.find("Geometry/DataItem").get("Dimensions").split()[0])
+            for attr in grid.findall("Attribute"):
+                rows = int(attr.find("DataItem").get("Dimensions").split()[0])
+                assert rows == (nn if attr.get("Center") == "Node" else ne)
+                ncomp = {"Scalar": 1, "Vector": 3, "Tensor6": 6, "Tensor": 9}.get(attr.get("AttributeType"))
+                dims = attr.find("DataItem").get("Dimensions").split()
+                if ncomp is not None:
+                    assert (int(dims[1]) if len(dims) > 1 else 1) == ncomp
+            for item in grid.iter("DataItem"):
+                if item.get("ItemType") == "Function":
+                    assert attr_of(grid, item).get("AttributeType") == "Tensor6"
+                    assert item.get("Function") == "JOIN($0, $1, $2, $3, $4, $5)"
+                    assert len(item.findall("DataItem")) == 6
+                    continue
+                if item.get("ItemType") == "HyperSlab":
+                    sel, source = item.findall("DataItem")
+                    start, stride, count = np.array(sel.text.split(), int).reshape(3, 2)
+                    dims = np.array(source.get("Dimensions").split(), int)
+                    assert np.all(start + stride * (count - 1) < dims)
+                    assert item.get("Dimensions") == " ".join(map(str, count))
+                    continue
+                if item.get("Format") == "XML":
+                    continue
+                assert item.get("Format") == "HDF"
+                fname, dset = item.text.strip().split(":")
+                assert not os.path.isabs(fname)
+                with h5py.File(xdmf.parent / fname, "r") as f:
+                    d = f[dset]
+                    assert list(d.shape) == [int(s) for s in item.get("Dimensions").split()]
+                    assert int(item.get("Precision")) == d.dtype.itemsize
+                    assert item.get("NumberType") == {"f": "Float", "i": "Int", "u": "UChar"}[d.dtype.kind] \
+                        or (d.dtype.kind == "u" and item.get("NumberType") == "UInt")
+                n_items += 1
+        assert times == sorted(times)
+        if expected_times is not None and coll.get("Name") == ROLE:
+            np.testing.assert_allclose(times, expected_times)
+    return n_items
+
+
+# ----------------------------------------------------------------------------- basic
+def test_write_read_roundtrip_2d(tmp_path):
+    mesh = box_mesh([0, 0], [2, 1], [4, 2])
+    out = tmp_path / "out"
+    h5, xdmf = write_series(out, mesh, n=3)
+    assert h5 == out / INDEX_H5 and xdmf == out / INDEX_XDMF
+    assert step_path(out, ROLE, 2).name == "lagrange_000002.h5"
+    assert sorted(p.name for p in (out / "steps").iterdir()) == [
+        "lagrange_000000.h5", "lagrange_000001.h5", "lagrange_000002.h5", "lagrange_mesh.h5"]
+    assert read_steps(out, ROLE) == [(0.0, 0, 0), (0.5, 10, 1), (1.0, 20, 2)]
+    cells, ctype = read_mesh_file(out, ROLE)
+    assert ctype == "quad" and cells.dtype == np.int64
+    np.testing.assert_array_equal(cells, mesh.cells)
+    pts, pd, cd = read_step(out, ROLE, 1)
+    assert pts.shape == (mesh.num_points, 3)
+    np.testing.assert_array_equal(pts[:, :2], mesh.points)
+    np.testing.assert_array_equal(pts[:, 2], 0.0)
+    epd, ecd = fields(mesh, 1)
+    for k in epd:
+        np.testing.assert_array_equal(pd[k], epd[k])
+    np.testing.assert_array_equal(cd["stress"], ecd["stress"])
+    np.testing.assert_array_equal(cd["plastic"], ecd["plastic"].astype(np.uint8))
+    assert read_step_attrs(out, ROLE, 2) == {"time": 1.0, "step": 20, "index": 2}
+    with h5py.File(step_path(out, ROLE, 0), "r") as f:
+        assert {"time", "step", "index"} <= set(f.attrs)
+    with h5py.File(mesh_path(out, ROLE), "r") as f:
+        assert f.attrs["cell_type"] == "quad"
+    assert not list(out.rglob("*.tmp"))
+
+
+def test_results_h5_from_other_cwd(tmp_path, monkeypatch):
+    """External links are relative to results.h5, not to the working directory."""
+    mesh = box_mesh([0, 0, 0], [1, 1, 1], [2, 2, 2])
+    out = tmp_path / "case" / "out"
+    write_series(out, mesh, n=3)
+    # a decoy tree in the cwd with the same relative paths but different content
+    decoy = tmp_path / "elsewhere"
+    write_series(decoy, box_mesh([0, 0, 0], [5, 5, 5], [1, 1, 1]), n=3)
+    monkeypatch.chdir(decoy)
+    rel = os.path.relpath(out / INDEX_H5, decoy)
+    with h5py.File(rel, "r") as f:
+        g = f[ROLE]
+        np.testing.assert_allclose(g["times"][()], [0.0, 0.5, 1.0])
+        np.testing.assert_array_equal(g["steps"][()], [0, 10, 20])
+        np.testing.assert_array_equal(g["indices"][()], [0, 1, 2])
+        assert g.attrs["cell_type"] == "hexahedron"
+        np.testing.assert_array_equal(g["mesh/cells"][()], mesh.cells)
+        for i in range(3):
+            step = g[f"{i:06d}"]
+            assert step.attrs["index"] == i
+            assert step["points"].shape == (mesh.num_points, 3)
+            np.testing.assert_array_equal(step["points"][()], mesh.points)
+            np.testing.assert_array_equal(step["point_data/velocity"][()], fields(mesh, i)[0]["velocity"])
+    # and the stored link is relative
+    with h5py.File(rel, "r") as f:
+        link = f[ROLE].get("000001", getlink=True)
+        assert isinstance(link, h5py.ExternalLink)
+        assert link.filename == "steps/lagrange_000001.h5"
+    assert read_steps(os.path.relpath(out, decoy), ROLE)[-1] == (1.0, 20, 2)
+
+
+def test_xdmf_references(tmp_path):
+    mesh = box_mesh([0, 0, 0], [1, 2, 1], [2, 3, 1])
+    out = tmp_path / "out"
+    _, xdmf = write_series(out, mesh, n=3)
+    n = check_xdmf(xdmf, expected_times=[0.0, 0.5, 1.0])
+    assert n == 3 * (1 + 1 + 3 + 6)  # topology, geometry, 3 plain fields + 6 stress slabs
+    root = ET.parse(xdmf).getroot()
+    grid = root.find("Domain/Grid/Grid")
+    types = {a.get("Name"): (a.get("AttributeType"), a.get("Center")) for a in grid.findall("Attribute")}
+    assert types == {"velocity": ("Vector", "Node"), "temperature": ("Scalar", "Node"),
+                     "stress": ("Tensor6", "Cell"), "plastic": ("Scalar", "Cell")}
+    assert grid.find("Topology").get("TopologyType") == "Hexahedron"
+
+
+def test_index_two_roles_and_incremental(tmp_path):
+    out = tmp_path / "out"
+    a = box_mesh([0, 0], [1, 1], [2, 2])
+    b = box_mesh([0, 0], [1, 1], [1, 1])
+    write_series(out, a, n=2, role="lagrange")
+    write_series(out, b, n=1, role="sph_2")
+    pd, cd = fields(a, 2)
+    write_step(out, "lagrange", 2, 20, 1.0, a.points, pd, cd)
+    assert [s[2] for s in read_steps(out, "lagrange")] == [0, 1]  # not yet indexed
+    write_index(out)
+    assert [s[2] for s in read_steps(out, "lagrange")] == [0, 1, 2]
+    assert read_steps(out, "sph_2") == [(0.0, 0, 0)]
+    root = ET.parse(out / INDEX_XDMF).getroot()
+    assert [g.get("Name") for g in root.findall("Domain/Grid")] == ["lagrange", "sph_2"]
+    check_xdmf(out / INDEX_XDMF)
+
+
+def test_read_steps_without_index(tmp_path):
+    out = tmp_path / "out"
+    m = box_mesh([0, 0], [1, 1], [1, 1])
+    write_mesh(out, ROLE, m.cells, "quad")
+    write_step(out, ROLE, 4, 7, 0.25, m.points, {}, {})
+    (out / "steps" / "lagrange_000005.h5.123.tmp").write_bytes(b"partial")
+    assert read_steps(out, ROLE) == [(0.25, 7, 4)]
+    write_index(out)  # ignores the stale tmp file
+    assert read_steps(out, ROLE) == [(0.25, 7, 4)]
+
+
+def test_invalid_arguments(tmp_path):
+    m = box_mesh([0, 0], [1, 1], [1, 1])
+    with pytest.raises(OutputError):
+        write_mesh(tmp_path, ROLE, m.cells, "triangle")
+    with pytest.raises(OutputError):
+        write_mesh(tmp_path, ROLE, m.cells[:, :3], "quad")
+    with pytest.raises(OutputError):
+        write_step(tmp_path, "bad/role", 0, 0, 0.0, m.points, {}, {})
+    with pytest.raises(OutputError):
+        write_step(tmp_path, ROLE, 0, 0, 0.0, m.points, {"v": np.zeros(3)}, {})
+    with pytest.raises(OutputError):
+        write_step(tmp_path, ROLE, 0, 0, 0.0, m.points, {"a/b": np.zeros(4)}, {})
+    with pytest.raises(OutputError):
+        read_step(tmp_path, ROLE, 9)
+    assert not list(Path(tmp_path).rglob("*.tmp"))
+
+
+def test_von_mises():
+    # stored order xx yy zz xy yz zx. Uniaxial: |sigma|; pure shear tau: sqrt(3) tau;
+    # hydrostatic: 0; general case against the deviatoric definition sqrt(3/2 s:s)
+    assert von_mises([[-5.0, 0, 0, 0, 0, 0]])[0] == pytest.approx(5.0)
+    for col in (3, 4, 5):
+        t = np.zeros((1, 6))
+        t[0, col] = 2.0
+        assert von_mises(t)[0] == pytest.approx(2.0 * np.sqrt(3.0))
+    assert von_mises([[7.0, 7.0, 7.0, 0, 0, 0]])[0] == pytest.approx(0.0, abs=1e-12)
+    rng = np.random.default_rng(1)
+    v = rng.normal(size=(5, 6))
+    full = np.empty((5, 3, 3))
+    full[:, [0, 1, 2], [0, 1, 2]] = v[:, :3]
+    full[:, 0, 1] = full[:, 1, 0] = v[:, 3]
+    full[:, 1, 2] = full[:, 2, 1] = v[:, 4]
+    full[:, 2, 0] = full[:, 0, 2] = v[:, 5]
+    dev = full - np.trace(full, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3
+    np.testing.assert_allclose(von_mises(v), np.sqrt(1.5 * np.sum(dev**2, axis=(1, 2))), rtol=1e-12)
+
+
+# ----------------------------------------------------------------------------- readers
+def test_meshio_time_series_reader(tmp_path):
+    meshio = pytest.importorskip("meshio")
+    # meshio's reader does not understand the Function item used for (n, 6) tensors,
+    # so this series has scalar and vector fields only
+    mesh = box_mesh([0, 0, 0], [1, 1, 1], [2, 1, 1])
+    out = tmp_path / "out"
+    write_mesh(out, ROLE, mesh.cells, mesh.cell_type)
+    for i in range(3):
+        pd, cd = fields(mesh, i)
+        write_step(out, ROLE, i, 10 * i, 0.5 * i, mesh.points, pd, {"plastic": cd["plastic"]})
+    _, xdmf = write_index(out)
+    with meshio.xdmf.TimeSeriesReader(xdmf) as reader:
+        points, cells = reader.read_points_cells()
+        np.testing.assert_array_equal(points, mesh.points)
+        assert cells[0].type == "hexahedron"
+        np.testing.assert_array_equal(cells[0].data, mesh.cells)
+        assert reader.num_steps == 3
+        for k in range(3):
+            t, pd, cd = reader.read_data(k)
+            assert t == 0.5 * k
+            np.testing.assert_array_equal(pd["velocity"], fields(mesh, k)[0]["velocity"])
+            np.testing.assert_array_equal(cd["plastic"][0], fields(mesh, k)[1]["plastic"])
+
+
+def test_vtk_xdmf_reader(tmp_path):
+    """ParaView's legacy XDMF reader (vtkXdmfReader, in the vtk wheel) reads the series."""
+    try:
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+        from vtkmodules.vtkCommonExecutionModel import vtkStreamingDemandDrivenPipeline
+        from vtkmodules.vtkIOXdmf2 import vtkXdmfReader
+    except ImportError:
+        pytest.skip("vtkXdmfReader not available in this vtk build")
+    mesh = box_mesh([0, 0, 0], [1, 1, 1], [2, 2, 1])
+    out = tmp_path / "out"
+    _, xdmf = write_series(out, mesh, n=3)
+    reader = vtkXdmfReader()
+    reader.SetFileName(str(xdmf))
+    reader.UpdateInformation()
+    times = reader.GetOutputInformation(0).Get(vtkStreamingDemandDrivenPipeline.TIME_STEPS())
+    np.testing.assert_allclose(times, [0.0, 0.5, 1.0])
+    reader.UpdateTimeStep(1.0)
+    grid = reader.GetOutputDataObject(0)
+    assert grid.GetNumberOfPoints() == mesh.num_points
+    assert grid.GetNumberOfCells() == mesh.num_cells
+    assert grid.GetCellType(0) == 12  # VTK_HEXAHEDRON
+    vel = vtk_to_numpy(grid.GetPointData().GetArray("velocity"))
+    np.testing.assert_array_equal(vel, fields(mesh, 2)[0]["velocity"])
+    # stored (xx yy zz xy yz zx) = (1..6)*3 must reach VTK as the full symmetric tensor
+    # [[xx xy zx] [xy yy yz] [zx yz zz]] (XDMF Tensor6 reordered by the Function item)
+    stress = vtk_to_numpy(grid.GetCellData().GetArray("stress"))
+    assert stress.shape == (mesh.num_cells, 9)
+    np.testing.assert_allclose(stress, np.tile(3.0 * np.array([1, 4, 6, 4, 2, 5, 6, 5, 3]), (mesh.num_cells, 1)))
+
+
+# ----------------------------------------------------------------------------- kill safety
+CHILD = textwrap.dedent("""
+    import sys
+    import numpy as np
+    from orchestrator.output import write_index, write_mesh, write_step
+    from solvers.lagrange.mesh import box_mesh
+
+    out, start = sys.argv[1], int(sys.argv[2])
+    mesh = box_mesh([0, 0, 0], [1, 1, 1], [24, 24, 24])
+    write_mesh(out, "lagrange", mesh.cells, mesh.cell_type)
+    nn, ne = mesh.num_points, mesh.num_cells
+    print("ready", flush=True)
+    i = start
+    while True:
+        vel = np.full((nn, 3), float(i))
+        write_step(out, "lagrange", i, 100 * i, 0.01 * i, mesh.points,
+                   {"velocity": vel, "temperature": np.full(nn, 300.0 + i)},
+                   {"stress": np.full((ne, 6), float(i))})
+        write_index(out)
+        i += 1
+""")
+
+
+def _check_indexed(out: Path, other_cwd: Path) -> int:
+    h5 = out / INDEX_H5
+    if not h5.exists():
+        return 0
+    prev = os.getcwd()
+    os.chdir(other_cwd)
+    try:
+        rel = os.path.relpath(h5, other_cwd)
+        with h5py.File(rel, "r") as f:
+            g = f[ROLE]
+            idx = g["indices"][()]
+            times = g["times"][()]
+            for i, t in zip(idx, times):
+                step = g[f"{i:06d}"]
+                assert step.attrs["time"] == t == pytest.approx(0.01 * i)
+                v = step["point_data/velocity"][()]
+                assert v.shape[1] == 3 and np.all(v == float(i))
+                assert np.all(step["cell_data/stress"][()] == float(i))
+    finally:
+        os.chdir(prev)
+    steps = read_steps(out, ROLE)
+    for _t, _s, i in steps:
+        _pts, pd, _cd = read_step(out, ROLE, i)
+        assert np.all(pd["temperature"] == 300.0 + i)
+    check_xdmf(out / INDEX_XDMF)
+    return len(steps)
+
+
+@pytest.mark.timeout(120)
+def test_sigkill_leaves_readable_index(tmp_path):
+    out = tmp_path / "out"
+    other = tmp_path / "cwd"
+    other.mkdir()
+    script = tmp_path / "child.py"
+    script.write_text(CHILD)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")])))
+    seed = int(os.environ.get("IMMERSE_TEST_SEED", time.time_ns() % 100_000))
+    rng = random.Random(seed)
+    indexed = 0
+    for trial in range(5):
+        existing = list((out / "steps").glob("lagrange_[0-9]*.h5")) if out.exists() else []
+        start = 1 + max((int(p.stem.split("_")[-1]) for p in existing), default=-1)
+        proc = subprocess.Popen([sys.executable, str(script), str(out), str(start)],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
+        try:
+            line = proc.stdout.readline()
+            assert line.strip() == "ready", f"child failed to start: {proc.stderr.read()}"
+            # the first kill comes late enough for some steps to be indexed
+            time.sleep(rng.uniform(0.3 if trial == 0 else 0.0, 0.4))
+        finally:
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=30)
+        assert proc.returncode == -signal.SIGKILL, f"seed {seed}: child exited early: {proc.stderr.read()}"
+        n = _check_indexed(out, other)
+        assert n >= indexed, f"seed {seed}: index lost steps"
+        indexed = n
+    # the survivors' state can always be re-indexed, stale *.tmp files are ignored
+    write_index(out)
+    assert _check_indexed(out, other) >= indexed
+    assert indexed > 0
