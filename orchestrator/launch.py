@@ -9,6 +9,7 @@ seconds and reports that rank; a rank that failed with a Python error has writte
 from __future__ import annotations
 
 import os
+import select
 import shutil
 import signal
 import subprocess
@@ -66,27 +67,55 @@ def prepare_out(out: Path, restart: str | None) -> None:
         output.write_index(out)
 
 
-def _alive(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as fh:
-            return fh.read().split(") ", 1)[1][0] != "Z"
-    except (FileNotFoundError, ProcessLookupError, IndexError):
-        return False
+class RankWatch:
+    """Watches the job's processes through Linux pidfds: poll() wakes the moment the first one ends,
+    before MPI's own error propagation takes the others down, so the first failed rank is known.
+    A process whose pid record is still there when it ends has failed (clean exits remove it)."""
 
+    def __init__(self, out: Path):
+        self.dir = P.run_dir(out) / "pids"
+        self.poller = select.poll()
+        self.fds: dict[int, tuple[int, Path]] = {}
+        self.watched: set[int] = set()
+        self.failed: list[str] = []
 
-def _failed_ranks(out: Path) -> list[str]:
-    """Ranks whose pid record remains but whose process is gone."""
-    dead = []
-    d = P.run_dir(out) / "pids"
-    if d.is_dir():
-        for f in d.iterdir():
-            if f.name.isdigit() and not _alive(int(f.name)):
-                try:
-                    role, rank = f.read_text().split()
-                except (OSError, ValueError):
-                    continue
-                dead.append(f"{role} rank {rank}")
-    return dead
+    def _scan(self) -> None:
+        if not self.dir.is_dir():
+            return
+        for f in self.dir.iterdir():
+            if not f.name.isdigit() or int(f.name) in self.watched:
+                continue
+            pid = int(f.name)
+            self.watched.add(pid)
+            try:
+                fd = os.pidfd_open(pid)
+            except ProcessLookupError:  # gone before we looked
+                self._ended(f)
+                continue
+            self.fds[fd] = (pid, f)
+            self.poller.register(fd, select.POLLIN)
+
+    def _ended(self, record: Path) -> None:
+        try:
+            role, rank = record.read_text().split()
+        except (OSError, ValueError):
+            return  # removed: a clean exit
+        self.failed.append(f"{role} rank {rank}")
+
+    def wait(self, timeout_ms: int) -> list[str]:
+        """Wait up to timeout_ms; return the ranks found failed so far (first failure first)."""
+        self._scan()
+        for fd, _ in self.poller.poll(timeout_ms):
+            pid, record = self.fds.pop(fd)
+            self.poller.unregister(fd)
+            os.close(fd)
+            self._ended(record)
+        return self.failed
+
+    def close(self) -> None:
+        for fd in self.fds:
+            os.close(fd)
+        self.fds.clear()
 
 
 def _error_reports(out: Path) -> list[str]:
@@ -124,32 +153,37 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         env.pop("IMMERSE_TTY", None)
     (out / "log.txt").open("a").write(f"command: {' '.join(cmd)}\n")
     proc = subprocess.Popen(cmd, env=env, start_new_session=True)
+    watch = RankWatch(out)
     failed: list[str] = []
     try:
         while proc.poll() is None:
-            failed = _failed_ranks(out)
+            failed = list(watch.wait(50))
             if failed or _error_reports(out):
                 # let a rank that is reporting an error finish its message, then end the job
                 try:
                     proc.wait(timeout=1.0)
                 except subprocess.TimeoutExpired:
                     _stop(proc)
-                failed = failed or _failed_ranks(out)
                 break
-            time.sleep(0.05)
+        failed = failed or list(watch.wait(0))
     except KeyboardInterrupt:
         _stop(proc)
         print("immerse: interrupted", file=sys.stderr)
         return 130
+    finally:
+        watch.close()
     rc = proc.wait()
     if out.is_dir():
         output.write_index(out)  # every completed step file, also those the coupler had no time to index
     reports = _error_reports(out)
     if rc == 0 and not failed and not reports:
         return 0
-    why = "; ".join(reports) if reports else (
-        f"{', '.join(failed)} died (killed by a signal or exited without a message)" if failed
-        else f"mpiexec exited with code {rc}")
+    if reports:
+        why = "; ".join(reports)
+    elif failed:
+        why = f"{failed[0]} died first (killed by a signal or exited without a message)"
+    else:
+        why = f"mpiexec exited with code {rc}"
     msg = f"immerse: run failed: {why}"
     print(msg, file=sys.stderr)
     with (out / "log.txt").open("a") as f:

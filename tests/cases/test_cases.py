@@ -67,7 +67,7 @@ def test_restart_is_bitwise_identical(tmp_path):
     assert r.returncode == 0, r.stderr
     with h5py.File(full / "results.h5") as a, h5py.File(restarted / "results.h5") as b:
         assert list(a["lagrange/times"][...]) == list(b["lagrange/times"][...])
-        last = sorted(a["lagrange"].keys() - {"times", "steps"})[-1]
+        last = sorted(k for k in a["lagrange"] if k.isdigit())[-1]
         for key in ("points", "point_data/velocity", "cell_data/stress", "cell_data/plastic_strain"):
             assert (a[f"lagrange/{last}/{key}"][...] == b[f"lagrange/{last}/{key}"][...]).all(), key
     sa = json.loads((full / "summary.json").read_text())
