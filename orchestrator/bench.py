@@ -136,5 +136,69 @@ def _worker(n: int, label: str) -> None:
         print(sec)
 
 
+@bench("taylor")
+def bench_taylor(out: Path, quick: bool = False) -> Path:
+    """Mesh convergence of the Taylor bar (final length, impact-face diameter) against cost, through
+    the real launcher (coupler + solver ranks). Also charts error against wall time."""
+    import shutil
+    import tempfile
+
+    from orchestrator.case import load_case, ranks_for
+    from orchestrator.launch import run_job
+
+    src = Path(__file__).resolve().parents[1] / "cases" / "taylor_bar"
+    text = (src / "case.toml").read_text()
+    meshes = [(4, 36), (6, 54)] if quick else [(4, 36), (6, 54), (8, 72), (10, 90)]
+    results, rows = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for radial, axial in meshes:
+            d = Path(tmp) / f"taylor_{radial}"
+            d.mkdir()
+            (d / "case.toml").write_text(text.replace("radial_cells = 6, axial_cells = 54",
+                                                      f"radial_cells = {radial}, axial_cells = {axial}"))
+            case = load_case(d)
+            rc = run_job(case, d / "out", ranks_for(case, {}))
+            if rc != 0:
+                raise RuntimeError(f"taylor bar with radial_cells={radial} failed (exit {rc})")
+            s = json.loads((d / "out" / "summary.json").read_text())
+            import h5py
+
+            with h5py.File(d / "out" / "steps" / "lagrange_mesh.h5") as h:
+                ne = int(h["cells"].shape[0])
+            params = {"radial_cells": radial, "axial_cells": axial, "elements": ne, "steps": s["steps"]}
+            for name, m in s["check"]["metrics"].items():
+                results.append({"name": "taylor_bar", "metric": name, "value": m["value"] * 1e3, "unit": "mm",
+                                "params": {**params, "reference_mm": m["reference"] * 1e3,
+                                           "rel_error": m["rel_error"]}})
+            results.append({"name": "taylor_bar", "metric": "wall_time", "value": s["wall_time_s"],
+                            "unit": "s", "params": params})
+            rows.append((ne, s["wall_time_s"], s["check"]["metrics"]))
+            shutil.rmtree(d / "out")
+    doc = {"results": results, "machine": machine()}
+    out.write_text(json.dumps(doc, indent=2))
+    _chart_error_vs_cost(rows, out.with_suffix(".png"))
+    return out
+
+
+def _chart_error_vs_cost(rows, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for metric, marker in (("final_length", "o-"), ("impact_diameter", "s-")):
+        ax.loglog([r[1] for r in rows], [max(r[2][metric]["rel_error"], 1e-6) for r in rows], marker, label=metric)
+        for ne, wall, m in rows:
+            ax.annotate(f"{ne}", (wall, max(m[metric]["rel_error"], 1e-6)), fontsize=7)
+    ax.set_xlabel("wall time (s), 1 rank")
+    ax.set_ylabel("relative error vs published mid-point")
+    ax.set_title("Taylor bar: accuracy against cost (labels: elements)")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
     _worker(int(sys.argv[2]), sys.argv[3])

@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import copy
 
+from adapters.registry import roles as _registered_roles
+
 SCHEMA_URI = "https://json-schema.org/draft/2020-12/schema"
 
 NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_-]*$"
@@ -23,8 +25,6 @@ NAME_TEXT = "must start with a letter or '_' and contain only letters, digits, '
 
 MATERIAL_MODELS = ("linear_elastic", "neo_hookean", "johnson_cook")
 BOUNDARY_TYPES = ("fixed", "velocity", "symmetry", "rigid_wall")
-from adapters.registry import roles as _registered_roles
-
 KNOWN_ROLES = tuple(_registered_roles())
 """Solver roles that exist in this code base (a case may only use some of them)."""
 
@@ -187,7 +187,8 @@ BODY = _table(
 
 LAGRANGE = _table(
     {
-        "hourglass": _num("dimensionless", minimum=0, maximum=1),
+        # FB viscous hourglass damping is itself explicit: stable for coefficient <= 1/8 at dt = h/c
+        "hourglass": _num("dimensionless", minimum=0, maximum=0.125),
         "bulk_viscosity_linear": _num("dimensionless", minimum=0),
         "bulk_viscosity_quadratic": _num("dimensionless", minimum=0),
         "bodies": {"type": "array", "items": BODY},

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from orchestrator.expressions import compile_expression
+from solvers.lagrange.nodal import rigid_wall
 
 AXES = {"x": 0, "y": 1, "z": 2}
 NAMES = ("x", "y", "z")
@@ -40,7 +41,8 @@ class BoundaryConditions:
                 self.prescribed.append((nodes, c, 0.0))
             elif kind == "rigid_wall":
                 n = np.asarray(spec["normal"], dtype=np.float64)
-                self.walls.append((np.asarray(spec["point"], dtype=np.float64), n / np.linalg.norm(n)))
+                p = np.asarray(spec["point"], dtype=np.float64)
+                self.walls.append((p[:dim].copy(), (n / np.linalg.norm(n))[:dim].copy()))
             else:  # the schema admits nothing else
                 raise ValueError(f"boundaries.type = {kind!r}: unknown")
 
@@ -49,9 +51,4 @@ class BoundaryConditions:
         for nodes, c, val in self.prescribed:
             v[nodes, c] = val
         for point, n in self.walls:
-            # frictionless wall: a node may not cross the plane during this step; tangential motion free
-            gap = (x - point) @ n
-            vn = v @ n
-            hit = gap + dt * vn < 0.0
-            if hit.any():
-                v[hit] += np.outer(-gap[hit] / dt - vn[hit], n)
+            rigid_wall(x, v, point, n, dt)

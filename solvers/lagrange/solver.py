@@ -19,7 +19,7 @@ import h5py
 import numpy as np
 
 from orchestrator.expressions import compile_expression
-from solvers.lagrange import kernels, materials
+from solvers.lagrange import kernels, materials, nodal
 from solvers.lagrange.boundary import BoundaryConditions
 from solvers.lagrange.mesh import box_mesh, cell_volumes, concatenate, quarter_cylinder_mesh, read_mesh
 from solvers.lagrange.partition import partition
@@ -116,6 +116,11 @@ class LagrangeSolver:
         self.e_int = np.zeros(ne)
         self.q = np.zeros(ne)
         self.f = np.zeros((nn, dim))
+        # work arrays of the step (allocated once)
+        self.v_old = np.zeros((nn, dim))
+        self.v_free = np.zeros((nn, dim))
+        self._sums = np.zeros(8)
+        self._no_impulse = np.zeros((0, dim))
 
         span = float(np.max(np.ptp(self.global_points, axis=0)))
         self.bcs = BoundaryConditions(case.get("boundaries", []), X, tol=1e-9 * span)
@@ -192,42 +197,30 @@ class LagrangeSolver:
     def predict(self, dt: float) -> None:
         self.dt = dt
         self.dt_avg = 0.5 * dt if self.first_step else 0.5 * (self.dt_prev + dt)
-        self.v_old = self.v.copy()
-        self.v += self.dt_avg * self.f * self.inv_mass[:, None]
+        nodal.predict_velocity(self.v, self.v_old, self.f, self.inv_mass, self.dt_avg)
 
     def correct(self, impulse: np.ndarray | None = None, step: int = 0, time: float = 0.0) -> None:
         if impulse is not None:
             self.v += impulse * self.inv_mass[:, None]
-        v_free = self.v + 0.0
+        np.copyto(self.v_free, self.v)
         self.bcs.apply(self.x, self.v, self.dt)
-        reaction = (self.v - v_free) * self.mass[:, None]
-        if impulse is not None:
-            reaction += impulse
-        if not np.isfinite(self.v).all():
-            node = int(self.part.nodes[np.flatnonzero(~np.isfinite(self.v).all(axis=1))[0]])
+        bad = nodal.update_and_account(
+            self.x, self.v, self.v_old, self.v_free, self.f, self.mass, self.part.owned,
+            impulse if impulse is not None else self._no_impulse, self.dt, self.dt_avg, self._sums)
+        if bad >= 0:
+            node = int(self.part.nodes[bad])
             raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s")
-
-        # exact discrete work of this step on the mean velocity (shared nodes counted once)
-        vbar = 0.5 * (self.v_old + self.v)
-        w = self.part.owned.astype(np.float64)[:, None]
-        loc = np.array([
-            -self.dt_avg * np.sum(w * self.f * vbar),
-            np.sum(w * reaction * vbar),
-        ])
-        imp = np.sum(w * reaction, axis=0)
-        torque = self._cross(self.x, reaction * w).sum(axis=0)
-        tot = self._allsum(np.concatenate([loc, imp, np.atleast_1d(torque)]))
+        # exact discrete work, impulse and torque of this step (shared nodes counted once)
+        tot = self._allsum(self._sums)
         self.w_int += tot[0]
         self.w_ext += tot[1]
         self.impulse += tot[2:2 + self.dim]
-        self.ang_impulse += tot[2 + self.dim:]
+        self.ang_impulse += tot[5:8] if self.dim == 3 else tot[7:8]
 
-        self.x += self.dt * self.v
         self.step, self.time = step, time
         self.first_step = False
         self.dt_prev = self.dt
         self._dt_stable = self._forces(self.dt)
-        del self.v_old
 
     # ---- diagnostics -----------------------------------------------------------------------------
     def _cross(self, a, b):
