@@ -32,13 +32,37 @@ def test_elastic_bar_wave(tmp_path):
     assert (out / "results.xdmf").is_file() and (out / "log.txt").is_file()
 
 
-def test_elastic_bar_wave_two_ranks_equals_one(tmp_path):
-    out1, s1 = run_case("elastic_bar_wave", tmp_path / "one")
-    out2, s2 = run_case("elastic_bar_wave", tmp_path / "two", "--ranks", "lagrange=2")
-    assert s2["ranks"] == {"lagrange": 2}
-    assert s2["steps"] == s1["steps"]
-    for name in ("wave_speed", "stress_amplitude"):
-        assert s2["check"]["metrics"][name]["value"] == pytest.approx(s1["check"]["metrics"][name]["value"], rel=1e-10)
+def test_taylor_bar_two_ranks_equals_one(tmp_path):
+    """The whole job on 2 solver ranks (shared nodes summed over the cut) equals 1 rank within
+    1e-10 relative: positions, velocities and stresses of every output step of a plastic impact."""
+    import numpy as np
+
+    from orchestrator import output
+
+    case = tmp_path / "case"
+    shutil.copytree(CASES / "taylor_bar", case, ignore=shutil.ignore_patterns("out"))
+    text = (case / "case.toml").read_text()
+    text = text.replace("end_time = 80.0e-6", "end_time = 10.0e-6").replace(
+        "output_interval = 4.0e-6", "output_interval = 2.5e-6").replace(
+        "radial_cells = 6, axial_cells = 54", "radial_cells = 4, axial_cells = 36")
+    (case / "case.toml").write_text(text)
+    outs = {}
+    for n in (1, 2):
+        outs[n] = tmp_path / f"out{n}"
+        r = immerse("run", case, "--out", outs[n], "--ranks", f"lagrange={n}")
+        assert r.returncode in (0, 1), r.stderr  # the check is for 80 us; here only equality matters
+    s1 = json.loads((outs[1] / "summary.json").read_text())
+    s2 = json.loads((outs[2] / "summary.json").read_text())
+    assert s2["ranks"] == {"lagrange": 2} and s1["steps"] == s2["steps"]
+    steps = output.read_steps(outs[1], "lagrange")
+    assert len(steps) == 5 and steps == output.read_steps(outs[2], "lagrange")
+    for _, _, index in steps:
+        p1, pd1, cd1 = output.read_step(outs[1], "lagrange", index)
+        p2, pd2, cd2 = output.read_step(outs[2], "lagrange", index)
+        for a, b in ((p1, p2), (pd1["velocity"], pd2["velocity"]), (cd1["stress"], cd2["stress"]),
+                     (cd1["plastic_strain"], cd2["plastic_strain"])):
+            assert np.abs(a - b).max() <= 1e-10 * max(np.abs(a).max(), 1e-300)
+    assert cd1["plastic_strain"].max() > 0.1  # the comparison covers plastic flow
 
 
 def test_spinning_block(tmp_path):
