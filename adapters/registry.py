@@ -44,3 +44,4 @@ def adapter_class(role: str) -> type:
 
 # The solvers this project ships. A new solver adds one line here and an adapter module.
 declare("lagrange", "adapters.lagrange", "lagrange")
+declare("ale", "adapters.ale", "ale")

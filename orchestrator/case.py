@@ -436,7 +436,7 @@ def _normalise(data: dict, case_dir: Path) -> dict:
     }
 
     materials = {}
-    for name, m in d["materials"].items():
+    for name, m in d.get("materials", {}).items():
         materials[name] = {k: (v if k == "model" else _f(v)) for k, v in m.items()}
 
     lag_in = d.get("lagrange", {})
@@ -498,11 +498,49 @@ def _normalise(data: dict, case_dir: Path) -> dict:
         "run": run,
         "ranks": {},
         "materials": materials,
-        "lagrange": lagrange,
         "boundaries": boundaries,
         "check": check,
     }
+    if "lagrange" in d or "ale" not in d:
+        case["lagrange"] = lagrange
+    if "ale" in d:
+        case["ale"] = _normalise_ale(d["ale"], dim)
     return case
+
+
+def _normalise_ale(a: dict, dim: int) -> dict:
+    """The [ale] table with numbers as floats; solver defaults (viscosity, hourglass) left to the
+    solver unless given."""
+    grid = a["grid"]
+    out = {
+        "dimension": dim,
+        "mode": a.get("mode", "eulerian"),
+        "grid": {"lower": [_f(v) for v in grid["lower"]], "upper": [_f(v) for v in grid["upper"]],
+                 "cells": [int(v) for v in grid["cells"]]},
+        "boundaries": {},
+        "materials": {n: {k: (v if k == "eos" else _f(v)) for k, v in m.items()}
+                      for n, m in a["materials"].items()},
+        "regions": [],
+        "energy_sources": [{"energy": _f(e["energy"]), "at": [_f(v) for v in e["at"]]}
+                           for e in a.get("energy_sources", [])],
+    }
+    if "hourglass" in a:
+        out["hourglass"] = _f(a["hourglass"])
+    if "viscosity" in a:
+        out["viscosity"] = {k: _f(v) for k, v in a["viscosity"].items()}
+    faces = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")[: 2 * dim]
+    for f in faces:
+        face = a.get("boundaries", {}).get(f, "wall")
+        if isinstance(face, dict):
+            inflow = face["inflow"]
+            face = {"inflow": {"density": _f(inflow["density"]), "pressure": _f(inflow["pressure"]),
+                               "velocity": [_f(v) for v in inflow["velocity"]]}}
+        out["boundaries"][f] = face
+    for r in a["regions"]:
+        reg = {k: (v if k in ("material", "region") else _f(v)) for k, v in r.items() if k != "velocity"}
+        reg["velocity"] = [_f(v) for v in r.get("velocity", [0.0] * dim)]
+        out["regions"].append(reg)
+    return out
 
 
 def _vec_len(key: str, value: list, dim: int) -> None:
@@ -529,15 +567,19 @@ def _check(case: dict, data: dict) -> None:
         raise CaseError("run.output_interval", data["run"]["output_interval"],
                         f"must be <= run.end_time = {_fmt_num(data['run']['end_time'])} (s)")
 
-    # at least one body (of any solver; only lagrange bodies exist so far)
-    bodies = case["lagrange"]["bodies"]
-    if not bodies:
+    # at least one solver: Lagrangian bodies and/or a background
+    if "ale" in case:
+        _check_ale(case["ale"], data["ale"], dim)
+    if "lagrange" in case and not case["lagrange"]["bodies"]:
         raw = data.get("lagrange", {}).get("bodies", MISSING)
         raise CaseError("lagrange.bodies", raw,
-                        "at least one body is required ([[lagrange.bodies]])")
+                        "at least one body is required ([[lagrange.bodies]]), or a background [ale]")
+    if "lagrange" in case and not case["materials"]:
+        raise CaseError("materials", MISSING, "required key missing: the bodies' materials, e.g. [materials.steel]")
 
     # [ranks] (roles only for the solvers this case uses)
-    case["ranks"] = ranks_for({"lagrange": case["lagrange"], "ranks": data.get("ranks", {})})
+    case["ranks"] = ranks_for({**{r: case[r] for r in ("lagrange", "ale") if r in case},
+                               "ranks": data.get("ranks", {})})
 
     # [materials]
     for name, m in case["materials"].items():
@@ -548,7 +590,8 @@ def _check(case: dict, data: dict) -> None:
                             f"must be > room_temperature = {_fmt_num(raw['room_temperature'])} (K)")
 
     # [lagrange]
-    raw_bodies = data["lagrange"]["bodies"]
+    bodies = case.get("lagrange", {}).get("bodies", [])
+    raw_bodies = data.get("lagrange", {}).get("bodies", [])
     seen: dict[str, int] = {}
     for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
         base = ["lagrange", "bodies", i]
@@ -626,6 +669,44 @@ def _check(case: dict, data: dict) -> None:
         if "file" in body["mesh"]:
             _check_mesh_file(format_key(["lagrange", "bodies", i, "mesh", "file"]),
                              raw_bodies[i]["mesh"]["file"], body["mesh"]["file"], dim)
+
+
+def _check_ale(ale: dict, raw: dict, dim: int) -> None:
+    """Cross-field rules of [ale]: vector lengths, grid extent, periodic pairs, material references,
+    region expressions."""
+    for k in ("lower", "upper", "cells"):
+        _vec_len(format_key(["ale", "grid", k]), raw["grid"][k], dim)
+    for j, (lo, hi) in enumerate(zip(ale["grid"]["lower"], ale["grid"]["upper"])):
+        if not hi > lo:
+            raise CaseError("ale.grid.upper", raw["grid"]["upper"],
+                            f"must be > lower component-wise (component {j})")
+    axes = ("x", "y", "z")[:dim]
+    raw_faces = raw.get("boundaries", {})
+    for f in raw_faces:
+        if f[0] not in axes:
+            raise CaseError(format_key(["ale", "boundaries", f]), raw_faces[f],
+                            f"dimension mismatch: no {f[0]} faces in a {dim}D case")
+    for a in axes:
+        lo, hi = ale["boundaries"][f"{a}_lower"], ale["boundaries"][f"{a}_upper"]
+        if (lo == "periodic") != (hi == "periodic"):
+            raise CaseError(format_key(["ale", "boundaries", f"{a}_lower" if lo == "periodic" else f"{a}_upper"]),
+                            "periodic", f"periodic must be set on both {a}_lower and {a}_upper")
+        for f in (f"{a}_lower", f"{a}_upper"):
+            face = ale["boundaries"][f]
+            if isinstance(face, dict):
+                _vec_len(format_key(["ale", "boundaries", f, "inflow", "velocity"]),
+                         raw_faces[f]["inflow"]["velocity"], dim)
+    for i, (reg, r) in enumerate(zip(ale["regions"], raw["regions"])):
+        base = ["ale", "regions", i]
+        if reg["material"] not in ale["materials"]:
+            raise CaseError(format_key(base + ["material"]), reg["material"],
+                            "undefined material; defined in [ale.materials]: " + ", ".join(ale["materials"]))
+        if "velocity" in r:
+            _vec_len(format_key(base + ["velocity"]), r["velocity"], dim)
+        if "region" in r:
+            _expr(format_key(base + ["region"]), r["region"], dim, BOOL)
+    for i, e in enumerate(raw.get("energy_sources", [])):
+        _vec_len(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
 
 
 _CELL_TYPE = {2: "quad", 3: "hexahedron"}

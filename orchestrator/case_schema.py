@@ -195,6 +195,94 @@ LAGRANGE = _table(
     },
 )
 
+# ---- [ale]: the background (compressible flow on a fixed grid) ------------------------------------
+EOS_KEYS = {
+    "ideal_gas": ("eos", "gamma"),
+    "stiffened_gas": ("eos", "gamma", "p_inf"),
+    "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0"),
+    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+}
+EOS_REQUIRED = {
+    "ideal_gas": ("eos", "gamma"),
+    "stiffened_gas": ("eos", "gamma", "p_inf"),
+    "tait": ("eos", "rho0", "bulk_modulus", "exponent"),
+    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+}
+FLUID = {
+    "type": "object",
+    "properties": {
+        "eos": {"type": "string", "enum": list(EOS_KEYS)},
+        "gamma": _num("dimensionless", exclusiveMinimum=1),
+        "p_inf": _num("Pa", minimum=0),
+        "rho0": _num("kg/m^3", exclusiveMinimum=0),
+        "bulk_modulus": _num("Pa", exclusiveMinimum=0),
+        "exponent": _num("dimensionless", minimum=1),
+        "p0": _num("Pa"),
+        "A": _num("Pa"),
+        "B": _num("Pa"),
+        "R1": _num("dimensionless", exclusiveMinimum=0),
+        "R2": _num("dimensionless", exclusiveMinimum=0),
+        "omega": _num("dimensionless", exclusiveMinimum=0),
+    },
+    "additionalProperties": False,
+    "required": ["eos"],
+    "allOf": [
+        {
+            "if": {"properties": {"eos": {"const": eos}}, "required": ["eos"]},
+            "then": {
+                "properties": {k: True for k in EOS_KEYS[eos]},
+                "additionalProperties": False,
+                "required": list(EOS_REQUIRED[eos]),
+                "x-when": f"eos = {eos!r}",
+            },
+        }
+        for eos in EOS_KEYS
+    ],
+}
+INFLOW = _table(
+    {"inflow": _table({"density": _num("kg/m^3", exclusiveMinimum=0), "velocity": _vector("m/s"),
+                       "pressure": _num("Pa")}, required=("density", "velocity", "pressure"))},
+    required=("inflow",),
+)
+ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "periodic"]}, INFLOW],
+            "x-allowed": "must be \"wall\", \"outflow\", \"periodic\" or { inflow = { density, velocity, pressure } }"}
+ALE_FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
+ALE_REGION = {
+    "type": "object",
+    "properties": {
+        "material": {"type": "string", "minLength": 1},
+        "region": {"type": "string", "minLength": 1},
+        "density": _num("kg/m^3", exclusiveMinimum=0),
+        "pressure": _num("Pa"),
+        "specific_internal_energy": _num("J/kg"),
+        "velocity": _vector("m/s"),
+    },
+    "additionalProperties": False,
+    "required": ["material", "density"],
+    "oneOf": [{"required": ["pressure"]}, {"required": ["specific_internal_energy"]}],
+    "x-allowed": "needs material, density and exactly one of pressure, specific_internal_energy",
+}
+ALE = _table(
+    {
+        "mode": {"type": "string", "enum": ["eulerian", "lagrangian"]},
+        "grid": BOX,
+        "hourglass": _num("dimensionless", minimum=0, maximum=0.125),
+        "viscosity": _table({"linear": _num("dimensionless", minimum=0),
+                             "quadratic": _num("dimensionless", minimum=0)}),
+        "boundaries": _table({f: ALE_FACE for f in ALE_FACES}),
+        "materials": {
+            "type": "object",
+            "minProperties": 1,
+            "propertyNames": {"pattern": NAME_PATTERN},
+            "additionalProperties": FLUID,
+        },
+        "regions": {"type": "array", "minItems": 1, "items": ALE_REGION},
+        "energy_sources": {"type": "array", "items": _table(
+            {"energy": _num("J", exclusiveMinimum=0), "at": _vector("m")}, required=("energy", "at"))},
+    },
+    required=("grid", "materials", "regions"),
+)
+
 BOUNDARY_KEYS = {
     "fixed": ("type", "region"),
     "velocity": ("type", "region", "velocity"),
@@ -267,10 +355,11 @@ CASE_SCHEMA = {
                 "x-allowed": "at least one material table, e.g. [materials.steel]",
             },
             "lagrange": LAGRANGE,
+            "ale": ALE,
             "boundaries": {"type": "array", "items": BOUNDARY},
             "check": CHECK,
         },
-        required=("run", "materials"),
+        required=("run",),
     ),
 }
 
