@@ -117,3 +117,144 @@ def momentum(case, out, history, params):
             vals[k.split(".", 1)[1]] = float(np.max(np.abs(a)))
     vals["steps"] = float(history["step"][-1])
     return vals
+
+
+def _zone_stations(out: Path, role: str, index: int, axis: int):
+    """1-D profile along `axis` of a run on a grid: zone fields averaged over each station."""
+    from orchestrator import output
+
+    cells, _ = output.read_mesh_file(out, role)
+    points, pd, cd = output.read_step(out, role, index)
+    centre = points[cells].mean(axis=1)[:, axis]
+    u = pd["velocity"][cells].mean(axis=1)[:, axis]
+    xs, inv = np.unique(np.round(centre, 12), return_inverse=True)
+    count = np.bincount(inv)
+
+    def station(a):
+        return np.bincount(inv, weights=a) / count
+
+    prof = {"x": xs, "rho": station(cd["density"]), "p": station(cd["pressure"]), "u": station(u)}
+    if "specific_internal_energy" in cd:
+        prof["e"] = station(cd["specific_internal_energy"])
+    return prof
+
+
+def _last_step(out: Path, role: str):
+    from orchestrator import output
+
+    return output.read_steps(out, role)[-1]
+
+
+def _plateau(x, a, lo, hi, margin):
+    sel = (x > lo + margin) & (x < hi - margin)
+    return float(a[sel].mean()) if sel.any() else float("nan")
+
+
+@register_check("riemann")
+def riemann(case, out, history, params):
+    """1-D Riemann problem on a grid, against the exact solution (stiffened gas, ideal gas = p_inf 0):
+    star-state plateaus, shock and contact positions (in cells), L1 density error."""
+    from solvers.ale.exact.riemann import RiemannSolution
+
+    axis = "xyz".index(params.get("axis", "x"))
+    x0 = float(params["x0"])
+    ex = RiemannSolution(left=tuple(params["left"]), right=tuple(params["right"]),
+                         gamma_l=float(params["gamma_left"]), gamma_r=float(params.get("gamma_right", params["gamma_left"])),
+                         p_inf_l=float(params.get("p_inf_left", 0.0)), p_inf_r=float(params.get("p_inf_right", 0.0)))
+    t, _, index = _last_step(out, "ale")
+    prof = _zone_stations(out, "ale", index, axis)
+    x = prof["x"]
+    dx = float(np.diff(x).mean())
+    w = ex.waves(t, x0)
+    margin = 4 * dx
+    inner_l = w.get("left_rarefaction_tail", w.get("left_shock"))
+    inner_r = w.get("right_rarefaction_tail", w.get("right_shock"))
+    contact = w["contact"]
+    vals = {
+        "p_star": _plateau(x, prof["p"], inner_l, inner_r, margin),
+        "u_star": _plateau(x, prof["u"], inner_l, inner_r, margin),
+        "rho_star_left": _plateau(x, prof["rho"], inner_l, contact, margin),
+        "rho_star_right": _plateau(x, prof["rho"], contact, inner_r, margin),
+    }
+    rho_ex = ex.sample(x, t, x0)[0]
+    vals["l1_density"] = float(np.sum(np.abs(prof["rho"] - rho_ex)) * dx / (x[-1] - x[0] + dx))
+
+    def crossing(level, near):
+        """Position nearest `near` where the density profile crosses `level` (linear interpolation)."""
+        s = np.sign(prof["rho"] - level)
+        k = np.flatnonzero(s[:-1] * s[1:] < 0)
+        if len(k) == 0:
+            return float("nan")
+        xs = x[k] + (level - prof["rho"][k]) * (x[k + 1] - x[k]) / (prof["rho"][k + 1] - prof["rho"][k])
+        return float(xs[np.argmin(np.abs(xs - near))])
+
+    if "right_shock" in w:
+        level = 0.5 * (ex.rho_star_r + params["right"][0])
+        vals["shock_position_error_cells"] = abs(crossing(level, w["right_shock"]) - w["right_shock"]) / dx
+    elif "left_shock" in w:
+        level = 0.5 * (ex.rho_star_l + params["left"][0])
+        vals["shock_position_error_cells"] = abs(crossing(level, w["left_shock"]) - w["left_shock"]) / dx
+    if ex.rho_star_l != ex.rho_star_r:
+        level = 0.5 * (ex.rho_star_l + ex.rho_star_r)
+        vals["contact_position_error_cells"] = abs(crossing(level, contact) - contact) / dx
+    for k, a in history.items():
+        if k.endswith("_balance_rel"):
+            vals[k.split(".", 1)[1]] = float(np.max(np.abs(a)))
+    return vals
+
+
+@register_check("sedov")
+def sedov(case, out, history, params):
+    """Point blast: shock radius (outer half-height of the density jump, zones binned by radius from
+    `centre`) against the Kamm & Timmes semi-analytic solution; E0 of the full-space problem is the
+    deposited energy times `symmetry_factor` (4 for a quarter plane, 8 for an octant)."""
+    from orchestrator import output
+    from solvers.ale.exact.sedov import SedovSolution
+
+    ale = case["ale"]
+    dim = ale["dimension"]
+    deposited = sum(e["energy"] for e in ale["energy_sources"])
+    e_full = deposited * float(params.get("symmetry_factor", 1.0))
+    geometry = int(params.get("geometry", dim))
+    rho0 = float(params["rho0"])
+    gamma = float(params["gamma"])
+    ex = SedovSolution(e_full, rho0, gamma, geometry)
+    t, _, index = _last_step(out, "ale")
+    cells, _ = output.read_mesh_file(out, "ale")
+    points, _, cd = output.read_step(out, "ale", index)
+    centre = np.asarray(params.get("centre", [0.0] * dim) + [0.0] * (3 - dim))
+    r = np.linalg.norm(points[cells].mean(axis=1) - centre, axis=1)
+    h = float(np.ptp(points[:, 0])) / ale["grid"]["cells"][0]
+    bins = np.arange(0.0, r.max() + h, h)
+    k = np.digitize(r, bins) - 1
+    count = np.bincount(k, minlength=len(bins))
+    rho_bin = np.bincount(k, weights=cd["density"], minlength=len(bins)) / np.maximum(count, 1)
+    peak = int(np.argmax(rho_bin))
+    half = rho0 + 0.5 * (rho_bin[peak] - rho0)
+    outer = peak + int(np.argmax(rho_bin[peak:] < half))
+    # interpolate the half-height crossing between bin centres outer-1 and outer
+    rc = bins + 0.5 * h
+    r0, r1, a0, a1 = rc[outer - 1], rc[outer], rho_bin[outer - 1], rho_bin[outer]
+    r_shock = r0 + (half - a0) * (r1 - r0) / (a1 - a0) if a1 != a0 else r0
+    vals = {"shock_radius": float(r_shock), "exact_shock_radius": float(ex.shock_radius(t)),
+            "peak_density": float(rho_bin[peak])}
+    for key, a in history.items():
+        if key.endswith("_balance_rel"):
+            vals[key.split(".", 1)[1]] = float(np.max(np.abs(a)))
+    return vals
+
+
+@register_check("positivity")
+def positivity(case, out, history, params):
+    """Every output step: density and specific internal energy positive and everything finite."""
+    from orchestrator import output
+
+    bad, rho_min, e_min = 0, np.inf, np.inf
+    for _, _, index in output.read_steps(out, "ale"):
+        _, pd, cd = output.read_step(out, "ale", index)
+        arrays = [pd["velocity"], cd["density"], cd["pressure"], cd["specific_internal_energy"]]
+        bad += int(sum(np.count_nonzero(~np.isfinite(a)) for a in arrays))
+        bad += int(np.count_nonzero(cd["density"] <= 0) + np.count_nonzero(cd["specific_internal_energy"] <= 0))
+        rho_min = min(rho_min, float(cd["density"].min()))
+        e_min = min(e_min, float(cd["specific_internal_energy"].min()))
+    return {"invalid_values": float(bad), "min_density": rho_min, "min_specific_internal_energy": e_min}

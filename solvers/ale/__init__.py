@@ -1,0 +1,1 @@
+"""ALE background solver: staggered-grid Lagrange step plus remap (Eulerian) hydrodynamics."""

@@ -1,0 +1,575 @@
+"""Lagrange-step kernels of the ALE background solver (staggered grid, 2D quads and 3D hexahedra).
+
+Discretisation (one zone z with corners c, lumped nodal masses m_n, zone mass M_z)
+----------------------------------------------------------------------------------
+* Geometry: ``b_c = dV/dx_c`` of the trilinear hexahedron / bilinear quadrilateral
+  (``hex_bvectors`` / ``quad_bvectors`` of the FE solver) and the exact zone volume, in 3D
+  ``V = 1/3 sum_c (x_c - x_0) . b_c`` summed per component and then permutation-invariantly
+  (:func:`hex_volume_sym`) so that boxes give the same bits whichever axis is which.
+* Corner force (force ON node c from zone z)::
+
+      f_zc = (p + q) b_c + f_hg,c
+
+  with the Flanagan-Belytschko viscous hourglass force of the FE solver: base vectors Gamma_a
+  (hex: eta zeta, zeta xi, xi eta, xi eta zeta; quad: xi eta), ``gamma_a = Gamma_a - (Gamma_a .
+  (x_i - x_0)) b_i / V`` (orthogonal to every linear velocity field), ``g_a = sum_c gamma_ac v_c`` and
+  ``f_hg,c = -a_h sum_a gamma_ac g_a``, ``a_h = C_hg rho c V^(2/3) / 4`` (3D) or
+  ``C_hg rho c A^(1/2) / 4`` (2D, per unit thickness).
+* Nodal force: gathered, never scattered: ``f_n = sum_{zones around n} f_zc`` in a fixed
+  (balanced-tree) order over the active zones (real, periodic images and open-boundary ghosts;
+  zones beyond a wall do not act).  The same order on every rank makes a decomposed run bitwise
+  equal to a single-rank one.
+* Artificial viscosity (scalar, bulk, compression only)::
+
+      q = rho (C_q l^2 (div v)^2 + C_l l c |div v|)      if div v < 0, else 0
+
+  with, in the Lagrange step, ``div v = (V^{n+1} - V^n) / (dt (V^{n+1} + V^n)/2)`` (the volume
+  change of the step, equal to ``sum_c v_c . b_c(x^{n+1/2}) / V`` at the mid-step geometry
+  exactly in 2D and to O(dt^2) in 3D), or ``sum_c v_c . b_c / V`` on the fixed grid after a
+  remap; the length is ``l = V / (largest face area)`` (3D) or ``A / (longest edge)`` (2D): the
+  smallest zone width for a box, identical in 2D and 3D.
+* Compatible energy: with the central-difference step ``v^{n+1/2} = v^{n-1/2} + dt_avg f^n / m``
+  the kinetic energy changes by ``sum_n dt_avg f^n . vbar_n`` exactly, ``vbar = (v^{n-1/2} +
+  v^{n+1/2}) / 2``.  Each zone therefore changes its internal energy by minus the work of its own
+  corner forces on the mean velocities of its corners::
+
+      M_z (e^+ - e^-) = - dt_avg sum_c f_zc^n . vbar_c
+
+  so kinetic + internal energy is conserved to round-off (walls do no work: vbar_normal = 0).
+  The conserved ``e`` lags the positions by half a step (it holds the work up to
+  t^{n+1/2}); the EOS is evaluated at the half-step extrapolation
+  ``e_eos = e + de_h`` with ``de_h = -(p^n + q^n) (V^{n+1} - V^n) / (2 M)``, which keeps the
+  pressure second-order in time without touching the conserved energy.
+* Stable step: ``dt_z = l / (u + Q + sqrt(Q^2 + c^2))`` with ``Q = C_l c + C_q l |div v|`` in
+  compression (0 otherwise) and ``u`` the largest corner speed in Eulerian mode (advection
+  Courant number of the remap), 0 in Lagrangian mode.
+
+Corner sums use balanced trees ``((c0 + c1) + (c3 + c2)) + ((c4 + c5) + (c7 + c6))`` (pairs along
+x first), so a flow along x, y or z on a box grid sums the same numbers in the same order.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from solvers.ale import eos as _eos
+from solvers.lagrange.kernels import QUAD_HG, hex_bvectors, quad_bvectors
+
+# zone-pass flags
+ENERGY = 1     # compatible energy update from the stored corner forces (real zones only)
+EOS = 2        # rho = M / V, EOS at e + de_h
+FORCES = 4     # kinematics, q, hourglass, corner forces, stable step
+MIDSTEP = 8    # div v from the volume change over the step (Lagrange step); else sum v.b/V at x
+ADVECT = 16    # add the corner speed to the Courant condition (Eulerian mode)
+
+# failure reasons of a zone pass
+BAD_VOLUME = 1
+BAD_STATE = 3
+
+
+@njit(cache=True, inline="always")
+def _t8(a0, a1, a2, a3, a4, a5, a6, a7):
+    return ((a0 + a1) + (a3 + a2)) + ((a4 + a5) + (a7 + a6))
+
+
+@njit(cache=True, inline="always")
+def _t4(a0, a1, a2, a3):
+    return (a0 + a1) + (a3 + a2)
+
+
+@njit(cache=True, inline="always")
+def _sym3(a, b, c):
+    """a + b + c summed smallest-first: invariant under any permutation of the arguments."""
+    if a > b:
+        a, b = b, a
+    if b > c:
+        b, c = c, b
+    if a > b:
+        a, b = b, a
+    return (a + b) + c
+
+
+@njit(cache=True, inline="always")
+def _vcomp(xe, b, d):
+    x0 = xe[0, d]
+    return _t8(0.0, (xe[1, d] - x0) * b[1, d], (xe[2, d] - x0) * b[2, d], (xe[3, d] - x0) * b[3, d],
+               (xe[4, d] - x0) * b[4, d], (xe[5, d] - x0) * b[5, d], (xe[6, d] - x0) * b[6, d],
+               (xe[7, d] - x0) * b[7, d])
+
+
+@njit(cache=True)
+def hex_volume_sym(xe, b):
+    """Volume ``1/3 sum_I (x_I - x_0) . b_I`` of a hexahedron from its b-vectors, per component
+    with balanced-tree corner sums and a permutation-invariant sum of the three components (so a
+    box gives the same bits whichever axis is which)."""
+    return _sym3(_vcomp(xe, b, 0), _vcomp(xe, b, 1), _vcomp(xe, b, 2)) / 3.0
+
+
+
+@njit(cache=True, inline="always")
+def _hproj(g1, g2, g3, g4, g5, g6, g7, xe, d):
+    x0 = xe[0, d]
+    return _t8(0.0, g1 * (xe[1, d] - x0), g2 * (xe[2, d] - x0), g3 * (xe[3, d] - x0),
+               g4 * (xe[4, d] - x0), g5 * (xe[5, d] - x0), g6 * (xe[6, d] - x0), g7 * (xe[7, d] - x0))
+
+
+@njit(cache=True, inline="always")
+def _hg_mode(g0, g1, g2, g3, g4, g5, g6, g7, xe, b, ve, ivol, ah, fc, z):
+    """One FB hourglass mode of a hexahedron (signs g = Gamma as literals, folded after inlining):
+    gamma = Gamma - (Gamma . x) b / V (coordinates relative to corner 0), f -= a_h gamma (gamma . v)."""
+    hx = _hproj(g1, g2, g3, g4, g5, g6, g7, xe, 0) * ivol
+    hy = _hproj(g1, g2, g3, g4, g5, g6, g7, xe, 1) * ivol
+    hz = _hproj(g1, g2, g3, g4, g5, g6, g7, xe, 2) * ivol
+    c0 = g0 - (hx * b[0, 0] + hy * b[0, 1] + hz * b[0, 2])
+    c1 = g1 - (hx * b[1, 0] + hy * b[1, 1] + hz * b[1, 2])
+    c2 = g2 - (hx * b[2, 0] + hy * b[2, 1] + hz * b[2, 2])
+    c3 = g3 - (hx * b[3, 0] + hy * b[3, 1] + hz * b[3, 2])
+    c4 = g4 - (hx * b[4, 0] + hy * b[4, 1] + hz * b[4, 2])
+    c5 = g5 - (hx * b[5, 0] + hy * b[5, 1] + hz * b[5, 2])
+    c6 = g6 - (hx * b[6, 0] + hy * b[6, 1] + hz * b[6, 2])
+    c7 = g7 - (hx * b[7, 0] + hy * b[7, 1] + hz * b[7, 2])
+    for d in range(3):
+        g = ah * _t8(c0 * ve[0, d], c1 * ve[1, d], c2 * ve[2, d], c3 * ve[3, d],
+                     c4 * ve[4, d], c5 * ve[5, d], c6 * ve[6, d], c7 * ve[7, d])
+        fc[z, 0, d] -= c0 * g
+        fc[z, 1, d] -= c1 * g
+        fc[z, 2, d] -= c2 * g
+        fc[z, 3, d] -= c3 * g
+        fc[z, 4, d] -= c4 * g
+        fc[z, 5, d] -= c5 * g
+        fc[z, 6, d] -= c6 * g
+        fc[z, 7, d] -= c7 * g
+
+
+# ------------------------------------------------------------------------------------------------
+# 3D
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rhi, zs, ns,
+                 flags, dt, dt_avg, code, par, q_lin, q_quad, hg):
+    """One pass over the zones ``zlo <= (i, j, k) < zhi`` (padded indices).
+
+    flags: ENERGY (only for real zones rlo <= ijk < rhi), EOS, FORCES, MIDSTEP, ADVECT.
+    Arrays: x, v, v_old (nn, 3); fc (nz, 8, 3) corner forces (read by ENERGY, written by
+    FORCES); M, e, V, rho, p, c, q, de_h (nz,).  V is always updated to the volume at x.
+    Returns ``(dt_min, bad_zone, reason)`` (bad_zone = -1 if none; the pass stops at the first).
+    """
+    co = np.empty(8, np.int64)
+    for a in range(8):
+        ox = 1 if (a == 1 or a == 2 or a == 5 or a == 6) else 0
+        oy = 1 if (a == 2 or a == 3 or a == 6 or a == 7) else 0
+        oz = 1 if a >= 4 else 0
+        co[a] = ox * ns[0] + oy * ns[1] + oz * ns[2]
+    xe = np.empty((8, 3))
+    ve = np.empty((8, 3))
+    b = np.empty((8, 3))
+    gam = np.empty(8)
+    w = np.empty(8)
+    do_energy = (flags & ENERGY) != 0
+    do_eos = (flags & EOS) != 0
+    do_forces = (flags & FORCES) != 0
+    midstep = (flags & MIDSTEP) != 0
+    advect = (flags & ADVECT) != 0
+    half_dt = 0.5 * dt
+    dt_min = np.inf
+    for i in range(zlo[0], zhi[0]):
+        ri = rlo[0] <= i < rhi[0]
+        for j in range(zlo[1], zhi[1]):
+            rj = ri and rlo[1] <= j < rhi[1]
+            for k in range(zlo[2], zhi[2]):
+                real = rj and rlo[2] <= k < rhi[2]
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                n0 = i * ns[0] + j * ns[1] + k * ns[2]
+                for a in range(8):
+                    nd = n0 + co[a]
+                    for d in range(3):
+                        xe[a, d] = x[nd, d]
+                        ve[a, d] = v[nd, d]
+                if do_energy and real:
+                    for a in range(8):
+                        nd = n0 + co[a]
+                        w[a] = (fc[z, a, 0] * (0.5 * (v_old[nd, 0] + ve[a, 0]))
+                                + fc[z, a, 1] * (0.5 * (v_old[nd, 1] + ve[a, 1]))
+                                + fc[z, a, 2] * (0.5 * (v_old[nd, 2] + ve[a, 2])))
+                    work = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7])
+                    e[z] -= dt_avg * work / M[z]
+                _, amax = hex_bvectors(xe, b)
+                vol = hex_volume_sym(xe, b)
+                if not (vol > 0.0):
+                    return dt_min, z, BAD_VOLUME
+                v_prev = V[z]
+                if do_energy and real:
+                    de_h[z] = -(p[z] + q[z]) * (vol - v_prev) / (2.0 * M[z])
+                V[z] = vol
+                if do_eos:
+                    r = M[z] / vol
+                    pz, cz, ok = _eos.state(code, par, r, e[z] + de_h[z])
+                    rho[z] = r
+                    p[z] = pz
+                    c[z] = cz
+                    if not ok:
+                        return dt_min, z, BAD_STATE
+                if not do_forces:
+                    continue
+                r = rho[z]
+                pz = p[z]
+                cz = c[z]
+                # velocity divergence: Lagrange step: volume change over the step (= sum v . b at
+                # the mid-step geometry, to O(dt^2)); otherwise sum v . b / V at x
+                if midstep:
+                    divv = (vol - v_prev) / (half_dt * (vol + v_prev))
+                else:
+                    for a in range(8):
+                        w[a] = ve[a, 0] * b[a, 0] + ve[a, 1] * b[a, 1] + ve[a, 2] * b[a, 2]
+                    divv = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) / vol
+                lc = vol / amax
+                qz = 0.0
+                qq = 0.0
+                if divv < 0.0:
+                    qq = q_lin * cz - q_quad * lc * divv
+                    qz = r * lc * qq * (-divv)
+                q[z] = qz
+                u = 0.0
+                if advect:
+                    for a in range(8):
+                        s2 = ve[a, 0] * ve[a, 0] + ve[a, 1] * ve[a, 1] + ve[a, 2] * ve[a, 2]
+                        if s2 > u:
+                            u = s2
+                    u = math.sqrt(u)
+                dte = lc / (u + qq + math.sqrt(qq * qq + cz * cz))
+                if dte < dt_min:
+                    dt_min = dte
+                s = pz + qz
+                for a in range(8):
+                    for d in range(3):
+                        fc[z, a, d] = s * b[a, d]
+                if hg > 0.0:
+                    cb = np.cbrt(vol)
+                    ah = hg * r * cz * cb * cb * 0.25
+                    ivol = 1.0 / vol
+                    # base vectors eta zeta, zeta xi, xi eta, xi eta zeta at the VTK corners
+                    _hg_mode(1.0, 1.0, -1.0, -1.0, -1.0, -1.0, 1.0, 1.0, xe, b, ve, ivol, ah, fc, z)
+                    _hg_mode(1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, xe, b, ve, ivol, ah, fc, z)
+                    _hg_mode(1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, xe, b, ve, ivol, ah, fc, z)
+                    _hg_mode(-1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, xe, b, ve, ivol, ah, fc, z)
+    return dt_min, -1, 0
+
+
+@njit(cache=True)
+def gather_3d(fc, zact, M, f, m, nlo, nhi, zs, ns):
+    """Nodal force f (nn, 3) and lumped mass m (nn,) of the nodes nlo <= ijk < nhi, gathered from
+    the 8 surrounding zones (active ones only) in a fixed balanced-tree order."""
+    for i in range(nlo[0], nhi[0]):
+        for j in range(nlo[1], nhi[1]):
+            for k in range(nlo[2], nhi[2]):
+                n = i * ns[0] + j * ns[1] + k * ns[2]
+                # zones (i-1+a, j-1+b, k-1+c); the node is their corner (1-a, 1-b, 1-c)
+                z000 = (i - 1) * zs[0] + (j - 1) * zs[1] + (k - 1) * zs[2]
+                z100 = z000 + zs[0]
+                z010 = z000 + zs[1]
+                z110 = z010 + zs[0]
+                z001 = z000 + zs[2]
+                z101 = z100 + zs[2]
+                z011 = z010 + zs[2]
+                z111 = z110 + zs[2]
+                # corner index of the node in each zone: offset (1-a, 1-b, 1-c)
+                for d in range(3):
+                    f[n, d] = _t8(zact[z000] * fc[z000, 6, d], zact[z100] * fc[z100, 7, d],
+                                  zact[z110] * fc[z110, 4, d], zact[z010] * fc[z010, 5, d],
+                                  zact[z001] * fc[z001, 2, d], zact[z101] * fc[z101, 3, d],
+                                  zact[z111] * fc[z111, 0, d], zact[z011] * fc[z011, 1, d])
+                m[n] = 0.125 * _t8(zact[z000] * M[z000], zact[z100] * M[z100],
+                                   zact[z110] * M[z110], zact[z010] * M[z010],
+                                   zact[z001] * M[z001], zact[z101] * M[z101],
+                                   zact[z111] * M[z111], zact[z011] * M[z011])
+
+
+# ------------------------------------------------------------------------------------------------
+# 2D (plane, unit thickness)
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rhi, zs, ns,
+                 flags, dt, dt_avg, code, par, q_lin, q_quad, hg):
+    """2D version of :func:`zone_pass_3d` (x, v, v_old (nn, 2); fc (nz, 4, 2))."""
+    co = np.empty(4, np.int64)
+    co[0] = 0
+    co[1] = ns[0]
+    co[2] = ns[0] + ns[1]
+    co[3] = ns[1]
+    xe = np.empty((4, 2))
+    ve = np.empty((4, 2))
+    b = np.empty((4, 2))
+    gam = np.empty(4)
+    w = np.empty(4)
+    do_energy = (flags & ENERGY) != 0
+    do_eos = (flags & EOS) != 0
+    do_forces = (flags & FORCES) != 0
+    midstep = (flags & MIDSTEP) != 0
+    advect = (flags & ADVECT) != 0
+    half_dt = 0.5 * dt
+    dt_min = np.inf
+    for i in range(zlo[0], zhi[0]):
+        ri = rlo[0] <= i < rhi[0]
+        for j in range(zlo[1], zhi[1]):
+            real = ri and rlo[1] <= j < rhi[1]
+            z = i * zs[0] + j * zs[1]
+            n0 = i * ns[0] + j * ns[1]
+            for a in range(4):
+                nd = n0 + co[a]
+                xe[a, 0] = x[nd, 0]
+                xe[a, 1] = x[nd, 1]
+                ve[a, 0] = v[nd, 0]
+                ve[a, 1] = v[nd, 1]
+            if do_energy and real:
+                for a in range(4):
+                    nd = n0 + co[a]
+                    w[a] = (fc[z, a, 0] * (0.5 * (v_old[nd, 0] + ve[a, 0]))
+                            + fc[z, a, 1] * (0.5 * (v_old[nd, 1] + ve[a, 1])))
+                work = _t4(w[0], w[1], w[2], w[3])
+                e[z] -= dt_avg * work / M[z]
+            vol, _ = quad_bvectors(xe, b)
+            if not (vol > 0.0):
+                return dt_min, z, BAD_VOLUME
+            v_prev = V[z]
+            if do_energy and real:
+                de_h[z] = -(p[z] + q[z]) * (vol - v_prev) / (2.0 * M[z])
+            V[z] = vol
+            if do_eos:
+                r = M[z] / vol
+                pz, cz, ok = _eos.state(code, par, r, e[z] + de_h[z])
+                rho[z] = r
+                p[z] = pz
+                c[z] = cz
+                if not ok:
+                    return dt_min, z, BAD_STATE
+            if not do_forces:
+                continue
+            r = rho[z]
+            pz = p[z]
+            cz = c[z]
+            if midstep:
+                divv = (vol - v_prev) / (half_dt * (vol + v_prev))
+            else:
+                for a in range(4):
+                    w[a] = ve[a, 0] * b[a, 0] + ve[a, 1] * b[a, 1]
+                divv = _t4(w[0], w[1], w[2], w[3]) / vol
+            # longest edge
+            emax = 0.0
+            for a in range(4):
+                an = (a + 1) % 4
+                ex = xe[an, 0] - xe[a, 0]
+                ey = xe[an, 1] - xe[a, 1]
+                l2 = ex * ex + ey * ey
+                if l2 > emax:
+                    emax = l2
+            lc = vol / math.sqrt(emax)
+            qz = 0.0
+            qq = 0.0
+            if divv < 0.0:
+                qq = q_lin * cz - q_quad * lc * divv
+                qz = r * lc * qq * (-divv)
+            q[z] = qz
+            u = 0.0
+            if advect:
+                for a in range(4):
+                    s2 = ve[a, 0] * ve[a, 0] + ve[a, 1] * ve[a, 1]
+                    if s2 > u:
+                        u = s2
+                u = math.sqrt(u)
+            dte = lc / (u + qq + math.sqrt(qq * qq + cz * cz))
+            if dte < dt_min:
+                dt_min = dte
+            s = pz + qz
+            for a in range(4):
+                fc[z, a, 0] = s * b[a, 0]
+                fc[z, a, 1] = s * b[a, 1]
+            if hg > 0.0:
+                ah = hg * r * cz * math.sqrt(vol) * 0.25
+                ivol = 1.0 / vol
+                hx = 0.0
+                hy = 0.0
+                for a in range(4):
+                    hx += QUAD_HG[a] * xe[a, 0]
+                    hy += QUAD_HG[a] * xe[a, 1]
+                hx *= ivol
+                hy *= ivol
+                gx = 0.0
+                gy = 0.0
+                for a in range(4):
+                    ga = QUAD_HG[a] - (hx * b[a, 0] + hy * b[a, 1])
+                    gam[a] = ga
+                    gx += ga * ve[a, 0]
+                    gy += ga * ve[a, 1]
+                gx *= ah
+                gy *= ah
+                for a in range(4):
+                    fc[z, a, 0] -= gam[a] * gx
+                    fc[z, a, 1] -= gam[a] * gy
+    return dt_min, -1, 0
+
+
+@njit(cache=True)
+def gather_2d(fc, zact, M, f, m, nlo, nhi, zs, ns):
+    """2D version of :func:`gather_3d` (4 zones per node)."""
+    for i in range(nlo[0], nhi[0]):
+        for j in range(nlo[1], nhi[1]):
+            n = i * ns[0] + j * ns[1]
+            z00 = (i - 1) * zs[0] + (j - 1) * zs[1]
+            z10 = z00 + zs[0]
+            z01 = z00 + zs[1]
+            z11 = z01 + zs[0]
+            for d in range(2):
+                f[n, d] = _t4(zact[z00] * fc[z00, 2, d], zact[z10] * fc[z10, 3, d],
+                              zact[z11] * fc[z11, 0, d], zact[z01] * fc[z01, 1, d])
+            m[n] = 0.25 * _t4(zact[z00] * M[z00], zact[z10] * M[z10],
+                              zact[z11] * M[z11], zact[z01] * M[z01])
+
+
+# ------------------------------------------------------------------------------------------------
+# node kernels (any dimension)
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def predict(v, v_old, f, m, nlo, nhi, ns, dt_avg):
+    """v_old <- v; v <- v + dt_avg f / m on the nodes nlo <= ijk < nhi."""
+    dim = v.shape[1]
+    for i in range(nlo[0], nhi[0]):
+        for j in range(nlo[1], nhi[1]):
+            for k in range(nlo[2], nhi[2]):
+                n = i * ns[0] + j * ns[1] + k * ns[2]
+                s = dt_avg / m[n]
+                for d in range(dim):
+                    v_old[n, d] = v[n, d]
+                    v[n, d] += s * f[n, d]
+
+
+@njit(cache=True)
+def move(x, v, dt):
+    """x <- x + dt v (all nodes, ghosts included)."""
+    nn, dim = x.shape
+    for n in range(nn):
+        for d in range(dim):
+            x[n, d] += dt * v[n, d]
+
+
+@njit(cache=True)
+def ghost_force_work(fc, zkind, v, v_old, owned, zlo, zhi, zs, ns, open_kind, out):
+    """Impulse and work on owned nodes of the corner forces of open-boundary ghost zones
+    (zkind == open_kind) during the step: out[0:dim] += sum f, out[3] += sum f . vbar
+    (multiply by dt_avg outside)."""
+    dim = v.shape[1]
+    nc = fc.shape[1]
+    co = np.empty(nc, np.int64)
+    for a in range(nc):
+        ox = 1 if (a == 1 or a == 2 or a == 5 or a == 6) else 0
+        oy = 1 if (a == 2 or a == 3 or a == 6 or a == 7) else 0
+        oz = 1 if a >= 4 else 0
+        co[a] = ox * ns[0] + oy * ns[1] + oz * ns[2]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                if zkind[z] != open_kind:
+                    continue
+                n0 = i * ns[0] + j * ns[1] + k * ns[2]
+                for a in range(nc):
+                    nd = n0 + co[a]
+                    if not owned[nd]:
+                        continue
+                    for d in range(dim):
+                        out[d] += fc[z, a, d]
+                        out[3] += fc[z, a, d] * 0.5 * (v[nd, d] + v_old[nd, d])
+
+
+@njit(cache=True)
+def sums(M, e, zreal, m, v, owned, out):
+    """out = [mass, internal energy, kinetic energy, momentum x, y, z, sum m |v|]."""
+    for a in range(out.shape[0]):
+        out[a] = 0.0
+    for z in range(M.shape[0]):
+        if zreal[z]:
+            out[0] += M[z]
+            out[1] += M[z] * e[z]
+    dim = v.shape[1]
+    for n in range(m.shape[0]):
+        if owned[n]:
+            s2 = 0.0
+            for d in range(dim):
+                s2 += v[n, d] * v[n, d]
+                out[3 + d] += m[n] * v[n, d]
+            out[2] += 0.5 * m[n] * s2
+            out[6] += m[n] * np.sqrt(s2)
+
+
+@njit(cache=True)
+def energy_from_pressure_array(code, par, rho, p, out):
+    for i in range(rho.shape[0]):
+        out[i] = _eos.energy_from_pressure(code, par, rho[i], p[i])
+
+
+def _flush():
+    import solvers.lagrange.kernels as _k
+    from solvers.ale.grid import flush_stale_cache
+
+    flush_stale_cache([zone_pass_3d, zone_pass_2d, gather_3d, gather_2d, predict, move,
+                       ghost_force_work, sums, energy_from_pressure_array, energy_update,
+                       lagrangian_volumes, _t4, _t8],
+                      [_eos.__file__, _k.__file__], "hydro.deps.sha256")
+
+
+
+
+@njit(cache=True)
+def energy_update(fc, v, v_old, e, M, zlo, zhi, zs, ns, dt_avg):
+    """Compatible internal-energy update alone (Eulerian mode: the geometry of the Lagrangian grid
+    comes from the remap's swept volumes): e -= dt_avg sum_c f_c . (v_old + v)_c / 2 / M."""
+    nc = fc.shape[1]
+    dim = fc.shape[2]
+    co = np.empty(nc, np.int64)
+    for a in range(nc):
+        ox = 1 if (a == 1 or a == 2 or a == 5 or a == 6) else 0
+        oy = 1 if (a == 2 or a == 3 or a == 6 or a == 7) else 0
+        oz = 1 if a >= 4 else 0
+        co[a] = ox * ns[0] + oy * ns[1] + oz * ns[2]
+    w = np.empty(8)
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                n0 = i * ns[0] + j * ns[1] + k * ns[2]
+                for a in range(nc):
+                    nd = n0 + co[a]
+                    s = 0.0
+                    for d in range(dim):
+                        s += fc[z, a, d] * (0.5 * (v_old[nd, d] + v[nd, d]))
+                    w[a] = s
+                if nc == 8:
+                    work = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7])
+                else:
+                    work = _t4(w[0], w[1], w[2], w[3])
+                e[z] -= dt_avg * work / M[z]
+
+
+@njit(cache=True)
+def lagrangian_volumes(SV, V, M, rho, p, q, de_h, zlo, zhi, zs):
+    """Eulerian mode: V_lag = V_eul + sum_d (SV_d[z + s_d] - SV_d[z]) (the swept volumes tile the
+    difference exactly), rho = M / V_lag and the half-step EOS energy shift de_h.  Returns the first
+    zone with V_lag <= 0 (or -1)."""
+    dim = SV.shape[0]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                vn = V[z]
+                for d in range(dim):
+                    vn += SV[d, z + zs[d]] - SV[d, z]
+                if not (vn > 0.0):
+                    return z
+                de_h[z] = -(p[z] + q[z]) * (vn - V[z]) / (2.0 * M[z])
+                V[z] = vn
+                rho[z] = M[z] / vn
+    return -1
+
+
+_flush()

@@ -1,0 +1,321 @@
+"""Remap kernels of the ALE background solver: direction-split, second-order, monotone advection
+of a staggered grid (zone mass and internal energy, nodal momentum) from the Lagrangian grid back to
+the fixed (Eulerian) grid.
+
+Swept volumes
+-------------
+The lower d-face of zone z sweeps, from its Eulerian to its Lagrangian position, the hexahedron
+(quad in 2D) spanned by the face's 4 (2) corners at both positions; ``SV_d[z]`` is its signed
+volume, positive for a displacement towards +d.  The swept hexahedra of all faces tile the
+difference between the Lagrangian and the Eulerian zone exactly (shared bilinear side patches), so
+``V_lag = V_eul + sum_d (SV_d[z + s_d] - SV_d[z])`` to round-off and a uniform density stays
+uniform through every sweep.  Volumes use ``V = 1/24 sum_faces (r_a + r_b + r_c + r_d) .
+((r_c - r_a) x (r_d - r_b))`` (exact for trilinear hexahedra) with ``r = x - x_0``, evaluated
+in the frame (t1, t2, d) with ``t1 = d+1, t2 = d+2 (mod 3)`` so that the same arithmetic runs
+for each axis (a swept volume that is flat in d is exactly zero).
+
+One sweep along d (material flows from the Lagrangian zone into the Eulerian one)
+----------------------------------------------------------------------------------
+Zones, per face f with upwind zone u (the zone the swept region belongs to on the Lagrangian grid)::
+
+    F_f   = SV_f (rho_u +/- 1/2 drho_u (1 - |SV_f| / V_u))        mass flux (+ towards +d)
+    e*_f  = e_u +/- 1/2 de_u (1 - |F_f| / M_u)                    face specific internal energy
+    M'    = M + F_lo - F_hi ;  V' = V + SV_lo - SV_hi ;  rho' = M' / V'
+    e'    = e + (F_lo (e*_lo - e) - F_hi (e*_hi - e)) / M'        (= (M e + F_lo e*_lo - F_hi e*_hi)/M')
+
+with limited slopes ``drho, de`` (monotonised central: ``minmod(2a, 2b, (a+b)/2)`` of the one-sided
+differences a, b).  Nodes (dual cells): the dual face between nodes n-s and n sits at the zone
+centres of layer i-1; its mass flux is built from the zone fluxes (``1/8`` of the sum over the
+4 zones of that layer around the node line of both faces of each zone, 2D: ``1/4`` over 2 zones)::
+
+    Phi = 1/8 sum_zones act_z (F_lo,z + F_hi,z)
+
+which makes the nodal mass change equal to the change of ``m_n = sum act_z M_z / 8``: the dual
+fluxes are consistent with the zone fluxes.  With the limited upwind nodal velocity ``v*`` at the
+dual face (same reconstruction in the mass fraction ``|Phi| / m_u``)::
+
+    m' v' = m v + Phi_lo v*_lo - Phi_hi v*_hi     computed as   v' = v + (Phi_lo (v*_lo - v) - Phi_hi (v*_hi - v)) / m'
+
+so a uniform velocity stays exactly uniform and momentum is conserved to round-off.  The kinetic
+energy the momentum remap loses, ``dK_n = 1/2 m |v|^2 + 1/2 Phi_lo |v*_lo|^2 - 1/2 Phi_hi |v*_hi|^2
+- 1/2 m' |v'|^2`` (its flux terms telescope), goes to the zones' internal energy (DeBar):
+zone z gets ``M_z / (8 m_n)`` of it from each corner, i.e. ``de_z = sum_c dK_c / (8 m_c)``
+(2D: 4), so kinetic + internal energy is conserved to round-off.
+"""
+from __future__ import annotations
+
+
+import numpy as np
+from numba import njit
+
+from solvers.ale.hydro import _t4, _t8
+
+
+@njit(cache=True, inline="always")
+def limiter(a, b):
+    """Monotonised-central limited difference (symmetric in a, b; odd)."""
+    if a * b <= 0.0:
+        return 0.0
+    aa = abs(a)
+    ab = abs(b)
+    s = 0.5 * abs(a + b)
+    m = 2.0 * aa if aa < ab else 2.0 * ab
+    if s < m:
+        m = s
+    return m if a > 0.0 else -m
+
+
+# ------------------------------------------------------------------------------------------------
+# swept volumes
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _face(r, a, b, c, d):
+    p0 = r[c, 0] - r[a, 0]
+    p1 = r[c, 1] - r[a, 1]
+    p2 = r[c, 2] - r[a, 2]
+    q0 = r[d, 0] - r[b, 0]
+    q1 = r[d, 1] - r[b, 1]
+    q2 = r[d, 2] - r[b, 2]
+    s0 = (r[a, 0] + r[b, 0]) + (r[d, 0] + r[c, 0])
+    s1 = (r[a, 1] + r[b, 1]) + (r[d, 1] + r[c, 1])
+    s2 = (r[a, 2] + r[b, 2]) + (r[d, 2] + r[c, 2])
+    return s0 * (p1 * q2 - p2 * q1) + s1 * (p2 * q0 - p0 * q2) + s2 * (p0 * q1 - p1 * q0)
+
+
+@njit(cache=True)
+def hex_volume(r):
+    """Volume of the trilinear hexahedron with corner coordinates r (8, 3) (VTK order)."""
+    t = (_face(r, 0, 3, 2, 1) + _face(r, 4, 5, 6, 7)) + (_face(r, 0, 1, 5, 4) + _face(r, 2, 3, 7, 6)) \
+        + (_face(r, 1, 2, 6, 5) + _face(r, 3, 0, 4, 7))
+    return t / 24.0
+
+
+@njit(cache=True)
+def swept_volumes_3d(X, x, SV, d, zlo, zhi, zs, ns):
+    """SV[z] = signed volume swept by the lower d-face of zone z from X to x (zones in range)."""
+    t1 = (d + 1) % 3
+    t2 = (d + 2) % 3
+    o1 = ns[t1]
+    o3 = ns[t2]
+    comp = np.array([t1, t2, d])
+    r = np.empty((8, 3))
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                n0 = i * ns[0] + j * ns[1] + k * ns[2]
+                nodes = (n0, n0 + o1, n0 + o1 + o3, n0 + o3)
+                for a in range(3):
+                    ca = comp[a]
+                    base = X[n0, ca]
+                    for q in range(4):
+                        r[q, a] = X[nodes[q], ca] - base
+                        r[q + 4, a] = x[nodes[q], ca] - base
+                SV[z] = hex_volume(r)
+
+
+@njit(cache=True)
+def swept_volumes_2d(X, x, SV, d, zlo, zhi, zs, ns):
+    """2D: SV[z] = signed area swept by the lower d-edge of zone z from X to x."""
+    t = 1 - d
+    o = ns[t]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            z = i * zs[0] + j * zs[1]
+            n0 = i * ns[0] + j * ns[1]
+            n1 = n0 + o
+            # quad (X0, X1, x1, x0) in the frame (t, d), relative to X0
+            bt = X[n0, t]
+            bn = X[n0, d]
+            d1t = x[n1, t] - bt
+            d1n = x[n1, d] - bn
+            d2t = (x[n0, t] - bt) - (X[n1, t] - bt)
+            d2n = (x[n0, d] - bn) - (X[n1, d] - bn)
+            SV[z] = 0.5 * (d1t * d2n - d1n * d2t)
+
+
+# ------------------------------------------------------------------------------------------------
+# zone part of a sweep
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def sweep_fluxes(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
+    """Mass flux F and face energy e* of the lower faces (stride s) of the zones in range."""
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                sv = SV[z]
+                if sv > 0.0:
+                    u = z - s
+                    sg = 0.5
+                else:
+                    u = z
+                    sg = -0.5
+                ru = rho[u]
+                dr = limiter(ru - rho[u - s], rho[u + s] - ru)
+                fr = abs(sv) / V[u]
+                if fr > 1.0:
+                    fr = 1.0
+                f = sv * (ru + sg * dr * (1.0 - fr))
+                eu = e[u]
+                de = limiter(eu - e[u - s], e[u + s] - eu)
+                fm = abs(f) / M[u]
+                if fm > 1.0:
+                    fm = 1.0
+                F[z] = f
+                ES[z] = eu + sg * de * (1.0 - fm)
+
+
+@njit(cache=True)
+def sweep_zones(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
+    """Conservative zone update of one sweep (zones in range)."""
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                fl = F[z]
+                fh = F[z + s]
+                mn = M[z] + fl - fh
+                vn = V[z] + SV[z] - SV[z + s]
+                ez = e[z]
+                e[z] = ez + (fl * (ES[z] - ez) - fh * (ES[z + s] - ez)) / mn
+                M[z] = mn
+                V[z] = vn
+                rho[z] = mn / vn
+
+
+# ------------------------------------------------------------------------------------------------
+# node part of a sweep
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def sweep_dual(F, zact, v, m, PHI, VS, d, nlo, nhi, zs, ns):
+    """Dual mass flux PHI[n] and limited upwind velocity VS[n] at the lower d-dual face of the
+    nodes in range (between node n - ns[d] and n, at the zone centres of layer i_d - 1)."""
+    dim = v.shape[1]
+    sd = zs[d]
+    nsd = ns[d]
+    if dim == 3:
+        t1 = zs[(d + 1) % 3]
+        t2 = zs[(d + 2) % 3]
+        scale = 0.125
+    else:
+        t1 = zs[1 - d]
+        t2 = 0
+        scale = 0.25
+    for i in range(nlo[0], nhi[0]):
+        for j in range(nlo[1], nhi[1]):
+            for k in range(nlo[2], nhi[2]):
+                n = i * ns[0] + j * ns[1] + k * ns[2]
+                za = i * zs[0] + j * zs[1] + k * zs[2] - sd - t1
+                zb = za + t1
+                if dim == 3:
+                    zc = za - t2
+                    zd = zb - t2
+                    phi = scale * _t4(zact[zc] * (F[zc] + F[zc + sd]), zact[zd] * (F[zd] + F[zd + sd]),
+                                      zact[zb] * (F[zb] + F[zb + sd]), zact[za] * (F[za] + F[za + sd]))
+                else:
+                    phi = scale * (zact[za] * (F[za] + F[za + sd]) + zact[zb] * (F[zb] + F[zb + sd]))
+                if phi > 0.0:
+                    u = n - nsd
+                    sg = 0.5
+                else:
+                    u = n
+                    sg = -0.5
+                fr = abs(phi) / m[u] if m[u] > 0.0 else 1.0
+                if fr > 1.0:
+                    fr = 1.0
+                PHI[n] = phi
+                for c in range(dim):
+                    vu = v[u, c]
+                    dv = limiter(vu - v[u - nsd, c], v[u + nsd, c] - vu)
+                    VS[n, c] = vu + sg * dv * (1.0 - fr)
+
+
+@njit(cache=True)
+def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns):
+    """Nodal momentum update of one sweep, new lumped masses and the kinetic-energy defect dK."""
+    dim = v.shape[1]
+    nsd = ns[d]
+    for i in range(nlo[0], nhi[0]):
+        for j in range(nlo[1], nhi[1]):
+            for k in range(nlo[2], nhi[2]):
+                n = i * ns[0] + j * ns[1] + k * ns[2]
+                if dim == 3:
+                    z000 = (i - 1) * zs[0] + (j - 1) * zs[1] + (k - 1) * zs[2]
+                    z100 = z000 + zs[0]
+                    z010 = z000 + zs[1]
+                    z110 = z010 + zs[0]
+                    z001 = z000 + zs[2]
+                    z101 = z100 + zs[2]
+                    z011 = z010 + zs[2]
+                    z111 = z110 + zs[2]
+                    mn = 0.125 * _t8(zact[z000] * M[z000], zact[z100] * M[z100],
+                                     zact[z110] * M[z110], zact[z010] * M[z010],
+                                     zact[z001] * M[z001], zact[z101] * M[z101],
+                                     zact[z111] * M[z111], zact[z011] * M[z011])
+                else:
+                    z00 = (i - 1) * zs[0] + (j - 1) * zs[1]
+                    z10 = z00 + zs[0]
+                    z01 = z00 + zs[1]
+                    z11 = z01 + zs[0]
+                    mn = 0.25 * _t4(zact[z00] * M[z00], zact[z10] * M[z10],
+                                    zact[z11] * M[z11], zact[z01] * M[z01])
+                pl = PHI[n]
+                ph = PHI[n + nsd]
+                k_old = 0.0
+                k_fl = 0.0
+                k_new = 0.0
+                for c in range(dim):
+                    vc = v[n, c]
+                    sl = VS[n, c]
+                    sh = VS[n + nsd, c]
+                    vn = vc + (pl * (sl - vc) - ph * (sh - vc)) / mn
+                    k_old += vc * vc
+                    k_fl += pl * sl * sl - ph * sh * sh
+                    k_new += vn * vn
+                    v[n, c] = vn
+                dK[n] = 0.5 * ((m[n] * k_old + k_fl) - mn * k_new)
+                m[n] = mn
+
+
+@njit(cache=True)
+def deposit(e, m, dK, zlo, zhi, zs, ns, dim):
+    """Zone share of the nodal kinetic-energy defect: e += sum_c dK_c / (2^dim m_c)."""
+    o1 = ns[0]
+    o2 = ns[1]
+    o4 = ns[2]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                n0 = i * ns[0] + j * ns[1] + k * ns[2]
+                if dim == 3:
+                    s = 0.125 * _t8(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
+                                    dK[n0 + o1 + o2] / m[n0 + o1 + o2], dK[n0 + o2] / m[n0 + o2],
+                                    dK[n0 + o4] / m[n0 + o4], dK[n0 + o1 + o4] / m[n0 + o1 + o4],
+                                    dK[n0 + o1 + o2 + o4] / m[n0 + o1 + o2 + o4],
+                                    dK[n0 + o2 + o4] / m[n0 + o2 + o4])
+                else:
+                    s = 0.25 * _t4(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
+                                   dK[n0 + o1 + o2] / m[n0 + o1 + o2], dK[n0 + o2] / m[n0 + o2])
+                e[z] += s
+
+
+@njit(cache=True)
+def set_positions(x, X):
+    nn, dim = x.shape
+    for n in range(nn):
+        for c in range(dim):
+            x[n, c] = X[n, c]
+
+
+def _flush():
+    from solvers.ale import hydro as _h
+    from solvers.ale.grid import flush_stale_cache
+
+    flush_stale_cache([limiter, hex_volume, swept_volumes_3d, swept_volumes_2d, sweep_fluxes,
+                       sweep_zones, sweep_dual, sweep_nodes, deposit, set_positions],
+                      [_h.__file__], "remap.deps.sha256")
+
+
+_flush()

@@ -1,0 +1,118 @@
+"""Sod's shock tube through the whole ALE solver (Lagrange step + remap, Eulerian mode).
+
+Reference: the exact Riemann solution (Toro 2009, ch. 4) for gamma = 1.4, left (rho, u, p) =
+(1, 0, 1), right (0.125, 0, 0.1), diaphragm at x0 = 0.5, t = 0.2:
+p* = 0.303130, u* = 0.927453, rho*_L = 0.426319, rho*_R = 0.265574, shock at 0.850431
+(solvers.ale.exact.RiemannSolution, literal values of the contract used as a cross-check).
+"""
+import numpy as np
+import pytest
+
+from tests.solvers.ale.ale_helpers import line, node_line, run, sod_config
+
+N = 400
+T = 0.2
+P_STAR, U_STAR, RHO_L, RHO_R, X_SHOCK = 0.303130, 0.927453, 0.426319, 0.265574, 0.850431
+
+
+@pytest.fixture(scope="module")
+def exact():
+    from solvers.ale.exact import RiemannSolution
+
+    ex = RiemannSolution(left=(1.0, 0.0, 1.0), right=(0.125, 0.0, 0.1), gamma_l=1.4)
+    assert ex.p_star == pytest.approx(P_STAR, abs=1e-6)
+    assert ex.u_star == pytest.approx(U_STAR, abs=1e-6)
+    assert ex.rho_star_l == pytest.approx(RHO_L, abs=1e-6)
+    assert ex.rho_star_r == pytest.approx(RHO_R, abs=1e-6)
+    assert ex.waves(T, 0.5)["right_shock"] == pytest.approx(X_SHOCK, abs=1e-6)
+    return ex
+
+
+@pytest.fixture(scope="module")
+def runs():
+    """The same tube along x, y (2D) and x, y, z (3D)."""
+    out = {}
+    for dim in (2, 3):
+        for axis in range(dim):
+            out[(dim, axis)] = run(sod_config(dim, N, axis), T)
+    return out
+
+
+def test_sod_plateaus_and_shock(runs):
+    """Star-state plateaus within 2 % of the exact values, shock within 3 cells."""
+    s = runs[(2, 0)]
+    rho = line(s, s.rho, 0)[:, 0]
+    p = line(s, s.p, 0)[:, 0]
+    u = node_line(s, 0, 0)[:, 0]
+    xc = (np.arange(N) + 0.5) / N
+    xn = np.arange(N + 1) / N
+    left = (xc > 0.52) & (xc < 0.66)     # rarefaction tail 0.486 .. contact 0.685
+    right = (xc > 0.71) & (xc < 0.83)    # contact .. shock 0.850
+    assert np.max(np.abs(rho[left] / RHO_L - 1.0)) < 0.02
+    assert np.max(np.abs(rho[right] / RHO_R - 1.0)) < 0.02
+    assert np.max(np.abs(p[left | right] / P_STAR - 1.0)) < 0.02
+    assert np.max(np.abs(u[(xn > 0.52) & (xn < 0.83)] / U_STAR - 1.0)) < 0.02
+    # shock: where the density crosses the mean of rho*_R and the pre-shock 0.125
+    mid = 0.5 * (RHO_R + 0.125)
+    i = np.flatnonzero((rho[:-1] > mid) & (rho[1:] <= mid) & (xc[:-1] > 0.75))[0]
+    x_s = xc[i] + (rho[i] - mid) / (rho[i] - rho[i + 1]) / N
+    assert abs(x_s - X_SHOCK) < 3.0 / N
+    # undisturbed states well beyond the waves (the numerical rarefaction head has a smooth precursor)
+    assert np.max(np.abs(rho[xc < 0.15] - 1.0)) < 1e-10
+    assert np.max(np.abs(rho[xc > 0.88] - 0.125)) < 1e-10
+
+
+def test_sod_same_profile_on_every_axis_and_dimension(runs):
+    """The 1-D profile is the same along x, y, z in 2D and 3D (1e-12 relative; along the axes of
+    one dimension the solver is bitwise symmetric)."""
+    ref = {k: line(s, s.rho, k[1])[:, 0] for k, s in runs.items()}
+    ref_e = {k: line(s, s.e, k[1])[:, 0] for k, s in runs.items()}
+    base, base_e = ref[(2, 0)], ref_e[(2, 0)]
+    for k in runs:
+        assert np.max(np.abs(ref[k] - base) / base) < 1e-12, k
+        assert np.max(np.abs(ref_e[k] - base_e) / base_e) < 1e-12, k
+    for dim in (2, 3):
+        for axis in range(1, dim):
+            assert np.array_equal(ref[(dim, axis)], ref[(dim, 0)])
+            assert np.array_equal(ref_e[(dim, axis)], ref_e[(dim, 0)])
+
+
+def test_sod_conservation_eulerian_with_walls(runs):
+    """Mass, momentum (with the wall reactions) and total energy to 1e-12 relative."""
+    for key, s in runs.items():
+        d = s.diagnostics()
+        assert abs(d["mass_balance_rel"]) < 1e-12, key
+        assert abs(d["energy_balance_rel"]) < 1e-12, key
+        assert abs(d["momentum_balance_rel"]) < 1e-12, key
+        # walls do no work; their impulse is (p_left - p_right) A sum(dt_avg) (the waves have not
+        # arrived), and sum(dt_avg) = T - dt_last/2: the velocities live at half steps
+        area = float(np.prod(s.block.h[np.arange(s.dim) != key[1]]))
+        assert abs(d["boundary_work"]) < 1e-14 * d["total_energy"]
+        assert d[f"momentum_{'xyz'[key[1]]}"] == pytest.approx((1.0 - 0.1) * area * (T - 0.5 * s.dt), rel=1e-12)
+
+
+def test_sod_lagrangian_energy():
+    """Lagrangian mode (no remap) with walls: kinetic + internal energy to 1e-12 relative, and the
+    star state is reached as well."""
+    s = run(sod_config(2, N, 0, mode="lagrangian"), T)
+    d = s.diagnostics()
+    assert abs(d["energy_balance_rel"]) < 1e-12
+    assert d["mass_balance_rel"] == 0.0
+    p = line(s, s.p, 0)[:, 0]
+    xn = s.node_field(s.x)[: N + 1, 0]           # the moved nodes of the first row
+    xc = 0.5 * (xn[:-1] + xn[1:])
+    star = (xc > 0.52) & (xc < 0.83)
+    assert np.max(np.abs(p[star] / P_STAR - 1.0)) < 0.02
+
+
+def test_sod_l1_convergence(exact):
+    """L1 density error decreases at the first order expected of a shock problem."""
+    errs = []
+    for n in (100, 200, 400):
+        s = run(sod_config(2, n), T)
+        xc = (np.arange(n) + 0.5) / n
+        rho_ex = exact.sample(xc, T, 0.5)[0]
+        errs.append(np.mean(np.abs(line(s, s.rho, 0)[:, 0] - rho_ex)))
+    orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
+    assert errs[0] < 7e-3
+    assert np.all(orders > 0.8), (errs, orders)
