@@ -523,6 +523,8 @@ def _normalise_ale(a: dict, dim: int) -> dict:
         "regions": [],
         "energy_sources": [{"energy": _f(e["energy"]), "at": [_f(v) for v in e["at"]]}
                            for e in a.get("energy_sources", [])],
+        "obstacles": [{"region": o["region"], "subsamples": int(o.get("subsamples", 1))}
+                      for o in a.get("obstacles", [])],
     }
     if "hourglass" in a:
         out["hourglass"] = _f(a["hourglass"])
@@ -673,7 +675,7 @@ def _check(case: dict, data: dict) -> None:
 
 def _check_ale(ale: dict, raw: dict, dim: int) -> None:
     """Cross-field rules of [ale]: vector lengths, grid extent, periodic pairs, material references,
-    region expressions."""
+    region and obstacle expressions (obstacles in Eulerian mode only)."""
     for k in ("lower", "upper", "cells"):
         _vec_len(format_key(["ale", "grid", k]), raw["grid"][k], dim)
     for j, (lo, hi) in enumerate(zip(ale["grid"]["lower"], ale["grid"]["upper"])):
@@ -707,6 +709,11 @@ def _check_ale(ale: dict, raw: dict, dim: int) -> None:
             _expr(format_key(base + ["region"]), r["region"], dim, BOOL)
     for i, e in enumerate(raw.get("energy_sources", [])):
         _vec_len(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
+    for i, o in enumerate(raw.get("obstacles", [])):
+        _expr(format_key(["ale", "obstacles", i, "region"]), o["region"], dim, BOOL)
+        if ale["mode"] != "eulerian":
+            raise CaseError(format_key(["ale", "obstacles"]), raw["obstacles"],
+                            "obstacles need ale.mode = \"eulerian\" (the remap keeps material out of them)")
 
 
 _CELL_TYPE = {2: "quad", 3: "hexahedron"}

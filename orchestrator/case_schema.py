@@ -279,6 +279,10 @@ ALE = _table(
         "regions": {"type": "array", "minItems": 1, "items": ALE_REGION},
         "energy_sources": {"type": "array", "items": _table(
             {"energy": _num("J", exclusiveMinimum=0), "at": _vector("m")}, required=("energy", "at"))},
+        # static obstacles: blocked where the region holds (fraction of k^dim sub-points per zone)
+        "obstacles": {"type": "array", "items": _table(
+            {"region": {"type": "string", "minLength": 1}, "subsamples": _int(minimum=1)},
+            required=("region",))},
     },
     required=("grid", "materials", "regions"),
 )

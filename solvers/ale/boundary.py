@@ -14,20 +14,24 @@ face nodes are free (their ghost zones act on them).
 
 Face-centred arrays of direction d (swept volumes, mass fluxes) use their own map along d: images
 on a periodic axis, otherwise zero gradient (a wall face's flux is zero anyway).
+
+Rank cuts (grid.CUT) have no physical map; every fill is followed by the halo exchange of the same
+arrays (``halo``, parallel.Halo), which gives their ghosts the neighbour's values.
 """
 from __future__ import annotations
 
 import numpy as np
 from numba import njit
 
-from solvers.ale.grid import INFLOW, OUTFLOW, PERIODIC, WALL, Block
+from solvers.ale.grid import CUT, GHOST, INFLOW, OUTFLOW, PERIODIC, WALL, Block
 
 
 class Boundaries:
     """Ghost maps and node constraints of a block."""
 
-    def __init__(self, block: Block):
+    def __init__(self, block: Block, halo=None):
         self.b = block
+        self.halo = halo if halo is not None and halo.active else None
         self._build_maps()
         dim = block.dim
         wn, wc, inn, ivel = [], [], [], []
@@ -54,6 +58,8 @@ class Boundaries:
         """[(ghost plane, source plane)] of face (d, s), or [] for inflow (prescribed)."""
         n = int(self.b.n3[d])
         f = self.b.face[d, s]
+        if f == CUT:  # ghosts by halo exchange
+            return []
         if face_dir:  # face-centred array of direction d along its own axis
             if f == PERIODIC:
                 return [(1, n + 1), (0, n)] if s == 0 else [(n + 2, 2), (n + 3, 3)]
@@ -136,12 +142,18 @@ class Boundaries:
         self.nmap_vec = self._compose(True, True, vector=True)
         self.nmap_sca = self._compose(True, False)
 
-    def fill_zones(self, fields, inflow_values=None, face_dir=None):
+    def fill_zones(self, fields, inflow_values=None, face_dir=None, depth=GHOST):
         """Fill the ghost zones of zone-shaped flat arrays ``fields`` (in place).
 
         ``inflow_values[(d, s)]`` gives, per field, the prescribed ghost value (None = zero-gradient
         copy) on an inflow face.  ``face_dir`` = d marks face-centred arrays of direction d (fluxes).
+        ``depth``: ghost layers exchanged at rank cuts.
         """
+        self._fill_zones(fields, inflow_values, face_dir)
+        if self.halo is not None:
+            self.halo.zones(fields, depth)
+
+    def _fill_zones(self, fields, inflow_values, face_dir):
         if face_dir is not None:
             dst, src = self.fmap[face_dir]
             for a in fields:
@@ -167,9 +179,13 @@ class Boundaries:
         copy_rows_signed(v, dst, src, sign)
         for (d, s), st in self.b.inflow.items():
             v[dst[src == -1 - (2 * d + s)]] = np.asarray(st["velocity"], np.float64) if inflow else 0.0
+        if self.halo is not None:
+            self.halo.nodes([v])
 
     def fill_nodes_scalar(self, m):
         copy_rows(m.reshape(m.shape[0], -1), *self.nmap_sca)
+        if self.halo is not None:
+            self.halo.nodes([m])
 
 
 

@@ -28,12 +28,15 @@ wall       mirror 2, 3                  mirror 3, 4 (normal component -1)  inact
 outflow    copy 2, 2 (zero gradient)    copy 2, 2                          open
 periodic   images n+1, n                images n+1, n; plane n+2 = 2       image
 inflow     prescribed state             prescribed velocity                open
+cut        neighbour's n'+1, n'         neighbour's n'+1, n'; n+2.. = 2..  image
 =========  ===========================  =================================  ======================
 
 (the upper side is the mirror image).  *Zone kinds* decide which zones act on a real node:
 real and image zones always, open ghosts (outflow/inflow, they stand for the fluid beyond) too,
 ghosts beyond a wall never (a wall node has the half/quarter mass and force of its real zones).
-A later MPI increment treats a rank cut as an ``image`` face whose ghosts come from the neighbour.
+A rank cut (``cut``, parallel.py) is an image face too: its ghosts are the neighbour's zones and
+nodes (halo exchange), its zone ghosts are images and its upper node plane belongs to the upper
+neighbour.
 """
 from __future__ import annotations
 
@@ -41,7 +44,7 @@ import numpy as np
 
 GHOST = 2
 
-WALL, OUTFLOW, PERIODIC, INFLOW = 0, 1, 2, 3
+WALL, OUTFLOW, PERIODIC, INFLOW, CUT = 0, 1, 2, 3, 4
 FACE_CODES = {"wall": WALL, "outflow": OUTFLOW, "periodic": PERIODIC}
 FACE_NAMES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
 
@@ -58,9 +61,10 @@ class GridError(ValueError):
 
 
 class Block:
-    """One rank's padded block of the structured grid (this increment: the whole box)."""
+    """One rank's padded block of the structured grid: ``local_cells`` zones per axis from global
+    zone ``offset`` (default: the whole box); ``cuts`` (3, 2) marks faces shared with another rank."""
 
-    def __init__(self, lower, upper, cells, faces, offset=None, local_cells=None):
+    def __init__(self, lower, upper, cells, faces, offset=None, local_cells=None, cuts=None):
         lower = np.asarray(lower, dtype=np.float64)
         upper = np.asarray(upper, dtype=np.float64)
         cells = np.asarray(cells, dtype=np.int64)
@@ -106,6 +110,12 @@ class Block:
                     self.face[d, s] = FACE_CODES[spec]
             if (self.face[d, 0] == PERIODIC) != (self.face[d, 1] == PERIODIC):
                 raise GridError(f"periodic must be set on both {FACE_NAMES[2 * d]} and {FACE_NAMES[2 * d + 1]}")
+        if cuts is not None:
+            for d in range(dim):
+                for s in range(2):
+                    if cuts[d][s]:
+                        self.face[d, s] = CUT
+                        self.inflow.pop((d, s), None)
 
         # Eulerian (reference) node coordinates of the padded block, ghosts included
         self.X = np.zeros((self.nnodes, dim))
@@ -130,7 +140,7 @@ class Block:
                 sub = kind[tuple(sl)]
                 if f == WALL:
                     sub[...] = Z_INACTIVE
-                elif f == PERIODIC:
+                elif f in (PERIODIC, CUT):
                     sub[sub == Z_REAL] = Z_IMAGE
                 else:
                     sub[sub != Z_INACTIVE] = Z_OPEN
@@ -138,12 +148,12 @@ class Block:
         self.zkind = kind.ravel().astype(np.int8)
         self.zact = (self.zkind != Z_INACTIVE).astype(np.float64)
 
-        # owned nodes (diagnostics, output): real nodes, minus the upper plane of a periodic axis
+        # owned nodes (diagnostics): real nodes, minus the upper plane of a periodic axis or a cut
         own = np.zeros(self.ndims, bool)
         sl = tuple(slice(int(a), int(b)) for a, b in zip(*self.nreal))
         own[sl] = True
         for d in range(dim):
-            if self.face[d, 1] == PERIODIC:
+            if self.face[d, 1] in (PERIODIC, CUT):
                 s2 = [slice(None)] * 3
                 s2[d] = G + n3[d]
                 own[tuple(s2)] = False

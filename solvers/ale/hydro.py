@@ -199,6 +199,14 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 vol = hex_volume_sym(xe, b)
                 if not (vol > 0.0):
                     return dt_min, z, BAD_VOLUME
+                if M[z] == 0.0:  # no material (a fully blocked zone, blocked.py): no state, no force
+                    V[z] = vol
+                    rho[z] = 0.0
+                    p[z] = 0.0
+                    c[z] = 0.0
+                    q[z] = 0.0
+                    fc[z, :, :] = 0.0
+                    continue
                 v_prev = V[z]
                 if do_energy and real:
                     de_h[z] = -(p[z] + q[z]) * (vol - v_prev) / (2.0 * M[z])
@@ -332,6 +340,14 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
             vol, _ = quad_bvectors(xe, b)
             if not (vol > 0.0):
                 return dt_min, z, BAD_VOLUME
+            if M[z] == 0.0:  # no material (a fully blocked zone, blocked.py): no state, no force
+                V[z] = vol
+                rho[z] = 0.0
+                p[z] = 0.0
+                c[z] = 0.0
+                q[z] = 0.0
+                fc[z, :, :] = 0.0
+                continue
             v_prev = V[z]
             if do_energy and real:
                 de_h[z] = -(p[z] + q[z]) * (vol - v_prev) / (2.0 * M[z])
@@ -438,7 +454,7 @@ def predict(v, v_old, f, m, nlo, nhi, ns, dt_avg):
         for j in range(nlo[1], nhi[1]):
             for k in range(nlo[2], nhi[2]):
                 n = i * ns[0] + j * ns[1] + k * ns[2]
-                s = dt_avg / m[n]
+                s = dt_avg / m[n] if m[n] > 0.0 else 0.0  # massless: inside an obstacle (blocked.py)
                 for d in range(dim):
                     v_old[n, d] = v[n, d]
                     v[n, d] += s * f[n, d]
@@ -548,7 +564,8 @@ def energy_update(fc, v, v_old, e, M, zlo, zhi, zs, ns, dt_avg):
                     work = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7])
                 else:
                     work = _t4(w[0], w[1], w[2], w[3])
-                e[z] -= dt_avg * work / M[z]
+                if M[z] > 0.0:  # (no material: a fully blocked zone, no force)
+                    e[z] -= dt_avg * work / M[z]
 
 
 @njit(cache=True)

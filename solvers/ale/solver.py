@@ -31,20 +31,26 @@ to the zone containing the point.
 Region velocities are zone values; a node gets the mass-weighted mean of its active zones.
 
 Coupling impulses (correct(impulse=...)) are (nn, dim) arrays in output node order (the points of
-output(), x fastest).
+output(), x fastest), the whole grid's array on every rank (each rank applies the rows of its nodes).
 
 Balances (diagnostics): mass, momentum and energy against their initial values plus what crossed
 the boundary (wall and inflow reactions, forces of open-boundary ghost zones, and the remap's
 fluxes through open faces and through the boundary nodes' dual cells): exact to round-off for every
 face kind.
 
-MPI readiness: all arrays live on a padded block (2 ghost layers) with a global offset; nodal forces
-and masses are gathered from the zones in a fixed order; ghost fills are single index maps (a rank
-cut becomes an "image" face whose ghosts arrive by halo exchange; the sweeps need one exchange of
-zone and node ghosts each).  This increment runs on one rank.
+Parallel runs (parallel.py): the zone box is split over the communicator's ranks (Cartesian); each
+rank holds a padded block (2 ghost layers) with a global offset; faces between ranks are cuts whose
+ghosts arrive by halo exchange right after every physical ghost fill (boundary.py).  Nodal forces
+and masses are gathered from the zones in a fixed order, so N ranks reproduce one rank bitwise;
+the stable step is a MIN, diagnostics SUM over owned zones/nodes (and each rank's share of the
+boundary terms).  output() and checkpoint() gather to rank 0 in the one-rank (global) layout;
+restart() reads any rank count's checkpoint.  A failure on one rank (bad zone, non-finite velocity)
+is raised on every rank at the next collective check (the stable-step reduction, or the
+Lagrangian-volume check of the remap), with the failing rank's message there.
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import h5py
@@ -54,7 +60,8 @@ from orchestrator.expressions import compile_expression
 from solvers.ale import eos as _eos
 from solvers.ale import hydro, remap
 from solvers.ale.boundary import Boundaries
-from solvers.ale.grid import (GHOST, INFLOW, OUTFLOW, PERIODIC, WALL, Z_OPEN, Block)
+from solvers.ale.grid import (CUT, FACE_NAMES, GHOST, INFLOW, OUTFLOW, PERIODIC, WALL, Z_OPEN, Block)
+from solvers.ale.parallel import Decomposition, Halo, structured_cells
 
 # artificial viscosity defaults per mode (linear, quadratic): the remap of Eulerian mode adds its own
 # dissipation, so a lighter q keeps shocks sharper there (Sedov 40^2: front half-height 1.6 % vs
@@ -87,10 +94,13 @@ class AleSolver:
         g = config["grid"]
         faces = {f: "wall" for f in ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")}
         faces.update(config.get("boundaries", {}) or {})
-        if comm is not None and comm.size > 1:
-            raise NotImplementedError("the ALE solver runs on one rank in this increment")
-        self.block = B = Block(g["lower"], g["upper"], g["cells"], faces)
-        self.bc = Boundaries(B)
+        periodic = [faces.get(FACE_NAMES[2 * d]) == "periodic" for d in range(min(len(g["cells"]), 3))]
+        self.dec = Decomposition(comm, g["cells"], periodic)
+        self.block = B = Block(g["lower"], g["upper"], g["cells"], faces, offset=self.dec.offset,
+                               local_cells=self.dec.n, cuts=self.dec.cuts)
+        self.halo = Halo(self.dec, B)
+        self.bc = Boundaries(B, self.halo)
+        self._error = None  # a failure message waiting for the next collective check (parallel)
 
         # material (one in this increment)
         used = [r["material"] for r in config["regions"]]
@@ -139,6 +149,13 @@ class AleSolver:
         self.z1 = (np.where(act, 1, 0).astype(np.int64), np.where(act, np.array(B.zdims) - 1, 1).astype(np.int64))
         self.open_faces = [(d, s) for d in range(dim) for s in range(2) if B.face[d, s] in (OUTFLOW, INFLOW)]
         self.has_images = any(B.face[d, 0] == PERIODIC for d in range(dim))
+        self.has_cuts = self.halo.active
+        self._out_cells = None
+        self._gout = None  # global output index of the local output nodes (parallel impulses)
+        if self.dec.parallel:
+            ijk = np.stack(np.unravel_index(B.out_nodes, B.ndims), axis=1)[:, :dim] - GHOST + B.offset
+            stride = np.cumprod(np.concatenate([[1], B.cells[:-1] + 1]))
+            self._gout = ijk @ stride
         self._inflow_state = {}
         for (d, s), st in B.inflow.items():
             rho_in = float(st["density"])
@@ -157,7 +174,14 @@ class AleSolver:
         touch = np.any(B.zkind[zn] == Z_OPEN, axis=1) & B.owned[cand]
         self._open_nodes = cand[touch]
         self._open_nodes_z = np.ascontiguousarray(zn[touch])
-        self._real_f = B.real_zone.astype(np.float64)
+        # zones of the box (real here or, beyond a cut, on the neighbour rank; not periodic images)
+        inbox = np.ones(B.zdims, bool)
+        for d in range(dim):
+            gi = B.offset[d] + np.arange(B.zdims[d]) - GHOST
+            shape = [1, 1, 1]
+            shape[d] = B.zdims[d]
+            inbox &= ((gi >= 0) & (gi < B.cells[d])).reshape(shape)
+        self._real_f = inbox.ravel().astype(np.float64)
         self._open_face_nodes = {(d, s_): B.face_nodes(d, s_)[B.owned[B.face_nodes(d, s_)]]
                                  for d, s_ in self.open_faces}
 
@@ -174,6 +198,13 @@ class AleSolver:
         self.b_energy = 0.0
         self.b_momentum = np.zeros(dim)
 
+        # blocked volume fractions: static obstacles of the case now, coupled bodies via remap()
+        self._blk = None
+        if config.get("obstacles"):
+            if self.mode != "eulerian":
+                raise ValueError("obstacles (blocked volume fractions) need mode = 'eulerian'")
+            from solvers.ale.blocked import Blocked
+            self._blk = Blocked(self, config["obstacles"])
         self._initialising = True
         self._initial_state(config)
         self._dt_stable = self._forces(midstep=False, advect=self.mode == "eulerian", eos=True)
@@ -208,7 +239,10 @@ class AleSolver:
                 e[mask] = float(r["specific_internal_energy"])
                 p[mask] = np.nan
             vel[mask] = np.asarray(r.get("velocity", [0.0] * dim), dtype=np.float64)
-        if np.any(np.isnan(rho)):
+        missing = bool(np.any(np.isnan(rho)))
+        if self.dec.parallel and self.dec.sum(np.array([float(missing)]))[0] > 0.0 and not missing:
+            raise ValueError("a zone of another rank is not covered by any region")
+        if missing:
             first = np.flatnonzero(np.isnan(rho))[0]
             z = np.flatnonzero(real)[first]
             raise ValueError(f"zone {B.zone_ijk(z)} (centre {centres[first]}) is not covered by any region")
@@ -224,6 +258,8 @@ class AleSolver:
         self.M[:] = 1.0
         self._pass(self.z1, 0)
         self.M[real] = rho * self.V[real]
+        if self._blk is not None:  # material in the open volume only
+            self._blk.initial_state(self)
         # energy sources
         for src in cfg.get("energy_sources", []) or []:
             self._deposit_energy(float(src["energy"]), np.asarray(src["at"], dtype=np.float64))
@@ -268,6 +304,8 @@ class AleSolver:
         if not zones:
             raise ValueError(f"energy source at {list(at)} is outside the grid")
         for zi in zones:
+            if np.any(zi < B.offset) or np.any(zi >= B.offset + B.n):
+                continue  # another rank's zone
             pad = np.zeros(3, np.int64)
             pad[: self.dim] = zi - B.offset + GHOST
             z = int(pad @ B.zs)
@@ -280,6 +318,8 @@ class AleSolver:
         wz = B.zview(w)
         vzv = B.zview(vz)
         ref = vz[np.flatnonzero(B.real_zone)[0]].copy()
+        if self.dec.parallel:  # the first zone of the box, as on one rank (same rounding)
+            self.dec.bcast(ref, self.dec.rank_of([0] * dim))
         num = np.zeros(B.ndims + (dim,))
         den = np.zeros(B.ndims)
         nsl = [slice(1, B.ndims[d] - 1) if d < dim else slice(None) for d in range(3)]
@@ -336,17 +376,20 @@ class AleSolver:
                         sign[d] = -1.0
                     for dst, src in planes:
                         self.bc._copy(views, d, dst, src, sign)
-                else:
+                elif f == INFLOW:
                     vin = np.asarray(B.inflow[(d, s)]["velocity"], np.float64)
                     for g in self.bc.ghost_planes(d, s, nodes=False):
                         sl = [slice(None)] * 4
                         sl[d] = g
                         views[tuple(sl)] = vin
+        self.halo.zones([a])
 
     def _constrain(self, record: bool) -> None:
         """Walls: normal velocity 0; inflow faces: the inflow velocity (on the real face nodes)."""
         self._acc[:] = 0.0
         self.bc.constrain(self.v, self.v_old, self.m, self._acc)
+        if self._blk is not None:  # immersed walls of the obstacles and their pressure reaction
+            self._blk.constrain(self, record)
         if record:
             self.b_momentum += self._acc[: self.dim]
             self.b_energy += self._acc[3]
@@ -369,21 +412,49 @@ class AleSolver:
             state = (f"rho={self.rho[bad]:.6g} kg/m^3, e={self.e[bad]:.6g} J/kg (EOS at "
                      f"{self.e[bad] + self.de_h[bad]:.6g}), p={self.p[bad]:.6g} Pa, c={self.c[bad]:.6g} m/s, "
                      f"q={self.q[bad]:.6g} Pa, V={self.V[bad]:.6g}, M={self.M[bad]:.6g} kg")
-            raise SolverError(f"ALE zone {ijk}: {_REASONS.get(reason, 'failure')}{what} at step {self.step}, "
-                              f"t={self.time:.6g} s; state {state}; material {self.material!r} "
-                              f"{_eos.describe(self.eos_code, self.eos_par)}")
+            self._fail(f"ALE zone {ijk}: {_REASONS.get(reason, 'failure')}{what} at step {self.step}, "
+                       f"t={self.time:.6g} s; state {state}; material {self.material!r} "
+                       f"{_eos.describe(self.eos_code, self.eos_par)}")
         return float(dt_min)
+
+    def _fail(self, msg: str) -> None:
+        """One rank: raise now.  Parallel: keep the first message for the next :meth:`_sync` (every
+        rank must reach it, or the others would wait in a halo exchange)."""
+        if not self.dec.parallel:
+            raise SolverError(msg)
+        if self._error is None:
+            self._error = msg
+
+    def _sync(self, dt_min: float = np.inf) -> float:
+        """Collective: the smallest stable step over the ranks; raises SolverError on every rank if
+        one recorded a failure (its message there, the failing rank's number elsewhere)."""
+        if not self.dec.parallel:
+            return dt_min
+        flag = 0.0 if self._error is None else -1.0 - self.dec.rank
+        buf = self.dec.min(np.array([dt_min, flag]))
+        if buf[1] < 0.0:
+            msg, self._error = self._error, None
+            raise SolverError(msg or f"ALE failure on rank {int(-buf[1]) - 1} of the ALE group at step "
+                                     f"{self.step}, t={self.time:.6g} s (see that rank's error)")
+        return float(buf[0])
 
     def _forces(self, midstep: bool, advect: bool, eos: bool, energy: bool = False) -> float:
         """(energy update,) EOS, q, hourglass and corner forces of the real zones; ghost zones;
         nodal forces and masses; returns the stable step."""
         flags = hydro.FORCES | (hydro.MIDSTEP if midstep else 0) | (hydro.ADVECT if advect else 0)
+        if eos and self._blk is not None:  # rho = M / open volume (blocked.py)
+            self._blk.eos(self)
+            eos = False
         flags |= (hydro.EOS if eos else 0) | (hydro.ENERGY if energy else 0)
         dt_min = self._check(self._pass(self.zr, flags, self.dt, self.dt_avg))
+        if self._blk is not None:  # face apertures of the cut zones
+            dt_min = min(dt_min, self._blk.apertures(self))
         self._fill_zone_state()
         B = self.block
-        if self.has_images:
-            self.bc.fill_zones([self.fc])  # periodic images carry their image's corner forces exactly
+        if self.has_images:  # periodic images carry their image's corner forces exactly
+            self.bc.fill_zones([self.fc], depth=1)  # (the gather reads one ghost layer)
+        elif self.has_cuts:
+            self.halo.zones([self.fc], depth=1)
         if self.open_faces:
             gflags = hydro.FORCES | (hydro.MIDSTEP if midstep else 0)
             for d, s in self.open_faces:
@@ -402,7 +473,7 @@ class AleSolver:
             vb = self.v[bn]
             self.b_momentum += (dm[:, None] * vb).sum(axis=0)
             self.b_energy += 0.5 * float(np.sum(dm * np.sum(vb * vb, axis=1)))
-        return dt_min
+        return self._sync(dt_min)
 
     # ------------------------------------------------------------------------------------------
     # time stepping
@@ -427,6 +498,8 @@ class AleSolver:
         self.step, self.time = int(step), float(time)
         if impulse is not None:
             imp = np.asarray(impulse, dtype=np.float64).reshape(-1, self.dim)
+            if self._gout is not None:
+                imp = imp[self._gout]
             self.v[B.out_nodes] += imp / self.m[B.out_nodes, None]
             self.b_momentum += imp[B.owned[B.out_nodes]].sum(axis=0)
             vb = 0.5 * (self.v[B.out_nodes] + self.v_old[B.out_nodes])
@@ -435,8 +508,8 @@ class AleSolver:
         self.bc.fill_nodes_vector(self.v)
         if not np.all(np.isfinite(self.v)):
             n = int(np.flatnonzero(~np.all(np.isfinite(self.v), axis=1))[0])
-            raise SolverError(f"non-finite velocity at ALE node {self._node_ijk(n)} at step {self.step}, "
-                              f"t={self.time:.6g} s")
+            self._fail(f"non-finite velocity at ALE node {self._node_ijk(n)} at step {self.step}, "
+                       f"t={self.time:.6g} s")
         if self.open_faces:
             self._gw[:] = 0.0
             hydro.ghost_force_work(self.fc, B.zkind, self.v, self.v_old, B.owned, self.z1[0], self.z1[1],
@@ -458,13 +531,20 @@ class AleSolver:
     def remap(self, blocked=None) -> None:
         """Eulerian mode: remap the Lagrangian state back to the fixed grid.
 
-        ``blocked`` (per-zone blocked volume fraction, later increment) must be None for now.
-        TODO(blocked): scale the swept volumes and zone volumes by the open fraction 1 - blocked.
+        ``blocked``: per-zone blocked volume fraction in [0, 1] (coupled bodies; (ne,) in output
+        zone order, or None), combined with the case's static obstacles (the larger fraction);
+        the remap then never moves material into the blocked part (solvers/ale/blocked.py).
         """
         if self.mode != "eulerian" or not self._pending_remap:
+            if blocked is not None and self.mode != "eulerian" and np.any(np.asarray(blocked) != 0.0):
+                raise ValueError("blocked volume fractions need mode = 'eulerian'")
             return
-        if blocked is not None and np.any(np.asarray(blocked) != 0.0):
-            raise NotImplementedError("blocked volume fractions are a later increment")
+        if self._blk is None and blocked is not None and np.any(np.asarray(blocked) != 0.0):
+            from solvers.ale.blocked import Blocked
+            self._blk = Blocked(self)
+        if self._blk is not None:
+            self._blk.remap(self, blocked)
+            return
         B, dim = self.block, self.dim
         # swept volumes of the real faces of every direction (planes 2 .. n+2)
         for d in range(dim):
@@ -477,6 +557,7 @@ class AleSolver:
                                        self.zr[0], self.zr[1], B.zs)
         if bad >= 0:
             self._check((0.0, bad, hydro.BAD_VOLUME), " (Lagrangian grid)")
+        self._sync()
         self._fill_remap_zones()
         order = range(dim) if self.parity == 0 else range(dim - 1, -1, -1)
         for d in order:
@@ -568,21 +649,28 @@ class AleSolver:
         return tuple(int(v) for v in (np.array([i, j, k])[: self.dim] - GHOST + B.offset))
 
     def _totals(self) -> dict:
-        B = self.block
+        """Sums over the owned zones and nodes and the boundary terms (all ranks: collective)."""
+        B, dim = self.block, self.dim
         hydro.sums(self.M, self.e, B.real_zone, self.m, self.v, B.owned, self._sums)
         s = self._sums
+        bal = (self.b_mass, self.b_energy, self.b_momentum)
+        if self.dec.parallel:
+            s = self.dec.sum(np.concatenate([s, [self.b_mass, self.b_energy], self.b_momentum]))
+            bal = (float(s[7]), float(s[8]), s[9:9 + dim].copy())
         return {"mass": s[0], "internal_energy": s[1], "kinetic_energy": s[2],
-                "total_energy": s[1] + s[2], "momentum": s[3:3 + self.dim].copy(), "momentum_gross": s[6]}
+                "total_energy": s[1] + s[2], "momentum": s[3:3 + dim].copy(), "momentum_gross": s[6],
+                "b_mass": bal[0], "b_energy": bal[1], "b_momentum": bal[2]}
 
     def diagnostics(self) -> dict[str, float]:
         t = self._totals()
-        e_scale = max(abs(self.energy0), abs(t["total_energy"]), abs(self.b_energy), 1e-300)
-        e_err = (t["total_energy"] - self.energy0 - self.b_energy) / e_scale
-        m_err = (t["mass"] - self.mass0 - self.b_mass) / max(abs(self.mass0), 1e-300)
+        b_energy, b_mass, b_momentum = t["b_energy"], t["b_mass"], t["b_momentum"]
+        e_scale = max(abs(self.energy0), abs(t["total_energy"]), abs(b_energy), 1e-300)
+        e_err = (t["total_energy"] - self.energy0 - b_energy) / e_scale
+        m_err = (t["mass"] - self.mass0 - b_mass) / max(abs(self.mass0), 1e-300)
         # scale: the gross momentum sum m |v| (the net may cancel, e.g. a symmetric problem)
         p_scale = max(np.linalg.norm(self.momentum0), np.linalg.norm(t["momentum"]),
-                      np.linalg.norm(self.b_momentum), t["momentum_gross"], 1e-300)
-        p_err = np.linalg.norm(t["momentum"] - self.momentum0 - self.b_momentum) / p_scale
+                      np.linalg.norm(b_momentum), t["momentum_gross"], 1e-300)
+        p_err = np.linalg.norm(t["momentum"] - self.momentum0 - b_momentum) / p_scale
         d = {"mass": t["mass"]}
         for c, name in enumerate("xyz"[: self.dim]):
             d[f"momentum_{name}"] = float(t["momentum"][c])
@@ -590,7 +678,7 @@ class AleSolver:
             "kinetic_energy": t["kinetic_energy"],
             "internal_energy": t["internal_energy"],
             "total_energy": t["total_energy"],
-            "boundary_work": self.b_energy,
+            "boundary_work": b_energy,
             "energy_balance_rel": float(e_err),
             "mass_balance_rel": float(m_err),
             "momentum_balance_rel": float(p_err),
@@ -605,8 +693,11 @@ class AleSolver:
         return a[self.block.out_nodes]
 
     def output(self):
-        """(points (nn, 3), cells (ne, 4|8) VTK order, point_data, cell_data) on rank 0."""
+        """(points (nn, 3), cells (ne, 4|8) VTK order, point_data, cell_data) on rank 0 (the whole
+        grid in global order; None on the other ranks).  Collective."""
         B = self.block
+        if self.dec.parallel:
+            return self._output_parallel()
         pts = np.zeros((B.out_nodes.size, 3))
         pts[:, : self.dim] = self.x[B.out_nodes]
         vel = np.zeros_like(pts)
@@ -619,41 +710,133 @@ class AleSolver:
             "sound_speed": self.zone_field(self.c).copy(),
             "artificial_viscosity": self.zone_field(self.q).copy(),
         }
+        if self._blk is not None:
+            cell_data["blocked_fraction"] = self.zone_field(self._blk.blocked_fraction()).copy()
         return pts, B.connectivity(), {"velocity": vel}, cell_data
 
+    def _gather_real(self, a: np.ndarray, nodes: bool):
+        """Rank 0: the real zones (nodes) of ``a`` over the whole grid in output order (x fastest)."""
+        B, dim = self.block, self.dim
+        rng = B.nreal if nodes else B.zreal
+        glo = np.zeros(3, np.int64)
+        glo[:dim] = B.offset
+        gshape = np.ones(3, np.int64)
+        gshape[:dim] = B.cells + (1 if nodes else 0)
+        g = self.dec.gather_box(a, B.ndims if nodes else B.zdims, rng[0], rng[1], glo, gshape)
+        if g is None:
+            return None
+        return np.ascontiguousarray(g.transpose((2, 1, 0) + tuple(range(3, g.ndim)))).reshape((-1,) + a.shape[1:])
+
+    def _output_parallel(self):
+        dim = self.dim
+        nodal = self._gather_real(np.concatenate([self.x, self.v], axis=1), True)
+        cols = [self.rho, self.p, self.e + self.de_h, self.c, self.q]
+        names = ("density", "pressure", "specific_internal_energy", "sound_speed", "artificial_viscosity")
+        if self._blk is not None:
+            cols.append(self._blk.blocked_fraction())
+            names += ("blocked_fraction",)
+        zonal = self._gather_real(np.stack(cols, axis=1), False)
+        if self.dec.rank != 0:
+            return None
+        pts = np.zeros((nodal.shape[0], 3))
+        pts[:, :dim] = nodal[:, :dim]
+        vel = np.zeros_like(pts)
+        vel[:, :dim] = nodal[:, dim:]
+        cell_data = {name: zonal[:, i].copy() for i, name in enumerate(names)}
+        if self._out_cells is None:
+            self._out_cells = structured_cells(self.block.cells)
+        return pts, self._out_cells, {"velocity": vel}, cell_data
+
     # ------------------------------------------------------------------------------------------
-    # checkpoint / restart (whole padded block; same rank count continues bitwise)
+    # checkpoint / restart: the global padded arrays (the one-rank layout: cells + 4 zones, + 5
+    # nodes per axis), assembled on rank 0 from every rank's share (its real zones/nodes, plus the
+    # ghost layers of its physical faces); each rank reads back its window, whatever the rank count
+    # (the same count continues bitwise).  Boundary terms of the balances are kept per rank.
     # ------------------------------------------------------------------------------------------
     ARRAYS = ("M", "e", "V", "rho", "p", "c", "q", "de_h", "fc", "x", "v", "v_old", "f", "m")
     SCALARS = ("step", "time", "dt", "dt_prev", "dt_avg", "first_step", "parity", "_pending_remap",
-               "b_mass", "b_energy", "mass0", "energy0", "_dt_stable")
-    VECTORS = ("b_momentum", "momentum0")
+               "mass0", "energy0", "_dt_stable")
+    VECTORS = ("momentum0",)
+
+    def _layout(self, a: np.ndarray):
+        """(nodes?, padded local dims) of a zone- or node-shaped array."""
+        B = self.block
+        nodes = a.shape[0] == B.nnodes
+        return nodes, tuple(B.ndims if nodes else B.zdims)
+
+    def _share(self, nodes: bool):
+        """This rank's box [lo, hi) of the global padded array, its global corner and the global shape."""
+        B, dim = self.block, self.dim
+        lo = np.zeros(3, np.int64)
+        hi = np.array(B.ndims if nodes else B.zdims, np.int64)
+        for d in range(dim):
+            if B.face[d, 0] == CUT:
+                lo[d] = GHOST
+            if B.face[d, 1] == CUT:
+                hi[d] = int(B.n3[d]) + GHOST
+        glo = lo.copy()
+        glo[:dim] += B.offset
+        gshape = np.ones(3, np.int64)
+        gshape[:dim] = B.cells + 2 * GHOST + (1 if nodes else 0)
+        return lo, hi, glo, gshape
 
     def checkpoint(self, path) -> None:
+        """Collective; rank 0 writes ``path`` (under a temporary name, then moved into place)."""
+        dec = self.dec
         path = Path(path)
-        tmp = Path(str(path) + ".tmp")
-        with h5py.File(tmp, "w") as h:
-            for k in self.ARRAYS:
-                h.create_dataset(k, data=getattr(self, k))
-            for k in self.VECTORS:
-                h.create_dataset(k, data=getattr(self, k))
-            for k in self.SCALARS:
-                h.attrs[k] = getattr(self, k)
-            h.attrs["cells"] = self.block.cells
-            h.attrs["mode"] = self.mode
-        tmp.replace(path)
+        data = {}
+        for k in self.ARRAYS:
+            a = getattr(self, k)
+            nodes, layout = self._layout(a)
+            if dec.parallel:
+                data[k] = dec.gather_box(a, layout, *self._share(nodes))
+            else:
+                data[k] = a.reshape(layout + a.shape[1:])
+        bal = np.concatenate([[self.b_mass, self.b_energy], self.b_momentum])
+        rows = bal[None, :]
+        if dec.parallel:
+            rows = np.empty((dec.size, bal.size)) if dec.rank == 0 else None
+            dec.comm.Gather(bal, rows, root=0)
+        if dec.rank == 0:
+            tmp = Path(f"{path}.{os.getpid()}.tmp")
+            with h5py.File(tmp, "w") as h:
+                for k, a in data.items():
+                    h.create_dataset(k, data=a)
+                for k in self.VECTORS:
+                    h.create_dataset(k, data=getattr(self, k))
+                h.create_dataset("balances", data=rows)  # per rank: b_mass, b_energy, b_momentum
+                for k in self.SCALARS:
+                    h.attrs[k] = getattr(self, k)
+                h.attrs["cells"] = self.block.cells
+                h.attrs["mode"] = self.mode
+                h.attrs["ranks"] = dec.size
+            os.replace(tmp, path)
+        if dec.parallel:
+            dec.comm.Barrier()  # the file exists when checkpoint returns on any rank
 
     def restart(self, path) -> None:
+        B, dec = self.block, self.dec
+        o = np.zeros(3, np.int64)
+        o[: self.dim] = B.offset
         with h5py.File(path, "r") as h:
             if not np.array_equal(h.attrs["cells"], self.block.cells):
                 raise ValueError(f"checkpoint {path} is for a grid of {list(h.attrs['cells'])} cells")
             for k in self.ARRAYS:
-                getattr(self, k)[...] = h[k][...]
+                a = getattr(self, k)
+                _, n = self._layout(a)
+                a[...] = h[k][o[0]:o[0] + n[0], o[1]:o[1] + n[1], o[2]:o[2] + n[2]].reshape(a.shape)
             for k in self.VECTORS:
                 setattr(self, k, h[k][...].copy())
             for k in self.SCALARS:
                 val = h.attrs[k]
                 setattr(self, k, val.item() if hasattr(val, "item") else val)
+            rows = h["balances"][...]
+        if rows.shape[0] == dec.size:
+            mine = rows[dec.rank]
+        else:  # another rank count: rank 0 carries the boundary terms so far
+            mine = rows.sum(axis=0) if dec.rank == 0 else np.zeros(rows.shape[1])
+        self.b_mass, self.b_energy = float(mine[0]), float(mine[1])
+        self.b_momentum = mine[2:].copy()
         self.step = int(self.step)
         self.parity = int(self.parity)
         self.first_step = bool(self.first_step)

@@ -44,3 +44,17 @@ def test_sedov_3d(tmp_path):
     m = s["check"]["metrics"]
     assert m["shock_radius"]["rel_error"] <= 0.02
     assert m["energy_balance_rel"]["value"] <= 1e-10
+
+
+def test_shock_reflection_obstacle(tmp_path):
+    """A Mach 2 shock reflected by an immersed wall (obstacle x > 0.7525, the cut zone half blocked)
+    against the exact Rankine-Hugoniot reflected state (15, 6) and shock position."""
+    out, s = run_case("shock_reflection_obstacle", tmp_path)
+    m = s["check"]["metrics"]
+    for name in ("p_reflected", "rho_reflected", "p_behind_incident"):
+        assert m[name]["rel_error"] <= 0.02, name
+    assert m["reflected_shock_position_error_cells"]["value"] <= 2.0
+    assert m["mass_balance_rel"]["value"] <= 1e-12 and m["energy_balance_rel"]["value"] <= 1e-12
+    assert s["check"]["passed"]
+    with h5py.File(out / "results.h5") as h:
+        assert len(h["ale/times"]) == 6
