@@ -129,6 +129,11 @@ def _two_ranks(n: int, label: str) -> float:
 def _worker(n: int, label: str) -> None:
     from mpi4py import MPI
 
+    if label.startswith("ale:"):
+        sec = time_ale(MPI.COMM_WORLD, n, label[4:], max(5, int(4e6 / n**3)), repeats=5)
+        if MPI.COMM_WORLD.rank == 0:
+            print(sec)
+        return
     mat = {"elastic": ELASTIC, "j2_johnson_cook": J2}[label]
     case = lagrange_case(n, mat, 1.0 if label == "elastic" else 200.0)
     sec, _ = time_lagrange(MPI.COMM_WORLD, case, max(5, int(2e6 / n**3)), repeats=5)
@@ -266,6 +271,14 @@ def bench_ale(out: Path, quick: bool = False) -> Path:
             sec = time_ale(MPI.COMM_SELF, n, mode, steps, repeats=5)
             results.append({"name": f"ale_sedov3d_{label}", "metric": "time_per_zone_cycle", "value": sec * 1e6,
                             "unit": "us", "params": {"zones": n**3, "ranks": 1, "steps": steps, "repeats": 5}})
+    n = sizes[-1]
+    for mode, label in (("lagrangian", "lagrange_step"), ("eulerian", "lagrange_plus_remap")):
+        one = next(r for r in results if r["name"] == f"ale_sedov3d_{label}" and r["params"]["zones"] == n**3)
+        two = _two_ranks(n, f"ale:{mode}")
+        results.append({"name": f"ale_sedov3d_{label}", "metric": "time_per_zone_cycle", "value": two * 1e6,
+                        "unit": "us", "params": {"zones": n**3, "ranks": 2}})
+        results.append({"name": f"ale_sedov3d_{label}", "metric": "parallel_efficiency_2_ranks",
+                        "value": one["value"] / (2 * two * 1e6), "unit": "", "params": {"zones": n**3}})
     results.append({"name": "ale_sedov3d", "metric": "memory_per_zone", "value": ale_memory_per_zone(sizes[-1]),
                     "unit": "B", "params": {"zones": sizes[-1] ** 3}})
     results.append({"name": "lulesh_2.0_reference", "metric": "time_per_zone_cycle", "value": 0.72, "unit": "us",

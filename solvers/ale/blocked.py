@@ -737,7 +737,7 @@ def _flush():
     from solvers.ale import boundary as _b
     from solvers.ale import hydro as _h
     from solvers.ale import remap as _r
-    from solvers.ale.grid import flush_stale_cache
+    from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([open_eos, lagrangian_open_volumes, sweep_fluxes, sweep_zones, sweep_dual, sweep_nodes,
                        deposit, apertures_2d, apertures_3d, corner_force_sum],

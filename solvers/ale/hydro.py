@@ -526,7 +526,7 @@ def energy_from_pressure_array(code, par, rho, p, out):
 
 def _flush():
     import solvers.lagrange.kernels as _k
-    from solvers.ale.grid import flush_stale_cache
+    from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([zone_pass_3d, zone_pass_2d, gather_3d, gather_2d, predict, move,
                        ghost_force_work, sums, energy_from_pressure_array, energy_update,

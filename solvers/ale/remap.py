@@ -311,7 +311,7 @@ def set_positions(x, X):
 
 def _flush():
     from solvers.ale import hydro as _h
-    from solvers.ale.grid import flush_stale_cache
+    from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([limiter, hex_volume, swept_volumes_3d, swept_volumes_2d, sweep_fluxes,
                        sweep_zones, sweep_dual, sweep_nodes, deposit, set_positions],

@@ -60,12 +60,12 @@ energy increment ``1/2 (sigma^{n-1} + sigma^n) : D  V^{n-1/2} dt``.
 """
 from __future__ import annotations
 
-import hashlib
 import math
-import os
 
 import numpy as np
 from numba import njit
+
+from solvers.numba_cache import flush_stale_cache
 
 from . import materials as _materials
 from .materials import (JOHNSON_COOK, LINEAR_ELASTIC, NEO_HOOKEAN, P_G, P_K, P_LAM,
@@ -626,34 +626,10 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
 
 
 def _flush_stale_cache() -> None:
-    """Drop this module's numba cache when materials.py changed.
-
-    numba's on-disk cache of a function is keyed on the source file of that
-    function only; the constitutive functions of materials.py are compiled
-    *into* the kernels, so an edit of materials.py alone would silently reuse
-    stale machine code.  The hash of materials.py is stored next to the cache
-    index; on mismatch the index of every cached kernel is flushed.
-    """
-    try:
-        with open(_materials.__file__, "rb") as fh:
-            digest = hashlib.sha256(fh.read()).hexdigest()
-        disps = [hex_bvectors, quad_bvectors, reference_gradients, _is_bad, _forces_hex,
-                 _forces_quad, element_forces]
-        stamp = os.path.join(element_forces._cache.cache_path, "kernels.materials.sha256")
-        try:
-            with open(stamp) as fh:
-                if fh.read().strip() == digest:
-                    return
-        except OSError:
-            pass
-        for d in disps:
-            d._cache.flush()
-        tmp = f"{stamp}.{os.getpid()}.tmp"
-        with open(tmp, "w") as fh:
-            fh.write(digest)
-        os.replace(tmp, stamp)
-    except Exception:  # cache handling must never break the solver (read-only trees etc.)
-        pass
+    """The constitutive functions of materials.py are compiled into these kernels (see
+    solvers.numba_cache): drop the cache when materials.py changed."""
+    flush_stale_cache([hex_bvectors, quad_bvectors, reference_gradients, _is_bad, _forces_hex,
+                       _forces_quad, element_forces], [_materials.__file__], "kernels.materials.sha256")
 
 
 _flush_stale_cache()
