@@ -288,5 +288,39 @@ def bench_ale(out: Path, quick: bool = False) -> Path:
     return out
 
 
+@bench("sod")
+def bench_sod(out: Path, quick: bool = False) -> Path:
+    """Sod on 100..1600 zones through the launcher: L1 density error against the exact solution, its
+    observed order, and wall time (accuracy against cost)."""
+    import tempfile
+
+    from orchestrator.case import load_case, ranks_for
+    from orchestrator.launch import run_job
+
+    src = Path(__file__).resolve().parents[1] / "cases" / "sod"
+    text = (src / "case.toml").read_text()
+    sizes = [100, 200, 400] if quick else [100, 200, 400, 800, 1600]
+    results, rows = [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        for n in sizes:
+            d = Path(tmp) / f"sod_{n}"
+            d.mkdir()
+            (d / "case.toml").write_text(text.replace("upper = [1.0, 0.0025], cells = [400, 1]",
+                                                      f"upper = [1.0, {1.0 / n!r}], cells = [{n}, 1]"))
+            case = load_case(d)
+            if run_job(case, d / "out", ranks_for(case, {})) != 0:
+                raise RuntimeError(f"sod with {n} zones failed")
+            s = json.loads((d / "out" / "summary.json").read_text())
+            l1 = s["check"]["reported"]["l1_density"]
+            rows.append((n, l1, s["wall_time_s"]))
+    for i, (n, l1, wall) in enumerate(rows):
+        order = float(np.log2(rows[i - 1][1] / l1)) if i else None
+        results.append({"name": "sod", "metric": "l1_density_error", "value": l1, "unit": "",
+                        "params": {"zones": n, "observed_order": order, "wall_time_s": wall}})
+    doc = {"results": results, "machine": machine()}
+    out.write_text(json.dumps(doc, indent=2))
+    return out
+
+
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
     _worker(int(sys.argv[2]), sys.argv[3])

@@ -533,7 +533,9 @@ def _normalise_ale(a: dict, dim: int) -> dict:
     faces = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")[: 2 * dim]
     for f in faces:
         face = a.get("boundaries", {}).get(f, "wall")
-        if isinstance(face, dict):
+        if isinstance(face, dict) and "piston" in face:
+            face = {"piston": {"velocity": _f(face["piston"]["velocity"])}}
+        elif isinstance(face, dict):
             inflow = face["inflow"]
             face = {"inflow": {"density": _f(inflow["density"]), "pressure": _f(inflow["pressure"]),
                                "velocity": [_f(v) for v in inflow["velocity"]]}}
@@ -695,7 +697,11 @@ def _check_ale(ale: dict, raw: dict, dim: int) -> None:
                             "periodic", f"periodic must be set on both {a}_lower and {a}_upper")
         for f in (f"{a}_lower", f"{a}_upper"):
             face = ale["boundaries"][f]
-            if isinstance(face, dict):
+            if isinstance(face, dict) and "piston" in face:
+                if ale["mode"] != "lagrangian":
+                    raise CaseError(format_key(["ale", "boundaries", f, "piston"]), raw_faces[f]["piston"],
+                                    "piston faces need ale.mode = \"lagrangian\" (the face nodes move with the piston)")
+            elif isinstance(face, dict):
                 _vec_len(format_key(["ale", "boundaries", f, "inflow", "velocity"]),
                          raw_faces[f]["inflow"]["velocity"], dim)
     for i, (reg, r) in enumerate(zip(ale["regions"], raw["regions"])):

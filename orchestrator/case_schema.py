@@ -244,8 +244,10 @@ INFLOW = _table(
                        "pressure": _num("Pa")}, required=("density", "velocity", "pressure"))},
     required=("inflow",),
 )
-ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "periodic"]}, INFLOW],
-            "x-allowed": "must be \"wall\", \"outflow\", \"periodic\" or { inflow = { density, velocity, pressure } }"}
+PISTON = _table({"piston": _table({"velocity": _num("m/s")}, required=("velocity",))}, required=("piston",))
+ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "periodic"]}, INFLOW, PISTON],
+            "x-allowed": "must be \"wall\", \"outflow\", \"periodic\", { inflow = { density, velocity, pressure } }"
+                         " or { piston = { velocity } }"}
 ALE_FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
 ALE_REGION = {
     "type": "object",

@@ -7,7 +7,8 @@ construction, to index arrays, axis by axis (x, then y, then z over the whole ex
 axes, so edge and corner ghosts are consistent); every ghost entry thereby learns its ultimate real
 source (and sign), and a fill is a single pass ``a[dst] = a[src]`` in numba.
 
-Node constraints (after the predictor): on a wall face the normal velocity component is zero; on an
+Node constraints (after the predictor): on a wall face the normal velocity component is zero (on a
+piston face, a wall in every other respect, it is the piston's speed, positive into the domain); on an
 inflow face the nodes move with the inflow velocity.  The reaction impulse ``m (v_after -
 v_before)`` and its work on the mean velocity enter the solver's balances.  Outflow and periodic
 face nodes are free (their ghost zones act on them).
@@ -34,25 +35,30 @@ class Boundaries:
         self.halo = halo if halo is not None and halo.active else None
         self._build_maps()
         dim = block.dim
-        wn, wc, inn, ivel = [], [], [], []
+        wn, wc, wv, inn, ivel = [], [], [], [], []
         for d in range(dim):
             for s in range(2):
                 nodes = block.face_nodes(d, s)
                 if block.face[d, s] == WALL:
                     wn.append(nodes)
                     wc.append(np.full(nodes.size, d, np.int64))
+                    # normal velocity component: 0, or the piston speed into the domain
+                    up = block.piston.get((d, s), 0.0)
+                    wv.append(np.full(nodes.size, up if s == 0 else -up, np.float64))
                 elif block.face[d, s] == INFLOW:
                     inn.append(nodes)
                     ivel.append(np.tile(np.asarray(block.inflow[(d, s)]["velocity"], np.float64), (nodes.size, 1)))
         self.wall_nodes = np.concatenate(wn) if wn else np.zeros(0, np.int64)
         self.wall_comp = np.concatenate(wc) if wc else np.zeros(0, np.int64)
+        self.wall_vel = np.concatenate(wv) if wv else np.zeros(0, np.float64)
         self.inflow_nodes = np.concatenate(inn) if inn else np.zeros(0, np.int64)
         self.inflow_vel = np.concatenate(ivel) if ivel else np.zeros((0, dim))
 
     def constrain(self, v, v_old, m, acc) -> None:
-        """Impose the wall and inflow velocities (in place); reactions summed into acc (see kernel)."""
+        """Impose the wall, piston and inflow velocities (in place); reactions summed into acc (see
+        kernel)."""
         constrain(v, v_old, m, self.b.owned, self.inflow_nodes, self.inflow_vel, self.wall_nodes,
-                  self.wall_comp, acc)
+                  self.wall_comp, self.wall_vel, acc)
 
     def _planes(self, d: int, s: int, nodes: bool, face_dir: bool = False):
         """[(ghost plane, source plane)] of face (d, s), or [] for inflow (prescribed)."""
@@ -214,10 +220,11 @@ def copy_rows_signed(a, dst, src, sign):
 
 
 @njit(cache=True)
-def constrain(v, v_old, m, owned, inflow_nodes, inflow_vel, wall_nodes, wall_comp, acc):
-    """Inflow face nodes take the inflow velocity, then wall nodes lose their normal component.
-    The reaction impulse m (v_after - v_before) of owned nodes is added to acc[0:dim] and its work
-    on the mean velocity (v_old + v_after)/2 to acc[3]."""
+def constrain(v, v_old, m, owned, inflow_nodes, inflow_vel, wall_nodes, wall_comp, wall_vel, acc):
+    """Inflow face nodes take the inflow velocity, then wall nodes set their normal component to
+    wall_vel (0 on a wall, the signed piston speed on a piston face).  The reaction impulse
+    m (v_after - v_before) of owned nodes is added to acc[0:dim] and its work on the mean velocity
+    (v_old + v_after)/2 to acc[3] (a piston's work is boundary work)."""
     dim = v.shape[1]
     for t in range(inflow_nodes.shape[0]):
         n = inflow_nodes[t]
@@ -231,8 +238,8 @@ def constrain(v, v_old, m, owned, inflow_nodes, inflow_vel, wall_nodes, wall_com
         n = wall_nodes[t]
         c = wall_comp[t]
         w = 1.0 if owned[n] else 0.0
-        r = -m[n] * v[n, c]
-        v[n, c] = 0.0
+        r = m[n] * (wall_vel[t] - v[n, c])
+        v[n, c] = wall_vel[t]
         acc[c] += w * r
-        acc[3] += w * r * 0.5 * v_old[n, c]
+        acc[3] += w * r * 0.5 * (v_old[n, c] + v[n, c])
 

@@ -28,6 +28,7 @@ wall       mirror 2, 3                  mirror 3, 4 (normal component -1)  inact
 outflow    copy 2, 2 (zero gradient)    copy 2, 2                          open
 periodic   images n+1, n                images n+1, n; plane n+2 = 2       image
 inflow     prescribed state             prescribed velocity                open
+piston     as wall (a wall whose nodes move at the prescribed normal speed, Lagrangian mode)
 cut        neighbour's n'+1, n'         neighbour's n'+1, n'; n+2.. = 2..  image
 =========  ===========================  =================================  ======================
 
@@ -98,13 +99,18 @@ class Block:
         self.zreal = (np.where(act, G, 0), np.where(act, G + n3, 1))
         self.nreal = (np.where(act, G, 0), np.where(act, G + n3 + 1, 1))
 
-        # faces: kind codes (dim, 2) and inflow states
+        # faces: kind codes (dim, 2), inflow states and piston speeds (a piston is a wall whose
+        # nodes move at the prescribed normal speed, positive into the domain)
         self.face = np.zeros((3, 2), np.int64)
         self.inflow = {}
+        self.piston = {}
         for d in range(dim):
             for s in range(2):
                 spec = faces[FACE_NAMES[2 * d + s]]
-                if isinstance(spec, dict):
+                if isinstance(spec, dict) and "piston" in spec:
+                    self.face[d, s] = WALL
+                    self.piston[(d, s)] = float(spec["piston"]["velocity"])
+                elif isinstance(spec, dict):
                     self.face[d, s] = INFLOW
                     self.inflow[(d, s)] = spec["inflow"]
                 else:
@@ -117,6 +123,7 @@ class Block:
                     if cuts[d][s]:
                         self.face[d, s] = CUT
                         self.inflow.pop((d, s), None)
+                        self.piston.pop((d, s), None)
 
         # Eulerian (reference) node coordinates of the padded block, ghosts included
         self.X = np.zeros((self.nnodes, dim))

@@ -4,8 +4,9 @@ Time stepping (the central-difference pattern of the FE solver, so the coupler d
 step n -> n+1, dt = dt^{n+1/2}, dt_avg = (dt_prev + dt)/2, dt/2 on the first step)::
 
     predict(dt):  v* = v^{n-1/2} + dt_avg f^n / m
-    correct():    v += impulse / m; boundary conditions (walls: normal velocity 0, inflow nodes:
-                  the inflow velocity; the reaction impulse enters the balances); ghost nodes;
+    correct():    v += impulse / m; boundary conditions (walls: normal velocity 0, pistons: the
+                  piston speed, inflow nodes: the inflow velocity; the reaction impulse and its
+                  work enter the balances); ghost nodes;
                   x^{n+1} = x^n + dt v^{n+1/2}; compatible internal-energy update
                   M (e^+ - e^-) = -dt_avg sum_c f_c^n . vbar_c;
                   Lagrangian mode: new volumes, densities, EOS, q, hourglass, corner forces f^{n+1}
@@ -98,6 +99,8 @@ class AleSolver:
         self.dec = Decomposition(comm, g["cells"], periodic)
         self.block = B = Block(g["lower"], g["upper"], g["cells"], faces, offset=self.dec.offset,
                                local_cells=self.dec.n, cuts=self.dec.cuts)
+        if B.piston and self.mode != "lagrangian":
+            raise ValueError("piston faces need mode = 'lagrangian' (the face nodes move with the piston)")
         self.halo = Halo(self.dec, B)
         self.bc = Boundaries(B, self.halo)
         self._error = None  # a failure message waiting for the next collective check (parallel)
@@ -385,7 +388,8 @@ class AleSolver:
         self.halo.zones([a])
 
     def _constrain(self, record: bool) -> None:
-        """Walls: normal velocity 0; inflow faces: the inflow velocity (on the real face nodes)."""
+        """Walls: normal velocity 0 (pistons: the piston speed); inflow faces: the inflow velocity (on
+        the real face nodes)."""
         self._acc[:] = 0.0
         self.bc.constrain(self.v, self.v_old, self.m, self._acc)
         if self._blk is not None:  # immersed walls of the obstacles and their pressure reaction
