@@ -305,3 +305,67 @@ def reflected_shock(case, out, history, params):
         if key.endswith("_balance_rel"):
             vals[key.split(".", 1)[1]] = float(np.max(np.abs(a)))
     return vals
+
+
+@register_check("piston")
+def piston(case, out, history, params):
+    """A piston face (ale.boundaries, { piston = { velocity } }, Lagrangian mode) driving a shock into
+    the fluid at rest of the first region, against the exact Rankine-Hugoniot solution
+    (solvers.ale.exact.piston; Tait or stiffened/ideal gas, from the region's material): plateau
+    pressure and density behind the shock (zones between the piston and the exact shock position,
+    4 zones excluded at each end), piston position, and the shock position (half-height crossing of
+    the pressure jump) in undisturbed zone widths."""
+    from solvers.ale.exact import piston as exact
+
+    ale = case["ale"]
+    faces = [(f, b["piston"]["velocity"]) for f, b in ale["boundaries"].items()
+             if isinstance(b, dict) and "piston" in b]
+    if len(faces) != 1:
+        raise ValueError(f"piston check: needs exactly one piston face (found {len(faces)})")
+    face, u_p = faces[0]
+    axis = "xyz".index(face[0])
+    lower = face.endswith("lower")
+    region = ale["regions"][0]
+    mat = dict(ale["materials"][region["material"]])
+    eos = mat["eos"]
+    if eos == "tait":
+        ex = exact.tait(u_p, mat["rho0"], mat["bulk_modulus"], mat["exponent"], mat.get("p0", 0.0),
+                        rho0=region["density"])
+    elif eos in ("stiffened_gas", "ideal_gas"):
+        ex = exact.stiffened_gas(u_p, region["density"], region["pressure"], mat["gamma"], mat.get("p_inf", 0.0))
+    else:
+        raise ValueError(f"piston check: eos {eos!r} (needs tait, stiffened_gas or ideal_gas)")
+    g = ale["grid"]
+    x_face = g["lower"][axis] if lower else g["upper"][axis]
+    dx0 = (g["upper"][axis] - g["lower"][axis]) / g["cells"][axis]
+    t, _, index = _last_step(out, "ale")
+    prof = _zone_stations(out, "ale", index, axis)
+    # distance from the piston's initial position, into the domain
+    x = (prof["x"] - x_face) if lower else (x_face - prof["x"])
+    order = np.argsort(x)
+    x, p, rho = x[order], prof["p"][order], prof["rho"][order]
+    xp, xs = ex.piston_position(t), ex.shock_position(t)
+    if xs >= abs(g["upper"][axis] - g["lower"][axis]):
+        raise ValueError(f"piston check: at t={t:.6g} the shock has left the column")
+    inside = np.flatnonzero((x > xp) & (x < xs))[4:-4]
+    vals = {
+        "p_plateau": float(p[inside].mean()) if inside.size else float("nan"),
+        "rho_plateau": float(rho[inside].mean()) if inside.size else float("nan"),
+        "exact_p1": ex.p1, "exact_rho1": ex.rho1, "exact_shock_speed": ex.D,
+        "exact_shock_position": xs,
+        "plateau_zones": float(inside.size),
+    }
+    level = 0.5 * (ex.p0 + ex.p1)
+    sgn = np.sign(p - level)
+    k = np.flatnonzero(sgn[:-1] * sgn[1:] < 0)
+    if len(k):
+        xc = x[k] + (level - p[k]) * (x[k + 1] - x[k]) / (p[k + 1] - p[k])
+        vals["shock_position_error_cells"] = float(np.min(np.abs(xc - xs)) / dx0)
+    else:
+        vals["shock_position_error_cells"] = float("inf")
+    # the piston face: the first zone's centre is half a compressed zone ahead of it
+    vals["piston_position_error_cells"] = float(abs(x[0] - 0.5 * dx0 * ex.rho0 / ex.rho1 - xp) / dx0)
+    for key, a in history.items():
+        if key.endswith("_balance_rel"):
+            vals[key.split(".", 1)[1]] = float(np.max(np.abs(a)))
+    return vals

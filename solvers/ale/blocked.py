@@ -121,6 +121,7 @@ class Blocked:
         self.touched = np.zeros(0, np.int64)
         self.wall_nodes = np.zeros(0, np.int64)
         self.wall_comp = np.zeros(0, np.int64)
+        self._wall_vel = np.zeros(0)  # immersed walls are at rest (normal velocity 0)
         self.VE = s.V.copy()  # geometric volumes of the fixed grid (initial_state sets them at start-up)
         self.ASV = np.zeros((B.dim, B.nzones))
         self._no_inflow = (np.zeros(0, np.int64), np.zeros((0, B.dim)))
@@ -204,6 +205,7 @@ class Blocked:
             comps.append(np.full(int(sel.sum()), d, np.int64))
         self.wall_nodes = np.ascontiguousarray(np.concatenate(nodes), dtype=np.int64)
         self.wall_comp = np.ascontiguousarray(np.concatenate(comps), dtype=np.int64)
+        self._wall_vel = np.zeros(self.wall_nodes.size)
 
     # ---- solver hooks ---------------------------------------------------------------------------
     def initial_state(self, s) -> None:
@@ -241,7 +243,7 @@ class Blocked:
         """Immersed-wall node constraints into s._acc; when recording, the obstacle's pressure
         reaction dt_avg sum_cut zones sum_c f_c as well."""
         _constrain_kernel(s.v, s.v_old, s.m, s.block.owned, self._no_inflow[0], self._no_inflow[1],
-                          self.wall_nodes, self.wall_comp, s._acc)
+                          self.wall_nodes, self.wall_comp, self._wall_vel, s._acc)
         if record:
             corner_force_sum(s.fc, self.touched, self._R)
             s._acc[: self.dim] += s.dt_avg * self._R

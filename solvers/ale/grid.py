@@ -28,11 +28,12 @@ wall       mirror 2, 3                  mirror 3, 4 (normal component -1)  inact
 outflow    copy 2, 2 (zero gradient)    copy 2, 2                          open
 periodic   images n+1, n                images n+1, n; plane n+2 = 2       image
 inflow     prescribed state             prescribed velocity                open
-piston     as wall (a wall whose nodes move at the prescribed normal speed, Lagrangian mode)
 cut        neighbour's n'+1, n'         neighbour's n'+1, n'; n+2.. = 2..  image
 =========  ===========================  =================================  ======================
 
-(the upper side is the mirror image).  *Zone kinds* decide which zones act on a real node:
+(the upper side is the mirror image).  A piston face (``{piston = {velocity}}``, Lagrangian mode)
+is a wall whose nodes move at the prescribed normal speed (``piston``, positive into the domain;
+boundary.py).  *Zone kinds* decide which zones act on a real node:
 real and image zones always, open ghosts (outflow/inflow, they stand for the fluid beyond) too,
 ghosts beyond a wall never (a wall node has the half/quarter mass and force of its real zones).
 A rank cut (``cut``, parallel.py) is an image face too: its ghosts are the neighbour's zones and

@@ -58,3 +58,28 @@ def test_shock_reflection_obstacle(tmp_path):
     assert s["check"]["passed"]
     with h5py.File(out / "results.h5") as h:
         assert len(h["ale/times"]) == 6
+
+
+def test_water_piston_column(tmp_path):
+    """Piston at 50 m/s into Tait water (Lagrangian grid): plateau pressure within 2% of the
+    Rankine-Hugoniot p1 (solvers.ale.exact.piston), shock within 3 zones, energy balance at round-off
+    (the piston's work is boundary work: within 1% of p1 u_p t A, the momentum within 1% of
+    rho0 D t u_p A)."""
+    from solvers.ale.exact.piston import tait
+
+    out, s = run_case("water_piston_column", tmp_path)
+    m, r = s["check"]["metrics"], s["check"]["reported"]
+    ex = tait(50.0, 1000.0, 2.19e9, 7.15, 1.0e5)
+    assert m["p_plateau"]["reference"] == pytest.approx(ex.p1, rel=1e-6)
+    assert m["p_plateau"]["rel_error"] <= 0.02
+    assert r["rho_plateau"] == pytest.approx(ex.rho1, rel=0.02)
+    assert r["plateau_zones"] > 150
+    assert m["shock_position_error_cells"]["value"] <= 3.0
+    assert r["piston_position_error_cells"] <= 1e-3
+    assert m["energy_balance_rel"]["value"] <= 1e-10 and m["mass_balance_rel"]["value"] <= 1e-12
+    assert r["momentum_balance_rel"] <= 1e-10
+    t, area = s["end_time"], 0.0025
+    f = s["final"]
+    assert f["ale.boundary_work"] == pytest.approx(ex.p1 * 50.0 * t * area, rel=0.01)
+    assert f["ale.momentum_x"] == pytest.approx(ex.rho0 * ex.D * t * 50.0 * area, rel=0.01)
+    assert s["check"]["passed"]

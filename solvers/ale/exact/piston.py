@@ -81,7 +81,7 @@ def stiffened_gas(u_p: float, rho0: float, p0: float, gamma: float, p_inf: float
         return (p1 - p0) * (1.0 / rho0 - 1.0 / rho1_of(p1)) - u_p * u_p
 
     c0 = math.sqrt(g * P0 / rho0)
-    hi = p0 + rho0 * u_p * (c0 + (g + 1) * u_p)  # above the root: D < c0 + (g+1)/2 u_p... doubled
+    hi = p0 + rho0 * u_p * (c0 + (g + 1) * u_p)  # an upper bracket (doubled until f > 0)
     while f(hi) < 0:
         hi = p0 + 2.0 * (hi - p0)
     p1 = brentq(f, p0, hi, xtol=1e-300, rtol=4 * np.finfo(float).eps, maxiter=500)
