@@ -28,3 +28,13 @@ def immerse(*args, timeout=600, **kw) -> subprocess.CompletedProcess:
 @pytest.fixture
 def run_immerse():
     return immerse
+
+
+def pytest_configure(config):
+    """Under `mpiexec -n N pytest`, give every rank its own temporary root: ranks sharing pytest's
+    default root race when pruning old directories."""
+    if int(os.environ.get("PMI_SIZE", "1")) > 1 and not config.option.basetemp:
+        import tempfile
+
+        rank = os.environ.get("PMI_RANK", "0")
+        config.option.basetemp = Path(tempfile.gettempdir()) / f"immerse-pytest-mpi-{os.getuid()}-rank{rank}"
