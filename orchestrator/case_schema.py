@@ -78,6 +78,24 @@ def _table(properties: dict, required: tuple[str, ...] = (), **extra) -> dict:
     return s
 
 
+def _variants(selector: str, allowed: dict, required: dict | None = None) -> list:
+    """`allOf` entries giving each value of `selector` its own key set: only `allowed[value]` keys
+    may appear and `required[value]` (default: all of them) must."""
+    required = required or allowed
+    return [
+        {
+            "if": {"properties": {selector: {"const": value}}, "required": [selector]},
+            "then": {
+                "properties": {k: True for k in keys},
+                "additionalProperties": False,
+                "required": list(required[value]),
+                "x-when": f"{selector} = {value!r}",
+            },
+        }
+        for value, keys in allowed.items()
+    ]
+
+
 def _name() -> dict:
     return {"type": "string", "minLength": 1, "pattern": NAME_PATTERN, "x-allowed": NAME_TEXT}
 
@@ -132,18 +150,7 @@ MATERIAL = {
     },
     "additionalProperties": False,
     "required": ["model", "density", "youngs_modulus", "poisson_ratio"],
-    "allOf": [
-        {
-            "if": {"properties": {"model": {"const": model}}, "required": ["model"]},
-            "then": {
-                "properties": {k: True for k in keys},
-                "additionalProperties": False,
-                "required": list(keys),
-                "x-when": f"model = {model!r}",
-            },
-        }
-        for model, keys in MODEL_KEYS.items()
-    ],
+    "allOf": _variants("model", MODEL_KEYS),
 }
 
 BOX = _table(
@@ -226,18 +233,7 @@ FLUID = {
     },
     "additionalProperties": False,
     "required": ["eos"],
-    "allOf": [
-        {
-            "if": {"properties": {"eos": {"const": eos}}, "required": ["eos"]},
-            "then": {
-                "properties": {k: True for k in EOS_KEYS[eos]},
-                "additionalProperties": False,
-                "required": list(EOS_REQUIRED[eos]),
-                "x-when": f"eos = {eos!r}",
-            },
-        }
-        for eos in EOS_KEYS
-    ],
+    "allOf": _variants("eos", EOS_KEYS, EOS_REQUIRED),
 }
 INFLOW = _table(
     {"inflow": _table({"density": _num("kg/m^3", exclusiveMinimum=0), "velocity": _vector("m/s"),
@@ -311,18 +307,7 @@ BOUNDARY = {
     },
     "additionalProperties": False,
     "required": ["type"],
-    "allOf": [
-        {
-            "if": {"properties": {"type": {"const": kind}}, "required": ["type"]},
-            "then": {
-                "properties": {k: True for k in keys},
-                "additionalProperties": False,
-                "required": list(keys),
-                "x-when": f"type = {kind!r}",
-            },
-        }
-        for kind, keys in BOUNDARY_KEYS.items()
-    ],
+    "allOf": _variants("type", BOUNDARY_KEYS),
 }
 
 METRIC = _table(
