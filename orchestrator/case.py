@@ -526,10 +526,12 @@ def _normalise_ale(a: dict, dim: int) -> dict:
         "obstacles": [{"region": o["region"], "subsamples": int(o.get("subsamples", 1))}
                       for o in a.get("obstacles", [])],
     }
+    if "fraction_samples" in a:
+        out["fraction_samples"] = int(a["fraction_samples"])
     if "hourglass" in a:
         out["hourglass"] = _f(a["hourglass"])
     if "viscosity" in a:
-        out["viscosity"] = {k: _f(v) for k, v in a["viscosity"].items()}
+        out["viscosity"] = {k: (v if k == "kind" else _f(v)) for k, v in a["viscosity"].items()}
     faces = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")[: 2 * dim]
     for f in faces:
         face = a.get("boundaries", {}).get(f, "wall")
@@ -709,10 +711,19 @@ def _check_ale(ale: dict, raw: dict, dim: int) -> None:
         if reg["material"] not in ale["materials"]:
             raise CaseError(format_key(base + ["material"]), reg["material"],
                             "undefined material; defined in [ale.materials]: " + ", ".join(ale["materials"]))
+        void = ale["materials"][reg["material"]]["eos"] == "void"
+        if void and "density" in r:
+            raise CaseError(format_key(base + ["density"]), r["density"],
+                            f"material {reg['material']!r} is void: a void region has no density, "
+                            "pressure or specific_internal_energy")
+        if not void and "density" not in r:
+            raise CaseError(format_key(base), r, "needs material, density and exactly one of pressure, "
+                            "specific_internal_energy (a void material: none of them)")
         if "velocity" in r:
             _vec_len(format_key(base + ["velocity"]), r["velocity"], dim)
         if "region" in r:
             _expr(format_key(base + ["region"]), r["region"], dim, BOOL)
+    _check_ale_mixed(ale, raw)
     for i, e in enumerate(raw.get("energy_sources", [])):
         _vec_len(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
     for i, o in enumerate(raw.get("obstacles", [])):
@@ -720,6 +731,26 @@ def _check_ale(ale: dict, raw: dict, dim: int) -> None:
         if ale["mode"] != "eulerian":
             raise CaseError(format_key(["ale", "obstacles"]), raw["obstacles"],
                             "obstacles need ale.mode = \"eulerian\" (the remap keeps material out of them)")
+
+
+def _check_ale_mixed(ale: dict, raw: dict) -> None:
+    """Several materials per zone (or void): Eulerian mode, no obstacles or inflow faces yet."""
+    used = list(dict.fromkeys(r["material"] for r in ale["regions"]))
+    voids = [m for m in used if ale["materials"][m]["eos"] == "void"]
+    if len(used) == 1 and not voids:
+        return
+    if len(voids) == len(used):
+        raise CaseError("ale.regions", [r["material"] for r in raw["regions"]],
+                        "void only: at least one region needs a material with an equation of state")
+    what = "several materials" if len(used) > 1 else "a void material"
+    if ale["mode"] != "eulerian":
+        raise CaseError("ale.mode", raw.get("mode"), f"{what} in ale.regions need mode = \"eulerian\"")
+    if raw.get("obstacles"):
+        raise CaseError("ale.obstacles", raw["obstacles"], f"not supported yet with {what} in ale.regions")
+    for f, face in ale["boundaries"].items():
+        if isinstance(face, dict) and "inflow" in face:
+            raise CaseError(format_key(["ale", "boundaries", f]), raw["boundaries"][f],
+                            f"inflow faces are not supported yet with {what} in ale.regions")
 
 
 _CELL_TYPE = {2: "quad", 3: "hexahedron"}

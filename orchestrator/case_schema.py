@@ -208,12 +208,14 @@ EOS_KEYS = {
     "stiffened_gas": ("eos", "gamma", "p_inf"),
     "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0"),
     "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+    "void": ("eos",),   # empty space: volume only (several materials per zone)
 }
 EOS_REQUIRED = {
     "ideal_gas": ("eos", "gamma"),
     "stiffened_gas": ("eos", "gamma", "p_inf"),
     "tait": ("eos", "rho0", "bulk_modulus", "exponent"),
     "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+    "void": ("eos",),
 }
 FLUID = {
     "type": "object",
@@ -256,16 +258,21 @@ ALE_REGION = {
         "velocity": _vector("m/s"),
     },
     "additionalProperties": False,
-    "required": ["material", "density"],
-    "oneOf": [{"required": ["pressure"]}, {"required": ["specific_internal_energy"]}],
-    "x-allowed": "needs material, density and exactly one of pressure, specific_internal_energy",
+    "required": ["material"],
+    # a void region has no state at all (checked against the material in case.py)
+    "oneOf": [{"required": ["density", "pressure"]}, {"required": ["density", "specific_internal_energy"]},
+              {"not": {"anyOf": [{"required": ["density"]}, {"required": ["pressure"]},
+                                 {"required": ["specific_internal_energy"]}]}}],
+    "x-allowed": "needs material, density and exactly one of pressure, specific_internal_energy "
+                 "(a void material: none of them)",
 }
 ALE = _table(
     {
         "mode": {"type": "string", "enum": ["eulerian", "lagrangian"]},
         "grid": BOX,
         "hourglass": _num("dimensionless", minimum=0, maximum=0.125),
-        "viscosity": _table({"linear": _num("dimensionless", minimum=0),
+        "viscosity": _table({"kind": {"type": "string", "enum": ["scalar", "monotonic"]},
+                             "linear": _num("dimensionless", minimum=0),
                              "quadratic": _num("dimensionless", minimum=0)}),
         "boundaries": _table({f: ALE_FACE for f in ALE_FACES}),
         "materials": {
@@ -275,6 +282,8 @@ ALE = _table(
             "additionalProperties": FLUID,
         },
         "regions": {"type": "array", "minItems": 1, "items": ALE_REGION},
+        # several materials: region expressions sampled at k^dim points per zone (volume fractions)
+        "fraction_samples": _int(minimum=1, maximum=64),
         "energy_sources": {"type": "array", "items": _table(
             {"energy": _num("J", exclusiveMinimum=0), "at": _vector("m")}, required=("energy", "at"))},
         # static obstacles: blocked where the region holds (fraction of k^dim sub-points per zone)

@@ -28,6 +28,33 @@ Discretisation (one zone z with corners c, lumped nodal masses m_n, zone mass M_
   exactly in 2D and to O(dt^2) in 3D), or ``sum_c v_c . b_c / V`` on the fixed grid after a
   remap; the length is ``l = V / (largest face area)`` (3D) or ``A / (longest edge)`` (2D): the
   smallest zone width for a box, identical in 2D and 3D.
+* Artificial viscosity (monotonic, ``viscosity.kind = "monotonic"``; Christensen 1990, the form of
+  ALE3D/LULESH): per logical direction d of the zone (xi, eta[, zeta]) the axis ``m_d`` (mean of
+  the corners of the d+ face minus mean of the d- face), the same difference ``dv_d`` of the
+  corner velocities, the area vector of the d-mid-surface ``A_d`` (3D: ``m_e x m_f``, (d, e, f)
+  cyclic; 2D: ``m_eta`` turned by -90 degrees for xi, ``m_xi`` by +90 for eta) and the central
+  Jacobian ``J_d = m_d . A_d`` give the directional strain rate and width::
+
+      D_d = dv_d . A_d / J_d        (sum_d D_d = div v of the zone-centre velocity gradient)
+      h_d = J_d / |A_d|             (D_d h_d = dv_d . A_d / |A_d|: the normal velocity jump)
+
+  (:func:`mono_gradients_3d` / ``_2d``, a pre-pass over every zone of the padded block: the
+  neighbours of the real zones and of the open-boundary ghosts come from the ghost nodes, i.e.
+  mirrored at walls, images at periodic faces, the neighbour's nodes at rank cuts (so N ranks
+  compute the one-rank bits); at the mid-step geometry
+  ``x - dt/2 v`` in the Lagrange step, on the fixed grid after a remap).  With the ratios of the
+  neighbours along d, ``r_- = D_d(z - e_d) / D_d(z)``, ``r_+ = D_d(z + e_d) / D_d(z)``, the limiter
+  and the jump are::
+
+      phi_d = max(0, min((r_- + r_+)/2, 2 r_-, 2 r_+, 1)),     du_d = -D_d h_d > 0
+      q = rho sum_d [C_l c (1 - phi_d) du_d + C_q (1 - phi_d^2) du_d^2]   over the d with D_d < 0
+
+  and q = 0 unless ``div v < 0`` (the same divergence as the scalar q, so that the work
+  ``-q dV`` of the step is never negative).  A linear velocity field on a uniform grid has equal
+  ratios 1: phi = 1 and q = 0 (homologous compression, no q); a 1-D shock on a box grid has
+  phi = 0 in its zones and gets the scalar q (``du = l |div v|`` when the zone width along the
+  shock is the smallest one).  A zone with ``J_d <= 0`` (only a distorted ghost) counts as
+  ``D_d = 0``: its neighbour has ``phi = 0``, the full q.
 * Compatible energy: with the central-difference step ``v^{n+1/2} = v^{n-1/2} + dt_avg f^n / m``
   the kinetic energy changes by ``sum_n dt_avg f^n . vbar_n`` exactly, ``vbar = (v^{n-1/2} +
   v^{n+1/2}) / 2``.  Each zone therefore changes its internal energy by minus the work of its own
@@ -42,7 +69,9 @@ Discretisation (one zone z with corners c, lumped nodal masses m_n, zone mass M_
   pressure second-order in time without touching the conserved energy.
 * Stable step: ``dt_z = l / (u + Q + sqrt(Q^2 + c^2))`` with ``Q = C_l c + C_q l |div v|`` in
   compression (0 otherwise) and ``u`` the largest corner speed in Eulerian mode (advection
-  Courant number of the remap), 0 in Lagrangian mode.
+  Courant number of the remap), 0 in Lagrangian mode.  Monotonic q: Q is that of the q actually
+  applied, per unit jump and the largest over the directions, ``Q = max_d q_d / (rho du_d) =
+  max_d [C_l c (1 - phi_d) + C_q (1 - phi_d^2) du_d]`` (the scalar Q for a 1-D shock, phi = 0).
 
 Corner sums use balanced trees ``((c0 + c1) + (c3 + c2)) + ((c4 + c5) + (c7 + c6))`` (pairs along
 x first), so a flow along x, y or z on a box grid sums the same numbers in the same order.
@@ -63,6 +92,11 @@ EOS = 2        # rho = M / V, EOS at e + de_h
 FORCES = 4     # kinematics, q, hourglass, corner forces, stable step
 MIDSTEP = 8    # div v from the volume change over the step (Lagrange step); else sum v.b/V at x
 ADVECT = 16    # add the corner speed to the Courant condition (Eulerian mode)
+
+# artificial viscosity kinds (zone pass argument qkind)
+Q_SCALAR = 0
+Q_MONOTONIC = 1
+Q_KINDS = {"scalar": Q_SCALAR, "monotonic": Q_MONOTONIC}
 
 # failure reasons of a zone pass
 BAD_VOLUME = 1
@@ -144,16 +178,156 @@ def _hg_mode(g0, g1, g2, g3, g4, g5, g6, g7, xe, b, ve, ivol, ah, fc, z):
 
 
 # ------------------------------------------------------------------------------------------------
+# monotonic artificial viscosity: directional strain rates (pre-pass) and the limited q
+# ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def mono_gradients_3d(x, v, grad, shift, zlo, zhi, zs, ns):
+    """Pre-pass of the monotonic q: per zone ``zlo <= (i, j, k) < zhi`` and logical direction d
+    (xi, eta, zeta) the strain rate ``grad[z, d] = dv_d . A_d / J_d`` and the width
+    ``grad[z, 3 + d] = J_d / |A_d|`` at the positions ``x - shift v`` (the mid-step geometry of
+    the Lagrange step: shift = dt/2; 0 on the fixed grid).  ``m_d`` = the zone's logical axis
+    (mean of the d+ face corners minus mean of the d- face corners), ``dv_d`` the same of the
+    velocities, ``A_d`` = the cross product of the other two axes in cyclic order (the area
+    vector of the zone's d-mid-surface) and ``J_d = m_d . A_d`` (the central Jacobian).  A zone
+    with ``J_d <= 0`` (a degenerate ghost) gets 0 (as a neighbour: full q)."""
+    co = np.empty(8, np.int64)
+    for a in range(8):
+        ox = 1 if (a == 1 or a == 2 or a == 5 or a == 6) else 0
+        oy = 1 if (a == 2 or a == 3 or a == 6 or a == 7) else 0
+        oz = 1 if a >= 4 else 0
+        co[a] = ox * ns[0] + oy * ns[1] + oz * ns[2]
+    xe = np.empty((8, 3))
+    ve = np.empty((8, 3))
+    m = np.empty((3, 3))    # m[d] logical axis d
+    dv = np.empty((3, 3))   # dv[d] velocity difference along d
+    A = np.empty((3, 3))    # A[d] area vector of the d-mid-surface
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                n0 = i * ns[0] + j * ns[1] + k * ns[2]
+                for a in range(8):
+                    nd = n0 + co[a]
+                    for c in range(3):
+                        ve[a, c] = v[nd, c]
+                        xe[a, c] = x[nd, c] - shift * v[nd, c] if shift != 0.0 else x[nd, c]
+                for c in range(3):
+                    m[0, c] = 0.25 * (((xe[1, c] + xe[2, c]) + (xe[5, c] + xe[6, c]))
+                                      - ((xe[0, c] + xe[3, c]) + (xe[4, c] + xe[7, c])))
+                    m[1, c] = 0.25 * (((xe[3, c] + xe[2, c]) + (xe[7, c] + xe[6, c]))
+                                      - ((xe[0, c] + xe[1, c]) + (xe[4, c] + xe[5, c])))
+                    m[2, c] = 0.25 * (((xe[4, c] + xe[5, c]) + (xe[7, c] + xe[6, c]))
+                                      - ((xe[0, c] + xe[1, c]) + (xe[3, c] + xe[2, c])))
+                    dv[0, c] = 0.25 * (((ve[1, c] + ve[2, c]) + (ve[5, c] + ve[6, c]))
+                                       - ((ve[0, c] + ve[3, c]) + (ve[4, c] + ve[7, c])))
+                    dv[1, c] = 0.25 * (((ve[3, c] + ve[2, c]) + (ve[7, c] + ve[6, c]))
+                                       - ((ve[0, c] + ve[1, c]) + (ve[4, c] + ve[5, c])))
+                    dv[2, c] = 0.25 * (((ve[4, c] + ve[5, c]) + (ve[7, c] + ve[6, c]))
+                                       - ((ve[0, c] + ve[1, c]) + (ve[3, c] + ve[2, c])))
+                for d in range(3):
+                    e = (d + 1) % 3
+                    f = (d + 2) % 3
+                    A[d, 0] = m[e, 1] * m[f, 2] - m[e, 2] * m[f, 1]
+                    A[d, 1] = m[e, 2] * m[f, 0] - m[e, 0] * m[f, 2]
+                    A[d, 2] = m[e, 0] * m[f, 1] - m[e, 1] * m[f, 0]
+                for d in range(3):
+                    jd = (m[d, 0] * A[d, 0] + m[d, 1] * A[d, 1]) + m[d, 2] * A[d, 2]
+                    a2 = (A[d, 0] * A[d, 0] + A[d, 1] * A[d, 1]) + A[d, 2] * A[d, 2]
+                    if jd > 0.0 and a2 > 0.0 and jd < np.inf:
+                        grad[z, d] = ((dv[d, 0] * A[d, 0] + dv[d, 1] * A[d, 1]) + dv[d, 2] * A[d, 2]) / jd
+                        grad[z, 3 + d] = jd / math.sqrt(a2)
+                    else:
+                        grad[z, d] = 0.0
+                        grad[z, 3 + d] = 0.0
+
+
+@njit(cache=True)
+def mono_gradients_2d(x, v, grad, shift, zlo, zhi, zs, ns):
+    """2D version of :func:`mono_gradients_3d` (``grad[z, d]``, ``grad[z, 2 + d]``; the area vector
+    of the xi-mid-line is the eta axis turned by -90 degrees, that of the eta-mid-line the xi axis
+    turned by +90 degrees)."""
+    co = np.empty(4, np.int64)
+    co[0] = 0
+    co[1] = ns[0]
+    co[2] = ns[0] + ns[1]
+    co[3] = ns[1]
+    xe = np.empty((4, 2))
+    ve = np.empty((4, 2))
+    m = np.empty((2, 2))
+    dv = np.empty((2, 2))
+    A = np.empty((2, 2))
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            z = i * zs[0] + j * zs[1]
+            n0 = i * ns[0] + j * ns[1]
+            for a in range(4):
+                nd = n0 + co[a]
+                for c in range(2):
+                    ve[a, c] = v[nd, c]
+                    xe[a, c] = x[nd, c] - shift * v[nd, c] if shift != 0.0 else x[nd, c]
+            for c in range(2):
+                m[0, c] = 0.5 * ((xe[1, c] + xe[2, c]) - (xe[0, c] + xe[3, c]))
+                m[1, c] = 0.5 * ((xe[3, c] + xe[2, c]) - (xe[0, c] + xe[1, c]))
+                dv[0, c] = 0.5 * ((ve[1, c] + ve[2, c]) - (ve[0, c] + ve[3, c]))
+                dv[1, c] = 0.5 * ((ve[3, c] + ve[2, c]) - (ve[0, c] + ve[1, c]))
+            A[0, 0] = m[1, 1]
+            A[0, 1] = -m[1, 0]
+            A[1, 0] = -m[0, 1]
+            A[1, 1] = m[0, 0]
+            for d in range(2):
+                jd = m[d, 0] * A[d, 0] + m[d, 1] * A[d, 1]
+                a2 = A[d, 0] * A[d, 0] + A[d, 1] * A[d, 1]
+                if jd > 0.0 and a2 > 0.0 and jd < np.inf:
+                    grad[z, d] = (dv[d, 0] * A[d, 0] + dv[d, 1] * A[d, 1]) / jd
+                    grad[z, 2 + d] = jd / math.sqrt(a2)
+                else:
+                    grad[z, d] = 0.0
+                    grad[z, 2 + d] = 0.0
+
+
+@njit(cache=True, inline="always")
+def _mono_q(grad, z, zs, ndir, r, cz, q_lin, q_quad):
+    """Monotonic q of zone z (in compression) and its viscous speed Q (see the module docstring):
+    returns ``(q, Q)``."""
+    s = 0.0
+    qmax = 0.0
+    for d in range(ndir):
+        g = grad[z, d]
+        if g < 0.0:
+            inv = 1.0 / g
+            rm = grad[z - zs[d], d] * inv
+            rp = grad[z + zs[d], d] * inv
+            phi = 0.5 * (rm + rp)
+            if 2.0 * rm < phi:
+                phi = 2.0 * rm
+            if 2.0 * rp < phi:
+                phi = 2.0 * rp
+            if phi > 1.0:
+                phi = 1.0
+            if not (phi > 0.0):  # (also a non-finite ratio: full q)
+                phi = 0.0
+            w = 1.0 - phi
+            jump = -(g * grad[z, ndir + d])            # compressive velocity jump >= 0
+            qd = (q_lin * cz * w + q_quad * jump * (1.0 - phi * phi))
+            s += qd * jump
+            if qd > qmax:
+                qmax = qd
+    return r * s, qmax
+
+
+# ------------------------------------------------------------------------------------------------
 # 3D
 # ------------------------------------------------------------------------------------------------
 @njit(cache=True)
 def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rhi, zs, ns,
-                 flags, dt, dt_avg, code, par, q_lin, q_quad, hg):
+                 flags, dt, dt_avg, code, par, q_lin, q_quad, hg, qkind, grad):
     """One pass over the zones ``zlo <= (i, j, k) < zhi`` (padded indices).
 
     flags: ENERGY (only for real zones rlo <= ijk < rhi), EOS, FORCES, MIDSTEP, ADVECT.
     Arrays: x, v, v_old (nn, 3); fc (nz, 8, 3) corner forces (read by ENERGY, written by
     FORCES); M, e, V, rho, p, c, q, de_h (nz,).  V is always updated to the volume at x.
+    qkind: Q_SCALAR or Q_MONOTONIC; grad (nz, 6): the directional strain rates and widths of
+    :func:`mono_gradients_3d` (read for Q_MONOTONIC only, on the zone and its 6 face neighbours).
     Returns ``(dt_min, bad_zone, reason)`` (bad_zone = -1 if none; the pass stops at the first).
     """
     co = np.empty(8, np.int64)
@@ -236,8 +410,11 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 qz = 0.0
                 qq = 0.0
                 if divv < 0.0:
-                    qq = q_lin * cz - q_quad * lc * divv
-                    qz = r * lc * qq * (-divv)
+                    if qkind == Q_MONOTONIC:
+                        qz, qq = _mono_q(grad, z, zs, 3, r, cz, q_lin, q_quad)
+                    else:
+                        qq = q_lin * cz - q_quad * lc * divv
+                        qz = r * lc * qq * (-divv)
                 q[z] = qz
                 u = 0.0
                 if advect:
@@ -299,8 +476,8 @@ def gather_3d(fc, zact, M, f, m, nlo, nhi, zs, ns):
 # ------------------------------------------------------------------------------------------------
 @njit(cache=True)
 def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rhi, zs, ns,
-                 flags, dt, dt_avg, code, par, q_lin, q_quad, hg):
-    """2D version of :func:`zone_pass_3d` (x, v, v_old (nn, 2); fc (nz, 4, 2))."""
+                 flags, dt, dt_avg, code, par, q_lin, q_quad, hg, qkind, grad):
+    """2D version of :func:`zone_pass_3d` (x, v, v_old (nn, 2); fc (nz, 4, 2); grad (nz, 4))."""
     co = np.empty(4, np.int64)
     co[0] = 0
     co[1] = ns[0]
@@ -384,8 +561,11 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
             qz = 0.0
             qq = 0.0
             if divv < 0.0:
-                qq = q_lin * cz - q_quad * lc * divv
-                qz = r * lc * qq * (-divv)
+                if qkind == Q_MONOTONIC:
+                    qz, qq = _mono_q(grad, z, zs, 2, r, cz, q_lin, q_quad)
+                else:
+                    qq = q_lin * cz - q_quad * lc * divv
+                    qz = r * lc * qq * (-divv)
             q[z] = qz
             u = 0.0
             if advect:
@@ -528,8 +708,8 @@ def _flush():
     import solvers.lagrange.kernels as _k
     from solvers.numba_cache import flush_stale_cache
 
-    flush_stale_cache([zone_pass_3d, zone_pass_2d, gather_3d, gather_2d, predict, move,
-                       ghost_force_work, sums, energy_from_pressure_array, energy_update,
+    flush_stale_cache([zone_pass_3d, zone_pass_2d, mono_gradients_3d, mono_gradients_2d, gather_3d,
+                       gather_2d, predict, move, ghost_force_work, sums, energy_from_pressure_array, energy_update,
                        lagrangian_volumes, _t4, _t8],
                       [_eos.__file__, _k.__file__], "hydro.deps.sha256")
 
@@ -583,7 +763,8 @@ def lagrangian_volumes(SV, V, M, rho, p, q, de_h, zlo, zhi, zs):
                     vn += SV[d, z + zs[d]] - SV[d, z]
                 if not (vn > 0.0):
                     return z
-                de_h[z] = -(p[z] + q[z]) * (vn - V[z]) / (2.0 * M[z])
+                # (no material: void, mixed.py)
+                de_h[z] = -(p[z] + q[z]) * (vn - V[z]) / (2.0 * M[z]) if M[z] > 0.0 else 0.0
                 V[z] = vn
                 rho[z] = M[z] / vn
     return -1

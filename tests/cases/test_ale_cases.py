@@ -83,3 +83,28 @@ def test_water_piston_column(tmp_path):
     assert f["ale.boundary_work"] == pytest.approx(ex.p1 * 50.0 * t * area, rel=0.01)
     assert f["ale.momentum_x"] == pytest.approx(ex.rho0 * ex.D * t * 50.0 * area, rel=0.01)
     assert s["check"]["passed"]
+
+
+def test_water_air_shock_tube(tmp_path):
+    """Two materials (stiffened gas): plateaus within 3 %, interface (water fraction 1/2) within 2
+    cells of the exact contact, pressure within 1 % of p* at the interface, conservation."""
+    out, s = run_case("water_air_shock_tube", tmp_path)
+    m = s["check"]["metrics"]
+    for name in ("p_star", "u_star", "rho_star_left", "rho_star_right"):
+        assert m[name]["rel_error"] <= 0.03, name
+    assert m["interface_position_error_cells"]["value"] <= 2.0
+    assert m["interface_pressure_oscillation_rel"]["value"] <= 0.01
+    assert m["mass_balance_rel"]["value"] <= 1e-12 and m["energy_balance_rel"]["value"] <= 1e-12
+    assert s["check"]["passed"]
+    # per-material masses (water 1000 x 0.8 x 0.0025, air 50 x 0.2 x 0.0025) kept to round-off
+    fin = s["final"]
+    assert abs(fin["ale.mass_water"] / 2.0 - 1) < 1e-12 and abs(fin["ale.mass_air"] / 0.025 - 1) < 1e-12
+
+
+def test_advected_square(tmp_path):
+    out, s = run_case("advected_square", tmp_path)
+    m = s["check"]["metrics"]
+    assert m["volume_drift_rel"]["value"] <= 1e-12
+    # the square (area 0.16) keeps its shape to 2.5 % of its area after one diagonal period
+    assert m["symmetric_difference"]["value"] <= 0.004
+    assert s["check"]["passed"]

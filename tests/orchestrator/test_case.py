@@ -189,6 +189,7 @@ BAD_CASES = [
     ("ale_undefined_material", "ale.regions[1].material", "undefined material"),
     ("ale_unknown_eos", "ale.materials.air.eos", "must be one of"),
     ("ale_gamma_one", "ale.materials.air.gamma", "must be > 1"),
+    ("ale_viscosity_kind", "ale.viscosity.kind", "one of: 'scalar', 'monotonic'"),
     ("output_interval_too_long", "run.output_interval", "<= run.end_time"),
     ("dimension_four", "run.dimension", "one of: 2, 3"),
     ("symmetry_axis_z_2d", "boundaries[0].axis", "dimension mismatch"),

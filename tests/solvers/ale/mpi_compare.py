@@ -41,6 +41,11 @@ def _sedov(mode):
     return cfg
 
 
+def _mono(cfg):
+    cfg["viscosity"] = {"kind": "monotonic"}
+    return cfg
+
+
 # name: (config, steps, impulse steps)
 CASES = {
     "sod_x_eulerian": (lambda: sod_config(2, 64, 0, ntrans=4), 40, ()),
@@ -54,7 +59,31 @@ CASES = {
     "open_2d_eulerian": (lambda: _open(2, "eulerian"), 30, ()),
     "open_2d_lagrangian": (lambda: _open(2, "lagrangian"), 30, ()),
     "open_3d_eulerian": (lambda: _open(3, "eulerian"), 12, ()),
+    # monotonic q: its neighbour strain rates from the ghost nodes (walls, images, open faces, cuts)
+    "sedov_3d_lagrangian_mono": (lambda: _mono(_sedov("lagrangian")), 20, (3,)),
+    "periodic_2d_mono": (lambda: _mono(_perturbed_stream(2, 12, periodic(2), "eulerian", [0.3, -0.2])), 30, ()),
+    "open_2d_lagrangian_mono": (lambda: _mono(_open(2, "lagrangian")), 30, ()),
+    # several materials (mixed.py): interface reconstruction reads one neighbour layer of fractions
+    "water_air_2d": (lambda: _water_air(), 40, ()),
+    "square_2d": (lambda: _square(2, 16), 30, ()),
+    "square_3d": (lambda: _square(3, 8), 12, ()),
 }
+
+
+def _water_air():
+    from tests.solvers.ale.test_mixed import water_air_config
+    cfg = water_air_config(n=64)
+    cfg["grid"]["upper"][1] = 4.0 / 64
+    cfg["grid"]["cells"][1] = 4
+    return cfg
+
+
+def _square(dim, n):
+    from tests.solvers.ale.test_mixed import square_config
+    cfg = square_config(n, dim)
+    for r in cfg["regions"]:
+        r["velocity"] = [0.3, -0.2, 0.1][:dim]
+    return cfg
 
 
 def impulse(cfg, step):
@@ -85,6 +114,10 @@ def snapshot(s):
         a = getattr(s, k)
         nodes = a.shape[0] == s.block.nnodes
         out[k] = s._gather_real(a, nodes) if s.dec.parallel else (s.node_field if nodes else s.zone_field)(a)
+    if s.mm is not None:
+        for k in ("vol", "mass", "ener"):
+            a = getattr(s.mm, k)
+            out[f"material_{k}"] = s._gather_real(a, False) if s.dec.parallel else s.zone_field(a)
     res = s.output()
     diag = s.diagnostics()
     if s.dec.rank != 0:

@@ -32,7 +32,8 @@ REPO = Path(__file__).resolve().parents[3]
 @pytest.mark.parametrize("name", list(mc.CASES))
 def test_decomposed_run_equals_one_rank(name):
     """Sod along x / y (2D), Sedov 3D, periodic streams (2D/3D), inflow/outflow faces, in Eulerian
-    and Lagrangian modes (coupling impulses on some steps): within 1e-12 relative of one rank."""
+    and Lagrangian modes (coupling impulses on some steps), scalar and monotonic q: within 1e-12
+    relative of one rank."""
     world = MPI.COMM_WORLD
     r = mc.compare(world, name)
     if world.rank != 0:
@@ -43,7 +44,9 @@ def test_decomposed_run_equals_one_rank(name):
 
 
 @pytest.mark.mpi
-@pytest.mark.parametrize("name", ["sedov_3d_eulerian", "open_2d_lagrangian"])
+@pytest.mark.parametrize("name", ["sedov_3d_eulerian", "open_2d_lagrangian", "sedov_3d_lagrangian_mono",
+                                  "periodic_2d_mono", "open_2d_lagrangian_mono", "water_air_2d", "square_2d",
+                                  "square_3d"])
 def test_decomposed_fields_are_bitwise(name):
     """Gathered nodal forces and masses, halo exchange at every ghost fill: the state arrays and the
     output are the one-rank bits (only the diagnostics' sums over ranks round differently)."""

@@ -81,10 +81,16 @@ def test_configuration_errors():
     cfg["regions"][0]["region"] = "x < 0.5"
     with pytest.raises(ValueError, match=r"zone \(2, 0\).*not covered"):
         AleSolver(None, cfg)
-    cfg = uniform_config(2, 4, [0.0, 0.0], {})
+    # several materials per zone: Eulerian mode only (mixed.py)
+    cfg = uniform_config(2, 4, [0.0, 0.0], {}, mode="lagrangian")
     cfg["materials"]["water"] = {"eos": "stiffened_gas", "gamma": 4.4, "p_inf": 6e8}
     cfg["regions"].append({"material": "water", "region": "x < 0.5", "density": 1000.0, "pressure": 1e5})
-    with pytest.raises(NotImplementedError, match="one material"):
+    with pytest.raises(ValueError, match="several materials .* need mode = 'eulerian'"):
+        AleSolver(None, cfg)
+    cfg = uniform_config(2, 4, [0.0, 0.0], {})
+    cfg["materials"]["vacuum"] = {"eos": "void"}
+    cfg["regions"] = [{"material": "vacuum"}]
+    with pytest.raises(ValueError, match="void only"):
         AleSolver(None, cfg)
 
 

@@ -1,0 +1,674 @@
+"""Several materials per zone for the ALE background (Eulerian mode): volume fractions, void, the
+mixed-zone closure and interface reconstruction (PLIC) in the remap.
+
+State per zone z and material k (arrays shaped (nzones, nmat), so the checkpoint and the ghost
+fills treat them like any zone field): volume ``vol``, mass ``mass``, specific internal energy
+``ener`` (the conserved one, lagging half a step like the zone's ``e``), the half-step EOS shift
+``deh`` and the material pressure/sound speed ``pm``/``cm``.  The zone keeps the sums the hydro
+kernels use: ``M = sum_k mass_k``, ``M e = sum_k mass_k ener_k``, ``V = sum_k vol_k``.
+A material named with ``eos = "void"`` has volume and nothing else (no mass, energy or pressure).
+
+One step (solver.py calls these in this order)
+----------------------------------------------
+1. Forces at t^n use the zone pressure ``p = (1 - f_void) sum_k a_k p_k / sum_k a_k``,
+   ``a_k = vol_k / K_k``, ``K = rho c^2``: the materials' linearised equilibrium pressure (the one
+   whose work ``p dV`` equals ``sum_k p_k dV_k`` under the volume split of step 2), scaled by the
+   share of the zone that is not void; and the largest sound speed of the materials present (more
+   than ``TRACE`` of the zone).
+2. Lagrange step, :func:`lagrange_split`: the zone's volume change ``dV`` is shared in proportion
+   to the materials' compressibilities, ``dV_k = dV (vol_k / K_k) / sum_j (vol_j / K_j)`` with
+   ``K = rho c^2`` (equal pressure changes: a zone in pressure equilibrium stays in it; equal strain
+   for traces, or if a material would lose half its volume); with void, compression closes the void
+   first and expansion goes to the materials.  The zone's compatible energy change ``dE = M e_new -
+   sum_k mass_k ener_k`` is shared in proportion to each material's work, ``w_k = (p_k + q) dV_k /
+   sum_j (p_j + q) dV_j`` (by mass if the shares would have mixed signs), so the sum is exactly the
+   zone's change.
+3. Remap, one sweep per direction, :func:`sweep_fluxes` + :func:`sweep_zones`: each face's swept
+   volume ``SV`` is split over the materials of its donor zone by the exact volume of the donor's
+   piecewise-linear interface (Youngs' normals from the fraction field, the plane placed to hold the
+   fraction; solvers/ale/plic.py) inside the slab of width ``|SV| / V_donor`` at that face.  With
+   several materials the interfaces are nested (onion skins in material order): the plane of the
+   cumulative fraction ``F_k = sum_{j <= k} f_j`` cuts off materials 0..k, material k gets the
+   difference of two nested cuts (kept monotone and within what the donor holds, so no material
+   volume turns negative).  Mass and energy go with the material at the donor's material density and
+   energy; where the donor and its two neighbours along the sweep hold one and the same material the
+   second-order limited flux of remap.py is used instead, so single-material regions keep their
+   accuracy.  Volume, mass and energy of every material are conserved to round-off.
+4. After the remap, :func:`relax` moves each mixed zone towards pressure equilibrium: the
+   linearised equilibrium ``pbar = sum(vol_k p_k / K_k) / sum(vol_k / K_k)``, ``K = rho c^2``,
+   ``dvol_k = vol_k (p_k - pbar) / K_k`` (sum 0; scaled so no material loses more than half its
+   volume), with the work ``-pbar dvol_k`` exchanged between the materials (sum 0: the zone's energy
+   is untouched).  Void takes no part (it has no pressure): a material next to void expands into it
+   through the Lagrange step (step 2) and the advection, at the speed its nodes move.  Two passes
+   per step.
+
+References: D. L. Youngs, "Time-dependent multi-material flow with large fluid distortion" (1982);
+D. J. Benson, "Volume of fluid interface reconstruction methods for multi-material problems",
+Appl. Mech. Rev. 55 (2002) (nested dissection); the seed's "Time Splitting ALE" step.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from solvers.ale import eos as _eos
+from solvers.ale import plic
+from solvers.ale.remap import limiter
+
+VOID = -1
+TRACE = 1e-9       # volume fraction below which a material is a trace: no EOS call, no say in c
+PURE = 1e-12       # a zone whose other materials hold less than this fraction is pure
+RELAX_PASSES = 2
+RELAX_PASSES_INITIAL = 30   # initial mixed zones may be far from equilibrium
+
+# failure reasons
+BAD_MATERIAL_STATE = 5
+
+
+@njit(cache=True)
+def _present(vol, mass, code, z, k, vz):
+    return code[k] != VOID and mass[z, k] > 0.0 and vol[z, k] > TRACE * vz
+
+
+@njit(cache=True)
+def zone_eos(vol, mass, ener, deh, pm, cm, code, par, M, V, rho, p, c, e, de_h, zlo, zhi, zs):
+    """Material states, zone pressure (volume-weighted), sound speed (largest present), rho = M/V,
+    zone e and de_h as mass-weighted sums.  Returns (zone, material) of an invalid state or (-1, -1)."""
+    nm = vol.shape[1]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                vz = 0.0
+                for m in range(nm):
+                    vz += vol[z, m]
+                pa = 0.0
+                asum = 0.0
+                vvoid = 0.0
+                cmax = 0.0
+                Mz = 0.0
+                Ez = 0.0
+                Dz = 0.0
+                for m in range(nm):
+                    if _present(vol, mass, code, z, m, vz):
+                        r = mass[z, m] / vol[z, m]
+                        pk, ck, ok = _eos.state(code[m], par[m], r, ener[z, m] + deh[z, m])
+                        if not ok:
+                            return z, m
+                        pm[z, m] = pk
+                        cm[z, m] = ck
+                        a = vol[z, m] / (r * ck * ck)
+                        pa += a * pk
+                        asum += a
+                        if ck > cmax:
+                            cmax = ck
+                    else:
+                        pm[z, m] = 0.0
+                        cm[z, m] = 0.0
+                        if code[m] == VOID:
+                            vvoid += vol[z, m]
+                    Mz += mass[z, m]
+                    Ez += mass[z, m] * ener[z, m]
+                    Dz += mass[z, m] * deh[z, m]
+                # the materials' linearised equilibrium pressure (compressibility-weighted: the
+                # pressure whose work matches the volume split of lagrange_split); void: no pressure
+                peq = pa / asum if asum > 0.0 else 0.0
+                # traces carry the pressure of the rest (they neither push nor pull)
+                for m in range(nm):
+                    if code[m] != VOID and mass[z, m] > 0.0 and not vol[z, m] > TRACE * vz:
+                        pm[z, m] = peq
+                M[z] = Mz
+                if Mz > 0.0:
+                    e[z] = Ez / Mz
+                    de_h[z] = Dz / Mz
+                    rho[z] = Mz / V[z]
+                    p[z] = peq * (1.0 - vvoid / vz)
+                    c[z] = cmax
+                else:
+                    e[z] = 0.0
+                    de_h[z] = 0.0
+                    rho[z] = 0.0
+                    p[z] = 0.0
+                    c[z] = 0.0
+    return -1, -1
+
+
+@njit(cache=True)
+def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs):
+    """Share the zone's Lagrange-step volume and energy change over its materials (real zones;
+    V is the Lagrangian volume, e the updated zone energy).  See the module docstring."""
+    nm = vol.shape[1]
+    dvk = np.empty(nm)
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                vold = 0.0
+                vvoid = 0.0
+                for m in range(nm):
+                    vold += vol[z, m]
+                    if code[m] == VOID:
+                        vvoid += vol[z, m]
+                dv = V[z] - vold
+                vmat = vold - vvoid
+                if not (M[z] > 0.0 and vmat > 0.0):  # void only
+                    for m in range(nm):
+                        vol[z, m] *= V[z] / vold
+                        deh[z, m] = 0.0
+                    continue
+                # void: compression closes it first, expansion goes to the materials
+                dvoid = 0.0
+                if dv < 0.0 and vvoid > 0.0:
+                    dvoid = dv if -dv < vvoid else -vvoid
+                dmat = dv - dvoid
+                # materials: traces by equal strain, the others in proportion to their
+                # compressibility vol/K (K = rho c^2): equal pressure changes, so a zone in pressure
+                # equilibrium stays in it
+                rest = dmat
+                asum = 0.0
+                for m in range(nm):
+                    dvk[m] = 0.0
+                    if code[m] == VOID:
+                        continue
+                    if cm[z, m] > 0.0 and mass[z, m] > 0.0:
+                        asum += vol[z, m] * vol[z, m] / (mass[z, m] * cm[z, m] * cm[z, m])
+                    else:
+                        dvk[m] = vol[z, m] * dmat / vmat
+                        rest -= dvk[m]
+                equal = not asum > 0.0
+                if not equal:
+                    for m in range(nm):
+                        if code[m] != VOID and cm[z, m] > 0.0 and mass[z, m] > 0.0:
+                            dvk[m] = rest * (vol[z, m] * vol[z, m] / (mass[z, m] * cm[z, m] * cm[z, m])) / asum
+                            if vol[z, m] + dvk[m] < 0.5 * vol[z, m]:
+                                equal = True
+                if equal:
+                    for m in range(nm):
+                        if code[m] != VOID:
+                            dvk[m] = vol[z, m] * dmat / vmat
+                # energy: shared by p dV work (by mass if the shares would have mixed signs)
+                qz = q[z]
+                dE = M[z] * e[z]
+                den = 0.0
+                for m in range(nm):
+                    dE -= mass[z, m] * ener[z, m]
+                    if code[m] != VOID and mass[z, m] > 0.0:
+                        den += (pm[z, m] + qz) * dvk[m]
+                use_work = den != 0.0
+                for m in range(nm):
+                    if code[m] != VOID and mass[z, m] > 0.0 and (pm[z, m] + qz) * dvk[m] * den < 0.0:
+                        use_work = False
+                for m in range(nm):
+                    if code[m] == VOID:
+                        vol[z, m] += dvoid * vol[z, m] / vvoid if vvoid > 0.0 else 0.0
+                        deh[z, m] = 0.0
+                        continue
+                    vol[z, m] += dvk[m]
+                    if not mass[z, m] > 0.0:
+                        deh[z, m] = 0.0
+                        continue
+                    w = (pm[z, m] + qz) * dvk[m] / den if use_work else mass[z, m] / M[z]
+                    ener[z, m] += w * dE / mass[z, m]
+                    deh[z, m] = -(pm[z, m] + qz) * dvk[m] / (2.0 * mass[z, m])
+
+
+@njit(cache=True)
+def relax(vol, mass, ener, deh, code, par, zlo, zhi, zs, passes):
+    """Pressure relaxation of the mixed zones (see the module docstring); the zone's volume, mass
+    and energy are unchanged."""
+    nm = vol.shape[1]
+    pk = np.empty(nm)
+    kk = np.empty(nm)
+    dv = np.empty(nm)
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                for _ in range(passes):
+                    vz = 0.0
+                    for m in range(nm):
+                        vz += vol[z, m]
+                    npres = 0
+                    a = 0.0
+                    b = 0.0
+                    for m in range(nm):
+                        if _present(vol, mass, code, z, m, vz):
+                            r = mass[z, m] / vol[z, m]
+                            p_, c_, ok = _eos.state(code[m], par[m], r, ener[z, m] + deh[z, m])
+                            if not ok:
+                                break
+                            pk[m] = p_
+                            kk[m] = r * c_ * c_
+                            a += vol[z, m] * p_ / kk[m]
+                            b += vol[z, m] / kk[m]
+                            npres += 1
+                        else:
+                            pk[m] = 0.0
+                            kk[m] = 0.0
+                    if npres < 2:
+                        break
+                    pbar = a / b
+                    th = 1.0
+                    for m in range(nm):
+                        dv[m] = 0.0
+                        if kk[m] > 0.0:
+                            dv[m] = vol[z, m] * (pk[m] - pbar) / kk[m]
+                            if dv[m] < -0.5 * vol[z, m]:
+                                t = 0.5 * vol[z, m] / (-dv[m])
+                                if t < th:
+                                    th = t
+                    for m in range(nm):
+                        if kk[m] > 0.0:
+                            d_ = th * dv[m]
+                            vol[z, m] += d_
+                            ener[z, m] -= pbar * d_ / mass[z, m]
+
+
+@njit(cache=True)
+def cumulative_fractions(vol, FC):
+    """FC[k, z] = sum_{j <= k} vol[z, j] / sum_j vol[z, j] (all zones; 0 for an empty zone)."""
+    nz, nm = vol.shape
+    for z in range(nz):
+        vz = 0.0
+        for m in range(nm):
+            vz += vol[z, m]
+        acc = 0.0
+        for m in range(nm - 1):
+            acc += vol[z, m]
+            FC[m, z] = acc / vz if vz > 0.0 else 0.0
+
+
+@njit(cache=True)
+def sweep_fluxes(vol, mass, ener, code, FC, rho, e, M, V, SV, F, ES, VF, MF, EF, d, s, h, zlo, zhi, zs):
+    """Material volume, mass and energy fluxes (VF, MF, EF: (nz, nm), + towards +d) of the lower
+    d-faces of the zones in range, and the zone totals F (mass) and ES (face specific energy) that
+    the nodal part of the sweep and the boundary balances use."""
+    nm = vol.shape[1]
+    dim = h.shape[0]
+    tk = np.empty(nm)
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                sv = SV[z]
+                for m in range(nm):
+                    VF[z, m] = 0.0
+                    MF[z, m] = 0.0
+                    EF[z, m] = 0.0
+                if sv > 0.0:
+                    u = z - s
+                    sg = 0.5
+                    upper = True
+                else:
+                    u = z
+                    sg = -0.5
+                    upper = False
+                if sv == 0.0:
+                    F[z] = 0.0
+                    ES[z] = e[u]
+                    continue
+                vu = 0.0
+                for m in range(nm):
+                    vu += vol[u, m]
+                # the one material of the donor, if it is pure
+                pure = -1
+                for m in range(nm):
+                    if vol[u, m] >= (1.0 - PURE) * vu:
+                        pure = m
+                if pure >= 0:
+                    same = (vol[u - s, pure] >= (1.0 - PURE) * (vol[u - s, :].sum())
+                            and vol[u + s, pure] >= (1.0 - PURE) * (vol[u + s, :].sum()))
+                    VF[z, pure] = sv
+                    if code[pure] == VOID:
+                        F[z] = 0.0
+                        ES[z] = 0.0
+                        continue
+                    if same:  # second order, as remap.sweep_fluxes
+                        ru = rho[u]
+                        dr = limiter(ru - rho[u - s], rho[u + s] - ru)
+                        fr = abs(sv) / V[u]
+                        if fr > 1.0:
+                            fr = 1.0
+                        f = sv * (ru + sg * dr * (1.0 - fr))
+                        eu = e[u]
+                        de = limiter(eu - e[u - s], e[u + s] - eu)
+                        fm = abs(f) / M[u]
+                        if fm > 1.0:
+                            fm = 1.0
+                        es = eu + sg * de * (1.0 - fm)
+                    else:
+                        f = sv * mass[u, pure] / vol[u, pure]
+                        es = ener[u, pure]
+                    MF[z, pure] = f
+                    EF[z, pure] = f * es
+                    F[z] = f
+                    ES[z] = es
+                    continue
+                # mixed donor: nested PLIC cuts of the slab at the face
+                fr = abs(sv) / vu
+                if fr > 1.0:
+                    fr = 1.0
+                w = fr * h[d]
+                gprev = 0.0
+                for m in range(nm - 1):
+                    fc = FC[m, u]
+                    if not vol[u, m] > 0.0:
+                        g = gprev
+                    elif fc >= 1.0:
+                        g = 1.0
+                    else:
+                        if dim == 2:
+                            nx, ny = plic.youngs_normal_2d(FC[m], u, zs[0], zs[1], h[0], h[1])
+                            g = plic.slab_fraction_2d(nx, ny, fc, h[0], h[1], d, upper, w)
+                        else:
+                            nx, ny, nz_ = plic.youngs_normal_3d(FC[m], u, zs[0], zs[1], zs[2], h[0], h[1], h[2])
+                            g = plic.slab_fraction_3d(nx, ny, nz_, fc, h[0], h[1], h[2], d, upper, w)
+                    if g < gprev:
+                        g = gprev
+                    if g > 1.0:
+                        g = 1.0
+                    tk[m] = (g - gprev) * abs(sv)
+                    gprev = g
+                tk[nm - 1] = (1.0 - gprev) * abs(sv)
+                # never more than the donor holds: the excess goes to materials with room left
+                exc = 0.0
+                room = 0.0
+                for m in range(nm):
+                    if tk[m] > vol[u, m]:
+                        exc += tk[m] - vol[u, m]
+                        tk[m] = vol[u, m]
+                    room += vol[u, m] - tk[m]
+                if exc > 0.0 and room > 0.0:
+                    for m in range(nm):
+                        tk[m] += exc * (vol[u, m] - tk[m]) / room
+                ftot = 0.0
+                etot = 0.0
+                sgn = 1.0 if sv > 0.0 else -1.0
+                for m in range(nm):
+                    vf = sgn * tk[m]
+                    VF[z, m] = vf
+                    if code[m] != VOID and vol[u, m] > 0.0 and mass[u, m] > 0.0:
+                        mf = vf * mass[u, m] / vol[u, m]
+                        MF[z, m] = mf
+                        EF[z, m] = mf * ener[u, m]
+                        ftot += mf
+                        etot += mf * ener[u, m]
+                F[z] = ftot
+                ES[z] = etot / ftot if ftot != 0.0 else e[u]
+
+
+@njit(cache=True)
+def sweep_zones(vol, mass, ener, VF, MF, EF, M, V, rho, e, F, ES, SV, s, zlo, zhi, zs):
+    """Conservative update of every material of the zones in range, and of the zone (M = sum of the
+    material masses).  Written as increments so that a sweep without flux changes no bit (the sweep
+    order then does not matter for a flow along one axis)."""
+    nm = vol.shape[1]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                Mz = 0.0
+                for m in range(nm):
+                    vn = vol[z, m] + (VF[z, m] - VF[z + s, m])
+                    fl = MF[z, m]
+                    fh = MF[z + s, m]
+                    mn = mass[z, m] + (fl - fh)
+                    # round-off only: the fluxes never take more than a donor holds
+                    if vn < 0.0:
+                        vn = 0.0
+                    if mn > 0.0:
+                        en = ener[z, m]
+                        ener[z, m] = en + ((EF[z, m] - fl * en) - (EF[z + s, m] - fh * en)) / mn
+                    else:
+                        mn = 0.0
+                        ener[z, m] = 0.0
+                    vol[z, m] = vn
+                    mass[z, m] = mn
+                    Mz += mn
+                fl = F[z]
+                fh = F[z + s]
+                if Mz > 0.0:
+                    ez = e[z]
+                    e[z] = ez + (fl * (ES[z] - ez) - fh * (ES[z + s] - ez)) / Mz
+                else:
+                    e[z] = 0.0
+                vz = V[z] + SV[z] - SV[z + s]
+                V[z] = vz
+                M[z] = Mz
+                rho[z] = Mz / vz
+
+
+@njit(cache=True)
+def add_energy(ener, mass, code, de, zlo, zhi, zs):
+    """ener_k += de[z] for the materials with mass (a zone-level specific energy increment)."""
+    nm = ener.shape[1]
+    for i in range(zlo[0], zhi[0]):
+        for j in range(zlo[1], zhi[1]):
+            for k in range(zlo[2], zhi[2]):
+                z = i * zs[0] + j * zs[1] + k * zs[2]
+                for m in range(nm):
+                    if code[m] != VOID and mass[z, m] > 0.0:
+                        ener[z, m] += de[z]
+
+
+# ------------------------------------------------------------------------------------------------
+# the solver's side
+# ------------------------------------------------------------------------------------------------
+class Materials:
+    """Material state of an :class:`~solvers.ale.solver.AleSolver` with several materials (or void)
+    and the calls the solver makes at each stage of its step."""
+
+    FIELDS = ("vol", "mass", "ener", "deh")   # checkpointed (pm, cm follow from them)
+
+    def __init__(self, s, config: dict):
+        used = {r["material"] for r in config["regions"]}
+        self.names = [n for n in config["materials"] if n in used]
+        nm = len(self.names)
+        self.code = np.zeros(nm, np.int64)
+        self.par = np.zeros((nm, _eos.NPAR))
+        for k, name in enumerate(self.names):
+            props = dict(config["materials"][name])
+            eos_name = props.pop("eos")
+            if eos_name == "void":
+                self.code[k] = VOID
+                continue
+            code, par = _eos.eos_params(eos_name, props)
+            self.code[k] = int(code)
+            self.par[k] = par
+        if np.all(self.code == VOID):
+            raise ValueError("the ALE regions hold void only: at least one region needs a material with an EOS")
+        B = s.block
+        nz = B.nzones
+        self.nm = nm
+        for f in self.FIELDS + ("pm", "cm", "VF", "MF", "EF"):
+            setattr(self, f, np.zeros((nz, nm)))
+        self.FC = np.zeros((max(nm - 1, 1), nz))
+        self.h = np.ascontiguousarray(B.h[: s.dim], dtype=np.float64)
+        self.samples = int(config.get("fraction_samples") or (8 if s.dim == 2 else 4))
+        self.has_void = bool(np.any(self.code == VOID))
+
+    # ---- initial state -------------------------------------------------------------------------
+    def sample(self, s, cfg: dict):
+        """Zone-average density, specific energy and velocity of the real zones from the regions
+        evaluated at ``samples^dim`` points per zone; keeps the per-material fractions, densities
+        and energies for :meth:`set_initial`."""
+        from orchestrator.expressions import compile_expression
+
+        B, dim = s.block, s.dim
+        real = B.real_zone
+        centres = B.zone_centres()[real][:, :dim]
+        nreal = centres.shape[0]
+        n = self.samples
+        off1 = ((np.arange(n) + 0.5) / n - 0.5)
+        offs = np.stack(np.meshgrid(*([off1] * dim), indexing="ij"), axis=-1).reshape(-1, dim) * B.h[:dim]
+        ns = offs.shape[0]
+        pts = (centres[:, None, :] + offs[None, :, :]).reshape(-1, dim)
+        names = ("x", "y", "z")[:dim]
+        regions = cfg["regions"]
+        ridx = np.full(pts.shape[0], -1, np.int64)
+        for i, r in enumerate(regions):
+            if r.get("region"):
+                mask = np.broadcast_to(np.asarray(compile_expression(r["region"], names=names)(*pts.T),
+                                                  dtype=bool), (pts.shape[0],))
+                ridx[mask] = i
+            else:
+                ridx[:] = i
+        missing = bool(np.any(ridx < 0))
+        if s.dec.parallel and s.dec.sum(np.array([float(missing)]))[0] > 0.0 and not missing:
+            raise ValueError("a zone of another rank is not covered by any region")
+        if missing:
+            first = int(np.flatnonzero(ridx < 0)[0]) // ns
+            z = np.flatnonzero(real)[first]
+            raise ValueError(f"zone {B.zone_ijk(z)} (centre {centres[first]}) is not covered by any region")
+        nr = len(regions)
+        r_mat = np.array([self.names.index(r["material"]) for r in regions], np.int64)
+        r_rho = np.zeros(nr)
+        r_e = np.zeros(nr)
+        r_vel = np.zeros((nr, dim))
+        for i, r in enumerate(regions):
+            k = r_mat[i]
+            r_vel[i] = np.asarray(r.get("velocity", [0.0] * dim), np.float64)
+            if self.code[k] == VOID:
+                continue
+            r_rho[i] = float(r["density"])
+            if "pressure" in r:
+                r_e[i] = float(_eos.energy_from_pressure(self.code[k], self.par[k], r_rho[i], float(r["pressure"])))
+            else:
+                r_e[i] = float(r["specific_internal_energy"])
+        mat = r_mat[ridx].reshape(nreal, ns)
+        rho = r_rho[ridx].reshape(nreal, ns)
+        ee = r_e[ridx].reshape(nreal, ns)
+        vel = r_vel[ridx].reshape(nreal, ns, dim)
+        self._f0 = np.zeros((nreal, self.nm))
+        self._rho0 = np.zeros((nreal, self.nm))
+        self._e0 = np.zeros((nreal, self.nm))
+        for k in range(self.nm):
+            w = mat == k
+            cnt = w.sum(axis=1)
+            rs = (rho * w).sum(axis=1)
+            self._f0[:, k] = cnt / ns
+            with np.errstate(invalid="ignore", divide="ignore"):
+                self._rho0[:, k] = np.where(cnt > 0, rs / np.maximum(cnt, 1), 0.0)
+                self._e0[:, k] = np.where(rs > 0, (rho * ee * w).sum(axis=1) / np.where(rs > 0, rs, 1.0), 0.0)
+        mz = rho.sum(axis=1)
+        zrho = mz / ns
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ze = np.where(mz > 0, (rho * ee).sum(axis=1) / np.where(mz > 0, mz, 1.0), 0.0)
+            zvel = np.where(mz[:, None] > 0, (rho[..., None] * vel).sum(axis=1) / np.where(mz > 0, mz, 1.0)[:, None],
+                            vel.mean(axis=1))
+        return zrho, ze, zvel
+
+    def set_initial(self, s) -> None:
+        """Material volumes and masses from the sampled fractions and the zone volumes; mixed zones
+        relaxed to pressure equilibrium."""
+        real = s.block.real_zone
+        Vr = s.V[real]
+        self.vol[real] = self._f0 * Vr[:, None]
+        self.mass[real] = self._rho0 * self.vol[real]
+        self.ener[real] = self._e0
+        relax(self.vol, self.mass, self.ener, self.deh, self.code, self.par, s.zr[0], s.zr[1], s.block.zs,
+              RELAX_PASSES_INITIAL)
+        self._e0 = self.ener[real]
+        s.M[real] = self.mass[real].sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s.e[real] = np.where(s.M[real] > 0, (self.mass[real] * self._e0).sum(axis=1)
+                                 / np.where(s.M[real] > 0, s.M[real], 1.0), 0.0)
+        s.rho[real] = s.M[real] / Vr
+        del self._f0, self._rho0, self._e0
+        self.fill(s)
+
+    # ---- the step --------------------------------------------------------------------------------
+    def fill(self, s) -> None:
+        s.bc.fill_zones([self.vol, self.mass, self.ener, self.deh])
+
+    def update_eos(self, s) -> None:
+        bad, k = zone_eos(self.vol, self.mass, self.ener, self.deh, self.pm, self.cm, self.code, self.par,
+                          s.M, s.V, s.rho, s.p, s.c, s.e, s.de_h, s.zr[0], s.zr[1], s.block.zs)
+        if bad >= 0:
+            self._bad_state(s, bad, k)
+
+    def _bad_state(self, s, z: int, k: int) -> None:
+        ijk = s.block.zone_ijk(z)
+        vz = self.vol[z].sum()
+        r = self.mass[z, k] / self.vol[z, k]
+        st = (f"rho={r:.6g} kg/m^3, e={self.ener[z, k]:.6g} J/kg (EOS at {self.ener[z, k] + self.deh[z, k]:.6g}), "
+              f"volume fraction {self.vol[z, k] / vz:.6g}")
+        s._fail(f"ALE zone {ijk}: invalid thermodynamic state of material {self.names[k]!r} "
+                f"({_eos.describe(int(self.code[k]), self.par[k])}) at step {s.step}, t={s.time:.6g} s; {st}")
+
+    def deposit_energy(self, s, de: np.ndarray) -> None:
+        """A zone-level specific energy increment (real zones) to every material; ghosts refilled."""
+        add_energy(self.ener, self.mass, self.code, de, s.zr[0], s.zr[1], s.block.zs)
+        s.bc.fill_zones([self.ener])
+
+    def lagrange_step(self, s) -> None:
+        """After lagrangian_volumes (s.V = Lagrangian volumes) and the zone energy update."""
+        lagrange_split(self.vol, self.mass, self.ener, self.deh, self.pm, self.cm, self.code, s.M, s.e, s.V, s.q,
+                       s.zr[0], s.zr[1], s.block.zs)
+
+    def relax_pressures(self, s) -> None:
+        relax(self.vol, self.mass, self.ener, self.deh, self.code, self.par, s.zr[0], s.zr[1], s.block.zs,
+              RELAX_PASSES)
+
+    def sweep(self, s, d: int) -> None:
+        """Zone part of one sweep: material fluxes (zone totals in s.F, s.ES), balances of the open
+        faces, conservative update."""
+        B = s.block
+        st = int(B.zs[d])
+        if self.nm > 1:
+            cumulative_fractions(self.vol, self.FC)
+        lo, hi = s.zr[0].copy(), s.zr[1].copy()
+        hi[d] += 1
+        sweep_fluxes(self.vol, self.mass, self.ener, self.code, self.FC, s.rho, s.e, s.M, s.V, s.SV[d],
+                     s.F, s.ES, self.VF, self.MF, self.EF, d, st, self.h, lo, hi, B.zs)
+        s.bc.fill_zones([s.F, s.ES, self.VF, self.MF, self.EF], face_dir=d)
+        s._boundary_fluxes(d)
+        sweep_zones(self.vol, self.mass, self.ener, self.VF, self.MF, self.EF, s.M, s.V, s.rho, s.e, s.F, s.ES,
+                    s.SV[d], st, s.zr[0], s.zr[1], B.zs)
+
+    # ---- output ----------------------------------------------------------------------------------
+    def fractions(self) -> np.ndarray:
+        vz = self.vol.sum(axis=1)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(vz[:, None] > 0, self.vol / np.where(vz > 0, vz, 1.0)[:, None], 0.0)
+
+    def densities(self) -> np.ndarray:
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.vol > 0, self.mass / np.where(self.vol > 0, self.vol, 1.0), 0.0)
+
+    def cell_columns(self):
+        """(name, zone array) pairs written with the zone fields."""
+        f = self.fractions()
+        r = self.densities()
+        cols = []
+        for k, name in enumerate(self.names):
+            cols.append((f"volume_fraction_{name}", np.ascontiguousarray(f[:, k])))
+            if self.code[k] != VOID:
+                cols.append((f"density_{name}", np.ascontiguousarray(r[:, k])))
+        return cols
+
+    def totals(self, s) -> dict:
+        real = s.block.real_zone
+        v = self.vol[real].sum(axis=0)
+        m = self.mass[real].sum(axis=0)
+        buf = np.concatenate([v, m])
+        if s.dec.parallel:
+            buf = s.dec.sum(buf)
+        out = {}
+        for k, name in enumerate(self.names):
+            out[f"volume_{name}"] = float(buf[k])
+            if self.code[k] != VOID:
+                out[f"mass_{name}"] = float(buf[self.nm + k])
+        return out
+
+
+def _flush():
+    from solvers.ale import remap as _r
+    from solvers.numba_cache import flush_stale_cache
+
+    flush_stale_cache([_present, zone_eos, lagrange_split, relax, cumulative_fractions, sweep_fluxes,
+                       sweep_zones, add_energy], [_eos.__file__, plic.__file__, _r.__file__],
+                      "mixed.deps.sha256")
+
+
+_flush()
