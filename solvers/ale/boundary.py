@@ -53,6 +53,34 @@ class Boundaries:
         self.wall_vel = np.concatenate(wv) if wv else np.zeros(0, np.float64)
         self.inflow_nodes = np.concatenate(inn) if inn else np.zeros(0, np.int64)
         self.inflow_vel = np.concatenate(ivel) if ivel else np.zeros((0, dim))
+        # an inflow node on a wall (the face's edge) keeps the wall's normal velocity: its target
+        # velocity is final before the wall pass, so the reaction and its work are recorded once,
+        # on the velocity the node ends with (recorded in two stages, the work of the first stage
+        # would use the inflow's normal component the wall then removes)
+        if self.inflow_nodes.size and self.wall_nodes.size:
+            pos = {int(n): t for t, n in enumerate(self.inflow_nodes)}
+            for n, c, wv_ in zip(self.wall_nodes, self.wall_comp, self.wall_vel):
+                t = pos.get(int(n))
+                if t is not None:
+                    self.inflow_vel[t, c] = wv_
+        # inflow ghost nodes on the plane of a wall: (nodes, wall direction, wall normal velocity)
+        dst, src, _ = self.nmap_vec
+        pres = dst[src < 0]
+        ijk = np.stack(np.unravel_index(pres, block.ndims), axis=1)
+        iw, cw, vw = [], [], []
+        for d in range(dim):
+            for s in range(2):
+                if block.face[d, s] != WALL:
+                    continue
+                plane = 2 if s == 0 else int(block.n3[d]) + 2
+                on = pres[ijk[:, d] == plane]
+                up = block.piston.get((d, s), 0.0)
+                iw.append(on)
+                cw.append(np.full(on.size, d, np.int64))
+                vw.append(np.full(on.size, up if s == 0 else -up))
+        self._inflow_wall_nodes = (np.concatenate(iw) if iw else np.zeros(0, np.int64),
+                                   np.concatenate(cw) if cw else np.zeros(0, np.int64),
+                                   np.concatenate(vw) if vw else np.zeros(0))
 
     def constrain(self, v, v_old, m, acc) -> None:
         """Impose the wall, piston and inflow velocities (in place); reactions summed into acc (see
@@ -180,11 +208,17 @@ class Boundaries:
 
     def fill_nodes_vector(self, v, inflow=True):
         """Ghost nodes of a nodal vector (velocity-like: normal component mirrored at walls;
-        inflow ghosts get the inflow velocity)."""
+        inflow ghosts get the inflow velocity, mirrored like any other value where the inflow's
+        ghost layer continues beyond a wall, and with the wall's normal velocity on the wall's plane,
+        so that the extended wall stays a wall for the inflow's ghost zones too)."""
         dst, src, sign = self.nmap_vec
         copy_rows_signed(v, dst, src, sign)
         for (d, s), st in self.b.inflow.items():
-            v[dst[src == -1 - (2 * d + s)]] = np.asarray(st["velocity"], np.float64) if inflow else 0.0
+            sel = src == -1 - (2 * d + s)
+            v[dst[sel]] = np.asarray(st["velocity"], np.float64) * sign[sel] if inflow else 0.0
+        if inflow and self._inflow_wall_nodes[0].size:
+            nodes, comp, vel = self._inflow_wall_nodes
+            v[nodes, comp] = vel
         if self.halo is not None:
             self.halo.nodes([v])
 

@@ -198,9 +198,13 @@ class AleSolver:
         touch = np.any(B.zkind[zn] == Z_OPEN, axis=1) & B.owned[cand]
         self._open_nodes = cand[touch]
         self._open_nodes_z = np.ascontiguousarray(zn[touch])
-        # zones of the box (real here or, beyond a cut, on the neighbour rank; not periodic images)
+        # zones of real fluid: real here, beyond a cut on the neighbour rank, or periodic images (a
+        # real zone across the box, whose share of a boundary node's kinetic-energy defect it gets
+        # through the image node): the rest of an open-boundary node's zones are open ghosts
         inbox = np.ones(B.zdims, bool)
         for d in range(dim):
+            if periodic[d]:
+                continue
             gi = B.offset[d] + np.arange(B.zdims[d]) - GHOST
             shape = [1, 1, 1]
             shape[d] = B.zdims[d]
