@@ -22,3 +22,21 @@ def test_bench_sod_quick(tmp_path):
 def test_bench_unknown_name():
     r = immerse("bench", "nonsense")
     assert r.returncode == 2 and "bench NAME = 'nonsense'" in r.stderr
+
+
+def test_bench_advect_quick(tmp_path):
+    """Two-material bench: the square's symmetric difference falls with the mesh, volumes are kept,
+    the water-air tube's interface sits within 2 cells; the cost of two materials is reported."""
+    out = tmp_path / "bench-advect.json"
+    r = immerse("bench", "advect", "--quick", "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(out.read_text())["results"]
+    sq = [x for x in res if x["name"] == "advected_square"]
+    assert [x["params"]["zones_per_side"] for x in sq] == [32, 64]
+    assert sq[1]["value"] < 0.6 * sq[0]["value"]
+    assert all(x["params"]["volume_drift_rel"] <= 1e-12 for x in sq)
+    wa = [x for x in res if x["name"] == "water_air_shock_tube"]
+    assert [x["params"]["zones"] for x in wa] == [200, 400]
+    assert all(x["params"]["interface_position_error_cells"] <= 2.0 for x in wa)
+    ball = {x["params"]["materials"]: x for x in res if x["name"] == "advected_ball_3d"}
+    assert set(ball) == {"one_material", "two_materials"} and ball["two_materials"]["params"]["mixed_zone_share"] > 0
