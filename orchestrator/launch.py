@@ -155,9 +155,12 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     proc = subprocess.Popen(cmd, env=env, start_new_session=True)
     watch = RankWatch(out)
     failed: list[str] = []
+    died_first: list[str] = []  # ranks seen dead before any rank reported an error
     try:
         while proc.poll() is None:
             failed = list(watch.wait(50))
+            if failed and not _error_reports(out):
+                died_first = failed
             if failed or _error_reports(out):
                 # let a rank that is reporting an error finish its message, then end the job
                 try:
@@ -178,7 +181,12 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     reports = _error_reports(out)
     if rc == 0 and not failed and not reports:
         return 0
-    if reports:
+    silent = [r for r in died_first if not any(rep.startswith(r + ":") for rep in reports)]
+    if reports and silent:
+        # a rank killed without a word (signal, OOM killer) is the cause; the others' reports (MPI
+        # errors of a neighbour in a halo exchange, ...) are its consequences
+        why = f"{silent[0]} died first (killed by a signal or exited without a message); then: " + "; ".join(reports)
+    elif reports:
         why = "; ".join(reports)
     elif failed:
         why = f"{failed[0]} died first (killed by a signal or exited without a message)"

@@ -85,3 +85,63 @@ def test_physical_failure_names_element_step_time(tmp_path, run_immerse):
     assert r.returncode != 0
     assert "lagrange rank 0" in r.stderr
     assert "element" in r.stderr and "step" in r.stderr and "t=" in r.stderr, r.stderr
+
+
+def _ale_case(tmp_path, name, **replace):
+    case = tmp_path / "case"
+    shutil.copytree(CASES / name, case, ignore=shutil.ignore_patterns("out"))
+    text = (case / "case.toml").read_text()
+    for a, b in replace.items():
+        assert a in text, a
+        text = text.replace(a, b)
+    (case / "case.toml").write_text(text)
+    return case
+
+
+def test_sigkill_of_an_ale_rank(tmp_path):
+    """The background on 2 ranks: SIGKILL of ALE rank 1 ends the job within 30 s, non-zero, naming
+    the role and rank; the completed output steps stay readable."""
+    case = _ale_case(tmp_path, "sedov_2d", **{"end_time = 1.0": "end_time = 100.0",
+                                             "output_interval = 0.25": "output_interval = 0.01"})
+    out = tmp_path / "out"
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
+                             "--ranks", "ale=2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, env=env)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline:
+            steps = list((out / "steps").glob("ale_[0-9]*.h5")) if (out / "steps").is_dir() else []
+            if len(steps) >= 3 and "ale 1" in _pids(out):
+                break
+            time.sleep(0.2)
+        else:
+            raise AssertionError("run did not produce output in time")
+        t_kill = time.time()
+        os.kill(_pids(out)["ale 1"], signal.SIGKILL)
+        stdout, stderr = proc.communicate(timeout=30)
+        elapsed = time.time() - t_kill
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode != 0 and elapsed < 30
+    assert "ale rank 1" in stderr, stderr
+    with h5py.File(out / "results.h5", "r") as h:
+        assert len(h["ale/times"][...]) >= 3
+        for key in h["ale"]:
+            if key.isdigit():
+                assert h[f"ale/{key}/cell_data/density"].shape[0] == 120 * 120
+
+
+def test_ale_physical_failure_names_zone_step_time(tmp_path, run_immerse):
+    """Water (stiffened gas) pulled apart by a piston moving out at 3 km/s: it cavitates past
+    p = -p_inf, and the run stops naming the zone, the state, step and time."""
+    case = _ale_case(tmp_path, "water_piston_column", **{
+        "piston = { velocity = 50.0 }": "piston = { velocity = -3000.0 }",
+        'materials.water = { eos = "tait", rho0 = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }':
+            'materials.water = { eos = "stiffened_gas", gamma = 4.4, p_inf = 6.0e8 }'})
+    r = run_immerse("run", case, "--out", tmp_path / "out", timeout=300)
+    assert r.returncode != 0
+    assert "ale rank 0" in r.stderr, r.stderr
+    assert "ALE zone (" in r.stderr and "invalid thermodynamic state" in r.stderr, r.stderr
+    assert "step" in r.stderr and "t=" in r.stderr and "rho=" in r.stderr
