@@ -33,32 +33,37 @@ def _pids(out):
     return found
 
 
-def test_sigkill_of_a_solver_rank(tmp_path):
-    case = _spinning_case(tmp_path, **{"max_steps = 10000": "max_steps = 100000000",
-                                       "output_interval = 0.2": "output_interval = 0.05"})
-    out = tmp_path / "out"
+def _kill_rank_mid_run(case, out, role, rank, ranks):
+    """Run `case`, SIGKILL `role` rank `rank` once 3 output steps exist; (return code, stderr, seconds
+    from the kill to the job's end)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
-                             "--ranks", "lagrange=2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--ranks", ranks], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
     try:
         deadline = time.time() + 120
         while time.time() < deadline:
-            steps = list((out / "steps").glob("lagrange_[0-9]*.h5")) if (out / "steps").is_dir() else []
-            if len(steps) >= 3 and "lagrange 1" in _pids(out):
+            steps = list((out / "steps").glob(f"{role}_[0-9]*.h5")) if (out / "steps").is_dir() else []
+            if len(steps) >= 3 and f"{role} {rank}" in _pids(out):
                 break
             time.sleep(0.2)
         else:
             raise AssertionError("run did not produce output in time")
-        victim = _pids(out)["lagrange 1"]
         t_kill = time.time()
-        os.kill(victim, signal.SIGKILL)
-        stdout, stderr = proc.communicate(timeout=30)
-        elapsed = time.time() - t_kill
+        os.kill(_pids(out)[f"{role} {rank}"], signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=30)
+        return proc.returncode, stderr, time.time() - t_kill
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert proc.returncode != 0
+
+
+def test_sigkill_of_a_solver_rank(tmp_path):
+    case = _spinning_case(tmp_path, **{"max_steps = 10000": "max_steps = 100000000",
+                                       "output_interval = 0.2": "output_interval = 0.05"})
+    out = tmp_path / "out"
+    rc, stderr, elapsed = _kill_rank_mid_run(case, out, "lagrange", 1, "lagrange=2")
+    assert rc != 0
     assert elapsed < 30
     assert "lagrange rank 1" in stderr, stderr
     # no process of the job survives
@@ -104,27 +109,8 @@ def test_sigkill_of_an_ale_rank(tmp_path):
     case = _ale_case(tmp_path, "sedov_2d", **{"end_time = 1.0": "end_time = 100.0",
                                              "output_interval = 0.25": "output_interval = 0.01"})
     out = tmp_path / "out"
-    env = dict(os.environ, PYTHONPATH=str(REPO))
-    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
-                             "--ranks", "ale=2"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, env=env)
-    try:
-        deadline = time.time() + 120
-        while time.time() < deadline:
-            steps = list((out / "steps").glob("ale_[0-9]*.h5")) if (out / "steps").is_dir() else []
-            if len(steps) >= 3 and "ale 1" in _pids(out):
-                break
-            time.sleep(0.2)
-        else:
-            raise AssertionError("run did not produce output in time")
-        t_kill = time.time()
-        os.kill(_pids(out)["ale 1"], signal.SIGKILL)
-        stdout, stderr = proc.communicate(timeout=30)
-        elapsed = time.time() - t_kill
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    assert proc.returncode != 0 and elapsed < 30
+    rc, stderr, elapsed = _kill_rank_mid_run(case, out, "ale", 1, "ale=2")
+    assert rc != 0 and elapsed < 30
     assert "ale rank 1" in stderr, stderr
     with h5py.File(out / "results.h5", "r") as h:
         assert len(h["ale/times"][...]) >= 3
