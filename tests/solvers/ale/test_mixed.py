@@ -195,13 +195,18 @@ def test_advected_square_error_decreases(squares):
     assert err[32] < 0.01
 
 
-def test_advected_cube_3d_volume_conserved():
-    s, f0, f, fex, d0, d = square_error(16, dim=3)
-    for k in ("volume_heavy", "volume_light"):
-        assert abs(d[k] / d0[k] - 1) < 1e-12
-    err = float(np.sum(np.abs(f - fex)) / 16 ** 3)
-    # the cube holds 0.064 of the box; after one diagonal period it keeps its place and most of its shape
-    assert err < 0.35 * 0.064, err
+def test_advected_cube_3d():
+    """3-D PLIC (Youngs' 27-point normals): the cube's material volume is kept to 1e-12 and its
+    symmetric-difference volume falls from 16^3 to 24^3 (measured 0.0166, 0.0099; 32^3: 0.0071;
+    the cube holds 0.064)."""
+    err = {}
+    for n in (16, 24):
+        s, f0, f, fex, d0, d = square_error(n, dim=3)
+        for k in ("volume_heavy", "volume_light"):
+            assert abs(d[k] / d0[k] - 1) < 1e-12
+        err[n] = float(np.sum(np.abs(f - fex)) / n ** 3)
+    print("advected cube symmetric-difference volume:", err)
+    assert err[24] < 0.7 * err[16] and err[16] < 0.3 * 0.064, err
 
 
 # ---- void -------------------------------------------------------------------------------------
