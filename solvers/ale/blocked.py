@@ -19,7 +19,12 @@ Model (a porous / face-aperture discretisation of the same staggered scheme)
   fraction).  Across a face both zones see the same aperture, so a uniform pressure exerts no
   force anywhere; ``sum_c b^A_c != 0`` in a cut zone is the pressure of the obstacle surface in it,
   i.e. the obstacle's reaction on the fluid (added to the momentum balance like a wall reaction).
-  The bulk viscosity uses ``div v = sum_c v_c . b^A_c / (phi V)``.
+  The artificial viscosity is of the solver's kind and acts where
+  ``div v = sum_c v_c . b^A_c / (phi V) < 0``: scalar, ``q = rho (C_q l^2 (div v)^2 + C_l l c |div v|)``
+  with that divergence; monotonic (hydro.py), from the zone's directional strain rates and its
+  neighbours' (the same pre-pass over the fixed grid as every zone), a solid neighbour counting
+  as a wall ghost, i.e. the zone's mirror image with its own strain rate (as the ghost zone of a
+  conforming wall; the solid zone's own nodes, at rest, would give it the full q).
 * **Lagrangian open volume and remap.**  ``V_open^lag = phi V + sum_d (A SV_d[z + s_d] - A SV_d[z])``
   (``SV`` the geometric swept volumes of the faces, remap.py), i.e. the open-volume change is
   exactly the one whose gradient gives the forces, so the compatible energy update is the PdV work
@@ -53,8 +58,11 @@ volumes use the fractions of the state; the remap brings the material onto the n
 holds material is an error (the coupler must first push the material out); a zone that opens
 would start empty (no pressure) and fill through its faces (not reachable yet: a zone only becomes
 fully blocked when it is empty).  The coupler's fractions (``AleSolver.remap(blocked)``: one value
-per zone of the whole grid, output order) combine with the static obstacles by the larger value;
-they are not checkpointed (a restart starts from the static fractions).
+per zone of the whole grid, output order) combine with the static obstacles by the larger value.
+The combined fraction is checkpointed (``AleSolver.checkpoint``: dataset ``blocked_fraction``)
+and restart sets it again (creating the Blocked object if only the coupler's fractions made one):
+the open fractions, apertures, solid flags and wall nodes follow from it, so a restart continues
+bitwise.
 
 Static obstacles (``[ale] obstacles = [{region = "x > 0.75", subsamples = k}]``): the region
 (boolean expression in x, y[, z]) is evaluated on a k^dim sub-grid of points per zone (points at
@@ -75,8 +83,8 @@ from orchestrator.expressions import compile_expression
 from solvers.ale import eos as _eos
 from solvers.ale.boundary import constrain as _constrain_kernel
 from solvers.ale.grid import GHOST
-from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym
-from solvers.ale.remap import limiter, set_positions
+from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, Q_MONOTONIC, _mono_q, _t4, _t8, hex_volume_sym
+from solvers.ale.remap import set_positions
 from solvers.lagrange.kernels import hex_bvectors, quad_bvectors
 
 SOLID_TOL = 1e-12
@@ -164,6 +172,7 @@ class Blocked:
             n_open = dec.sum(n_open)
         if n_open[0] == 0.0:
             raise ValueError("the obstacles block every zone of the ALE grid")
+        self.b = np.where(B.real_zone, b, 0.0)  # (checkpointed: the rest follows from it)
         self.phi = phi
         self.solid = (phi <= 0.0).astype(np.uint8)
         A = np.ones((dim, B.nzones))
@@ -236,8 +245,8 @@ class Blocked:
         returns their stable step."""
         B = s.block
         k = apertures_3d if self.dim == 3 else apertures_2d
-        return float(k(s.x, s.v, s.fc, s.M, s.rho, s.p, s.c, s.q, self.phi, self.A, self.touched,
-                       B.zs, B.ns, s.q_lin, s.q_quad))
+        return float(k(s.x, s.v, s.fc, s.M, s.rho, s.p, s.c, s.q, self.phi, self.A, self.solid, self.touched,
+                       B.zs, B.ns, s.q_lin, s.q_quad, s.q_kind, s.qgrad))
 
     def constrain(self, s, record: bool) -> None:
         """Immersed-wall node constraints into s._acc; when recording, the obstacle's pressure
@@ -250,7 +259,7 @@ class Blocked:
 
     # ---- remap ----------------------------------------------------------------------------------
     def remap(self, s, fractions=None) -> None:
-        """The Eulerian remap with blocked fractions (AleSolver.remap with the blocked kernels);
+        """The Eulerian remap with blocked fractions (AleSolver.remap with the open volumes);
         ``fractions`` (coupler, per zone, or None: the static obstacles only) apply to the remapped
         state (see the module docstring)."""
         B, dim = s.block, self.dim
@@ -269,7 +278,7 @@ class Blocked:
         s._fill_remap_zones()
         order = range(dim) if s.parity == 0 else range(dim - 1, -1, -1)
         for d in order:
-            self._sweep(s, d)
+            s._sweep(d)  # (the remap kernels with this object's face volumes, solid flags, massless zones)
         set_positions(s.x, B.X)
         if b_new is not None:
             self._apply_new_fractions(s, b_new)
@@ -291,31 +300,6 @@ class Blocked:
             s._fail(msg)  # one rank: raises; parallel: raised on every rank by the _sync below
         _sync(s)
         self.set_fractions(s, b_new)
-
-    def _sweep(self, s, d: int) -> None:
-        """One direction of the remap (AleSolver._sweep with the blocked kernels)."""
-        B = s.block
-        st = int(B.zs[d])
-        lo, hi = s.zr[0].copy(), s.zr[1].copy()
-        hi[d] += 1
-        sweep_fluxes(s.rho, s.e, s.M, s.V, self.ASV[d], s.F, s.ES, self.solid, st, lo, hi, B.zs)
-        s.bc.fill_zones([s.F, s.ES], face_dir=d)
-        s._boundary_fluxes(d)
-        sweep_zones(s.rho, s.e, s.M, s.V, self.ASV[d], s.F, s.ES, st, s.zr[0], s.zr[1], B.zs)
-        s._fill_remap_zones()
-        nlo, nhi = s.nr[0].copy(), s.nr[1].copy()
-        nhi[d] += 1
-        sweep_dual(s.F, B.zact, self.solid, s.v, s.m, s.PHI, s.VS, d, nlo, nhi, B.zs, B.ns)
-        bn = s._open_nodes
-        if bn.size:
-            m0, v0 = s.m[bn].copy(), s.v[bn].copy()
-        sweep_nodes(s.v, s.m, s.M, B.zact, s.PHI, s.VS, s.dK, d, s.nr[0], s.nr[1], B.zs, B.ns)
-        if bn.size:
-            s._open_node_terms(d, m0, v0)
-        deposit(s.e, s.M, s.m, s.dK, s.zr[0], s.zr[1], B.zs, B.ns, s.dim)
-        s.bc.fill_nodes_vector(s.v)
-        s.bc.fill_nodes_scalar(s.m)
-        s.bc.fill_zones([s.e], s._inflow_values("energy"))
 
     def blocked_fraction(self) -> np.ndarray:
         return 1.0 - self.phi
@@ -378,224 +362,17 @@ def lagrangian_open_volumes(ASV, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
     return -1
 
 
-@njit(cache=True)
-def sweep_fluxes(rho, e, M, V, ASV, F, ES, solid, s, zlo, zhi, zs):
-    """remap.sweep_fluxes with aperture-scaled face volumes ASV; a solid neighbour of the upwind
-    zone is a wall ghost (copy of the upwind zone: zero one-sided slope); closed faces carry
-    nothing."""
-    for i in range(zlo[0], zhi[0]):
-        for j in range(zlo[1], zhi[1]):
-            for k in range(zlo[2], zhi[2]):
-                z = i * zs[0] + j * zs[1] + k * zs[2]
-                sv = ASV[z]
-                if sv > 0.0:
-                    u = z - s
-                    sg = 0.5
-                else:
-                    u = z
-                    sg = -0.5
-                if sv == 0.0 or not (M[u] > 0.0):
-                    F[z] = 0.0
-                    ES[z] = e[u]
-                    continue
-                ru = rho[u]
-                rl = ru if solid[u - s] else rho[u - s]
-                rh = ru if solid[u + s] else rho[u + s]
-                dr = limiter(ru - rl, rh - ru)
-                fr = abs(sv) / V[u]
-                if fr > 1.0:
-                    fr = 1.0
-                f = sv * (ru + sg * dr * (1.0 - fr))
-                eu = e[u]
-                el = eu if solid[u - s] else e[u - s]
-                eh = eu if solid[u + s] else e[u + s]
-                de = limiter(eu - el, eh - eu)
-                fm = abs(f) / M[u]
-                if fm > 1.0:
-                    fm = 1.0
-                F[z] = f
-                ES[z] = eu + sg * de * (1.0 - fm)
-
-
-@njit(cache=True)
-def sweep_zones(rho, e, M, V, ASV, F, ES, s, zlo, zhi, zs):
-    """remap.sweep_zones with open volumes; zones without material and without inflow are left
-    alone (solid zones: M = 0 exactly)."""
-    for i in range(zlo[0], zhi[0]):
-        for j in range(zlo[1], zhi[1]):
-            for k in range(zlo[2], zhi[2]):
-                z = i * zs[0] + j * zs[1] + k * zs[2]
-                fl = F[z]
-                fh = F[z + s]
-                vn = V[z] + ASV[z] - ASV[z + s]
-                V[z] = vn
-                mn = M[z] + fl - fh
-                if not (mn > 0.0):
-                    if M[z] == 0.0 and fl == 0.0 and fh == 0.0:
-                        continue
-                    M[z] = mn
-                    rho[z] = 0.0
-                    continue
-                ez = e[z]
-                e[z] = ez + (fl * (ES[z] - ez) - fh * (ES[z + s] - ez)) / mn
-                M[z] = mn
-                rho[z] = mn / vn if vn > 0.0 else 0.0
-
-
-@njit(cache=True, inline="always")
-def _layer_solid(solid, z0, t1, t2, dim):
-    """The zones z0 + {0, -t1} (+ {0, -t2} in 3D) around a node line are all solid."""
-    if dim == 3:
-        return solid[z0] != 0 and solid[z0 - t1] != 0 and solid[z0 - t2] != 0 and solid[z0 - t1 - t2] != 0
-    return solid[z0] != 0 and solid[z0 - t1] != 0
-
-
-@njit(cache=True)
-def sweep_dual(F, zact, solid, v, m, PHI, VS, d, nlo, nhi, zs, ns):
-    """remap.sweep_dual; at an immersed wall (the zone layer between the upwind node and its
-    neighbour is solid) the neighbour's velocity is the mirror image of the other neighbour's
-    (normal component reversed), as the ghost nodes of a conforming wall."""
-    dim = v.shape[1]
-    sd = zs[d]
-    nsd = ns[d]
-    if dim == 3:
-        t1 = zs[(d + 1) % 3]
-        t2 = zs[(d + 2) % 3]
-        scale = 0.125
-    else:
-        t1 = zs[1 - d]
-        t2 = 0
-        scale = 0.25
-    for i in range(nlo[0], nhi[0]):
-        for j in range(nlo[1], nhi[1]):
-            for k in range(nlo[2], nhi[2]):
-                n = i * ns[0] + j * ns[1] + k * ns[2]
-                zn = i * zs[0] + j * zs[1] + k * zs[2]
-                za = zn - sd - t1
-                zb = za + t1
-                if dim == 3:
-                    zc = za - t2
-                    zd = zb - t2
-                    phi = scale * _t4(zact[zc] * (F[zc] + F[zc + sd]), zact[zd] * (F[zd] + F[zd + sd]),
-                                      zact[zb] * (F[zb] + F[zb + sd]), zact[za] * (F[za] + F[za + sd]))
-                else:
-                    phi = scale * (zact[za] * (F[za] + F[za + sd]) + zact[zb] * (F[zb] + F[zb + sd]))
-                if phi > 0.0:
-                    u = n - nsd
-                    zu = zn - sd
-                    sg = 0.5
-                else:
-                    u = n
-                    zu = zn
-                    sg = -0.5
-                fr = abs(phi) / m[u] if m[u] > 0.0 else 1.0
-                if fr > 1.0:
-                    fr = 1.0
-                PHI[n] = phi
-                hi_solid = _layer_solid(solid, zu, t1, t2, dim)
-                lo_solid = _layer_solid(solid, zu - sd, t1, t2, dim)
-                for c in range(dim):
-                    vu = v[u, c]
-                    vl = v[u - nsd, c]
-                    vh = v[u + nsd, c]
-                    if hi_solid and lo_solid:
-                        vl = vu
-                        vh = vu
-                    elif hi_solid:
-                        vh = -vl if c == d else vl
-                    elif lo_solid:
-                        vl = -vh if c == d else vh
-                    dv = limiter(vu - vl, vh - vu)
-                    VS[n, c] = vu + sg * dv * (1.0 - fr)
-
-
-@njit(cache=True)
-def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns):
-    """remap.sweep_nodes; a node left without mass (inside an obstacle) gets v = 0, dK = 0."""
-    dim = v.shape[1]
-    nsd = ns[d]
-    for i in range(nlo[0], nhi[0]):
-        for j in range(nlo[1], nhi[1]):
-            for k in range(nlo[2], nhi[2]):
-                n = i * ns[0] + j * ns[1] + k * ns[2]
-                if dim == 3:
-                    z000 = (i - 1) * zs[0] + (j - 1) * zs[1] + (k - 1) * zs[2]
-                    z100 = z000 + zs[0]
-                    z010 = z000 + zs[1]
-                    z110 = z010 + zs[0]
-                    z001 = z000 + zs[2]
-                    z101 = z100 + zs[2]
-                    z011 = z010 + zs[2]
-                    z111 = z110 + zs[2]
-                    mn = 0.125 * _t8(zact[z000] * M[z000], zact[z100] * M[z100],
-                                     zact[z110] * M[z110], zact[z010] * M[z010],
-                                     zact[z001] * M[z001], zact[z101] * M[z101],
-                                     zact[z111] * M[z111], zact[z011] * M[z011])
-                else:
-                    z00 = (i - 1) * zs[0] + (j - 1) * zs[1]
-                    z10 = z00 + zs[0]
-                    z01 = z00 + zs[1]
-                    z11 = z01 + zs[0]
-                    mn = 0.25 * _t4(zact[z00] * M[z00], zact[z10] * M[z10],
-                                    zact[z11] * M[z11], zact[z01] * M[z01])
-                if not (mn > 0.0):
-                    for c in range(dim):
-                        v[n, c] = 0.0
-                    dK[n] = 0.0
-                    m[n] = 0.0
-                    continue
-                pl = PHI[n]
-                ph = PHI[n + nsd]
-                k_old = 0.0
-                k_fl = 0.0
-                k_new = 0.0
-                for c in range(dim):
-                    vc = v[n, c]
-                    sl = VS[n, c]
-                    sh = VS[n + nsd, c]
-                    vn = vc + (pl * (sl - vc) - ph * (sh - vc)) / mn
-                    k_old += vc * vc
-                    k_fl += pl * sl * sl - ph * sh * sh
-                    k_new += vn * vn
-                    v[n, c] = vn
-                dK[n] = 0.5 * ((m[n] * k_old + k_fl) - mn * k_new)
-                m[n] = mn
-
-
-@njit(cache=True)
-def deposit(e, M, m, dK, zlo, zhi, zs, ns, dim):
-    """remap.deposit for the zones with material only."""
-    o1 = ns[0]
-    o2 = ns[1]
-    o4 = ns[2]
-    for i in range(zlo[0], zhi[0]):
-        for j in range(zlo[1], zhi[1]):
-            for k in range(zlo[2], zhi[2]):
-                z = i * zs[0] + j * zs[1] + k * zs[2]
-                if not (M[z] > 0.0):
-                    continue
-                n0 = i * ns[0] + j * ns[1] + k * ns[2]
-                if dim == 3:
-                    s = 0.125 * _t8(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
-                                    dK[n0 + o1 + o2] / m[n0 + o1 + o2], dK[n0 + o2] / m[n0 + o2],
-                                    dK[n0 + o4] / m[n0 + o4], dK[n0 + o1 + o4] / m[n0 + o1 + o4],
-                                    dK[n0 + o1 + o2 + o4] / m[n0 + o1 + o2 + o4],
-                                    dK[n0 + o2 + o4] / m[n0 + o2 + o4])
-                else:
-                    s = 0.25 * _t4(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
-                                   dK[n0 + o1 + o2] / m[n0 + o1 + o2], dK[n0 + o2] / m[n0 + o2])
-                e[z] += s
-
-
 @njit(cache=True, inline="always")
 def _aperture(A, z, zs, d, o):
     return A[d, z] if o == 0 else A[d, z + zs[d]]
 
 
 @njit(cache=True)
-def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, zones, zs, ns, q_lin, q_quad):
+def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin, q_quad, qkind, grad):
     """Aperture correction of the zones listed (after hydro.zone_pass_2d at the fixed grid):
-    div v = sum v . b^A / (phi V), new q, f_c = (p + q) b^A_c + phi f_hg,c, written as
+    div v = sum v . b^A / (phi V), new q of the solver's kind (qkind; monotonic: from the strain
+    rates ``grad`` of hydro.mono_gradients_2d, a solid neighbour as a wall ghost, hydro._mono_q),
+    f_c = (p + q) b^A_c + phi f_hg,c, written as
     f_c + ((p + q_new) b^A_c - (p + q_old) b_c) + (phi - 1) (f_c - (p + q_old) b_c) so that a corner
     with an open face and an unchanged q keeps its bits.  Returns the zones' stable step."""
     xe = np.empty((4, 2))
@@ -641,8 +418,11 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, zones, zs, ns, q_lin, q_quad
         qz = 0.0
         qq = 0.0
         if divv < 0.0:
-            qq = q_lin * cz - q_quad * lc * divv
-            qz = rho[z] * lc * qq * (-divv)
+            if qkind == Q_MONOTONIC:
+                qz, qq = _mono_q(grad, z, zs, 2, rho[z], cz, q_lin, q_quad, solid)
+            else:
+                qq = q_lin * cz - q_quad * lc * divv
+                qz = rho[z] * lc * qq * (-divv)
         s_old = p[z] + q[z]
         s_new = p[z] + qz
         q[z] = qz
@@ -662,7 +442,7 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, zones, zs, ns, q_lin, q_quad
 
 
 @njit(cache=True)
-def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, zones, zs, ns, q_lin, q_quad):
+def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin, q_quad, qkind, grad):
     """3D version of :func:`apertures_2d` (hydro.zone_pass_3d geometry)."""
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -702,8 +482,11 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, zones, zs, ns, q_lin, q_quad
         qz = 0.0
         qq = 0.0
         if divv < 0.0:
-            qq = q_lin * cz - q_quad * lc * divv
-            qz = rho[z] * lc * qq * (-divv)
+            if qkind == Q_MONOTONIC:
+                qz, qq = _mono_q(grad, z, zs, 3, rho[z], cz, q_lin, q_quad, solid)
+            else:
+                qq = q_lin * cz - q_quad * lc * divv
+                qz = rho[z] * lc * qq * (-divv)
         s_old = p[z] + q[z]
         s_new = p[z] + qz
         q[z] = qz
@@ -736,14 +519,11 @@ def corner_force_sum(fc, zones, out):
 
 def _flush():
     import solvers.lagrange.kernels as _k
-    from solvers.ale import boundary as _b
     from solvers.ale import hydro as _h
-    from solvers.ale import remap as _r
     from solvers.numba_cache import flush_stale_cache
 
-    flush_stale_cache([open_eos, lagrangian_open_volumes, sweep_fluxes, sweep_zones, sweep_dual, sweep_nodes,
-                       deposit, apertures_2d, apertures_3d, corner_force_sum],
-                      [_eos.__file__, _k.__file__, _h.__file__, _r.__file__, _b.__file__], "blocked.deps.sha256")
+    flush_stale_cache([open_eos, lagrangian_open_volumes, _aperture, apertures_2d, apertures_3d, corner_force_sum],
+                      [_eos.__file__, _k.__file__, _h.__file__], "blocked.deps.sha256")
 
 
 _flush()

@@ -114,6 +114,28 @@ def _t4(a0, a1, a2, a3):
 
 
 @njit(cache=True, inline="always")
+def zones_around_node_3d(i, j, k, zs):
+    """The 8 zones around node (i, j, k): zone (i - 1, j - 1, k - 1) + o for the hexahedron corner
+    offsets o in VTK order (000, 100, 110, 010, 001, 101, 111, 011); the node is the opposite
+    corner (6, 7, 4, 5, 2, 3, 0, 1) of each."""
+    z0 = (i - 1) * zs[0] + (j - 1) * zs[1] + (k - 1) * zs[2]
+    z1 = z0 + zs[0]
+    z3 = z0 + zs[1]
+    z2 = z3 + zs[0]
+    return z0, z1, z2, z3, z0 + zs[2], z1 + zs[2], z2 + zs[2], z3 + zs[2]
+
+
+@njit(cache=True, inline="always")
+def zones_around_node_2d(i, j, zs):
+    """2D version of :func:`zones_around_node_3d`: offsets (00, 10, 11, 01), the node is the
+    corner (2, 3, 0, 1) of each."""
+    z0 = (i - 1) * zs[0] + (j - 1) * zs[1]
+    z1 = z0 + zs[0]
+    z3 = z0 + zs[1]
+    return z0, z1, z3 + zs[0], z3
+
+
+@njit(cache=True, inline="always")
 def _sym3(a, b, c):
     """a + b + c summed smallest-first: invariant under any permutation of the arguments."""
     if a > b:
@@ -286,17 +308,26 @@ def mono_gradients_2d(x, v, grad, shift, zlo, zhi, zs, ns):
 
 
 @njit(cache=True, inline="always")
-def _mono_q(grad, z, zs, ndir, r, cz, q_lin, q_quad):
+def _mono_q(grad, z, zs, ndir, r, cz, q_lin, q_quad, solid):
     """Monotonic q of zone z (in compression) and its viscous speed Q (see the module docstring):
-    returns ``(q, Q)``."""
+    returns ``(q, Q)``.  ``solid``: None, or per zone nonzero for a fully blocked zone (obstacles,
+    blocked.py): such a neighbour is a wall ghost, the zone's mirror image (its own strain rate,
+    as the ghost zone of a conforming wall)."""
     s = 0.0
     qmax = 0.0
     for d in range(ndir):
         g = grad[z, d]
         if g < 0.0:
             inv = 1.0 / g
-            rm = grad[z - zs[d], d] * inv
-            rp = grad[z + zs[d], d] * inv
+            gm = grad[z - zs[d], d]
+            gp = grad[z + zs[d], d]
+            if solid is not None:
+                if solid[z - zs[d]]:
+                    gm = g
+                if solid[z + zs[d]]:
+                    gp = g
+            rm = gm * inv
+            rp = gp * inv
             phi = 0.5 * (rm + rp)
             if 2.0 * rm < phi:
                 phi = 2.0 * rm
@@ -411,7 +442,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 qq = 0.0
                 if divv < 0.0:
                     if qkind == Q_MONOTONIC:
-                        qz, qq = _mono_q(grad, z, zs, 3, r, cz, q_lin, q_quad)
+                        qz, qq = _mono_q(grad, z, zs, 3, r, cz, q_lin, q_quad, None)
                     else:
                         qq = q_lin * cz - q_quad * lc * divv
                         qz = r * lc * qq * (-divv)
@@ -451,24 +482,14 @@ def gather_3d(fc, zact, M, f, m, nlo, nhi, zs, ns):
             for k in range(nlo[2], nhi[2]):
                 n = i * ns[0] + j * ns[1] + k * ns[2]
                 # zones (i-1+a, j-1+b, k-1+c); the node is their corner (1-a, 1-b, 1-c)
-                z000 = (i - 1) * zs[0] + (j - 1) * zs[1] + (k - 1) * zs[2]
-                z100 = z000 + zs[0]
-                z010 = z000 + zs[1]
-                z110 = z010 + zs[0]
-                z001 = z000 + zs[2]
-                z101 = z100 + zs[2]
-                z011 = z010 + zs[2]
-                z111 = z110 + zs[2]
-                # corner index of the node in each zone: offset (1-a, 1-b, 1-c)
+                z0, z1, z2, z3, z4, z5, z6, z7 = zones_around_node_3d(i, j, k, zs)
                 for d in range(3):
-                    f[n, d] = _t8(zact[z000] * fc[z000, 6, d], zact[z100] * fc[z100, 7, d],
-                                  zact[z110] * fc[z110, 4, d], zact[z010] * fc[z010, 5, d],
-                                  zact[z001] * fc[z001, 2, d], zact[z101] * fc[z101, 3, d],
-                                  zact[z111] * fc[z111, 0, d], zact[z011] * fc[z011, 1, d])
-                m[n] = 0.125 * _t8(zact[z000] * M[z000], zact[z100] * M[z100],
-                                   zact[z110] * M[z110], zact[z010] * M[z010],
-                                   zact[z001] * M[z001], zact[z101] * M[z101],
-                                   zact[z111] * M[z111], zact[z011] * M[z011])
+                    f[n, d] = _t8(zact[z0] * fc[z0, 6, d], zact[z1] * fc[z1, 7, d],
+                                  zact[z2] * fc[z2, 4, d], zact[z3] * fc[z3, 5, d],
+                                  zact[z4] * fc[z4, 2, d], zact[z5] * fc[z5, 3, d],
+                                  zact[z6] * fc[z6, 0, d], zact[z7] * fc[z7, 1, d])
+                m[n] = 0.125 * _t8(zact[z0] * M[z0], zact[z1] * M[z1], zact[z2] * M[z2], zact[z3] * M[z3],
+                                   zact[z4] * M[z4], zact[z5] * M[z5], zact[z6] * M[z6], zact[z7] * M[z7])
 
 
 # ------------------------------------------------------------------------------------------------
@@ -562,7 +583,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
             qq = 0.0
             if divv < 0.0:
                 if qkind == Q_MONOTONIC:
-                    qz, qq = _mono_q(grad, z, zs, 2, r, cz, q_lin, q_quad)
+                    qz, qq = _mono_q(grad, z, zs, 2, r, cz, q_lin, q_quad, None)
                 else:
                     qq = q_lin * cz - q_quad * lc * divv
                     qz = r * lc * qq * (-divv)
@@ -612,15 +633,11 @@ def gather_2d(fc, zact, M, f, m, nlo, nhi, zs, ns):
     for i in range(nlo[0], nhi[0]):
         for j in range(nlo[1], nhi[1]):
             n = i * ns[0] + j * ns[1]
-            z00 = (i - 1) * zs[0] + (j - 1) * zs[1]
-            z10 = z00 + zs[0]
-            z01 = z00 + zs[1]
-            z11 = z01 + zs[0]
+            z0, z1, z2, z3 = zones_around_node_2d(i, j, zs)
             for d in range(2):
-                f[n, d] = _t4(zact[z00] * fc[z00, 2, d], zact[z10] * fc[z10, 3, d],
-                              zact[z11] * fc[z11, 0, d], zact[z01] * fc[z01, 1, d])
-            m[n] = 0.25 * _t4(zact[z00] * M[z00], zact[z10] * M[z10],
-                              zact[z11] * M[z11], zact[z01] * M[z01])
+                f[n, d] = _t4(zact[z0] * fc[z0, 2, d], zact[z1] * fc[z1, 3, d],
+                              zact[z2] * fc[z2, 0, d], zact[z3] * fc[z3, 1, d])
+            m[n] = 0.25 * _t4(zact[z0] * M[z0], zact[z1] * M[z1], zact[z2] * M[z2], zact[z3] * M[z3])
 
 
 # ------------------------------------------------------------------------------------------------
@@ -710,7 +727,7 @@ def _flush():
 
     flush_stale_cache([zone_pass_3d, zone_pass_2d, mono_gradients_3d, mono_gradients_2d, gather_3d,
                        gather_2d, predict, move, ghost_force_work, sums, energy_from_pressure_array, energy_update,
-                       lagrangian_volumes, _t4, _t8],
+                       lagrangian_volumes, _t4, _t8, zones_around_node_3d, zones_around_node_2d, _mono_q],
                       [_eos.__file__, _k.__file__], "hydro.deps.sha256")
 
 

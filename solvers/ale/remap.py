@@ -41,6 +41,13 @@ energy the momentum remap loses, ``dK_n = 1/2 m |v|^2 + 1/2 Phi_lo |v*_lo|^2 - 1
 - 1/2 m' |v'|^2`` (its flux terms telescope), goes to the zones' internal energy (DeBar):
 zone z gets ``M_z / (8 m_n)`` of it from each corner, i.e. ``de_z = sum_c dK_c / (8 m_c)``
 (2D: 4), so kinetic + internal energy is conserved to round-off.
+
+Obstacles and void
+------------------
+The same kernels serve grids with blocked volume fractions (blocked.py: ``solid`` flags, the
+face volumes scaled by the face apertures, zones and nodes without material) and void regions
+(mixed.py: nodes without mass); the extra branches are compiled out of the plain kernels
+(``solid = None``, ``M = None``, ``massless = False``), which keep their bits and speed.
 """
 from __future__ import annotations
 
@@ -48,7 +55,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from solvers.ale.hydro import _t4, _t8
+from solvers.ale.hydro import _t4, _t8, zones_around_node_2d, zones_around_node_3d
 
 
 @njit(cache=True, inline="always")
@@ -138,8 +145,15 @@ def swept_volumes_2d(X, x, SV, d, zlo, zhi, zs, ns):
 # zone part of a sweep
 # ------------------------------------------------------------------------------------------------
 @njit(cache=True)
-def sweep_fluxes(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
-    """Mass flux F and face energy e* of the lower faces (stride s) of the zones in range."""
+def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
+    """Mass flux F and face energy e* of the lower faces (stride s) of the zones in range.
+
+    ``solid``: None (no obstacles), or per zone nonzero for a fully blocked zone (obstacles,
+    blocked.py; SV are then the aperture-scaled face volumes).  With obstacles a closed face
+    (SV = 0) or an upwind zone without material carries nothing, and a solid neighbour of the
+    upwind zone is a wall ghost (a copy of the upwind zone: zero one-sided slope).  (None is a
+    type of its own to numba: the obstacle branches are compiled out of the plain kernel.)
+    """
     for i in range(zlo[0], zhi[0]):
         for j in range(zlo[1], zhi[1]):
             for k in range(zlo[2], zhi[2]):
@@ -151,14 +165,29 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
                 else:
                     u = z
                     sg = -0.5
+                if solid is not None and (sv == 0.0 or not (M[u] > 0.0)):
+                    F[z] = 0.0
+                    ES[z] = e[u]
+                    continue
                 ru = rho[u]
-                dr = limiter(ru - rho[u - s], rho[u + s] - ru)
+                rl = rho[u - s]
+                rh = rho[u + s]
+                eu = e[u]
+                el = e[u - s]
+                eh = e[u + s]
+                if solid is not None:
+                    if solid[u - s]:
+                        rl = ru
+                        el = eu
+                    if solid[u + s]:
+                        rh = ru
+                        eh = eu
+                dr = limiter(ru - rl, rh - ru)
                 fr = abs(sv) / V[u]
                 if fr > 1.0:
                     fr = 1.0
                 f = sv * (ru + sg * dr * (1.0 - fr))
-                eu = e[u]
-                de = limiter(eu - e[u - s], e[u + s] - eu)
+                de = limiter(eu - el, eh - eu)
                 fm = abs(f) / M[u]
                 if fm > 1.0:
                     fm = 1.0
@@ -167,8 +196,13 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
 
 
 @njit(cache=True)
-def sweep_zones(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
-    """Conservative zone update of one sweep (zones in range)."""
+def sweep_zones(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
+    """Conservative zone update of one sweep (zones in range).
+
+    ``solid`` as in :func:`sweep_fluxes` (only whether it is None matters here): with obstacles
+    zones may hold no material (V is the open volume): a zone left without material gets rho = 0
+    (and is left alone if it had none and nothing crossed its faces), a zone without open volume
+    rho = 0."""
     for i in range(zlo[0], zhi[0]):
         for j in range(zlo[1], zhi[1]):
             for k in range(zlo[2], zhi[2]):
@@ -177,20 +211,41 @@ def sweep_zones(rho, e, M, V, SV, F, ES, s, zlo, zhi, zs):
                 fh = F[z + s]
                 mn = M[z] + fl - fh
                 vn = V[z] + SV[z] - SV[z + s]
+                if solid is not None and not (mn > 0.0):
+                    V[z] = vn
+                    if not (M[z] == 0.0 and fl == 0.0 and fh == 0.0):
+                        M[z] = mn
+                        rho[z] = 0.0
+                    continue
                 ez = e[z]
                 e[z] = ez + (fl * (ES[z] - ez) - fh * (ES[z + s] - ez)) / mn
                 M[z] = mn
                 V[z] = vn
-                rho[z] = mn / vn
+                if solid is not None and not (vn > 0.0):
+                    rho[z] = 0.0
+                else:
+                    rho[z] = mn / vn
 
 
 # ------------------------------------------------------------------------------------------------
 # node part of a sweep
 # ------------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _layer_solid(solid, z0, t1, t2, dim):
+    """The zones z0 + {0, -t1} (+ {0, -t2} in 3D) around a node line are all solid."""
+    if dim == 3:
+        return solid[z0] != 0 and solid[z0 - t1] != 0 and solid[z0 - t2] != 0 and solid[z0 - t1 - t2] != 0
+    return solid[z0] != 0 and solid[z0 - t1] != 0
+
+
 @njit(cache=True)
-def sweep_dual(F, zact, v, m, PHI, VS, d, nlo, nhi, zs, ns):
+def sweep_dual(F, zact, solid, v, m, PHI, VS, d, nlo, nhi, zs, ns):
     """Dual mass flux PHI[n] and limited upwind velocity VS[n] at the lower d-dual face of the
-    nodes in range (between node n - ns[d] and n, at the zone centres of layer i_d - 1)."""
+    nodes in range (between node n - ns[d] and n, at the zone centres of layer i_d - 1).
+
+    ``solid`` as in :func:`sweep_fluxes`; at an immersed wall (the zone layer between the upwind
+    node and its neighbour is solid) the neighbour's velocity is the mirror image of the other
+    neighbour's (normal component reversed), as the ghost nodes of a conforming wall."""
     dim = v.shape[1]
     sd = zs[d]
     nsd = ns[d]
@@ -206,7 +261,8 @@ def sweep_dual(F, zact, v, m, PHI, VS, d, nlo, nhi, zs, ns):
         for j in range(nlo[1], nhi[1]):
             for k in range(nlo[2], nhi[2]):
                 n = i * ns[0] + j * ns[1] + k * ns[2]
-                za = i * zs[0] + j * zs[1] + k * zs[2] - sd - t1
+                zn = i * zs[0] + j * zs[1] + k * zs[2]
+                za = zn - sd - t1
                 zb = za + t1
                 if dim == 3:
                     zc = za - t2
@@ -217,23 +273,56 @@ def sweep_dual(F, zact, v, m, PHI, VS, d, nlo, nhi, zs, ns):
                     phi = scale * (zact[za] * (F[za] + F[za + sd]) + zact[zb] * (F[zb] + F[zb + sd]))
                 if phi > 0.0:
                     u = n - nsd
+                    zu = zn - sd
                     sg = 0.5
                 else:
                     u = n
+                    zu = zn
                     sg = -0.5
                 fr = abs(phi) / m[u] if m[u] > 0.0 else 1.0
                 if fr > 1.0:
                     fr = 1.0
                 PHI[n] = phi
-                for c in range(dim):
+                hi_solid = False
+                lo_solid = False
+                if solid is not None:
+                    hi_solid = _layer_solid(solid, zu, t1, t2, dim)
+                    lo_solid = _layer_solid(solid, zu - sd, t1, t2, dim)
+                if not (hi_solid or lo_solid):
+                    for c in range(dim):
+                        vu = v[u, c]
+                        dv = limiter(vu - v[u - nsd, c], v[u + nsd, c] - vu)
+                        VS[n, c] = vu + sg * dv * (1.0 - fr)
+                    continue
+                for c in range(dim):  # wall ghosts
                     vu = v[u, c]
-                    dv = limiter(vu - v[u - nsd, c], v[u + nsd, c] - vu)
+                    vl = v[u - nsd, c]
+                    vh = v[u + nsd, c]
+                    if hi_solid and lo_solid:
+                        vl = vu
+                        vh = vu
+                    elif hi_solid:
+                        vh = -vl if c == d else vl
+                    else:
+                        vl = -vh if c == d else vh
+                    dv = limiter(vu - vl, vh - vu)
                     VS[n, c] = vu + sg * dv * (1.0 - fr)
 
 
 @njit(cache=True)
-def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns):
-    """Nodal momentum update of one sweep, new lumped masses and the kinetic-energy defect dK."""
+def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless):
+    """Nodal momentum update of one sweep, new lumped masses and the kinetic-energy defect dK.
+
+    ``massless``: nodes may be left without mass (inside an obstacle, blocked.py, or in void,
+    mixed.py): such a node gets v = 0, dK = 0."""
+    if massless:  # (the flag is a constant in each inlined copy: no test per node without it)
+        _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, True)
+    else:
+        _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, False)
+
+
+@njit(cache=True, inline="always")
+def _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless):
     dim = v.shape[1]
     nsd = ns[d]
     for i in range(nlo[0], nhi[0]):
@@ -241,25 +330,18 @@ def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns):
             for k in range(nlo[2], nhi[2]):
                 n = i * ns[0] + j * ns[1] + k * ns[2]
                 if dim == 3:
-                    z000 = (i - 1) * zs[0] + (j - 1) * zs[1] + (k - 1) * zs[2]
-                    z100 = z000 + zs[0]
-                    z010 = z000 + zs[1]
-                    z110 = z010 + zs[0]
-                    z001 = z000 + zs[2]
-                    z101 = z100 + zs[2]
-                    z011 = z010 + zs[2]
-                    z111 = z110 + zs[2]
-                    mn = 0.125 * _t8(zact[z000] * M[z000], zact[z100] * M[z100],
-                                     zact[z110] * M[z110], zact[z010] * M[z010],
-                                     zact[z001] * M[z001], zact[z101] * M[z101],
-                                     zact[z111] * M[z111], zact[z011] * M[z011])
+                    z0, z1, z2, z3, z4, z5, z6, z7 = zones_around_node_3d(i, j, k, zs)
+                    mn = 0.125 * _t8(zact[z0] * M[z0], zact[z1] * M[z1], zact[z2] * M[z2], zact[z3] * M[z3],
+                                     zact[z4] * M[z4], zact[z5] * M[z5], zact[z6] * M[z6], zact[z7] * M[z7])
                 else:
-                    z00 = (i - 1) * zs[0] + (j - 1) * zs[1]
-                    z10 = z00 + zs[0]
-                    z01 = z00 + zs[1]
-                    z11 = z01 + zs[0]
-                    mn = 0.25 * _t4(zact[z00] * M[z00], zact[z10] * M[z10],
-                                    zact[z11] * M[z11], zact[z01] * M[z01])
+                    z0, z1, z2, z3 = zones_around_node_2d(i, j, zs)
+                    mn = 0.25 * _t4(zact[z0] * M[z0], zact[z1] * M[z1], zact[z2] * M[z2], zact[z3] * M[z3])
+                if massless and not (mn > 0.0):
+                    for c in range(dim):
+                        v[n, c] = 0.0
+                    dK[n] = 0.0
+                    m[n] = 0.0
+                    continue
                 pl = PHI[n]
                 ph = PHI[n + nsd]
                 k_old = 0.0
@@ -279,8 +361,11 @@ def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns):
 
 
 @njit(cache=True)
-def deposit(e, m, dK, zlo, zhi, zs, ns, dim):
-    """Zone share of the nodal kinetic-energy defect: e += sum_c dK_c / (2^dim m_c)."""
+def deposit(e, m, dK, zlo, zhi, zs, ns, dim, M):
+    """Zone share of the nodal kinetic-energy defect: e += sum_c dK_c / (2^dim m_c).
+
+    ``M``: None (every zone holds material), or the zone masses when zones may hold none
+    (obstacles, void; their corner nodes may be massless): those zones get nothing."""
     o1 = ns[0]
     o2 = ns[1]
     o4 = ns[2]
@@ -288,6 +373,8 @@ def deposit(e, m, dK, zlo, zhi, zs, ns, dim):
         for j in range(zlo[1], zhi[1]):
             for k in range(zlo[2], zhi[2]):
                 z = i * zs[0] + j * zs[1] + k * zs[2]
+                if M is not None and not (M[z] > 0.0):
+                    continue
                 n0 = i * ns[0] + j * ns[1] + k * ns[2]
                 if dim == 3:
                     s = 0.125 * _t8(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
@@ -314,7 +401,7 @@ def _flush():
     from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([limiter, hex_volume, swept_volumes_3d, swept_volumes_2d, sweep_fluxes,
-                       sweep_zones, sweep_dual, sweep_nodes, deposit, set_positions],
+                       sweep_zones, _layer_solid, sweep_dual, sweep_nodes, _sweep_nodes, deposit, set_positions],
                       [_h.__file__], "remap.deps.sha256")
 
 

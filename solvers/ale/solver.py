@@ -653,45 +653,43 @@ class AleSolver:
             self.mm.fill(self)
 
     def _sweep(self, d: int) -> None:
+        """One direction of the remap.  Obstacles (blocked.py): the aperture-scaled face volumes,
+        solid zones as wall ghosts, zones and nodes without material; void (mixed.py): nodes and
+        zones without material."""
         B = self.block
         s = int(B.zs[d])
+        blk = self._blk
+        solid = None if blk is None else blk.solid
+        massless = blk is not None or (self.mm is not None and self.mm.has_void)
+        Mz = self.M if massless else None
         if self.mm is not None:  # material fluxes (interface reconstruction), zone sums
             self.mm.sweep(self, d)
         else:
+            sv = self.SV[d] if blk is None else blk.ASV[d]
             # fluxes of the real faces (planes 2 .. n+2), ghost faces by the face fill
             lo, hi = self.zr[0].copy(), self.zr[1].copy()
             hi[d] += 1
-            remap.sweep_fluxes(self.rho, self.e, self.M, self.V, self.SV[d], self.F, self.ES, s, lo, hi, B.zs)
+            remap.sweep_fluxes(self.rho, self.e, self.M, self.V, sv, self.F, self.ES, solid, s, lo, hi, B.zs)
             self.bc.fill_zones([self.F, self.ES], face_dir=d)
             self._boundary_fluxes(d)
-            remap.sweep_zones(self.rho, self.e, self.M, self.V, self.SV[d], self.F, self.ES, s,
+            remap.sweep_zones(self.rho, self.e, self.M, self.V, sv, self.F, self.ES, solid, s,
                               self.zr[0], self.zr[1], B.zs)
         self._fill_remap_zones()
         # nodes: dual faces of nodes 2 .. n+3 along d, then the real nodes
         nlo, nhi = self.nr[0].copy(), self.nr[1].copy()
         nhi[d] += 1
-        remap.sweep_dual(self.F, B.zact, self.v, self.m, self.PHI, self.VS, d, nlo, nhi, B.zs, B.ns)
+        remap.sweep_dual(self.F, B.zact, solid, self.v, self.m, self.PHI, self.VS, d, nlo, nhi, B.zs, B.ns)
         bn = self._open_nodes
         if bn.size:
             m0, v0 = self.m[bn].copy(), self.v[bn].copy()
-        if self.mm is not None and self.mm.has_void:  # (nodes without mass inside void)
-            from solvers.ale import blocked as _blocked
-            _blocked.sweep_nodes(self.v, self.m, self.M, B.zact, self.PHI, self.VS, self.dK, d,
-                                 self.nr[0], self.nr[1], B.zs, B.ns)
-        else:
-            remap.sweep_nodes(self.v, self.m, self.M, B.zact, self.PHI, self.VS, self.dK, d,
-                              self.nr[0], self.nr[1], B.zs, B.ns)
+        remap.sweep_nodes(self.v, self.m, self.M, B.zact, self.PHI, self.VS, self.dK, d,
+                          self.nr[0], self.nr[1], B.zs, B.ns, massless)
         if bn.size:
             self._open_node_terms(d, m0, v0)
+        e0 = self.e.copy() if self.mm is not None else None
+        remap.deposit(self.e, self.m, self.dK, self.zr[0], self.zr[1], B.zs, B.ns, self.dim, Mz)
         if self.mm is not None:  # the kinetic-energy defect goes to every material of the zone
-            e0 = self.e.copy()
-            if self.mm.has_void:
-                _blocked.deposit(self.e, self.M, self.m, self.dK, self.zr[0], self.zr[1], B.zs, B.ns, self.dim)
-            else:
-                remap.deposit(self.e, self.m, self.dK, self.zr[0], self.zr[1], B.zs, B.ns, self.dim)
             self.mm.deposit_energy(self, self.e - e0)
-        else:
-            remap.deposit(self.e, self.m, self.dK, self.zr[0], self.zr[1], B.zs, B.ns, self.dim)
         self.bc.fill_nodes_vector(self.v)
         self.bc.fill_nodes_scalar(self.m)
         self.bc.fill_zones([self.e], self._inflow_values("energy"))
@@ -863,10 +861,14 @@ class AleSolver:
     VECTORS = ("momentum0",)
 
     def _checkpoint_arrays(self):
-        """(name, array) of the state a restart needs; material arrays are (zones, materials)."""
+        """(name, array) of the state a restart needs; material arrays are (zones, materials); with
+        blocked fractions the combined blocked fraction of every zone (static obstacles and the
+        coupler's, blocked.py: the open fractions, apertures and wall nodes follow from it)."""
         out = [(k, getattr(self, k)) for k in self.ARRAYS]
         if self.mm is not None:
             out += [(f"material_{k}", getattr(self.mm, k)) for k in self.mm.FIELDS + ("pm", "cm")]
+        if self._blk is not None:
+            out.append(("blocked_fraction", self._blk.b))
         return out
 
     def _layout(self, a: np.ndarray):
@@ -925,15 +927,24 @@ class AleSolver:
             dec.comm.Barrier()  # the file exists when checkpoint returns on any rank
 
     def restart(self, path) -> None:
+        """Collective (with blocked fractions: their ghost fills)."""
         B, dec = self.block, self.dec
         o = np.zeros(3, np.int64)
         o[: self.dim] = B.offset
+
+        def window(h, k, a):  # this rank's padded block of the global array k, into a
+            _, n = self._layout(a)
+            a[...] = h[k][o[0]:o[0] + n[0], o[1]:o[1] + n[1], o[2]:o[2] + n[2]].reshape(a.shape)
+            return a
+
         with h5py.File(path, "r") as h:
             if not np.array_equal(h.attrs["cells"], self.block.cells):
                 raise ValueError(f"checkpoint {path} is for a grid of {list(h.attrs['cells'])} cells")
             for k, a in self._checkpoint_arrays():
-                _, n = self._layout(a)
-                a[...] = h[k][o[0]:o[0] + n[0], o[1]:o[1] + n[1], o[2]:o[2] + n[2]].reshape(a.shape)
+                if k != "blocked_fraction":
+                    window(h, k, a)
+            # blocked fractions (static obstacles and coupler) of the checkpointed state, if any
+            b = window(h, "blocked_fraction", np.zeros(B.nzones)) if "blocked_fraction" in h else None
             for k in self.VECTORS:
                 setattr(self, k, h[k][...].copy())
             for k in self.SCALARS:
@@ -950,3 +961,8 @@ class AleSolver:
         self.parity = int(self.parity)
         self.first_step = bool(self.first_step)
         self._pending_remap = bool(self._pending_remap)
+        if b is not None:
+            if self._blk is None:  # fractions from the coupler alone (remap(blocked=...))
+                from solvers.ale.blocked import Blocked
+                self._blk = Blocked(self)
+            self._blk.set_fractions(self, b)

@@ -77,9 +77,9 @@ def _translate(rho0, shift, steps):
     hi[0] += 1
     bc.fill_zones([rho, e, M, V])
     for _ in range(steps):
-        remap.sweep_fluxes(rho, e, M, V, SV, F, ES, int(B.zs[0]), lo, hi, B.zs)
+        remap.sweep_fluxes(rho, e, M, V, SV, F, ES, None, int(B.zs[0]), lo, hi, B.zs)
         bc.fill_zones([F, ES], face_dir=0)
-        remap.sweep_zones(rho, e, M, V, SV, F, ES, int(B.zs[0]), zr[0], zr[1], B.zs)
+        remap.sweep_zones(rho, e, M, V, SV, F, ES, None, int(B.zs[0]), zr[0], zr[1], B.zs)
         bc.fill_zones([rho, e, M, V])
     return rho[real], e[real], M[real]
 
