@@ -19,7 +19,9 @@ One step (solver.py calls these in this order)
    to the materials' compressibilities, ``dV_k = dV (vol_k / K_k) / sum_j (vol_j / K_j)`` with
    ``K = rho c^2`` (equal pressure changes: a zone in pressure equilibrium stays in it; equal strain
    for traces, or if a material would lose half its volume); with void, compression closes the void
-   first and expansion goes to the materials.  The zone's compatible energy change ``dE = M e_new -
+   first, expansion is shared by equal strain (a material cannot fill void faster than its own
+   strain; a gas disc in void with all the expansion given to its 20 % share of a rim zone
+   over-expanded to a negative EOS energy within two steps).  The zone's compatible energy change ``dE = M e_new -
    sum_k mass_k ener_k`` is shared in proportion to each material's work, ``w_k = (p_k + q) dV_k /
    sum_j (p_j + q) dV_j`` (by mass if the shares would have mixed signs), so the sum is exactly the
    zone's change.
@@ -53,7 +55,7 @@ from numba import njit
 
 from solvers.ale import eos as _eos
 from solvers.ale import plic
-from solvers.ale.remap import limiter
+from solvers.ale.remap import face_flux
 
 VOID = -1
 TRACE = 1e-9       # volume fraction below which a material is a trace: no EOS call, no say in c
@@ -156,10 +158,14 @@ def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs)
                         vol[z, m] *= V[z] / vold
                         deh[z, m] = 0.0
                     continue
-                # void: compression closes it first, expansion goes to the materials
+                # void: compression closes it first; expansion by equal strain (the materials
+                # cannot fill the void faster than their own strain: the advection moves the
+                # interface at the speed of the nodes)
                 dvoid = 0.0
                 if dv < 0.0 and vvoid > 0.0:
                     dvoid = dv if -dv < vvoid else -vvoid
+                elif dv > 0.0 and vvoid > 0.0:
+                    dvoid = dv * vvoid / vold
                 dmat = dv - dvoid
                 # materials: traces by equal strain, the others in proportion to their
                 # compressibility vol/K (K = rho c^2): equal pressure changes, so a zone in pressure
@@ -324,18 +330,8 @@ def sweep_fluxes(vol, mass, ener, code, FC, rho, e, M, V, SV, F, ES, VF, MF, EF,
                         ES[z] = 0.0
                         continue
                     if same:  # second order, as remap.sweep_fluxes
-                        ru = rho[u]
-                        dr = limiter(ru - rho[u - s], rho[u + s] - ru)
-                        fr = abs(sv) / V[u]
-                        if fr > 1.0:
-                            fr = 1.0
-                        f = sv * (ru + sg * dr * (1.0 - fr))
-                        eu = e[u]
-                        de = limiter(eu - e[u - s], e[u + s] - eu)
-                        fm = abs(f) / M[u]
-                        if fm > 1.0:
-                            fm = 1.0
-                        es = eu + sg * de * (1.0 - fm)
+                        f, es = face_flux(sv, sg, rho[u], rho[u - s], rho[u + s], e[u], e[u - s], e[u + s],
+                                          V[u], M[u])
                     else:
                         f = sv * mass[u, pure] / vol[u, pure]
                         es = ener[u, pure]

@@ -144,6 +144,22 @@ def swept_volumes_2d(X, x, SV, d, zlo, zhi, zs, ns):
 # ------------------------------------------------------------------------------------------------
 # zone part of a sweep
 # ------------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def face_flux(sv, sg, ru, rl, rh, eu, el, eh, Vu, Mu):
+    """Mass flux and face energy of a face sweeping ``sv`` out of its upwind zone u (rho, e of u and
+    of its lower/upper neighbours; ``sg`` = +1/2 when the flux leaves u through its upper face)."""
+    dr = limiter(ru - rl, rh - ru)
+    fr = abs(sv) / Vu
+    if fr > 1.0:
+        fr = 1.0
+    f = sv * (ru + sg * dr * (1.0 - fr))
+    de = limiter(eu - el, eh - eu)
+    fm = abs(f) / Mu
+    if fm > 1.0:
+        fm = 1.0
+    return f, eu + sg * de * (1.0 - fm)
+
+
 @njit(cache=True)
 def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
     """Mass flux F and face energy e* of the lower faces (stride s) of the zones in range.
@@ -182,17 +198,9 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                     if solid[u + s]:
                         rh = ru
                         eh = eu
-                dr = limiter(ru - rl, rh - ru)
-                fr = abs(sv) / V[u]
-                if fr > 1.0:
-                    fr = 1.0
-                f = sv * (ru + sg * dr * (1.0 - fr))
-                de = limiter(eu - el, eh - eu)
-                fm = abs(f) / M[u]
-                if fm > 1.0:
-                    fm = 1.0
+                f, es = face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
                 F[z] = f
-                ES[z] = eu + sg * de * (1.0 - fm)
+                ES[z] = es
 
 
 @njit(cache=True)
@@ -400,7 +408,7 @@ def _flush():
     from solvers.ale import hydro as _h
     from solvers.numba_cache import flush_stale_cache
 
-    flush_stale_cache([limiter, hex_volume, swept_volumes_3d, swept_volumes_2d, sweep_fluxes,
+    flush_stale_cache([limiter, face_flux, hex_volume, swept_volumes_3d, swept_volumes_2d, sweep_fluxes,
                        sweep_zones, _layer_solid, sweep_dual, sweep_nodes, _sweep_nodes, deposit, set_positions],
                       [_h.__file__], "remap.deps.sha256")
 

@@ -76,3 +76,31 @@ def node_line(s: AleSolver, comp: int, axis: int) -> np.ndarray:
     cells = [c + 1 for c in s.block.cells]
     a = s.node_field(s.v)[:, comp].reshape(cells[::-1])
     return np.moveaxis(a, s.dim - 1 - axis, 0).reshape(cells[axis], -1)
+
+
+# Sod (gamma 1.4, (1, 0, 1) | (0.125, 0, 0.1) at 0.5, t = 0.2): exact star state and shock
+SOD_P_STAR, SOD_U_STAR, SOD_RHO_L, SOD_RHO_R, SOD_X_SHOCK = 0.303130, 0.927453, 0.426319, 0.265574, 0.850431
+
+
+def check_sod_profile(s: AleSolver, n: int) -> None:
+    """Assert a Sod tube along x at t = 0.2 on n zones: star-state plateaus within 2 %, shock within
+    3 cells, undisturbed states beyond the waves to 1e-10."""
+    rho = line(s, s.rho, 0)[:, 0]
+    p = line(s, s.p, 0)[:, 0]
+    u = node_line(s, 0, 0)[:, 0]
+    xc = (np.arange(n) + 0.5) / n
+    xn = np.arange(n + 1) / n
+    left = (xc > 0.52) & (xc < 0.66)     # rarefaction tail 0.486 .. contact 0.685
+    right = (xc > 0.71) & (xc < 0.83)    # contact .. shock 0.850
+    assert np.max(np.abs(rho[left] / SOD_RHO_L - 1.0)) < 0.02
+    assert np.max(np.abs(rho[right] / SOD_RHO_R - 1.0)) < 0.02
+    assert np.max(np.abs(p[left | right] / SOD_P_STAR - 1.0)) < 0.02
+    assert np.max(np.abs(u[(xn > 0.52) & (xn < 0.83)] / SOD_U_STAR - 1.0)) < 0.02
+    # shock: where the density crosses the mean of rho*_R and the pre-shock 0.125
+    mid = 0.5 * (SOD_RHO_R + 0.125)
+    i = np.flatnonzero((rho[:-1] > mid) & (rho[1:] <= mid) & (xc[:-1] > 0.75))[0]
+    x_s = xc[i] + (rho[i] - mid) / (rho[i] - rho[i + 1]) / n
+    assert abs(x_s - SOD_X_SHOCK) < 3.0 / n
+    # undisturbed states well beyond the waves (the numerical rarefaction head has a smooth precursor)
+    assert np.max(np.abs(rho[xc < 0.15] - 1.0)) < 1e-10
+    assert np.max(np.abs(rho[xc > 0.88] - 0.125)) < 1e-10

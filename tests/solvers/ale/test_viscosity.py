@@ -18,14 +18,13 @@ from orchestrator.case import load_case
 from solvers.ale import hydro
 from solvers.ale import solver as ale_solver
 from solvers.ale.solver import AleSolver
-from tests.solvers.ale.ale_helpers import (advance, line, node_line, run, sedov_config, sod_config,
-                                           uniform_config)
+from tests.solvers.ale.ale_helpers import (SOD_P_STAR, advance, check_sod_profile, line, run, sedov_config,
+                                           sod_config, uniform_config)
 
 REPO = Path(__file__).resolve().parents[3]
 MONO = {"kind": "monotonic"}
 N = 400
 T = 0.2
-P_STAR, U_STAR, RHO_L, RHO_R, X_SHOCK = 0.303130, 0.927453, 0.426319, 0.265574, 0.850431
 
 
 def _with(cfg, visc):
@@ -86,23 +85,7 @@ def _l1(s, exact):
 def test_sod_plateaus_and_shock(runs):
     """Star-state plateaus within 2 % of the exact values, shock within 3 cells (as the scalar q)."""
     s = runs[(2, 0)]
-    rho = line(s, s.rho, 0)[:, 0]
-    p = line(s, s.p, 0)[:, 0]
-    u = node_line(s, 0, 0)[:, 0]
-    xc = (np.arange(N) + 0.5) / N
-    xn = np.arange(N + 1) / N
-    left = (xc > 0.52) & (xc < 0.66)
-    right = (xc > 0.71) & (xc < 0.83)
-    assert np.max(np.abs(rho[left] / RHO_L - 1.0)) < 0.02
-    assert np.max(np.abs(rho[right] / RHO_R - 1.0)) < 0.02
-    assert np.max(np.abs(p[left | right] / P_STAR - 1.0)) < 0.02
-    assert np.max(np.abs(u[(xn > 0.52) & (xn < 0.83)] / U_STAR - 1.0)) < 0.02
-    mid = 0.5 * (RHO_R + 0.125)
-    i = np.flatnonzero((rho[:-1] > mid) & (rho[1:] <= mid) & (xc[:-1] > 0.75))[0]
-    x_s = xc[i] + (rho[i] - mid) / (rho[i] - rho[i + 1]) / N
-    assert abs(x_s - X_SHOCK) < 3.0 / N
-    assert np.max(np.abs(rho[xc < 0.15] - 1.0)) < 1e-10
-    assert np.max(np.abs(rho[xc > 0.88] - 0.125)) < 1e-10
+    check_sod_profile(s, N)
     d = s.diagnostics()
     assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12
 
@@ -137,7 +120,7 @@ def test_sod_l1_error_against_scalar_q(runs, exact, mode):
         xn = mono.node_field(mono.x)[: N + 1, 0]
         xc = 0.5 * (xn[:-1] + xn[1:])
         p = line(mono, mono.p, 0)[:, 0]
-        assert np.max(np.abs(p[(xc > 0.52) & (xc < 0.83)] / P_STAR - 1.0)) < 0.02
+        assert np.max(np.abs(p[(xc > 0.52) & (xc < 0.83)] / SOD_P_STAR - 1.0)) < 0.02
 
 
 # ------------------------------------------------------------------------------------------------
