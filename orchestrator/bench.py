@@ -345,7 +345,9 @@ def _mesh_study(case_name: str, old: str, grid, sizes, metrics) -> list:
                 raise RuntimeError(f"{case_name} with {n} zones failed")
             s = json.loads((d / "out" / "summary.json").read_text())
             vals = {**s["check"]["reported"], **{k: m["value"] for k, m in s["check"]["metrics"].items()}}
-            rows.append((n, {k: vals[k] for k in metrics}, s["wall_time_s"], s["steps"]))
+            # (a plateau narrower than the check's margins has no value: null, not NaN, in the JSON)
+            rows.append((n, {k: (vals[k] if np.isfinite(vals[k]) else None) for k in metrics},
+                         s["wall_time_s"], s["steps"]))
     return rows
 
 
