@@ -104,3 +104,18 @@ def check_sod_profile(s: AleSolver, n: int) -> None:
     # undisturbed states well beyond the waves (the numerical rarefaction head has a smooth precursor)
     assert np.max(np.abs(rho[xc < 0.15] - 1.0)) < 1e-10
     assert np.max(np.abs(rho[xc > 0.88] - 0.125)) < 1e-10
+
+
+def check_same_profile_every_axis(runs: dict) -> None:
+    """Assert that tubes run along every axis ({(dim, axis): solver}) give the (2, 0) tube's density
+    and energy profiles: within 1e-12 relative across dimensions, bitwise along the axes of one."""
+    ref = {k: line(s, s.rho, k[1])[:, 0] for k, s in runs.items()}
+    ref_e = {k: line(s, s.e, k[1])[:, 0] for k, s in runs.items()}
+    base, base_e = ref[(2, 0)], ref_e[(2, 0)]
+    for k in runs:
+        assert np.max(np.abs(ref[k] - base) / base) < 1e-12, k
+        assert np.max(np.abs(ref_e[k] - base_e) / base_e) < 1e-12, k
+    for dim in (2, 3):
+        for axis in range(1, dim):
+            assert np.array_equal(ref[(dim, axis)], ref[(dim, 0)])
+            assert np.array_equal(ref_e[(dim, axis)], ref_e[(dim, 0)])
