@@ -83,7 +83,7 @@ from orchestrator.expressions import compile_expression
 from solvers.ale import eos as _eos
 from solvers.ale.boundary import constrain as _constrain_kernel
 from solvers.ale.grid import GHOST
-from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, Q_MONOTONIC, _mono_q, _t4, _t8, hex_volume_sym
+from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
 from solvers.ale.remap import set_positions
 from solvers.lagrange.kernels import hex_bvectors, quad_bvectors
 
@@ -415,14 +415,7 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin,
                 emax = l2
         lc = vol / math.sqrt(emax)
         cz = c[z]
-        qz = 0.0
-        qq = 0.0
-        if divv < 0.0:
-            if qkind == Q_MONOTONIC:
-                qz, qq = _mono_q(grad, z, zs, 2, rho[z], cz, q_lin, q_quad, solid)
-            else:
-                qq = q_lin * cz - q_quad * lc * divv
-                qz = rho[z] * lc * qq * (-divv)
+        qz, qq = zone_q(qkind, grad, z, zs, 2, rho[z], cz, lc, divv, q_lin, q_quad, solid)
         s_old = p[z] + q[z]
         s_new = p[z] + qz
         q[z] = qz
@@ -479,14 +472,7 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin,
         divv = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) / (ph * vol)
         lc = vol / amax
         cz = c[z]
-        qz = 0.0
-        qq = 0.0
-        if divv < 0.0:
-            if qkind == Q_MONOTONIC:
-                qz, qq = _mono_q(grad, z, zs, 3, rho[z], cz, q_lin, q_quad, solid)
-            else:
-                qq = q_lin * cz - q_quad * lc * divv
-                qz = rho[z] * lc * qq * (-divv)
+        qz, qq = zone_q(qkind, grad, z, zs, 3, rho[z], cz, lc, divv, q_lin, q_quad, solid)
         s_old = p[z] + q[z]
         s_new = p[z] + qz
         q[z] = qz

@@ -349,6 +349,19 @@ def _mono_q(grad, z, zs, ndir, r, cz, q_lin, q_quad, solid):
 # ------------------------------------------------------------------------------------------------
 # 3D
 # ------------------------------------------------------------------------------------------------
+
+@njit(cache=True, inline="always")
+def zone_q(qkind, grad, z, zs, ndir, r, cz, lc, divv, q_lin, q_quad, solid):
+    """Artificial viscosity of zone z and its Courant term Q: (q, Q), both 0 unless compressed
+    (div v < 0); scalar q from div v and the length lc, or the monotonic q (:func:`_mono_q`)."""
+    if not divv < 0.0:
+        return 0.0, 0.0
+    if qkind == Q_MONOTONIC:
+        return _mono_q(grad, z, zs, ndir, r, cz, q_lin, q_quad, solid)
+    qq = q_lin * cz - q_quad * lc * divv
+    return r * lc * qq * (-divv), qq
+
+
 @njit(cache=True)
 def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rhi, zs, ns,
                  flags, dt, dt_avg, code, par, q_lin, q_quad, hg, qkind, grad):
@@ -438,14 +451,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                         w[a] = ve[a, 0] * b[a, 0] + ve[a, 1] * b[a, 1] + ve[a, 2] * b[a, 2]
                     divv = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) / vol
                 lc = vol / amax
-                qz = 0.0
-                qq = 0.0
-                if divv < 0.0:
-                    if qkind == Q_MONOTONIC:
-                        qz, qq = _mono_q(grad, z, zs, 3, r, cz, q_lin, q_quad, None)
-                    else:
-                        qq = q_lin * cz - q_quad * lc * divv
-                        qz = r * lc * qq * (-divv)
+                qz, qq = zone_q(qkind, grad, z, zs, 3, r, cz, lc, divv, q_lin, q_quad, None)
                 q[z] = qz
                 u = 0.0
                 if advect:
@@ -579,14 +585,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 if l2 > emax:
                     emax = l2
             lc = vol / math.sqrt(emax)
-            qz = 0.0
-            qq = 0.0
-            if divv < 0.0:
-                if qkind == Q_MONOTONIC:
-                    qz, qq = _mono_q(grad, z, zs, 2, r, cz, q_lin, q_quad, None)
-                else:
-                    qq = q_lin * cz - q_quad * lc * divv
-                    qz = r * lc * qq * (-divv)
+            qz, qq = zone_q(qkind, grad, z, zs, 2, r, cz, lc, divv, q_lin, q_quad, None)
             q[z] = qz
             u = 0.0
             if advect:
@@ -727,7 +726,7 @@ def _flush():
 
     flush_stale_cache([zone_pass_3d, zone_pass_2d, mono_gradients_3d, mono_gradients_2d, gather_3d,
                        gather_2d, predict, move, ghost_force_work, sums, energy_from_pressure_array, energy_update,
-                       lagrangian_volumes, _t4, _t8, zones_around_node_3d, zones_around_node_2d, _mono_q],
+                       lagrangian_volumes, _t4, _t8, zones_around_node_3d, zones_around_node_2d, _mono_q, zone_q],
                       [_eos.__file__, _k.__file__], "hydro.deps.sha256")
 
 
