@@ -65,6 +65,26 @@ def register_process(out_dir: Path, role: str, rank: int) -> None:
     os.replace(tmp, d / str(os.getpid()))
 
 
+def write_stop_state(out_dir: Path, **state) -> None:
+    """What the coupler was doing when it was told to stop (step, t): the launcher's interruption
+    message reads it. Written atomically; small."""
+    import json
+
+    d = run_dir(out_dir)
+    tmp = d / f".stop_state.{os.getpid()}.tmp"
+    tmp.write_text(json.dumps(state))
+    os.replace(tmp, d / "stop_state.json")
+
+
+def read_stop_state(out_dir: Path) -> dict | None:
+    import json
+
+    try:
+        return json.loads((run_dir(out_dir) / "stop_state.json").read_text())
+    except (OSError, ValueError):
+        return None
+
+
 def report_failure(out_dir: Path, role: str, rank: int, message: str) -> None:
     line = f"{role} rank {rank}: {message}".replace("\n", " ")
     try:

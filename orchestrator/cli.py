@@ -1,7 +1,7 @@
 """`immerse` command line: check, run, view, bench.
 
   immerse check CASE                          validate case.toml (and its meshes) only
-  immerse run CASE [--out DIR] [--ranks ROLE=N ...] [--restart FILE]
+  immerse run CASE [--out DIR] [--ranks ROLE=N ...] [--restart FILE] [--replace]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
   immerse bench NAME [--out FILE] [--quick]   NAME: lagrange
 
@@ -61,10 +61,18 @@ def cmd_run(args) -> int:
         ranks = ranks_for(case, ranks)
     except CaseError as e:
         return _fail(str(e))
-    if args.restart and not Path(args.restart).is_file():
-        return _fail(f"--restart = {args.restart!r}: not a readable checkpoint file")
-    out = Path(args.out) if args.out else Path(case["case_dir"]) / "out"
-    rc = run_job(case, out, ranks, args.restart)
+    # everything is checked before anything is created or launched
+    from orchestrator import outdir
+    from orchestrator.fingerprint import case_fingerprint
+    from orchestrator.restart import RestartError, check_restart
+
+    try:
+        ck = check_restart(args.restart, case) if args.restart is not None else None
+        out = Path(args.out) if args.out is not None else Path(case["case_dir"]) / "out"
+        plan = outdir.plan(out, case, case_fingerprint(case), replace=args.replace, restart=ck)
+        rc = run_job(case, out, ranks, args.restart, plan=plan)
+    except (RestartError, outdir.OutDirError) as e:
+        return _fail(str(e))
     if rc == 0:
         import json
 
@@ -110,7 +118,11 @@ def main(argv=None) -> int:
     p.add_argument("case")
     p.add_argument("--out", help="output directory (default CASE/out)")
     p.add_argument("--ranks", nargs="*", metavar="ROLE=N", help="ranks per solver, e.g. lagrange=2")
-    p.add_argument("--restart", help="checkpoint file (out/checkpoints/checkpoint_*.h5)")
+    p.add_argument("--restart", help="checkpoint file (OUT/checkpoints/checkpoint_*.h5) of this case; "
+                                     "continues its run in its own output directory")
+    p.add_argument("--replace", action="store_true",
+                   help="replace an earlier output of this case in OUT: deletes only the files immerse "
+                        "wrote there")
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("view", help="render PNG pictures of a run's output")
     p.add_argument("out")

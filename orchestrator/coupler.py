@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import socket
 import sys
 import time as _time
@@ -20,6 +21,7 @@ import h5py
 import numpy as np
 
 from adapters import protocol as P
+from orchestrator import restart
 
 WAIT_SLICE_S = 50e-6  # sleep slice of the coupler while solver groups compute
 
@@ -106,11 +108,18 @@ class Coupler:
         d = self.out / "checkpoints"
         path = d / f"checkpoint_{self.step:08d}.h5"
         tmp = path.with_suffix(".tmp")
+        ident = self._case_identity()
         with h5py.File(tmp, "w") as h:
             for k in ("t", "step", "out_index", "ckpt_index", "dt_min", "dt_max"):
                 h.attrs[k] = getattr(self, k)
+            # which case this state belongs to: a restart of any other case is refused
+            h.attrs["format"] = restart.FORMAT
+            h.attrs["case_name"] = self.case["name"]
+            h.attrs["case_fingerprint"] = ident["fingerprint"]
+            h.attrs["case_identity"] = ident["json"]
             for r in self.roles:
                 h.attrs[f"file_{r}"] = f"step_{self.step:08d}/{r}.h5"
+                h.attrs[f"ranks_{r}"] = self.inter[r].Get_remote_size()
                 h.create_dataset(f"history/{r}", data=np.array(self.history[r]))
             h.create_dataset("history/t", data=np.array(self.history_t))
             h.create_dataset("history/step", data=np.array(self.history_step))
@@ -118,7 +127,19 @@ class Coupler:
         self.ckpt_index += 1
         self.log(f"checkpoint {path.relative_to(self.out)} at step {self.step}, t = {self.t:.6e} s")
 
+    def _case_identity(self) -> dict:
+        """The case's fingerprint and the canonical JSON it hashes (mesh files hashed once)."""
+        if getattr(self, "_ident", None) is None:
+            from orchestrator.fingerprint import canonical_json, case_fingerprint, case_identity
+
+            self._ident = {"fingerprint": case_fingerprint(self.case),
+                           "json": canonical_json(case_identity(self.case))}
+        return self._ident
+
     def _load(self, path: Path) -> None:
+        # the launcher checked it already; a coupler started by other means must not continue
+        # another case's state either
+        restart.check_restart(path, self.case)
         with h5py.File(path, "r") as h:
             self.t = float(h.attrs["t"])
             self.step = int(h.attrs["step"])
@@ -234,11 +255,22 @@ def main(argv=None) -> None:
     ap.add_argument("--restart", default=None)
     args = ap.parse_args(argv)
     out = Path(args.out)
+    running: list[Coupler] = []
+
+    def stopped(signum, frame):
+        # the launcher ends the job (SIGTERM to every process): say where the time loop was, so the
+        # interruption message can name the step, then go without touching MPI (the others are dying)
+        if running:
+            P.write_stop_state(out, step=running[0].step, t=running[0].t, signal=signum)
+        os._exit(128 + signum)
+
+    signal.signal(signal.SIGTERM, stopped)
     place = P.join(P.COUPLER, args.roles.split(","))
     P.install_fault_handler(out, P.COUPLER, 0)
     P.register_process(out, P.COUPLER, 0)
     case = load_case(args.case)
-    Coupler(place, case, out, args.restart).run()
+    running.append(Coupler(place, case, out, args.restart))
+    running[0].run()
     (P.run_dir(out) / "pids" / str(os.getpid())).unlink(missing_ok=True)
 
 

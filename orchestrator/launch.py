@@ -8,22 +8,20 @@ seconds and reports that rank; a rank that failed with a Python error has writte
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import select
-import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from adapters import protocol as P
 from adapters import registry
-
-# outputs of a previous run that a fresh (non-restart) run replaces
-RUN_OUTPUTS = ("steps", "checkpoints", "pictures", ".run", "results.h5", "results.xdmf",
-               "summary.json", "log.txt", "diagnostics.h5")
-
+from orchestrator import outdir
 
 def venv_bin() -> Path:
     return Path(sys.executable).parent
@@ -42,29 +40,6 @@ def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | N
     for r in roles[1:]:
         cmd += [":", "-n", str(ranks[r]), py, "-m", registry.module_of(r), *common, "--role", r]
     return cmd
-
-
-def prepare_out(out: Path, restart: str | None) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    names = (".run",) if restart else RUN_OUTPUTS
-    for n in names:
-        p = out / n
-        if p.is_dir():
-            shutil.rmtree(p)
-        elif p.exists():
-            p.unlink()
-    if restart:
-        import h5py
-
-        from orchestrator import output
-
-        with h5py.File(restart, "r") as h:
-            first_new = int(h.attrs["out_index"])
-        # steps the restarted run will write again: drop the old ones so the index never mixes runs
-        for f in (out / "steps").glob("*_[0-9]*.h5"):
-            if int(f.stem.rsplit("_", 1)[1]) >= first_new:
-                f.unlink()
-        output.write_index(out)
 
 
 class RankWatch:
@@ -112,6 +87,17 @@ class RankWatch:
             self._ended(record)
         return self.failed
 
+    def find(self, role: str, rank: int) -> tuple[int, int] | None:
+        """(pid, pidfd) of a live, recorded process of the job."""
+        self._scan()
+        for fd, (pid, record) in self.fds.items():
+            try:
+                if record.read_text().split() == [role, str(rank)]:
+                    return pid, fd
+            except OSError:
+                pass
+        return None
+
     def close(self) -> None:
         for fd in self.fds:
             os.close(fd)
@@ -123,24 +109,170 @@ def _error_reports(out: Path) -> list[str]:
     return [f.read_text().strip() for f in sorted(d.glob("error_*.txt"))] if d.is_dir() else []
 
 
-def _stop(proc: subprocess.Popen, grace: float = 3.0) -> None:
-    for sig in (signal.SIGTERM, signal.SIGKILL):
-        try:
-            os.killpg(proc.pid, sig)
-        except ProcessLookupError:
-            return
-        try:
-            proc.wait(timeout=grace)
-            return
-        except subprocess.TimeoutExpired:
-            continue
+
+# ---- the process table -----------------------------------------------------------------------------
+def _proc_stat(pid: int) -> tuple[int, str] | None:
+    """(parent pid, state letter) of a process from /proc, None if it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return int(fields[1]), fields[0]
+    except (OSError, IndexError, ValueError):
+        return None
 
 
-def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None) -> int:
-    """Run the job; return 0 on success, else a non-zero code after printing which rank failed."""
+def descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` in the process table. hydra's proxies and the ranks each
+    start a session of their own (setsid), so a process group or session signal from the launcher
+    reaches mpiexec alone; the parent links still tie them to it."""
+    children: dict[int, list[int]] = {}
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            st = _proc_stat(int(name))
+            if st:
+                children.setdefault(st[0], []).append(int(name))
+    found, todo = set(), [pid]
+    while todo:
+        for c in children.get(todo.pop(), ()):
+            if c not in found:
+                found.add(c)
+                todo.append(c)
+    return found
+
+
+def is_running(pid: int) -> bool:
+    """Alive and not a zombie (a zombie has ended; only its exit status waits to be collected)."""
+    st = _proc_stat(pid)
+    return st is not None and st[1] not in "ZX"
+
+
+def _runs_job(pid: int, out: Path) -> bool:
+    """Is ``pid`` a process of the job writing to ``out`` (its command line says --out out)?"""
+    try:
+        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
+    except OSError:
+        return False
+    want = os.fsencode(str(out))
+    return any(a == b"--out" and b == want for a, b in zip(argv, argv[1:]))
+
+
+def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
+    """End every process of the job: mpiexec, hydra's proxies, the coupler and every solver rank
+    (those below mpiexec in the process table and those recorded in OUT/.run/pids, which also finds
+    a rank whose proxy already died). SIGTERM, then SIGKILL after ``grace`` seconds; returns when
+    none is running. pidfds make sure a recycled pid is never signalled."""
+    # below mpiexec only while it is not reaped (a reaped pid may already belong to another process)
+    pids = descendants(proc.pid) if proc.returncode is None else set()
+    d = P.run_dir(out) / "pids"
+    if d.is_dir():
+        pids |= {int(f.name) for f in d.iterdir() if f.name.isdigit() and _runs_job(int(f.name), out)}
+    fds = {}
+    for pid in pids:
+        try:
+            fds[pid] = os.pidfd_open(pid)
+        except OSError:
+            pass
+    try:
+        # mpiexec first and without a word: a SIGTERM'd mpiexec prints banners about its ranks
+        if proc.poll() is None:
+            proc.kill()
+        for sig, wait_s in ((signal.SIGTERM, grace), (signal.SIGKILL, 5.0)):
+            for pid, fd in fds.items():
+                try:
+                    signal.pidfd_send_signal(fd, sig)
+                except OSError:
+                    pass
+            deadline = time.monotonic() + wait_s
+            while any(is_running(p) for p in fds) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            if not any(is_running(p) for p in fds):
+                break
+    finally:
+        for fd in fds.values():
+            os.close(fd)
+    proc.wait()
+
+
+# ---- signals ---------------------------------------------------------------------------------------
+class StopRequest:
+    """Why running jobs must end: set by a signal handler (:func:`stop_on_signals`), or by a campaign
+    that runs jobs in threads and owns the signals itself."""
+
+    def __init__(self) -> None:
+        self.signum: int | None = None
+
+    def request(self, signum: int) -> None:
+        if self.signum is None:
+            self.signum = signum
+
+
+@contextlib.contextmanager
+def stop_on_signals(stop: StopRequest | None = None, signals=(signal.SIGINT, signal.SIGTERM)):
+    """While inside, SIGINT and SIGTERM to this process only set ``stop`` (no KeyboardInterrupt at a
+    random place): the job loop sees it within 50 ms and ends the job in order."""
+    stop = stop or StopRequest()
+    if threading.current_thread() is not threading.main_thread():
+        yield stop
+        return
+    previous = {s: signal.signal(s, lambda signum, frame: stop.request(signum)) for s in signals}
+    try:
+        yield stop
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
+
+
+# ---- one job ---------------------------------------------------------------------------------------
+@dataclass
+class JobResult:
+    returncode: int  # 0 ok; 128 + signal number when interrupted; else the job's failure code
+    message: str = ""  # one line (empty on success)
+    signal: int | None = None  # the signal that interrupted it
+
+
+def _last_output_time(out: Path) -> float | None:
+    """Time of the last output step every role has on disk (after re-indexing)."""
     from orchestrator import output
 
-    prepare_out(out, restart)
+    try:
+        lasts = [steps[-1][0] for r in output.list_roles(out) if (steps := output.read_steps(out, r))]
+    except (OSError, KeyError, ValueError):
+        return None
+    return min(lasts) if lasts else None
+
+
+def _interrupted(out: Path, signum: int) -> str:
+    name = signal.Signals(signum).name
+    state = P.read_stop_state(out)
+    where = (f"at step {state['step']}, t = {state['t']:.6e} s" if state
+             else "during start-up (before the time loop)")
+    last = _last_output_time(out)
+    outputs = f"outputs up to t = {last:.6e} s" if last is not None else "no output step written"
+    return f"interrupted by {name} {where}; {outputs} in {out}"
+
+
+def _ask_coupler_where(watch: RankWatch, timeout: float = 1.0) -> None:
+    """SIGTERM to the coupler alone first: it records its step and time, then exits."""
+    found = watch.find(P.COUPLER, 0)
+    if found is None:
+        return
+    pid, fd = found
+    try:
+        signal.pidfd_send_signal(fd, signal.SIGTERM)
+    except OSError:
+        return
+    deadline = time.monotonic() + timeout
+    while is_running(pid) and time.monotonic() < deadline:
+        time.sleep(0.01)
+
+
+def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None,
+            stop: StopRequest | None = None) -> JobResult:
+    """Launch the job into a prepared ``out``, watch it, and end all of it on a failure or when
+    ``stop`` is set (a signal); every completed output step is indexed afterwards. Prints nothing."""
+    from orchestrator import output
+
+    stop = stop or StopRequest()
     cmd = build_command(case, out, ranks, restart)
     env = dict(os.environ)
     env.setdefault("NUMBA_NUM_THREADS", "1")
@@ -151,13 +283,18 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         env["IMMERSE_TTY"] = "1"
     else:
         env.pop("IMMERSE_TTY", None)
-    (out / "log.txt").open("a").write(f"command: {' '.join(cmd)}\n")
+    with (out / "log.txt").open("a") as f:
+        f.write(f"command: {' '.join(cmd)}\n")
+    if stop.signum is not None:
+        return JobResult(128 + stop.signum, f"interrupted by {signal.Signals(stop.signum).name} before "
+                                            "the job started", stop.signum)
     proc = subprocess.Popen(cmd, env=env, start_new_session=True)
     watch = RankWatch(out)
     failed: list[str] = []
     died_first: list[str] = []  # ranks seen dead before any rank reported an error
+    ended_by_us = False
     try:
-        while proc.poll() is None:
+        while proc.poll() is None and stop.signum is None:
             failed = list(watch.wait(50))
             if failed and not _error_reports(out):
                 died_first = failed
@@ -166,23 +303,30 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
                 try:
                     proc.wait(timeout=1.0)
                 except subprocess.TimeoutExpired:
-                    _stop(proc)
+                    ended_by_us = True
                 break
+        if stop.signum is not None:
+            _ask_coupler_where(watch)
+            ended_by_us = True
         failed = failed or list(watch.wait(0))
-    except KeyboardInterrupt:
-        _stop(proc)
-        print("immerse: interrupted", file=sys.stderr)
-        return 130
     finally:
         watch.close()
-    rc = proc.wait()
+        # also after mpiexec's own end: no process of the job may outlive it
+        end_job(proc, out)
+    rc = proc.returncode
     if out.is_dir():
         output.write_index(out)  # every completed step file, also those the coupler had no time to index
+    if stop.signum is not None:
+        return JobResult(128 + stop.signum, _interrupted(out, stop.signum), stop.signum)
     reports = _error_reports(out)
     if rc == 0 and not failed and not reports:
-        return 0
+        return JobResult(0)
     silent = [r for r in died_first if not any(rep.startswith(r + ":") for rep in reports)]
-    if reports and silent:
+    if rc < 0 and not ended_by_us:
+        # mpiexec itself was killed: its proxies take the ranks down, which is not their failure
+        why = (f"mpiexec (pid {proc.pid}) died, killed by {signal.Signals(-rc).name}; the job was "
+               "ended with it")
+    elif reports and silent:
         # a rank killed without a word (signal, OOM killer) is the cause; the others' reports (MPI
         # errors of a neighbour in a halo exchange, ...) are its consequences
         why = f"{silent[0]} died first (killed by a signal or exited without a message); then: " + "; ".join(reports)
@@ -192,8 +336,36 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         why = f"{failed[0]} died first (killed by a signal or exited without a message)"
     else:
         why = f"mpiexec exited with code {rc}"
-    msg = f"immerse: run failed: {why}"
-    print(msg, file=sys.stderr)
-    with (out / "log.txt").open("a") as f:
-        f.write(msg + "\n")
-    return rc if rc not in (0, None) else 1
+    return JobResult(rc if rc not in (0, None) and rc > 0 else 1, f"run failed: {why}")
+
+
+def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None, *,
+            replace: bool = False, plan: outdir.Plan | None = None) -> int:
+    """Prepare ``out`` (the ownership rules of orchestrator.outdir), run the job with SIGINT/SIGTERM
+    ending it in order, claim the files it wrote; print one line unless it succeeded; return the
+    exit code (0, 1.., 130 on SIGINT, 143 on SIGTERM). OutDirError if ``out`` is refused."""
+    out = Path(out)
+    if plan is None:
+        from orchestrator.fingerprint import case_fingerprint
+
+        ck = None
+        if restart:
+            from orchestrator.restart import check_restart
+
+            ck = check_restart(restart, case)
+        plan = outdir.plan(out, case, case_fingerprint(case), replace=replace, restart=ck)
+    started = time.time()
+    with stop_on_signals() as stop:
+        outdir.prepare(plan, started)
+        try:
+            result = execute(case, out, ranks, restart, stop)
+        finally:
+            outdir.finish_run(out, started)
+    if result.message:
+        if result.signal is not None and sys.stderr.isatty():
+            print(file=sys.stderr)  # past the progress bar
+        msg = f"immerse: {result.message}"
+        print(msg, file=sys.stderr)
+        with (out / "log.txt").open("a") as f:
+            f.write(msg + "\n")
+    return result.returncode

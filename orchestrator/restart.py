@@ -1,0 +1,130 @@
+"""What `immerse run --restart FILE` accepts: a checkpoint manifest written by the coupler
+(``OUT/checkpoints/checkpoint_<step>.h5``) of this very case (see :mod:`orchestrator.fingerprint`),
+with the state file of every solver the case uses beside it. Anything else is refused with one line
+naming --restart before anything is created or launched.
+
+The manifest's attributes written by :meth:`orchestrator.coupler.Coupler.checkpoint`:
+``format`` (FORMAT), ``case_name``, ``case_fingerprint``, ``case_identity`` (the canonical JSON the
+fingerprint hashes, so a refusal can name the key that differs), ``ranks_<role>``, ``file_<role>``
+(the solver's state, relative to the manifest), and the coupler's own state (t, step, out_index, ...).
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+FORMAT = "immerse-checkpoint-1"
+EXPECTED = "expected a checkpoint manifest OUT/checkpoints/checkpoint_<step>.h5"
+COUPLER_STATE = ("t", "step", "out_index", "ckpt_index", "dt_min", "dt_max")
+
+
+class RestartError(ValueError):
+    """One line: ``--restart = '<path>': <why>``."""
+
+    def __init__(self, path, why: str):
+        super().__init__(f"--restart = {str(path)!r}: {why}")
+
+
+@dataclass
+class Checkpoint:
+    path: Path  # resolved
+    step: int
+    t: float
+    out_index: int
+    case_name: str
+    fingerprint: str
+    identity: dict
+    ranks: dict[str, int]
+    files: dict[str, Path]  # role -> solver state file
+
+
+def _text(v) -> str:
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _what_else(h) -> str:
+    """Name the kinds of immerse files that are not a checkpoint manifest."""
+    a = h.attrs
+    if _text(a.get("layout", "")).startswith("immerse-output"):
+        return "a results index (results.h5), not a checkpoint; " + EXPECTED
+    if "role" in a and "index" in a:
+        return "an output step file, not a checkpoint; " + EXPECTED
+    if "cells" in h and "cell_type" in a:
+        return "an output mesh file, not a checkpoint; " + EXPECTED
+    if "ranks" in a and "step" in a:
+        return "the state of one solver group; pass the checkpoint_<step>.h5 that names it"
+    if all(k in a for k in COUPLER_STATE) and "case_fingerprint" not in a:
+        return ("a checkpoint without a case fingerprint (written by an older immerse): it cannot "
+                "be matched to this case")
+    return "an HDF5 file that is not an immerse checkpoint; " + EXPECTED
+
+
+def read_checkpoint(path) -> Checkpoint:
+    """Read and check a checkpoint manifest (not the case): RestartError if it is not one."""
+    import h5py
+
+    p = Path(path)
+    if not p.exists():
+        raise RestartError(path, "no such file; " + EXPECTED)
+    if p.is_dir():
+        raise RestartError(path, "is a directory; " + EXPECTED)
+    if not p.is_file():
+        raise RestartError(path, "not a regular file; " + EXPECTED)
+    try:
+        with open(p, "rb"):
+            pass
+    except OSError as e:
+        raise RestartError(path, f"cannot read: {e.strerror or e}") from None
+    if not h5py.is_hdf5(p):
+        raise RestartError(path, "not an HDF5 file; " + EXPECTED)
+    try:
+        with h5py.File(p, "r") as h:
+            a = h.attrs
+            if _text(a.get("format", "")) != FORMAT:
+                raise RestartError(path, _what_else(h))
+            missing = [k for k in COUPLER_STATE if k not in a]
+            if missing:
+                raise RestartError(path, f"damaged checkpoint: no attribute {missing[0]!r}")
+            files = {k[5:]: p.parent / _text(a[k]) for k in a if k.startswith("file_")}
+            ranks = {k[6:]: int(a[k]) for k in a if k.startswith("ranks_")}
+            ck = Checkpoint(path=p.resolve(), step=int(a["step"]), t=float(a["t"]),
+                            out_index=int(a["out_index"]), case_name=_text(a["case_name"]),
+                            fingerprint=_text(a["case_fingerprint"]),
+                            identity=json.loads(_text(a["case_identity"])), ranks=ranks, files=files)
+    except RestartError:
+        raise
+    except (OSError, KeyError, ValueError, TypeError) as e:
+        raise RestartError(path, f"unreadable checkpoint ({type(e).__name__}: {e})".replace("\n", " ")) from None
+    for role, f in ck.files.items():
+        if not f.is_file():
+            raise RestartError(path, f"the {role} state it names is missing: {f}")
+    return ck
+
+
+def _short(v) -> str:
+    text = json.dumps(v) if not isinstance(v, str) else v
+    return text if len(text) <= 60 else text[:57] + "..."
+
+
+def check_restart(path, case: dict) -> Checkpoint:
+    """The checkpoint at ``path`` if it belongs to ``case`` (same fingerprint and solvers), else
+    RestartError naming the first key that differs. Any rank counts are accepted: both solvers
+    restart on another rank count (ALE bitwise, Lagrangian to round-off)."""
+    from orchestrator.case import solvers_used
+    from orchestrator.fingerprint import case_fingerprint, case_identity, first_difference
+
+    ck = read_checkpoint(path)
+    if ck.fingerprint != case_fingerprint(case):
+        here = case_identity(case)
+        d = first_difference(ck.identity, here)
+        where = (f"{d[0]} = {_short(d[1])} in the checkpoint, {_short(d[2])} in this case" if d
+                 else "fingerprints differ")
+        raise RestartError(path, f"checkpoint of another case ({ck.case_name!r}): {where}; only "
+                                 "end_time, max_steps, output/checkpoint intervals, "
+                                 "diagnostics_every, ranks and [check] may change on restart")
+    roles = solvers_used(case)
+    if sorted(ck.files) != sorted(roles):
+        raise RestartError(path, f"holds solvers {', '.join(sorted(ck.files)) or '(none)'}, the case "
+                                 f"uses {', '.join(roles)}")
+    return ck
