@@ -47,17 +47,17 @@ def _what_else(h) -> str:
     """Name the kinds of immerse files that are not a checkpoint manifest."""
     a = h.attrs
     if _text(a.get("layout", "")).startswith("immerse-output"):
-        return "a results index (results.h5), not a checkpoint; " + EXPECTED
+        return "is a results index (results.h5), not a checkpoint; " + EXPECTED
     if "role" in a and "index" in a:
-        return "an output step file, not a checkpoint; " + EXPECTED
+        return "is an output step file, not a checkpoint; " + EXPECTED
     if "cells" in h and "cell_type" in a:
-        return "an output mesh file, not a checkpoint; " + EXPECTED
+        return "is an output mesh file, not a checkpoint; " + EXPECTED
     if "ranks" in a and "step" in a:
-        return "the state of one solver group; pass the checkpoint_<step>.h5 that names it"
+        return "is the state of one solver group; pass the checkpoint_<step>.h5 that names it"
     if all(k in a for k in COUPLER_STATE) and "case_fingerprint" not in a:
-        return ("a checkpoint without a case fingerprint (written by an older immerse): it cannot "
+        return ("is a checkpoint without a case fingerprint (written by an older immerse): it cannot "
                 "be matched to this case")
-    return "an HDF5 file that is not an immerse checkpoint; " + EXPECTED
+    return "is an HDF5 file but not an immerse checkpoint; " + EXPECTED
 
 
 def read_checkpoint(path) -> Checkpoint:

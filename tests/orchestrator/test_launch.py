@@ -1,0 +1,171 @@
+"""Signals to `immerse run`: SIGTERM or SIGINT ends the whole job (mpiexec, hydra's proxies, the
+coupler, every solver rank) within seconds, as the process table shows; every completed output step
+stays readable and indexed; the launcher exits 143 / 130 with one line. When mpiexec itself is
+killed, the message says so."""
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+
+import h5py
+import pytest
+
+from tests.conftest import REPO
+from tests.orchestrator.test_faults import _ale_case, _pids, _spinning_case
+
+CASES = {
+    # a block spinning for 10^8 steps on 2 Lagrangian ranks; outputs every 0.05 s
+    "lagrange": (lambda t: _spinning_case(t, **{"max_steps = 10000": "max_steps = 100000000",
+                                                "output_interval = 0.2": "output_interval = 0.05"}),
+                 "lagrange=2"),
+    # the 2-D Sedov blast for 100 s on 2 ALE ranks; outputs every 0.01 s
+    "ale": (lambda t: _ale_case(t, "sedov_2d", **{"end_time = 1.0": "end_time = 100.0",
+                                                  "output_interval = 0.25": "output_interval = 0.01",
+                                                  "cells = [120, 120]": "cells = [60, 60]"}),
+            "ale=2"),
+}
+
+
+def _stat(pid):
+    """(state, start time in ticks) of a process, None once it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return fields[0], int(fields[19])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def process_tree(root):
+    """{pid: start time} of every process below ``root`` (hydra's proxies and the ranks start
+    sessions of their own, so the parent links are what ties them to the launcher)."""
+    children = {}
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                with open(f"/proc/{name}/stat") as f:
+                    ppid = int(f.read().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(name))
+    found, todo = {}, [root]
+    while todo:
+        for c in children.get(todo.pop(), ()):
+            st = _stat(c)
+            if st and c not in found:
+                found[c] = st[1]
+                todo.append(c)
+    return found
+
+
+def survivors(procs):
+    """Processes of ``procs`` ({pid: start time}) still running (a zombie has ended)."""
+    alive = []
+    for pid, start in procs.items():
+        st = _stat(pid)
+        if st and st[1] == start and st[0] not in "ZX":
+            alive.append(pid)
+    return alive
+
+
+def _cmdline(pid):
+    try:
+        return open(f"/proc/{pid}/cmdline", "rb").read().replace(b"\0", b" ").decode()
+    except OSError:
+        return ""
+
+
+def start_run(case, out, ranks, n_ranks, outputs=3):
+    """Launch `immerse run`; return (process, {pid: start} of the job) once ``outputs`` output steps
+    exist and every rank has recorded itself."""
+    env = dict(os.environ, PYTHONPATH=str(REPO))
+    env.pop("IMMERSE_TTY", None)
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
+                             "--ranks", ranks], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=env)
+    deadline = time.time() + 180
+    while time.time() < deadline:
+        steps = list((out / "steps").glob("*_[0-9]*.h5")) if (out / "steps").is_dir() else []
+        if len(steps) >= outputs and len(_pids(out)) == 1 + n_ranks:
+            break
+        assert proc.poll() is None, proc.communicate()
+        time.sleep(0.1)
+    else:
+        proc.kill()
+        raise AssertionError("the run did not produce output in time")
+    job = process_tree(proc.pid)
+    recorded = {pid: _stat(pid)[1] for pid in _pids(out).values() if _stat(pid)}
+    assert set(recorded) <= set(job), "every recorded rank is below the launcher"
+    assert any("mpiexec" in _cmdline(p) for p in job) and any("hydra_pmi_proxy" in _cmdline(p) for p in job)
+    return proc, job
+
+
+def assert_outputs_readable(out, role):
+    """Every step file on disk is indexed in results.h5 and readable through it."""
+    on_disk = sorted(int(p.stem.rsplit("_", 1)[1]) for p in (out / "steps").glob(f"{role}_[0-9]*.h5"))
+    with h5py.File(out / "results.h5", "r") as h:
+        indices = list(h[f"{role}/indices"][...])
+        times = list(h[f"{role}/times"][...])
+        for i in indices:
+            assert h[f"{role}/{i:06d}/points"].shape[1] == 3
+    assert indices == on_disk and len(indices) >= 3
+    return times
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
+@pytest.mark.parametrize("role", list(CASES))
+def test_signal_ends_the_whole_job(tmp_path, role, sig):
+    make_case, ranks = CASES[role]
+    case, out = make_case(tmp_path), tmp_path / "out"
+    proc, job = start_run(case, out, ranks, 2)
+    try:
+        t_sig = time.monotonic()
+        proc.send_signal(sig)
+        stdout, stderr = proc.communicate(timeout=30)
+        elapsed = time.monotonic() - t_sig
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    left = survivors(job)
+    print(f"{role} {sig.name}: launcher ended {elapsed:.2f} s after the signal; job of {len(job)} processes")
+    assert left == [], [(p, _cmdline(p)) for p in left]
+    assert proc.returncode == 128 + sig, (proc.returncode, stderr)
+    lines = stderr.strip().splitlines()
+    assert len(lines) == 1, stderr
+    m = re.fullmatch(rf"immerse: interrupted by {sig.name} at step (\d+), t = (\S+) s; outputs up to "
+                     rf"t = (\S+) s in {re.escape(str(out))}", lines[0])
+    assert m, lines[0]
+    assert elapsed < 15.0  # measured ~1-2 s; margin for a loaded machine
+    times = assert_outputs_readable(out, role)
+    assert float(m[3]) == pytest.approx(times[-1], rel=1e-6)
+    assert float(m[2]) >= float(m[3])
+    assert lines[0] in (out / "log.txt").read_text()
+
+
+def test_mpiexec_killed(tmp_path):
+    """SIGKILL of mpiexec: the message names mpiexec (it named the coupler), the ranks are gone."""
+    make_case, ranks = CASES["lagrange"]
+    case, out = make_case(tmp_path), tmp_path / "out"
+    proc, job = start_run(case, out, ranks, 2)
+    try:
+        mpiexec = [p for p in job if _cmdline(p).split(" ", 1)[0].endswith("mpiexec")]
+        assert len(mpiexec) == 1
+        t_kill = time.monotonic()
+        os.kill(mpiexec[0], signal.SIGKILL)
+        _, stderr = proc.communicate(timeout=30)
+        elapsed = time.monotonic() - t_kill
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    print(f"mpiexec SIGKILL: launcher ended {elapsed:.2f} s after")
+    assert survivors(job) == []
+    assert proc.returncode not in (0, 2)
+    last = stderr.strip().splitlines()[-1]
+    assert last.startswith(f"immerse: run failed: mpiexec (pid {mpiexec[0]}) died, killed by SIGKILL"), stderr
+    assert "coupler rank" not in stderr
+    assert elapsed < 30
+    assert_outputs_readable(out, "lagrange")
