@@ -21,7 +21,7 @@ $(STAMP): requirements.txt pyproject.toml
 venv: $(STAMP)
 
 demo: venv
-	$(VENV)/bin/immerse run cases/taylor_bar --out cases/taylor_bar/out
+	$(VENV)/bin/immerse run cases/taylor_bar --out cases/taylor_bar/out --replace
 	$(VENV)/bin/immerse view cases/taylor_bar/out
 
 test: test-serial test-mpi

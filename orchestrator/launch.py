@@ -5,6 +5,10 @@ launcher, not hydra, sees which process died first: every rank records pid -> (r
 and removes the record on a clean exit, so a record whose process is gone names a failed rank (also
 one killed by SIGKILL, which leaves no message). The launcher then ends the whole job within
 seconds and reports that rank; a rank that failed with a Python error has written its own message.
+
+SIGINT and SIGTERM to the launcher end the job the same way (stop_on_signals, end_job) and name the
+step it was at; if mpiexec itself dies, the message says so. execute() runs one job and reacts to a
+stop request without printing, so a campaign can run many; run_job() is what `immerse run` calls.
 """
 from __future__ import annotations
 
@@ -193,6 +197,27 @@ def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
     proc.wait()
 
 
+def _dies_with_launcher():
+    """preexec_fn for mpiexec: the kernel sends it SIGKILL when the launcher dies, even by SIGKILL,
+    and its proxies then end the ranks (mpiexec's death ends the job, see end_job). Linux only; the
+    signal follows the launcher *thread* that started the job, which waits for the job's end."""
+    import ctypes
+
+    try:
+        prctl = ctypes.CDLL(None, use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+    launcher = os.getpid()
+    pr_set_pdeathsig = 1
+
+    def arm() -> None:  # in the child, between fork and exec: one libc call, no Python locks
+        prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+        if os.getppid() != launcher:  # the launcher died before the line above
+            os._exit(1)
+
+    return arm
+
+
 # ---- signals ---------------------------------------------------------------------------------------
 class StopRequest:
     """Why running jobs must end: set by a signal handler (:func:`stop_on_signals`), or by a campaign
@@ -288,7 +313,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     if stop.signum is not None:
         return JobResult(128 + stop.signum, f"interrupted by {signal.Signals(stop.signum).name} before "
                                             "the job started", stop.signum)
-    proc = subprocess.Popen(cmd, env=env, start_new_session=True)
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_dies_with_launcher())
     watch = RankWatch(out)
     failed: list[str] = []
     died_first: list[str] = []  # ranks seen dead before any rank reported an error
@@ -357,6 +382,10 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     started = time.time()
     with stop_on_signals() as stop:
         outdir.prepare(plan, started)
+        if restart and plan.delete:  # step files past the checkpoint dropped: no index entry may dangle
+            from orchestrator import output
+
+            output.write_index(out)
         try:
             result = execute(case, out, ranks, restart, stop)
         finally:

@@ -72,6 +72,15 @@ def survivors(procs):
     return alive
 
 
+def kill_survivors(job):
+    """After a failed assertion: no runaway job left on the machine."""
+    for pid in survivors(job):
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
 def _cmdline(pid):
     try:
         return open(f"/proc/{pid}/cmdline", "rb").read().replace(b"\0", b" ").decode()
@@ -130,7 +139,8 @@ def test_signal_ends_the_whole_job(tmp_path, role, sig):
     finally:
         if proc.poll() is None:
             proc.kill()
-    left = survivors(job)
+        left = survivors(job)
+        kill_survivors(job)
     print(f"{role} {sig.name}: launcher ended {elapsed:.2f} s after the signal; job of {len(job)} processes")
     assert left == [], [(p, _cmdline(p)) for p in left]
     assert proc.returncode == 128 + sig, (proc.returncode, stderr)
@@ -161,11 +171,31 @@ def test_mpiexec_killed(tmp_path):
     finally:
         if proc.poll() is None:
             proc.kill()
+        left = survivors(job)
+        kill_survivors(job)
     print(f"mpiexec SIGKILL: launcher ended {elapsed:.2f} s after")
-    assert survivors(job) == []
+    assert left == []
     assert proc.returncode not in (0, 2)
     last = stderr.strip().splitlines()[-1]
     assert last.startswith(f"immerse: run failed: mpiexec (pid {mpiexec[0]}) died, killed by SIGKILL"), stderr
     assert "coupler rank" not in stderr
     assert elapsed < 30
     assert_outputs_readable(out, "lagrange")
+
+
+def test_launcher_killed(tmp_path):
+    """Even SIGKILL of the launcher (no handler can run) takes the job down: mpiexec dies with it
+    (parent-death signal) and its proxies end the ranks."""
+    make_case, ranks = CASES["ale"]
+    case, out = make_case(tmp_path), tmp_path / "out"
+    proc, job = start_run(case, out, ranks, 2)
+    t_kill = time.monotonic()
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 30
+    while survivors(job) and time.monotonic() < deadline:
+        time.sleep(0.05)
+    print(f"launcher SIGKILL: job gone {time.monotonic() - t_kill:.2f} s after")
+    left = survivors(job)
+    kill_survivors(job)
+    assert left == [], left
