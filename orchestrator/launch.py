@@ -232,14 +232,17 @@ class StopRequest:
 
 
 @contextlib.contextmanager
-def stop_on_signals(stop: StopRequest | None = None, signals=(signal.SIGINT, signal.SIGTERM)):
-    """While inside, SIGINT and SIGTERM to this process only set ``stop`` (no KeyboardInterrupt at a
-    random place): the job loop sees it within 50 ms and ends the job in order."""
+def stop_on_signals(stop: StopRequest | None = None,
+                    signals=(signal.SIGINT, signal.SIGTERM, signal.SIGHUP)):
+    """While inside, SIGINT, SIGTERM and SIGHUP (the terminal closed) to this process only set
+    ``stop`` (no KeyboardInterrupt at a random place): the job loop sees it within 50 ms and ends the
+    job in order. A signal the launcher was started ignoring (`nohup`, `&` in a script) stays ignored."""
     stop = stop or StopRequest()
     if threading.current_thread() is not threading.main_thread():
         yield stop
         return
-    previous = {s: signal.signal(s, lambda signum, frame: stop.request(signum)) for s in signals}
+    previous = {s: signal.signal(s, lambda signum, frame: stop.request(signum))
+                for s in signals if signal.getsignal(s) is not signal.SIG_IGN}
     try:
         yield stop
     finally:

@@ -88,14 +88,19 @@ def _cmdline(pid):
         return ""
 
 
-def start_run(case, out, ranks, n_ranks, outputs=3):
-    """Launch `immerse run`; return (process, {pid: start} of the job) once ``outputs`` output steps
-    exist and every rank has recorded itself."""
+def start_run(case, out, ranks, n_ranks, outputs=3, ignore=()):
+    """Launch `immerse run` (with the signals ``ignore`` ignored, as `nohup` does); return (process,
+    {pid: start} of the job) once ``outputs`` output steps exist and every rank has recorded itself."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     env.pop("IMMERSE_TTY", None)
+
+    def ignoring():
+        for s in ignore:
+            signal.signal(s, signal.SIG_IGN)
+
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
                              "--ranks", ranks], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env=env)
+                            env=env, preexec_fn=ignoring if ignore else None)
     deadline = time.time() + 180
     while time.time() < deadline:
         steps = list((out / "steps").glob("*_[0-9]*.h5")) if (out / "steps").is_dir() else []
@@ -125,8 +130,10 @@ def assert_outputs_readable(out, role):
     return times
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["SIGTERM", "SIGINT"])
-@pytest.mark.parametrize("role", list(CASES))
+@pytest.mark.parametrize("role, sig", [
+    ("lagrange", signal.SIGTERM), ("lagrange", signal.SIGINT), ("ale", signal.SIGTERM), ("ale", signal.SIGINT),
+    ("lagrange", signal.SIGHUP),  # the terminal closed
+], ids=lambda v: v.name if isinstance(v, signal.Signals) else v)
 def test_signal_ends_the_whole_job(tmp_path, role, sig):
     make_case, ranks = CASES[role]
     case, out = make_case(tmp_path), tmp_path / "out"
@@ -154,6 +161,30 @@ def test_signal_ends_the_whole_job(tmp_path, role, sig):
     assert float(m[3]) == pytest.approx(times[-1], rel=1e-6)
     assert float(m[2]) >= float(m[3])
     assert lines[0] in (out / "log.txt").read_text()
+
+
+def test_nohup_keeps_running(tmp_path):
+    """Started with SIGHUP ignored (`nohup immerse run ...`): a hang-up does not stop the run."""
+    make_case, ranks = CASES["lagrange"]
+    case, out = make_case(tmp_path), tmp_path / "out"
+    proc, job = start_run(case, out, ranks, 2, ignore=(signal.SIGHUP,))
+    try:
+        proc.send_signal(signal.SIGHUP)
+        n = len(list((out / "steps").glob("lagrange_[0-9]*.h5")))
+        deadline = time.monotonic() + 60
+        while len(list((out / "steps").glob("lagrange_[0-9]*.h5"))) < n + 2 and time.monotonic() < deadline:
+            assert proc.poll() is None
+            time.sleep(0.1)
+        assert proc.poll() is None and set(survivors(job)) == set(job)  # all of the job still runs
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+        assert proc.returncode == 143
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        left = survivors(job)
+        kill_survivors(job)
+    assert left == []
 
 
 def test_mpiexec_killed(tmp_path):
