@@ -52,24 +52,46 @@ def process_tree(root):
             except (OSError, IndexError, ValueError):
                 continue
             children.setdefault(ppid, []).append(int(name))
-    found, todo = {}, [root]
+    found, todo = Job(), [root]
     while todo:
         for c in children.get(todo.pop(), ()):
             st = _stat(c)
             if st and c not in found:
                 found[c] = st[1]
                 todo.append(c)
+    found.sessions = {s for p in found if (s := _session(p)) and s in found}  # sessions they lead
     return found
 
 
+def _session(pid):
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[3])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def survivors(procs):
-    """Processes of ``procs`` ({pid: start time}) still running (a zombie has ended)."""
+    """Processes of ``procs`` ({pid: start time}) still running (a zombie has ended), and any running
+    process in one of their sessions (mpiexec's, each proxy's and each rank's own: started after the
+    snapshot, it would be part of the job too)."""
     alive = []
     for pid, start in procs.items():
         st = _stat(pid)
         if st and st[1] == start and st[0] not in "ZX":
             alive.append(pid)
+    sessions = procs.sessions if hasattr(procs, "sessions") else set()
+    for name in os.listdir("/proc"):
+        if name.isdigit() and int(name) not in alive and _session(int(name)) in sessions:
+            st = _stat(int(name))
+            if st and st[0] not in "ZX":
+                alive.append(int(name))
     return alive
+
+
+class Job(dict):
+    """{pid: start time} of the job's processes, with the sessions they started."""
+    sessions: set
 
 
 def kill_survivors(job):
@@ -112,6 +134,7 @@ def start_run(case, out, ranks, n_ranks, outputs=3, ignore=()):
         proc.kill()
         raise AssertionError("the run did not produce output in time")
     job = process_tree(proc.pid)
+    assert len(job.sessions) >= 2 + n_ranks  # mpiexec's, the proxy's, each rank's: process groups miss them
     recorded = {pid: _stat(pid)[1] for pid in _pids(out).values() if _stat(pid)}
     assert set(recorded) <= set(job), "every recorded rank is below the launcher"
     assert any("mpiexec" in _cmdline(p) for p in job) and any("hydra_pmi_proxy" in _cmdline(p) for p in job)

@@ -12,13 +12,15 @@ import stat
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import h5py
 import pytest
 
 from orchestrator import outdir
-from tests.conftest import CASES, REPO, immerse
+from tests.conftest import CASES, REPO
+from tests.conftest import immerse as _immerse
 
 
 def bar_case(where: Path, name="bar", **replace) -> Path:
@@ -46,8 +48,17 @@ def snapshot(d: Path) -> dict:
     return snap
 
 
+def immerse(*args, **kw):
+    """The CLI, timed: a refusal comes in under 5 s (measured ~1 s: imports and the case check)."""
+    t0 = time.perf_counter()
+    r = _immerse(*args, **kw)
+    r.elapsed = time.perf_counter() - t0
+    return r
+
+
 def refused(r, *fragments) -> str:
     assert r.returncode == 2, (r.returncode, r.stderr)
+    assert getattr(r, "elapsed", 0.0) < 5.0
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1, r.stderr
     assert lines[0].startswith("immerse: --out = "), lines[0]
