@@ -21,7 +21,8 @@ import h5py
 import numpy as np
 
 from adapters import protocol as P
-from orchestrator import restart
+from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
+from orchestrator.restart import check_restart
 
 WAIT_SLICE_S = 50e-6  # sleep slice of the coupler while solver groups compute
 
@@ -113,7 +114,7 @@ class Coupler:
             for k in ("t", "step", "out_index", "ckpt_index", "dt_min", "dt_max"):
                 h.attrs[k] = getattr(self, k)
             # which case this state belongs to: a restart of any other case is refused
-            h.attrs["format"] = restart.FORMAT
+            h.attrs["format"] = CHECKPOINT_FORMAT
             h.attrs["case_name"] = self.case["name"]
             h.attrs["case_fingerprint"] = ident["fingerprint"]
             h.attrs["case_identity"] = ident["json"]
@@ -139,7 +140,7 @@ class Coupler:
     def _load(self, path: Path) -> None:
         # the launcher checked it already; a coupler started by other means must not continue
         # another case's state either
-        restart.check_restart(path, self.case)
+        check_restart(path, self.case)
         with h5py.File(path, "r") as h:
             self.t = float(h.attrs["t"])
             self.step = int(h.attrs["step"])
