@@ -85,8 +85,11 @@ SEDOV = {2: ("cylindrical", 40, 0.49), 3: ("spherical", 20, 0.41)}
 @pytest.mark.parametrize("dim", [2, 3])
 def test_sedov_point_blast_lagrangian(dim):
     """Quadrant/octant with walls, E_full deposited (its 1/4 or 1/8 share) in the corner zone:
-    total energy to 1e-10, symmetry about the diagonal (x <-> y) to 1e-12, and the density peak
-    at the Sedov shock radius within 1.5 zone widths."""
+    total energy to 1e-12 (measured 3.5e-14 / 6.1e-14), symmetry about the diagonal (x <-> y) to
+    1e-12, the density peak at the Sedov shock radius within 0.8 zone widths (measured 0.32 / 0.26;
+    the peak is a zone centroid, so it moves by whole zones), its height within 25 % / 30 % of the
+    strong-shock 6 (5.46 / 4.76: smeared over 2-3 zones) and the L1 density error against the exact
+    profile (at the zone centroids, relative to the mass) below 0.16 (0.134 / 0.131)."""
     from solvers.ale.exact import SedovSolution
 
     geometry, n, t = SEDOV[dim]
@@ -94,7 +97,7 @@ def test_sedov_point_blast_lagrangian(dim):
     sol = SedovSolution(e_full, 1.0, 1.4, geometry)
     s = run(sedov_config(dim, n, e_full / 2 ** dim), t)
     d = s.diagnostics()
-    assert abs(d["energy_balance_rel"]) < 1e-10
+    assert abs(d["energy_balance_rel"]) < 1e-12
     # the deposited share plus the cold gas, p V / (gamma - 1) = 1e-6 / 0.4
     assert d["total_energy"] == pytest.approx(e_full / 2 ** dim + 2.5e-6, rel=1e-12)
     rho = s.zone_field(s.rho).reshape([n] * dim)  # (z,) y, x
@@ -109,8 +112,11 @@ def test_sedov_point_blast_lagrangian(dim):
     r_peak = r.ravel()[np.argmax(rho)]
     R = sol.shock_radius(t)
     assert R == pytest.approx(t ** (2.0 / (2 + dim)), rel=1e-9)
-    assert abs(r_peak - R) < 1.5 / n
-    assert rho.max() > 0.5 * 6.0  # a real shock (strong-shock compression 6)
+    assert abs(r_peak - R) < 0.8 / n
+    assert rho.max() > (0.75 if dim == 2 else 0.7) * 6.0  # a real shock (strong-shock compression 6)
+    V = s.zone_field(s.V).reshape([n] * dim)
+    rho_ex = sol.profiles(r, t)[0]
+    assert np.sum(np.abs(rho - rho_ex) * V) / np.sum(rho_ex * V) < 0.16
 
 
 def test_invalid_initial_state_names_zone_step_time():
