@@ -43,8 +43,11 @@ def _plateau(x, a, lo, hi, margin):
 
 
 def test_water_air_plateaus_interface_and_pressure(water_air):
-    """Issue 3: interface within 2 cells, plateaus within 3 %, no pressure oscillation > 1 % at the
-    interface (N = 400)."""
+    """N = 400 against the exact solution (tolerances a few times the measured errors, in brackets):
+    density plateaus within 0.1 % (water, 2.6e-4) and 1 % (air, 4.3e-3), pressure plateau median
+    within 0.5 % (1.7e-3) and mean within 6 % (4.0e-2: the start-up dip, see
+    cases/water_air_shock_tube), interface within 0.3 cells (0.03) and one mixed zone, pressure within
+    0.3 % of p* across it (1.2e-3)."""
     s, _ = water_air
     n = 400
     dx = 1.0 / n
@@ -57,23 +60,23 @@ def test_water_air_plateaus_interface_and_pressure(water_air):
     m = 4 * dx
     rl = _plateau(x, rho, tail, contact, m).mean()
     rr = _plateau(x, rho, contact, shock, m).mean()
-    assert abs(rl / WA_EXACT.rho_star_l - 1) < 0.03, rl
-    assert abs(rr / WA_EXACT.rho_star_r - 1) < 0.03, rr
+    assert abs(rl / WA_EXACT.rho_star_l - 1) < 1e-3, rl
+    assert abs(rr / WA_EXACT.rho_star_r - 1) < 0.01, rr
     # pressure plateau: its median (see cases/water_air_shock_tube: a start-up wave in the stiff water
     # makes a dip behind the rarefaction tail; the mean is 0.96 p* at N = 400)
     ps = np.median(_plateau(x, p, tail, shock, m))
-    assert abs(ps / WA_EXACT.p_star - 1) < 0.03, ps
+    assert abs(ps / WA_EXACT.p_star - 1) < 5e-3, ps
     assert abs(_plateau(x, p, tail, shock, m).mean() / WA_EXACT.p_star - 1) < 0.06
     # interface: where the water fraction crosses 1/2
     k = int(np.flatnonzero((fw[:-1] - 0.5) * (fw[1:] - 0.5) < 0)[0])
     xi = x[k] + (0.5 - fw[k]) * dx / (fw[k + 1] - fw[k])
-    assert abs(xi - contact) / dx < 2.0, (xi, contact)
+    assert abs(xi - contact) / dx < 0.3, (xi, contact)
     # sharp: one mixed zone at most
     assert np.count_nonzero((fw > 1e-6) & (fw < 1 - 1e-6)) <= 2
     # pressure across the interface (5 zones either side, inside the star region)
     near = (np.abs(x - contact) < 5 * dx) & (x < shock - 2 * dx)
     osc = np.max(np.abs(p[near] - WA_EXACT.p_star)) / WA_EXACT.p_star
-    assert osc < 0.01, osc
+    assert osc < 3e-3, osc
 
 
 def test_water_air_conservation(water_air):
@@ -101,7 +104,8 @@ def test_water_air_same_along_y():
 
 def test_two_gases_reproduce_sod():
     """Sod with the two sides as two materials of the same EOS: the contact is the material
-    interface; plateaus within 2 %, conservation to round-off."""
+    interface; plateaus within 5e-4 (measured 1.4e-4, 9.4e-5, 1.4e-4), interface within 0.3 cells of
+    the exact contact (0.03), conservation to round-off."""
     n = 200
     cfg = {"dimension": 2, "mode": "eulerian",
            "grid": {"lower": [0.0, 0.0], "upper": [1.0, 1.0 / n], "cells": [n, 1]},
@@ -116,13 +120,13 @@ def test_two_gases_reproduce_sod():
     rho = line(s, s.rho, 0)[:, 0]
     p = line(s, s.p, 0)[:, 0]
     m = 4.0 / n
-    assert abs(_plateau(x, p, w["left_rarefaction_tail"], w["right_shock"], m).mean() / ex.p_star - 1) < 0.02
-    assert abs(_plateau(x, rho, w["left_rarefaction_tail"], w["contact"], m).mean() / ex.rho_star_l - 1) < 0.02
-    assert abs(_plateau(x, rho, w["contact"], w["right_shock"], m).mean() / ex.rho_star_r - 1) < 0.02
+    assert abs(_plateau(x, p, w["left_rarefaction_tail"], w["right_shock"], m).mean() / ex.p_star - 1) < 5e-4
+    assert abs(_plateau(x, rho, w["left_rarefaction_tail"], w["contact"], m).mean() / ex.rho_star_l - 1) < 5e-4
+    assert abs(_plateau(x, rho, w["contact"], w["right_shock"], m).mean() / ex.rho_star_r - 1) < 5e-4
     fl = line(s, s.mm.fractions()[:, 0], 0)[:, 0]
     k = int(np.flatnonzero((fl[:-1] - 0.5) * (fl[1:] - 0.5) < 0)[0])
     xi = x[k] + (0.5 - fl[k]) / n / (fl[k + 1] - fl[k])
-    assert abs(xi - w["contact"]) * n < 2.0
+    assert abs(xi - w["contact"]) * n < 0.3
     d = s.diagnostics()
     assert abs(d["energy_balance_rel"]) < 1e-12 and abs(d["mass_balance_rel"]) < 1e-12
 
@@ -184,15 +188,16 @@ def test_advected_square_volume_conserved(squares):
 
 
 def test_advected_square_error_decreases(squares):
-    """Symmetric-difference area between the advected and the exact square at 3 meshes: it
-    decreases, at least at first order."""
+    """Symmetric-difference area between the advected and the exact square at 3 meshes: measured
+    6.5e-3, 2.27e-3, 7.5e-4 at 32, 64, 128 (ratios 0.35, 0.33: order 1.5, 1.6); asserted ratios
+    below 0.45 and the coarsest below 8e-3."""
     err = {n: float(np.sum(np.abs(f - fex)) / n ** 2) for n, (s, f0, f, fex, d0, d) in squares.items()}
     print("advected square symmetric-difference area:", err)
     ns = sorted(err)
     for a, b in zip(ns, ns[1:]):
-        assert err[b] < 0.6 * err[a], err
-    # on the coarsest mesh the square (12.8 zones wide) keeps its area within a few zones' worth
-    assert err[32] < 0.01
+        assert err[b] < 0.45 * err[a], err
+    # on the coarsest mesh the square (12.8 zones wide, area 0.16) keeps its area within 5 %
+    assert err[32] < 8e-3
 
 
 def test_advected_cube_3d():
@@ -231,9 +236,9 @@ def test_gas_expands_into_void():
     assert np.all(fg[x > front + 1.0 / n] == 0.0)
     assert np.all(rho[x > front + 1.0 / n] == 0.0)
     last = (np.flatnonzero(fg > 0.5)[-1] + 1) / n
-    assert front - last < 0.1, (last, front)  # the thin tail of the fan lags (rho < 1e-3 there)
+    assert front - last < 0.1, (last, front)  # the thin tail of the fan lags (rho < 1e-3 there): 0.080
     l1 = float(np.mean(np.abs(rho - ex.sample(x, t, 0.5)[0])))
-    assert l1 < 3e-3, l1
+    assert l1 < 3e-3, l1  # measured 1.85e-3
     d = s.diagnostics()
     assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12
     assert abs(d["volume_gas"] + d["volume_vacuum"] - 1.0 / n) < 1e-15
@@ -268,7 +273,8 @@ def test_relaxation_conserves_and_equilibrates():
     for _ in range(6):
         mm.relax_pressures(s)
     p_after = pressures()
-    assert abs(p_after[0] / p_after[1] - 1) < 0.05, p_after
+    # 12 passes: 1513, 29, 2.5e-5 off after 2, 4, 6 passes, then 3e-13 (quadratic convergence)
+    assert abs(p_after[0] / p_after[1] - 1) < 1e-10, p_after
     assert abs(mm.vol[z].sum() / v0 - 1) < 1e-14
     assert abs(float(np.sum(mm.mass[z] * mm.ener[z])) / e0 - 1) < 1e-14
 
