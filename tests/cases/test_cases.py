@@ -6,7 +6,6 @@ import json
 import shutil
 
 import h5py
-import pytest
 
 from tests.conftest import CASES, immerse
 

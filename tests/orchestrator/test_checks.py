@@ -269,9 +269,9 @@ def reflected_output(out, case, t, p_factor=1.0):
     xc = 0.5 * (xn[1:] + xn[:-1])
     pts, cells = structured(xn, np.array([g["lower"][1], g["upper"][1]]))
     # (beyond the wall: the wall's state; the check ignores those zones)
-    rho, u, p = (smear(a, 3) for a in cell_average(
+    rho, _, p = (smear(a, 3) for a in cell_average(
         lambda s: ex.sample(np.minimum(s, P["x_wall"]), t, P["x_shock0"], P["x_wall"]), xn))
-    kind, xs = ex.shock_position(t, P["x_shock0"], P["x_wall"])
+    _, xs = ex.shock_position(t, P["x_shock0"], P["x_wall"])
     p = np.where(xc > xs, p * p_factor, p)
     vel = np.zeros_like(pts)
     return write(out, "ale", cells, [(t, pts, {"velocity": vel}, {"density": rho, "pressure": p})])
