@@ -10,92 +10,80 @@ import pytest
 
 from tests.cases.test_cases import run_case
 
+# run_case asserts every metric of the case's [check] (tolerances in cases/<name>/case.toml, a few
+# times the error measured there); the tests below assert which metrics are checked and what else
+# the run must show.
+
 
 def test_sod(tmp_path):
     out, s = run_case("sod", tmp_path)
-    m = s["check"]["metrics"]
-    for name in ("p_star", "u_star", "rho_star_left", "rho_star_right"):
-        assert m[name]["rel_error"] <= 0.02, name
-    assert m["shock_position_error_cells"]["value"] <= 3.0
-    assert m["mass_balance_rel"]["value"] <= 1e-12 and m["energy_balance_rel"]["value"] <= 1e-12
-    assert s["ranks"] == {"ale": 1} and s["check"]["passed"]
+    assert {"p_star", "u_star", "rho_star_left", "rho_star_right", "l1_density", "shock_position_error_cells",
+            "contact_position_error_cells", "p_star_max_deviation_rel", "mass_balance_rel",
+            "energy_balance_rel"} <= set(s["check"]["metrics"])
+    assert s["ranks"] == {"ale": 1}
     with h5py.File(out / "results.h5") as h:
         assert len(h["ale/times"]) == 5
 
 
-def test_toro123_stays_positive(tmp_path):
+def test_toro123(tmp_path):
+    """Two strong rarefactions against the exact solution (near-vacuum star state p* = 0.00189,
+    rho* = 0.02185), positive density and energy at every output step."""
     out, s = run_case("toro123", tmp_path)
-    r = s["check"]["reported"]
-    assert s["check"]["metrics"]["invalid_values"]["value"] == 0
-    assert r["min_density"] > 0 and r["min_specific_internal_energy"] > 0
-    # the near-vacuum really formed: exact rho* = 0.02185 in the middle
-    assert r["min_density"] < 0.1
+    m, r = s["check"]["metrics"], s["check"]["reported"]
+    assert {"p_star", "u_star", "rho_star_left", "rho_star_right", "l1_density", "invalid_values",
+            "min_density"} <= set(m)
+    assert m["invalid_values"]["value"] == 0 and r["min_specific_internal_energy"] > 0
 
 
 def test_sedov_2d(tmp_path):
     out, s = run_case("sedov_2d", tmp_path)
-    m = s["check"]["metrics"]
-    assert m["shock_radius"]["rel_error"] <= 0.02
-    assert m["energy_balance_rel"]["value"] <= 1e-10
+    assert {"shock_radius", "l1_density", "energy_balance_rel"} <= set(s["check"]["metrics"])
 
 
 def test_sedov_3d(tmp_path):
     out, s = run_case("sedov_3d", tmp_path)
-    m = s["check"]["metrics"]
-    assert m["shock_radius"]["rel_error"] <= 0.02
-    assert m["energy_balance_rel"]["value"] <= 1e-10
+    assert {"shock_radius", "l1_density", "energy_balance_rel"} <= set(s["check"]["metrics"])
 
 
 def test_shock_reflection_obstacle(tmp_path):
     """A Mach 2 shock reflected by an immersed wall (obstacle x > 0.7525, the cut zone half blocked)
     against the exact Rankine-Hugoniot reflected state (15, 6) and shock position."""
     out, s = run_case("shock_reflection_obstacle", tmp_path)
-    m = s["check"]["metrics"]
-    for name in ("p_reflected", "rho_reflected", "p_behind_incident"):
-        assert m[name]["rel_error"] <= 0.02, name
-    assert m["reflected_shock_position_error_cells"]["value"] <= 2.0
-    assert m["mass_balance_rel"]["value"] <= 1e-12 and m["energy_balance_rel"]["value"] <= 1e-12
-    assert s["check"]["passed"]
+    assert {"p_reflected", "rho_reflected", "p_behind_incident", "reflected_shock_position_error_cells",
+            "l1_density", "mass_balance_rel", "energy_balance_rel"} <= set(s["check"]["metrics"])
     with h5py.File(out / "results.h5") as h:
         assert len(h["ale/times"]) == 6
 
 
 def test_water_piston_column(tmp_path):
-    """Piston at 50 m/s into Tait water (Lagrangian grid): plateau pressure within 2% of the
-    Rankine-Hugoniot p1 (solvers.ale.exact.piston), shock within 3 zones, energy balance at round-off
-    (the piston's work is boundary work: within 1% of p1 u_p t A, the momentum within 1% of
-    rho0 D t u_p A)."""
+    """Piston at 50 m/s into Tait water (Lagrangian grid): plateau state against the Rankine-Hugoniot
+    solution (solvers.ale.exact.piston), shock and piston positions, energy balance at round-off
+    (the piston's work is boundary work: p1 u_p t A, the momentum rho0 D t u_p A, both a little low
+    from the start, while the shock forms)."""
     from solvers.ale.exact.piston import tait
 
     out, s = run_case("water_piston_column", tmp_path)
     m, r = s["check"]["metrics"], s["check"]["reported"]
     ex = tait(50.0, 1000.0, 2.19e9, 7.15, 1.0e5)
     assert m["p_plateau"]["reference"] == pytest.approx(ex.p1, rel=1e-6)
-    assert m["p_plateau"]["rel_error"] <= 0.02
-    assert r["rho_plateau"] == pytest.approx(ex.rho1, rel=0.02)
+    assert m["rho_plateau"]["reference"] == pytest.approx(ex.rho1, rel=1e-6)
+    assert {"shock_position_error_cells", "piston_position_error_cells", "energy_balance_rel"} <= set(m)
     assert r["plateau_zones"] > 150
-    assert m["shock_position_error_cells"]["value"] <= 3.0
-    assert r["piston_position_error_cells"] <= 1e-3
-    assert m["energy_balance_rel"]["value"] <= 1e-10 and m["mass_balance_rel"]["value"] <= 1e-12
-    assert r["momentum_balance_rel"] <= 1e-10
+    assert r["momentum_balance_rel"] <= 1e-12  # measured 7.5e-14
     t, area = s["end_time"], 0.0025
     f = s["final"]
-    assert f["ale.boundary_work"] == pytest.approx(ex.p1 * 50.0 * t * area, rel=0.01)
-    assert f["ale.momentum_x"] == pytest.approx(ex.rho0 * ex.D * t * 50.0 * area, rel=0.01)
-    assert s["check"]["passed"]
+    # measured: 3.9e-3 and 1.4e-3 below
+    assert f["ale.boundary_work"] == pytest.approx(ex.p1 * 50.0 * t * area, rel=8e-3)
+    assert f["ale.momentum_x"] == pytest.approx(ex.rho0 * ex.D * t * 50.0 * area, rel=4e-3)
 
 
 def test_water_air_shock_tube(tmp_path):
-    """Two materials (stiffened gas): plateaus within 3 %, interface (water fraction 1/2) within 2
-    cells of the exact contact, pressure within 1 % of p* at the interface, conservation."""
+    """Two materials (stiffened gas): plateaus, the start-up dip (mean and deepest point), interface
+    (water fraction 1/2) position and pressure, conservation."""
     out, s = run_case("water_air_shock_tube", tmp_path)
-    m = s["check"]["metrics"]
-    for name in ("p_star", "u_star", "rho_star_left", "rho_star_right"):
-        assert m[name]["rel_error"] <= 0.03, name
-    assert m["interface_position_error_cells"]["value"] <= 2.0
-    assert m["interface_pressure_oscillation_rel"]["value"] <= 0.01
-    assert m["mass_balance_rel"]["value"] <= 1e-12 and m["energy_balance_rel"]["value"] <= 1e-12
-    assert s["check"]["passed"]
+    assert {"p_star", "p_star_mean", "p_star_max_deviation_rel", "u_star", "rho_star_left", "rho_star_right",
+            "interface_position_error_cells", "interface_pressure_oscillation_rel", "mass_balance_rel",
+            "energy_balance_rel"} <= set(s["check"]["metrics"])
     # per-material masses (water 1000 x 0.8 x 0.0025, air 50 x 0.2 x 0.0025) kept to round-off
     fin = s["final"]
     assert abs(fin["ale.mass_water"] / 2.0 - 1) < 1e-12 and abs(fin["ale.mass_air"] / 0.025 - 1) < 1e-12
@@ -103,11 +91,7 @@ def test_water_air_shock_tube(tmp_path):
 
 def test_advected_square(tmp_path):
     out, s = run_case("advected_square", tmp_path)
-    m = s["check"]["metrics"]
-    assert m["volume_drift_rel"]["value"] <= 1e-12
-    # the square (area 0.16) keeps its shape to 2.5 % of its area after one diagonal period
-    assert m["symmetric_difference"]["value"] <= 0.004
-    assert s["check"]["passed"]
+    assert {"volume_drift_rel", "symmetric_difference"} <= set(s["check"]["metrics"])
 
 
 @pytest.mark.parametrize("case_name, ranks", [("water_air_shock_tube", ()), ("sedov_2d", ("--ranks", "ale=2"))])
@@ -126,15 +110,17 @@ def test_ale_restart_is_bitwise_identical(tmp_path, case_name, ranks):
     if case_name == "sedov_2d":  # a shorter blast: the restart mechanics, not the physics
         text = text.replace("cells = [120, 120]", "cells = [40, 40]")
     (case / "case.toml").write_text(text)
+    # (the 40^2 blast misses the check's tolerances, set for 120^2: exit 1, a completed run)
+    ok = (0, 1) if case_name == "sedov_2d" else (0,)
     full = tmp_path / "full"
     r = immerse("run", case, "--out", full, *ranks)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode in ok, r.stdout + r.stderr
     ckpts = sorted((full / "checkpoints").glob("checkpoint_*.h5"))
     assert len(ckpts) >= 2
     restarted = tmp_path / "restarted"
     shutil.copytree(full, restarted)
     r = immerse("run", case, "--out", restarted, "--restart", restarted / "checkpoints" / ckpts[1].name, *ranks)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode in ok, r.stdout + r.stderr
     with h5py.File(full / "results.h5") as a, h5py.File(restarted / "results.h5") as b:
         assert list(a["ale/times"][...]) == list(b["ale/times"][...])
         last = sorted(k for k in a["ale"] if k.isdigit())[-1]

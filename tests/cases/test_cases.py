@@ -6,26 +6,31 @@ import json
 import shutil
 
 import h5py
-import pytest
 
 from tests.conftest import CASES, immerse
 
 
 def run_case(name, tmp_path, *extra, timeout=900):
+    """`immerse run` of a shipped case; asserts exit 0 and that every metric of its [check] passed
+    (tolerances: cases/<name>/case.toml, a few times the error measured)."""
     out = tmp_path / "out"
     r = immerse("run", CASES / name, "--out", out, *extra, timeout=timeout)
     assert r.returncode == 0, r.stdout + r.stderr
-    return out, json.loads((out / "summary.json").read_text())
+    s = json.loads((out / "summary.json").read_text())
+    assert_check_passed(s)
+    return out, s
+
+
+def assert_check_passed(s):
+    m = s["check"]["metrics"]
+    bad = {k: (v["value"], v["reference"], v["tolerance"]) for k, v in m.items() if not v["passed"]}
+    assert not bad and s["check"]["passed"], f"failed metrics (value, reference, tolerance): {bad}"
 
 
 def test_elastic_bar_wave(tmp_path):
     out, s = run_case("elastic_bar_wave", tmp_path)
-    m = s["check"]["metrics"]
-    assert m["wave_speed"]["rel_error"] <= 0.02
-    assert m["stress_amplitude"]["rel_error"] <= 0.02
-    assert m["energy_balance_rel"]["value"] <= 1e-10
-    assert m["momentum_balance_rel"]["value"] <= 1e-10
-    assert s["check"]["passed"]
+    assert set(s["check"]["metrics"]) == {"wave_speed", "stress_amplitude", "energy_balance_rel",
+                                          "momentum_balance_rel"}
     # the ParaView index lists every output step (t = 0, 1, ..., 16 us)
     with h5py.File(out / "results.h5") as h:
         assert len(h["lagrange/times"]) == 17
@@ -68,9 +73,7 @@ def test_taylor_bar_two_ranks_equals_one(tmp_path):
 def test_spinning_block(tmp_path):
     out, s = run_case("spinning_block", tmp_path)
     assert s["steps"] == 10_000
-    m = s["check"]["metrics"]
-    assert m["momentum_balance_rel"]["value"] <= 1e-10
-    assert m["angular_momentum_balance_rel"]["value"] <= 1e-10
+    assert {"momentum_balance_rel", "angular_momentum_balance_rel"} <= set(s["check"]["metrics"])
 
 
 def test_restart_is_bitwise_identical(tmp_path):
@@ -100,13 +103,11 @@ def test_restart_is_bitwise_identical(tmp_path):
 
 
 def test_taylor_bar(tmp_path):
-    """42CrMo4 Taylor impact, quarter model: final length within 2 % and impact-face diameter within
-    3 % of the published code results (26.52-26.56 mm, 11.15-11.22 mm; references are mid-points)."""
+    """42CrMo4 Taylor impact, quarter model: final length and impact-face diameter against the
+    published code results (26.52-26.56 mm, 11.15-11.22 mm; references are mid-points), within the
+    case's tolerances (0.4 % and 0.8 %; measured 0.12 % and 0.31 %)."""
     out, s = run_case("taylor_bar", tmp_path)
-    m = s["check"]["metrics"]
-    assert m["final_length"]["rel_error"] <= 0.02
-    assert m["impact_diameter"]["rel_error"] <= 0.03
-    assert s["check"]["passed"]
+    assert set(s["check"]["metrics"]) == {"final_length", "impact_diameter"}
     # the rod really mushroomed and heated: plastic strain and temperature rise at the impact face
     from orchestrator import output
 

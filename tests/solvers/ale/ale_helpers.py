@@ -80,11 +80,18 @@ def node_line(s: AleSolver, comp: int, axis: int) -> np.ndarray:
 
 # Sod (gamma 1.4, (1, 0, 1) | (0.125, 0, 0.1) at 0.5, t = 0.2): exact star state and shock
 SOD_P_STAR, SOD_U_STAR, SOD_RHO_L, SOD_RHO_R, SOD_X_SHOCK = 0.303130, 0.927453, 0.426319, 0.265574, 0.850431
+# tolerances of sod_profile_errors at 400 zones, Eulerian mode (a few times the larger of the scalar
+# and monotonic q's errors, measured: rho*_L 8.6e-4 / 8.1e-4, rho*_R 4.2e-4 / 4.9e-4, p* 9.5e-4 /
+# 1.1e-3, u* 1.0e-3 / 9.9e-4, shock 0.086 / 0.076 cells, undisturbed states exact)
+SOD_TOL = {"rho_star_left": 2.5e-3, "rho_star_right": 1.5e-3, "p_star": 3e-3, "u_star": 3e-3, "shock_cells": 0.3,
+           "undisturbed": 1e-12}
 
 
-def check_sod_profile(s: AleSolver, n: int) -> None:
-    """Assert a Sod tube along x at t = 0.2 on n zones: star-state plateaus within 2 %, shock within
-    3 cells, undisturbed states beyond the waves to 1e-10."""
+def sod_profile_errors(s: AleSolver, n: int) -> dict:
+    """A Sod tube along x at t = 0.2 on n zones against the exact solution: the largest relative
+    deviations over the star-state plateaus, the shock position error in cells (where the density
+    crosses the mean of rho*_R and the pre-shock 0.125), and the largest deviations of the
+    undisturbed states well beyond the waves (the numerical rarefaction head has a smooth precursor)."""
     rho = line(s, s.rho, 0)[:, 0]
     p = line(s, s.p, 0)[:, 0]
     u = node_line(s, 0, 0)[:, 0]
@@ -92,18 +99,23 @@ def check_sod_profile(s: AleSolver, n: int) -> None:
     xn = np.arange(n + 1) / n
     left = (xc > 0.52) & (xc < 0.66)     # rarefaction tail 0.486 .. contact 0.685
     right = (xc > 0.71) & (xc < 0.83)    # contact .. shock 0.850
-    assert np.max(np.abs(rho[left] / SOD_RHO_L - 1.0)) < 0.02
-    assert np.max(np.abs(rho[right] / SOD_RHO_R - 1.0)) < 0.02
-    assert np.max(np.abs(p[left | right] / SOD_P_STAR - 1.0)) < 0.02
-    assert np.max(np.abs(u[(xn > 0.52) & (xn < 0.83)] / SOD_U_STAR - 1.0)) < 0.02
-    # shock: where the density crosses the mean of rho*_R and the pre-shock 0.125
     mid = 0.5 * (SOD_RHO_R + 0.125)
     i = np.flatnonzero((rho[:-1] > mid) & (rho[1:] <= mid) & (xc[:-1] > 0.75))[0]
     x_s = xc[i] + (rho[i] - mid) / (rho[i] - rho[i + 1]) / n
-    assert abs(x_s - SOD_X_SHOCK) < 3.0 / n
-    # undisturbed states well beyond the waves (the numerical rarefaction head has a smooth precursor)
-    assert np.max(np.abs(rho[xc < 0.15] - 1.0)) < 1e-10
-    assert np.max(np.abs(rho[xc > 0.88] - 0.125)) < 1e-10
+    return {"rho_star_left": float(np.max(np.abs(rho[left] / SOD_RHO_L - 1.0))),
+            "rho_star_right": float(np.max(np.abs(rho[right] / SOD_RHO_R - 1.0))),
+            "p_star": float(np.max(np.abs(p[left | right] / SOD_P_STAR - 1.0))),
+            "u_star": float(np.max(np.abs(u[(xn > 0.52) & (xn < 0.83)] / SOD_U_STAR - 1.0))),
+            "shock_cells": float(abs(x_s - SOD_X_SHOCK) * n),
+            "undisturbed": float(max(np.max(np.abs(rho[xc < 0.15] - 1.0)), np.max(np.abs(rho[xc > 0.88] - 0.125))))}
+
+
+def check_sod_profile(s: AleSolver, n: int, tol: dict) -> None:
+    """Assert :func:`sod_profile_errors` within ``tol`` (a few times the errors measured: the
+    caller's table)."""
+    err = sod_profile_errors(s, n)
+    bad = {k: (v, tol[k]) for k, v in err.items() if not v <= tol[k]}
+    assert not bad, f"Sod profile errors (measured, tolerance) {bad}; all: {err}"
 
 
 def check_same_profile_every_axis(runs: dict) -> None:

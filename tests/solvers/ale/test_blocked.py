@@ -71,7 +71,10 @@ def conforming():
 
 def test_aligned_obstacle_is_a_conforming_wall(conforming):
     """Obstacle on a zone face: bitwise the conforming wall until the shock arrives; after the
-    reflection rho and p on [0, 0.75] within 2 % (L1-relative and plateaus; measured 5e-4)."""
+    reflection (measured in brackets) rho and p on [0, 0.75] within 1.5e-3 L1-relative of the
+    conforming run (4.9e-4, 3.7e-4), the plateaus within 2e-4 of it (1.4e-5, 5.2e-5, 3e-8) and within
+    1e-3 / 3e-3 / 1e-3 of the exact p5 / rho5 / p2 (4.3e-4, 1.3e-3, 2.6e-4), the reflected shock
+    within 0.1 zones of the conforming one (0.02)."""
     a = AleSolver(None, tube(0.005, 150))
     b = AleSolver(None, tube(0.005, 160, [{"region": "x > 0.75"}]))
     assert np.all(b._blk.blocked_fraction()[b.block.out_zones] == (np.arange(160) >= 150))
@@ -93,17 +96,18 @@ def test_aligned_obstacle_is_a_conforming_wall(conforming):
     ra, pa = profiles(conforming)
     rb, pb = profiles(b)
     rb, pb = rb[:150], pb[:150]
-    assert np.sum(np.abs(rb - ra)) / np.sum(ra) < 0.02
-    assert np.sum(np.abs(pb - pa)) / np.sum(pa) < 0.02
+    assert np.sum(np.abs(rb - ra)) / np.sum(ra) < 1.5e-3
+    assert np.sum(np.abs(pb - pa)) / np.sum(pa) < 1.5e-3
     x = (np.arange(150) + 0.5) * 0.005
-    for va, vb, ref in zip(plateaus(x, ra, pa), plateaus(x, rb, pb), (EX.p5, EX.rho5, EX.p2)):
-        assert abs(vb / va - 1) < 0.02 and abs(vb / ref - 1) < 0.02
-    assert abs(shock_position(x, rb) - shock_position(x, ra)) < 0.005
+    for va, vb, ref, tol in zip(plateaus(x, ra, pa), plateaus(x, rb, pb), (EX.p5, EX.rho5, EX.p2), (1e-3, 3e-3, 1e-3)):
+        assert abs(vb / va - 1) < 2e-4 and abs(vb / ref - 1) < tol
+    assert abs(shock_position(x, rb) - shock_position(x, ra)) < 0.1 * 0.005
 
 
 def test_cut_obstacle_matches_conforming_plateaus(conforming):
-    """Obstacle boundary in the middle of a zone (blocked fraction 0.5 there): plateaus within 2 % of
-    the conforming run (measured 0.1 %), reflected shock within one zone, L1 difference < 2 %."""
+    """Obstacle boundary in the middle of a zone (blocked fraction 0.5 there), against the conforming
+    run (measured in brackets): plateaus within 2e-3 (6.5e-5, 7.6e-4, 2.7e-6), reflected shock within
+    0.2 zones (0.046), L1 differences below 4e-3 (1.7e-3, 1.8e-3: the grids differ by 1 %)."""
     h = 0.5 / 101  # 0.75 = 151.5 h: zone 151 is cut in half
     b = AleSolver(None, tube(h, 160, [{"region": "x > 0.75", "subsamples": 2}]))
     bf = b._blk.blocked_fraction()[b.block.out_zones]
@@ -114,11 +118,11 @@ def test_cut_obstacle_matches_conforming_plateaus(conforming):
     xa = (np.arange(150) + 0.5) * 0.005
     xb = (np.arange(160) + 0.5) * h
     for va, vb in zip(plateaus(xa, ra, pa), plateaus(xb, rb, pb)):
-        assert abs(vb / va - 1) < 0.02
-    assert abs(shock_position(xb, rb) - shock_position(xa, ra)) < h
+        assert abs(vb / va - 1) < 2e-3
+    assert abs(shock_position(xb, rb) - shock_position(xa, ra)) < 0.2 * h
     l1_rho = np.sum(np.abs(np.interp(xa, xb, rb) - ra)) / np.sum(ra)
     l1_p = np.sum(np.abs(np.interp(xa, xb, pb) - pa)) / np.sum(pa)
-    assert l1_rho < 0.02 and l1_p < 0.02
+    assert l1_rho < 4e-3 and l1_p < 4e-3
 
 
 def test_3d_obstacle_equals_2d():
@@ -367,9 +371,10 @@ def test_monotonic_q_at_an_immersed_wall_is_that_of_a_conforming_wall():
 @pytest.mark.parametrize("region, sub", [("x > 0.75", 1), ("x > 0.75", 2)], ids=["aligned", "cut"])
 def test_reflected_shock_with_monotonic_q(region, sub):
     """The reflected shock with monotonic q: obstacle on a zone face or through a zone, against the
-    conforming wall with monotonic q: plateaus within 2 % of the exact values and of the
-    conforming run, reflected shock within one zone, L1 differences < 2 % (measured 4e-4 aligned,
-    1.9e-3 cut), balances 1e-12."""
+    conforming wall with monotonic q (measured aligned / cut): plateaus within 4e-3 of it (<= 4e-5 /
+    1.4e-3) and within 1e-3 / 8e-3 / 1e-3 of the exact p5 / rho5 / p2 (2.3e-4 / 1.8e-4, 1.6e-3 /
+    2.9e-3, 3.3e-4), reflected shock within 0.2 zones (0.02 / 0.054), L1 differences < 5e-3 (4e-4 /
+    1.9e-3), balances 1e-12."""
     mono = {"kind": "monotonic"}
     a = AleSolver(None, {**tube(0.005, 150), "viscosity": mono})
     advance(a, T)
@@ -380,11 +385,11 @@ def test_reflected_shock_with_monotonic_q(region, sub):
     rb, pb = profiles(b)
     xa = (np.arange(150) + 0.5) * 0.005
     xb = (np.arange(160) + 0.5) * h
-    for va, vb, ref in zip(plateaus(xa, ra, pa), plateaus(xb, rb, pb), (EX.p5, EX.rho5, EX.p2)):
-        assert abs(vb / va - 1) < 0.02 and abs(vb / ref - 1) < 0.02
-    assert abs(shock_position(xb, rb) - shock_position(xa, ra)) < h
-    assert np.sum(np.abs(np.interp(xa, xb, rb) - ra)) / np.sum(ra) < 0.02
-    assert np.sum(np.abs(np.interp(xa, xb, pb) - pa)) / np.sum(pa) < 0.02
+    for va, vb, ref, tol in zip(plateaus(xa, ra, pa), plateaus(xb, rb, pb), (EX.p5, EX.rho5, EX.p2), (1e-3, 8e-3, 1e-3)):
+        assert abs(vb / va - 1) < 4e-3 and abs(vb / ref - 1) < tol
+    assert abs(shock_position(xb, rb) - shock_position(xa, ra)) < 0.2 * h
+    assert np.sum(np.abs(np.interp(xa, xb, rb) - ra)) / np.sum(ra) < 5e-3
+    assert np.sum(np.abs(np.interp(xa, xb, pb) - pa)) / np.sum(pa) < 5e-3
     d = b.diagnostics()
     assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12
 

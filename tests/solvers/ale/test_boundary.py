@@ -39,6 +39,11 @@ def test_open_faces_balances(dim, mode):
 
 
 def test_double_rarefaction_near_vacuum():
+    """Toro 1-2-3 on 200 zones with outflow faces: positive and finite everywhere, mirror symmetric,
+    balances to round-off; against the exact solution (measured in brackets): the central density
+    minimum within 35 % of rho* (23.5 % low), L1 density error below 8e-3 (5.8e-3)."""
+    from solvers.ale.exact.riemann import RiemannSolution
+
     n = 200
     cfg = {"dimension": 2, "mode": "eulerian",
            "grid": {"lower": [0.0, 0.0], "upper": [1.0, 1.0 / n], "cells": [n, 1]},
@@ -51,7 +56,10 @@ def test_double_rarefaction_near_vacuum():
     rho = line(s, s.rho, 0)[:, 0]
     e = line(s, s.e, 0)[:, 0]
     assert np.all(rho > 0) and np.all(e > 0) and np.all(np.isfinite(s.v))
-    assert 0.5 * 0.02185 < rho.min() < 2.0 * 0.02185
+    ex = RiemannSolution((1.0, -2.0, 0.4), (1.0, 2.0, 0.4), 1.4)
+    assert abs(rho.min() / ex.rho_star_l - 1) < 0.35
+    x = (np.arange(n) + 0.5) / n
+    assert np.mean(np.abs(rho - ex.sample(x, 0.15, 0.5)[0])) < 8e-3
     assert np.max(np.abs(rho - rho[::-1]) / rho) < 1e-12  # mirror symmetry about x = 0.5
     d = s.diagnostics()
     assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12
@@ -62,8 +70,9 @@ def test_double_rarefaction_near_vacuum():
 def test_piston_upper_face(dim):
     """A piston on x_upper moving in at u_p = 0.5 into gas at rest (1, 0, 1), gamma 1.4, Lagrangian:
     the face nodes sit at 1 - u_p t (to 1e-12), the plateau pressure is the Rankine-Hugoniot p1 of
-    solvers.ale.exact.piston within 2%, the boundary work p1 u_p t A within 2%, and the energy,
-    mass and momentum balances hold to round-off (1e-12) with the piston's reaction accounted."""
+    solvers.ale.exact.piston within 1e-4 (measured 1.9e-5), the boundary work p1 u_p t A within
+    5e-3 (2.6e-3 low: the shock forms over the first steps), and the energy, mass and momentum
+    balances hold to round-off (1e-12) with the piston's reaction accounted."""
     from solvers.ale.exact.piston import stiffened_gas
 
     n, u_p, t_end = 200, 0.5, 0.25
@@ -85,10 +94,10 @@ def test_piston_upper_face(dim):
     inside = np.flatnonzero((dist > u_p * t) & (dist < ex.D * t))
     inside = inside[np.argsort(dist[inside])][4:-4]
     assert inside.size > 30
-    assert pz[inside].mean() == pytest.approx(ex.p1, rel=0.02)
+    assert pz[inside].mean() == pytest.approx(ex.p1, rel=1e-4)
     d = s.diagnostics()
     area = (1.0 / n) ** (dim - 1)
-    assert d["boundary_work"] == pytest.approx(ex.p1 * u_p * t * area, rel=0.02)
+    assert d["boundary_work"] == pytest.approx(ex.p1 * u_p * t * area, rel=5e-3)
     assert abs(d["energy_balance_rel"]) <= 1e-12
     assert abs(d["mass_balance_rel"]) <= 1e-12 and d["momentum_balance_rel"] <= 1e-12
 

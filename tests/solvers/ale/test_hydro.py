@@ -85,8 +85,11 @@ SEDOV = {2: ("cylindrical", 40, 0.49), 3: ("spherical", 20, 0.41)}
 @pytest.mark.parametrize("dim", [2, 3])
 def test_sedov_point_blast_lagrangian(dim):
     """Quadrant/octant with walls, E_full deposited (its 1/4 or 1/8 share) in the corner zone:
-    total energy to 1e-10, symmetry about the diagonal (x <-> y) to 1e-12, and the density peak
-    at the Sedov shock radius within 1.5 zone widths."""
+    total energy to 1e-12 (measured 3.5e-14 / 6.1e-14), symmetry about the diagonal (x <-> y) to
+    1e-12, the density peak at the Sedov shock radius within 0.8 zone widths (measured 0.32 / 0.26;
+    the peak is a zone centroid, so it moves by whole zones), its height within 25 % / 30 % of the
+    strong-shock 6 (5.46 / 4.76: smeared over 2-3 zones) and the L1 density error against the exact
+    profile (at the zone centroids, relative to the mass) below 0.16 (0.134 / 0.131)."""
     from solvers.ale.exact import SedovSolution
 
     geometry, n, t = SEDOV[dim]
@@ -94,7 +97,7 @@ def test_sedov_point_blast_lagrangian(dim):
     sol = SedovSolution(e_full, 1.0, 1.4, geometry)
     s = run(sedov_config(dim, n, e_full / 2 ** dim), t)
     d = s.diagnostics()
-    assert abs(d["energy_balance_rel"]) < 1e-10
+    assert abs(d["energy_balance_rel"]) < 1e-12
     # the deposited share plus the cold gas, p V / (gamma - 1) = 1e-6 / 0.4
     assert d["total_energy"] == pytest.approx(e_full / 2 ** dim + 2.5e-6, rel=1e-12)
     rho = s.zone_field(s.rho).reshape([n] * dim)  # (z,) y, x
@@ -109,8 +112,11 @@ def test_sedov_point_blast_lagrangian(dim):
     r_peak = r.ravel()[np.argmax(rho)]
     R = sol.shock_radius(t)
     assert R == pytest.approx(t ** (2.0 / (2 + dim)), rel=1e-9)
-    assert abs(r_peak - R) < 1.5 / n
-    assert rho.max() > 0.5 * 6.0  # a real shock (strong-shock compression 6)
+    assert abs(r_peak - R) < 0.8 / n
+    assert rho.max() > (0.75 if dim == 2 else 0.7) * 6.0  # a real shock (strong-shock compression 6)
+    V = s.zone_field(s.V).reshape([n] * dim)
+    rho_ex = sol.profiles(r, t)[0]
+    assert np.sum(np.abs(rho - rho_ex) * V) / np.sum(rho_ex * V) < 0.16
 
 
 def test_invalid_initial_state_names_zone_step_time():
@@ -163,3 +169,128 @@ def test_hourglass_damps_only_hourglass_modes():
     f_hg = s.fc[z][:, 0] - s.p[z] * b[:, 0]
     assert np.dot(f_hg, gamma) < 0.0
     assert np.allclose(f_hg, f_hg @ gamma / 8 * gamma, atol=1e-15)
+
+
+def _fe_hourglass(xe, ve, rho, c, hg):
+    """The FE kernel's hourglass force on one element (solvers/lagrange/kernels.py): element_forces
+    with and without the coefficient (no stress: dt = 0 and zero stress; the bulk viscosity is the
+    same in both), for a linear elastic material of nu = 0 and E = rho c^2 (dilatational speed c)
+    and the mass rho V, so that the element's rho and c are the zone's."""
+    from solvers.lagrange.kernels import element_forces, quad_bvectors, reference_gradients
+    from solvers.lagrange.materials import material_params
+
+    dim = xe.shape[1]
+    conn = np.arange(2 ** dim, dtype=np.int64)[None, :]
+    vol = (hex_bvectors if dim == 3 else quad_bvectors)(xe, np.empty((2 ** dim, dim)))[0]
+    code, par = material_params("linear_elastic", {"density": rho, "youngs_modulus": rho * c * c,
+                                                   "poisson_ratio": 0.0})
+    grad0, vol0 = reference_gradients(xe, conn)
+    out = []
+    for coef in (hg, 0.0):
+        f = np.zeros_like(xe)
+        _, bad = element_forces(xe, ve, 0.0, conn, np.zeros(1, np.int64), np.array([code], np.int64),
+                                par[None, :].copy(), grad0, vol0, np.array([rho * vol]), np.zeros((1, 6)),
+                                np.zeros(1), np.full(1, 293.0), np.zeros(1), np.zeros(1), coef, 0.2, 1.0, f)
+        assert bad == -1
+        out.append(f)
+    return out[0] - out[1]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("hourglass", [None, 0.1])
+def test_hourglass_force_is_the_fe_kernels_on_a_distorted_zone(dim, hourglass):
+    """The ALE zone pass's Flanagan-Belytschko hourglass force equals the FE kernel's (the same
+    formula, a_h = C rho c V^(2/3)/4 in 3-D, C rho c A^(1/2)/4 per unit thickness in 2-D) on a
+    distorted zone with random corner velocities (hourglass modes and the rest), to round-off
+    (measured <= 2.1e-15 of the largest hourglass force; asserted 1e-13). The coefficient is the
+    case's, or the documented default 0.05 (README, solvers/ale/solver.py): twice it fails."""
+    from solvers.lagrange.kernels import quad_bvectors
+
+    cfg = uniform_config(dim, 3, [0.0] * dim, periodic(dim), mode="lagrangian", density=1.3, pressure=0.7)
+    if hourglass is not None:
+        cfg["hourglass"] = hourglass
+    cfg["viscosity"] = {"linear": 0.0, "quadratic": 0.0}  # (no q: the hourglass part is not lost in it)
+    coef = 0.05 if hourglass is None else hourglass
+    s = AleSolver(None, cfg)
+    B = s.block
+    z = int(np.flatnonzero(B.real_zone)[13 if dim == 3 else 4])  # the middle zone: all its nodes real
+    nodes = int(B._zone_to_node(np.array([z]))[0]) + B.corner_offsets()
+    rng = np.random.default_rng(7 + dim)
+    h = 1.0 / 3
+    s.x[nodes] += rng.uniform(-0.15 * h, 0.15 * h, (len(nodes), dim))
+    s.v[:] = 0.0
+    s.v[nodes] = 5.0 * rng.normal(size=(len(nodes), dim))  # (c = 0.87: a strong hourglass part)
+    s._pass(s.zr, hydro.FORCES)
+    xe, ve = s.x[nodes].copy(), s.v[nodes].copy()
+    b = np.empty_like(xe)
+    (hex_bvectors if dim == 3 else quad_bvectors)(xe, b)
+    f_ale = s.fc[z] - (s.p[z] + s.q[z]) * b
+    f_fe = _fe_hourglass(xe, ve, s.rho[z], s.c[z], coef)
+    assert np.abs(f_fe).max() > 0.1 * np.abs(s.fc[z]).max()  # not lost in the pressure force
+    assert np.abs(f_ale - f_fe).max() <= 1e-13 * np.abs(f_fe).max(), (f_ale, f_fe)
+
+
+# ---- smooth flow: second order in space and time -------------------------------------------------
+ACOUSTIC = {"gamma": 1.4, "rho0": 1.0, "c0": 1.0, "eps": 1e-6}
+
+
+def _zone_mean_sin(a, b):
+    """Mean of sin(2 pi x) over [a, b]."""
+    k = 2 * np.pi
+    return (np.cos(k * a) - np.cos(k * b)) / (k * (b - a))
+
+
+def acoustic_config(n, dim, mode="lagrangian"):
+    """A right-running sound wave of amplitude eps (rho' = rho0 eps S, u = c0 eps S, p' = rho0 c0^2 eps S
+    with S = sin 2 pi (x - c0 t)) in a periodic tube of length 1, n x 1 (x 1) zones, no artificial
+    viscosity (a smooth flow needs none; its linear term would be first order): zone
+    means of the exact solution, one region per zone (`x > i h`, the later region wins)."""
+    g, rho0, c0, eps = (ACOUSTIC[k] for k in ("gamma", "rho0", "c0", "eps"))
+    h = 1.0 / n
+    regions = []
+    for i in range(n):
+        S = _zone_mean_sin(i * h, (i + 1) * h)
+        r = {"material": "gas", "density": rho0 * (1 + eps * S), "pressure": rho0 * c0 ** 2 * (1 / g + eps * S),
+             "velocity": [c0 * eps * S] + [0.0] * (dim - 1)}
+        if i:
+            r["region"] = f"x > {i * h!r}"
+        regions.append(r)
+    lower, upper, cells = [0.0] * dim, [h] * dim, [1] * dim
+    upper[0], cells[0] = 1.0, n
+    return {"dimension": dim, "mode": mode, "grid": {"lower": lower, "upper": upper, "cells": cells},
+            "materials": {"gas": {"eos": "ideal_gas", "gamma": g}}, "regions": regions,
+            "boundaries": {"x_lower": "periodic", "x_upper": "periodic"},
+            "viscosity": {"linear": 0.0, "quadratic": 0.0}}
+
+
+def acoustic_error(n, dim, mode, t_end=1.0, courant=0.5):
+    """L1 error of the zone pressures after one period (dt = courant h / c0, landing on t_end), in
+    units of the wave's pressure amplitude, against the exact zone means over the moved zones."""
+    rho0, c0, eps = ACOUSTIC["rho0"], ACOUSTIC["c0"], ACOUSTIC["eps"]
+    s = AleSolver(None, acoustic_config(n, dim, mode))
+    steps = int(round(t_end * n * c0 / courant))
+    for k in range(1, steps + 1):
+        s.predict(t_end / steps)
+        s.correct(None, k, k * t_end / steps)
+        s.remap()
+    x = s.node_field(s.x)[: n + 1, 0]        # the nodes of the row y = 0 (x fastest)
+    p = s.zone_field(s.p)[:n]
+    exact = rho0 * c0 ** 2 * (1 / ACOUSTIC["gamma"] + eps * _zone_mean_sin(x[:-1] - c0 * t_end, x[1:] - c0 * t_end))
+    return float(np.mean(np.abs(p - exact))) / (rho0 * c0 ** 2 * eps)
+
+
+@pytest.mark.parametrize("mode, dim", [("lagrangian", 2), ("lagrangian", 3), ("eulerian", 2)])
+def test_smooth_sound_wave_converges_at_second_order(mode, dim):
+    """A sound wave carried once round a periodic tube, dt proportional to h: the pressure error
+    falls at second order, which needs the EOS evaluated at the time level of the positions (the
+    half-step energy extrapolation e + de_h of the Lagrange step, hydro.py: zone_pass in Lagrangian
+    mode, lagrangian_volumes in Eulerian mode, where the remap moves O(eps) and the errors are the
+    Lagrangian ones). Measured (2-D and 3-D, both modes alike): 4.80e-3, 1.20e-3, 3.01e-4, 7.54e-5
+    at n = 32 .. 256, orders 1.997, 1.998, 2.000; with de_h doubled: 2.7e-2 .. 3.6e-3, orders 0.95,
+    0.97, 0.985; without it the Lagrangian run grows unstable. Asserted: every order within 2 +- 0.1,
+    the finest error below 1.5e-4 (eps = 1e-6: the nonlinear terms, O(eps), stay far below)."""
+    ns = (32, 64, 128, 256)
+    errs = [acoustic_error(n, dim, mode) for n in ns]
+    orders = [float(np.log2(errs[i] / errs[i + 1])) for i in range(len(ns) - 1)]
+    assert all(abs(o - 2.0) < 0.1 for o in orders), (errs, orders)
+    assert errs[-1] < 1.5e-4, errs

@@ -43,8 +43,11 @@ def _plateau(x, a, lo, hi, margin):
 
 
 def test_water_air_plateaus_interface_and_pressure(water_air):
-    """Issue 3: interface within 2 cells, plateaus within 3 %, no pressure oscillation > 1 % at the
-    interface (N = 400)."""
+    """N = 400 against the exact solution (tolerances a few times the measured errors, in brackets):
+    density plateaus within 0.1 % (water, 2.6e-4) and 1 % (air, 4.3e-3), pressure plateau median
+    within 0.5 % (1.7e-3) and mean within 6 % (4.0e-2: the start-up dip, see
+    cases/water_air_shock_tube), interface within 0.3 cells (0.03) and one mixed zone, pressure within
+    0.3 % of p* across it (1.2e-3)."""
     s, _ = water_air
     n = 400
     dx = 1.0 / n
@@ -57,23 +60,23 @@ def test_water_air_plateaus_interface_and_pressure(water_air):
     m = 4 * dx
     rl = _plateau(x, rho, tail, contact, m).mean()
     rr = _plateau(x, rho, contact, shock, m).mean()
-    assert abs(rl / WA_EXACT.rho_star_l - 1) < 0.03, rl
-    assert abs(rr / WA_EXACT.rho_star_r - 1) < 0.03, rr
+    assert abs(rl / WA_EXACT.rho_star_l - 1) < 1e-3, rl
+    assert abs(rr / WA_EXACT.rho_star_r - 1) < 0.01, rr
     # pressure plateau: its median (see cases/water_air_shock_tube: a start-up wave in the stiff water
     # makes a dip behind the rarefaction tail; the mean is 0.96 p* at N = 400)
     ps = np.median(_plateau(x, p, tail, shock, m))
-    assert abs(ps / WA_EXACT.p_star - 1) < 0.03, ps
+    assert abs(ps / WA_EXACT.p_star - 1) < 5e-3, ps
     assert abs(_plateau(x, p, tail, shock, m).mean() / WA_EXACT.p_star - 1) < 0.06
     # interface: where the water fraction crosses 1/2
     k = int(np.flatnonzero((fw[:-1] - 0.5) * (fw[1:] - 0.5) < 0)[0])
     xi = x[k] + (0.5 - fw[k]) * dx / (fw[k + 1] - fw[k])
-    assert abs(xi - contact) / dx < 2.0, (xi, contact)
+    assert abs(xi - contact) / dx < 0.3, (xi, contact)
     # sharp: one mixed zone at most
     assert np.count_nonzero((fw > 1e-6) & (fw < 1 - 1e-6)) <= 2
     # pressure across the interface (5 zones either side, inside the star region)
     near = (np.abs(x - contact) < 5 * dx) & (x < shock - 2 * dx)
     osc = np.max(np.abs(p[near] - WA_EXACT.p_star)) / WA_EXACT.p_star
-    assert osc < 0.01, osc
+    assert osc < 3e-3, osc
 
 
 def test_water_air_conservation(water_air):
@@ -101,7 +104,8 @@ def test_water_air_same_along_y():
 
 def test_two_gases_reproduce_sod():
     """Sod with the two sides as two materials of the same EOS: the contact is the material
-    interface; plateaus within 2 %, conservation to round-off."""
+    interface; plateaus within 5e-4 (measured 1.4e-4, 9.4e-5, 1.4e-4), interface within 0.3 cells of
+    the exact contact (0.03), conservation to round-off."""
     n = 200
     cfg = {"dimension": 2, "mode": "eulerian",
            "grid": {"lower": [0.0, 0.0], "upper": [1.0, 1.0 / n], "cells": [n, 1]},
@@ -116,13 +120,13 @@ def test_two_gases_reproduce_sod():
     rho = line(s, s.rho, 0)[:, 0]
     p = line(s, s.p, 0)[:, 0]
     m = 4.0 / n
-    assert abs(_plateau(x, p, w["left_rarefaction_tail"], w["right_shock"], m).mean() / ex.p_star - 1) < 0.02
-    assert abs(_plateau(x, rho, w["left_rarefaction_tail"], w["contact"], m).mean() / ex.rho_star_l - 1) < 0.02
-    assert abs(_plateau(x, rho, w["contact"], w["right_shock"], m).mean() / ex.rho_star_r - 1) < 0.02
+    assert abs(_plateau(x, p, w["left_rarefaction_tail"], w["right_shock"], m).mean() / ex.p_star - 1) < 5e-4
+    assert abs(_plateau(x, rho, w["left_rarefaction_tail"], w["contact"], m).mean() / ex.rho_star_l - 1) < 5e-4
+    assert abs(_plateau(x, rho, w["contact"], w["right_shock"], m).mean() / ex.rho_star_r - 1) < 5e-4
     fl = line(s, s.mm.fractions()[:, 0], 0)[:, 0]
     k = int(np.flatnonzero((fl[:-1] - 0.5) * (fl[1:] - 0.5) < 0)[0])
     xi = x[k] + (0.5 - fl[k]) / n / (fl[k + 1] - fl[k])
-    assert abs(xi - w["contact"]) * n < 2.0
+    assert abs(xi - w["contact"]) * n < 0.3
     d = s.diagnostics()
     assert abs(d["energy_balance_rel"]) < 1e-12 and abs(d["mass_balance_rel"]) < 1e-12
 
@@ -184,15 +188,16 @@ def test_advected_square_volume_conserved(squares):
 
 
 def test_advected_square_error_decreases(squares):
-    """Symmetric-difference area between the advected and the exact square at 3 meshes: it
-    decreases, at least at first order."""
+    """Symmetric-difference area between the advected and the exact square at 3 meshes: measured
+    6.5e-3, 2.27e-3, 7.5e-4 at 32, 64, 128 (ratios 0.35, 0.33: order 1.5, 1.6); asserted ratios
+    below 0.45 and the coarsest below 8e-3."""
     err = {n: float(np.sum(np.abs(f - fex)) / n ** 2) for n, (s, f0, f, fex, d0, d) in squares.items()}
     print("advected square symmetric-difference area:", err)
     ns = sorted(err)
     for a, b in zip(ns, ns[1:]):
-        assert err[b] < 0.6 * err[a], err
-    # on the coarsest mesh the square (12.8 zones wide) keeps its area within a few zones' worth
-    assert err[32] < 0.01
+        assert err[b] < 0.45 * err[a], err
+    # on the coarsest mesh the square (12.8 zones wide, area 0.16) keeps its area within 5 %
+    assert err[32] < 8e-3
 
 
 def test_advected_cube_3d():
@@ -231,9 +236,9 @@ def test_gas_expands_into_void():
     assert np.all(fg[x > front + 1.0 / n] == 0.0)
     assert np.all(rho[x > front + 1.0 / n] == 0.0)
     last = (np.flatnonzero(fg > 0.5)[-1] + 1) / n
-    assert front - last < 0.1, (last, front)  # the thin tail of the fan lags (rho < 1e-3 there)
+    assert front - last < 0.1, (last, front)  # the thin tail of the fan lags (rho < 1e-3 there): 0.080
     l1 = float(np.mean(np.abs(rho - ex.sample(x, t, 0.5)[0])))
-    assert l1 < 3e-3, l1
+    assert l1 < 3e-3, l1  # measured 1.85e-3
     d = s.diagnostics()
     assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12
     assert abs(d["volume_gas"] + d["volume_vacuum"] - 1.0 / n) < 1e-15
@@ -268,9 +273,79 @@ def test_relaxation_conserves_and_equilibrates():
     for _ in range(6):
         mm.relax_pressures(s)
     p_after = pressures()
-    assert abs(p_after[0] / p_after[1] - 1) < 0.05, p_after
+    # 12 passes: 1513, 29, 2.5e-5 off after 2, 4, 6 passes, then 3e-13 (quadratic convergence)
+    assert abs(p_after[0] / p_after[1] - 1) < 1e-10, p_after
     assert abs(mm.vol[z].sum() / v0 - 1) < 1e-14
     assert abs(float(np.sum(mm.mass[z] * mm.ener[z])) / e0 - 1) < 1e-14
+
+
+def _out_of_equilibrium(s, z, fractions, states):
+    """Put zone z's materials at the given volume fractions and (rho, p) states."""
+    from solvers.ale import eos
+
+    mm = s.mm
+    V = mm.vol[z].sum()
+    for k, (f, (r, p)) in enumerate(zip(fractions, states)):
+        mm.vol[z, k] = f * V
+        mm.mass[z, k] = r * f * V
+        mm.ener[z, k] = eos.energy_from_pressure(int(mm.code[k]), mm.par[k], r, p) if r > 0 else 0.0
+        mm.deh[z, k] = 0.0
+    s.M[z] = mm.mass[z].sum()
+
+
+def test_mixed_zone_pressure_is_the_compressibility_weighted_mean():
+    """The zone pressure that drives the nodes is the materials' linearised equilibrium pressure
+    sum(a_k p_k) / sum(a_k), a_k = vol_k / (rho_k c_k^2) (mixed.zone_eos), computed here from the
+    EOS of each material: water at 3e8 Pa and air at 2e5 Pa (30 / 70 % of the zone) give 2.09e5 Pa
+    (a volume-weighted mean would be 9e7). Its work p dV on a compression equals the materials'
+    sum p_k dV_k under the volume split of mixed.lagrange_split (the closure's energy consistency)."""
+    from solvers.ale import eos
+
+    s = _two_zone_solver()
+    mm = s.mm
+    z = int(np.flatnonzero(s.block.real_zone)[1])
+    _out_of_equilibrium(s, z, (0.3, 0.7), ((1000.0, 3.0e8), (2.0, 2.0e5)))
+    mm.update_eos(s)
+    vol = mm.vol[z]
+    st = [eos.state(int(mm.code[k]), mm.par[k], mm.mass[z, k] / vol[k], mm.ener[z, k]) for k in range(2)]
+    pk = np.array([a[0] for a in st])
+    a = vol / (mm.mass[z] / vol * np.array([a[1] for a in st]) ** 2)
+    assert np.allclose(mm.pm[z], pk, rtol=1e-14, atol=0.0)
+    assert s.p[z] == pytest.approx(np.sum(a * pk) / np.sum(a), rel=1e-13)
+    assert s.p[z] == pytest.approx(2.09e5, rel=0.01) and s.c[z] == max(a[1] for a in st)
+    # the work of a compression: zone p dV = sum_k p_k dV_k (energy shared consistently)
+    s.q[:] = 0.0
+    dV = -1e-2 * vol.sum()
+    s.V[z] = vol.sum() + dV
+    v0 = vol.copy()
+    lo = np.zeros(3, np.int64)
+    lo[: s.dim] = np.array(s.block.zone_ijk(z)) + 2
+    mixed.lagrange_split(mm.vol, mm.mass, mm.ener, mm.deh, mm.pm, mm.cm, mm.code, s.M, s.e, s.V, s.q, lo, lo + 1,
+                         s.block.zs)
+    dVk = mm.vol[z] - v0
+    # (dV_k are differences of volumes, the water's 3e-7 of its own: measured 1.8e-12)
+    assert np.sum(mm.pm[z] * dVk) == pytest.approx(s.p[z] * dV, rel=1e-10)
+
+
+def test_mixed_zone_pressure_with_void():
+    """Gas and void sharing a zone: the zone pressure is the gas pressure times the share of the
+    zone that is not void (zone_eos: p = (1 - f_void) p_eq)."""
+    from solvers.ale import eos
+
+    cfg = {"dimension": 2, "mode": "eulerian",
+           "grid": {"lower": [0.0, 0.0], "upper": [1.0, 0.25], "cells": [4, 1]},
+           "materials": {"gas": {"eos": "ideal_gas", "gamma": 1.4}, "vacuum": {"eos": "void"}},
+           "regions": [{"material": "gas", "density": 1.0, "pressure": 1.0},
+                       {"material": "vacuum", "region": "x > 0.3125"}]}  # zone 1 (0.25 .. 0.5): 1/4 gas
+    s = AleSolver(None, cfg)
+    z = int(np.flatnonzero(s.block.real_zone)[1])
+    mm = s.mm
+    _out_of_equilibrium(s, z, (0.25, 0.75), ((0.8, 0.6), (0.0, 0.0)))
+    mm.update_eos(s)
+    p_gas = eos.state(int(mm.code[0]), mm.par[0], 0.8, mm.ener[z, 0])[0]
+    assert p_gas == pytest.approx(0.6, rel=1e-14)
+    assert s.p[z] == pytest.approx(0.25 * p_gas, rel=1e-14)
+    assert s.rho[z] == pytest.approx(0.8 * 0.25, rel=1e-14)
 
 
 def test_lagrange_split_shares_exactly():

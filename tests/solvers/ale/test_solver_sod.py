@@ -8,7 +8,7 @@ p* = 0.303130, u* = 0.927453, rho*_L = 0.426319, rho*_R = 0.265574, shock at 0.8
 import numpy as np
 import pytest
 
-from tests.solvers.ale.ale_helpers import check_same_profile_every_axis, check_sod_profile, line, run, sod_config
+from tests.solvers.ale.ale_helpers import SOD_TOL, check_same_profile_every_axis, check_sod_profile, line, run, sod_config
 
 N = 400
 T = 0.2
@@ -39,9 +39,10 @@ def runs():
 
 
 def test_sod_plateaus_and_shock(runs):
-    """Star-state plateaus within 2 % of the exact values, shock within 3 cells."""
+    """Star-state plateaus, shock position and undisturbed states against the exact solution
+    (ale_helpers.SOD_TOL: plateaus within 0.15 .. 0.3 %, shock within 0.3 cells)."""
     s = runs[(2, 0)]
-    check_sod_profile(s, N)
+    check_sod_profile(s, N, SOD_TOL)
 
 
 def test_sod_same_profile_on_every_axis_and_dimension(runs):
@@ -51,7 +52,8 @@ def test_sod_same_profile_on_every_axis_and_dimension(runs):
 
 
 def test_sod_conservation_eulerian_with_walls(runs):
-    """Mass, momentum (with the wall reactions) and total energy to 1e-12 relative."""
+    """Mass, momentum (with the wall reactions) and total energy to 1e-12 relative (round-off:
+    measured <= 1.3e-14, 8.2e-15 and 4.4e-14 on the (2, 0) tube)."""
     for key, s in runs.items():
         d = s.diagnostics()
         assert abs(d["mass_balance_rel"]) < 1e-12, key
@@ -65,8 +67,9 @@ def test_sod_conservation_eulerian_with_walls(runs):
 
 
 def test_sod_lagrangian_energy():
-    """Lagrangian mode (no remap) with walls: kinetic + internal energy to 1e-12 relative, and the
-    star state is reached as well."""
+    """Lagrangian mode (no remap) with walls: kinetic + internal energy to 1e-12 relative (measured
+    7.9e-15), and the star pressure is reached as well (largest deviation over the plateaus 0.96 %,
+    asserted 2 %: the post-shock ringing of a Lagrangian grid)."""
     s = run(sod_config(2, N, 0, mode="lagrangian"), T)
     d = s.diagnostics()
     assert abs(d["energy_balance_rel"]) < 1e-12
@@ -79,7 +82,8 @@ def test_sod_lagrangian_energy():
 
 
 def test_sod_l1_convergence(exact):
-    """L1 density error decreases at the first order expected of a shock problem."""
+    """L1 density error decreases at the first order expected of a shock problem: measured 5.28e-3,
+    2.67e-3, 1.45e-3 at 100, 200, 400 zones (orders 0.98, 0.88)."""
     errs = []
     for n in (100, 200, 400):
         s = run(sod_config(2, n), T)
@@ -87,5 +91,5 @@ def test_sod_l1_convergence(exact):
         rho_ex = exact.sample(xc, T, 0.5)[0]
         errs.append(np.mean(np.abs(line(s, s.rho, 0)[:, 0] - rho_ex)))
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
-    assert errs[0] < 7e-3
+    assert errs[2] < 1.8e-3, errs
     assert np.all(orders > 0.8), (errs, orders)

@@ -3,9 +3,9 @@
 References: a linear (homologous) velocity field on a uniform grid has no shock, so the limited q
 must vanish (the limiter ratios are 1; to round-off, 1e-14 of the scalar q of the same field);
 Sod's exact Riemann solution (Toro 2009, ch. 4; the star-state values of test_solver_sod.py) with
-the scalar q's tolerances (plateaus 2 %, shock within 3 cells) and an L1 density error no worse
-than 1.1 x the scalar q's; the Sedov-Taylor radius R(t) = (E t^2 / (alpha rho))^(1/4) (Kamm &
-Timmes 2007, solvers.ale.exact.SedovSolution) within 2 %, with the compatible energy to 1e-10.
+the scalar q's tolerances (ale_helpers.SOD_TOL) and an L1 density error no worse than 1.1 x the
+scalar q's; the Sedov-Taylor radius R(t) = (E t^2 / (alpha rho))^(1/4) (Kamm &
+Timmes 2007, solvers.ale.exact.SedovSolution) within 0.8 zones, with the compatible energy to 1e-12.
 """
 import itertools
 import shutil
@@ -18,7 +18,7 @@ from orchestrator.case import load_case
 from solvers.ale import hydro
 from solvers.ale import solver as ale_solver
 from solvers.ale.solver import AleSolver
-from tests.solvers.ale.ale_helpers import (SOD_P_STAR, advance, check_same_profile_every_axis, check_sod_profile,
+from tests.solvers.ale.ale_helpers import (SOD_P_STAR, SOD_TOL, advance, check_same_profile_every_axis, check_sod_profile,
                                            line, run, sedov_config, sod_config, uniform_config)
 
 REPO = Path(__file__).resolve().parents[3]
@@ -83,9 +83,9 @@ def _l1(s, exact):
 
 
 def test_sod_plateaus_and_shock(runs):
-    """Star-state plateaus within 2 % of the exact values, shock within 3 cells (as the scalar q)."""
+    """Star-state plateaus, shock and undisturbed states within the scalar q's tolerances."""
     s = runs[(2, 0)]
-    check_sod_profile(s, N)
+    check_sod_profile(s, N, SOD_TOL)
     d = s.diagnostics()
     assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12
 
@@ -99,7 +99,8 @@ def test_sod_same_profile_on_every_axis_and_dimension(runs):
 @pytest.mark.parametrize("mode", ["eulerian", "lagrangian"])
 def test_sod_l1_error_against_scalar_q(runs, exact, mode):
     """L1 density error of the monotonic q at most 1.1 x that of the scalar q (default coefficients
-    of each), 400 zones; Lagrangian mode: star pressure within 2 % and energy to 1e-12."""
+    of each), 400 zones (measured ratios 0.99 Eulerian, 0.91 Lagrangian); Lagrangian mode: star
+    pressure within 1 % (measured 0.40 %, the scalar q 0.96 %) and energy to 1e-12."""
     mono = runs[(2, 0)] if mode == "eulerian" else run(_with(sod_config(2, N, 0, mode=mode), MONO), T)
     scalar = run(sod_config(2, N, 0, mode=mode), T)
     e_mono, e_scalar = _l1(mono, exact), _l1(scalar, exact)
@@ -111,22 +112,23 @@ def test_sod_l1_error_against_scalar_q(runs, exact, mode):
         xn = mono.node_field(mono.x)[: N + 1, 0]
         xc = 0.5 * (xn[:-1] + xn[1:])
         p = line(mono, mono.p, 0)[:, 0]
-        assert np.max(np.abs(p[(xc > 0.52) & (xc < 0.83)] / SOD_P_STAR - 1.0)) < 0.02
+        assert np.max(np.abs(p[(xc > 0.52) & (xc < 0.83)] / SOD_P_STAR - 1.0)) < 0.01
 
 
 # ------------------------------------------------------------------------------------------------
 # Sedov
 # ------------------------------------------------------------------------------------------------
 def test_sedov_2d_lagrangian():
-    """Quadrant 40^2 with walls, t = 0.49 (R = 0.7): energy to 1e-10, x <-> y symmetry to 1e-12,
-    the density peak at the Sedov radius within 2 %."""
+    """Quadrant 40^2 with walls, t = 0.49 (R = 0.7): energy to 1e-12 (measured 3.4e-14), x <-> y
+    symmetry to 1e-12, the density peak at the Sedov radius within 0.8 zones (measured 0.38; a zone
+    centroid) and L1 density error against the exact profile below 0.16 (measured 0.133)."""
     from solvers.ale.exact import SedovSolution
 
     n, t = 40, 0.49
     e_full = SedovSolution(1.0, 1.0, 1.4, "cylindrical").alpha  # R(t) = t^(1/2)
     s = run(_with(sedov_config(2, n, e_full / 4), MONO), t)
     d = s.diagnostics()
-    assert abs(d["energy_balance_rel"]) < 1e-10
+    assert abs(d["energy_balance_rel"]) < 1e-12
     assert d["total_energy"] == pytest.approx(e_full / 4 + 2.5e-6, rel=1e-12)
     rho = s.zone_field(s.rho).reshape(n, n)
     assert np.max(np.abs(rho - rho.T)) < 1e-12 * rho.max()
@@ -136,8 +138,12 @@ def test_sedov_2d_lagrangian():
     R = SedovSolution(e_full, 1.0, 1.4, "cylindrical").shock_radius(t)
     print(f"\nSedov 2D 40^2 monotonic: density peak at r = {r_peak:.4f}, R = {R:.4f} "
           f"({(r_peak - R) / R:+.2%}), peak density {rho.max():.3f}")
-    assert abs(r_peak - R) < 0.02 * R
-    assert rho.max() > 0.5 * 6.0
+    assert abs(r_peak - R) < 0.8 / n
+    assert rho.max() > 0.75 * 6.0  # measured 5.63
+    r = np.sqrt(np.sum(cen ** 2, axis=-1))
+    rho_ex = SedovSolution(e_full, 1.0, 1.4, "cylindrical").profiles(r, t)[0]
+    V = s.zone_field(s.V).reshape(n, n)
+    assert np.sum(np.abs(rho - rho_ex) * V) / np.sum(rho_ex * V) < 0.16
     assert s.q.max() > 0.0
 
 

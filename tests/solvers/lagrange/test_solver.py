@@ -48,8 +48,9 @@ def bar_profile(s: LagrangeSolver):
 @pytest.mark.mpi
 @pytest.mark.parametrize("dim", [2, 3])
 def test_bar_wave_speed_and_amplitude(dim):
-    """Analytic 1-D bar (nu = 0): c = sqrt(E/rho) = 5000 m/s, sigma = rho c v0 = 4e7 Pa; 2 % each.
-    Runs on all ranks of COMM_WORLD (partitioned under mpiexec -n 2)."""
+    """Analytic 1-D bar (nu = 0): c = sqrt(E/rho) = 5000 m/s within 4e-4 (measured -8e-6 / 1.04e-4
+    in 2-D / 3-D), sigma = rho c v0 = 4e7 Pa within 2e-4 (<= 4.6e-5), energy and momentum balances to
+    1e-14 (<= 9.7e-16). Runs on all ranks of COMM_WORLD (partitioned under mpiexec -n 2)."""
     n, L = 400, 0.1
     lower, upper, cells = [0.0] * dim, [L] + [L / n] * (dim - 1), [n] + [1] * (dim - 1)
     case = make_case(dim, {"box": {"lower": lower, "upper": upper, "cells": cells}}, STEEL0,
@@ -66,13 +67,14 @@ def test_bar_wave_speed_and_amplitude(dim):
         fronts.append(x[k] + (2e7 - sig[k]) * (x[k + 1] - x[k]) / (sig[k + 1] - sig[k]))
         behind = (x > 0.15 * fronts[-1]) & (x < 0.6 * fronts[-1])
         amp = sig[behind].mean()
-        assert amp == pytest.approx(4e7, rel=0.02)
+        assert amp == pytest.approx(4e7, rel=2e-4)
     c = (fronts[1] - fronts[0]) / (times[1] - times[0])
-    assert c == pytest.approx(5000.0, rel=0.02)
+    assert c == pytest.approx(5000.0, rel=4e-4)
     d = s.diagnostics()
-    assert abs(d["energy_balance_rel"]) < 1e-10
-    assert d["momentum_balance_rel"] < 1e-10
-    # the nodal-work internal energy agrees with the elements' stress power (independent check)
+    assert abs(d["energy_balance_rel"]) < 1e-14
+    assert d["momentum_balance_rel"] < 1e-14
+    # the nodal-work internal energy agrees with the elements' stress power (independent check;
+    # measured 1.2 % / 1.4 % apart in 2-D / 3-D)
     assert d["stress_power_energy"] == pytest.approx(d["internal_work"], rel=0.02)
 
 
