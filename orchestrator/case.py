@@ -56,7 +56,7 @@ from .case_schema import (
     NAME_TEXT,
     RUN_DEFAULTS,
 )
-from .expressions import BOOL, NUM, ExpressionError, compile_expression
+from solvers.expressions import BOOL, NUM, ExpressionError, compile_expression
 
 __all__ = [
     "CaseError",

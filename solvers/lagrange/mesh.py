@@ -23,6 +23,7 @@ __all__ = [
     "Mesh",
     "MeshError",
     "box_mesh",
+    "body_mesh",
     "quarter_disk_mesh",
     "quarter_cylinder_mesh",
     "extrude",
@@ -353,6 +354,19 @@ def read_mesh(path, dim: int) -> Mesh:
         raise MeshError(f"{path.name}: {int(bad.sum())} degenerate {wanted} cell(s) "
                         f"(zero volume), e.g. cell {int(np.argmax(bad))}")
     return Mesh(points, cells)
+
+
+def body_mesh(spec: dict, dim: int) -> Mesh:
+    """The mesh of one body of the case (``spec``: an entry of ``lagrange.bodies``): the solver's
+    nodes, and the points ``immerse check`` evaluates the body's expressions on."""
+    m = spec["mesh"]
+    if "box" in m:
+        b = m["box"]
+        return box_mesh(b["lower"], b["upper"], b["cells"])
+    if "quarter_cylinder" in m:
+        q = m["quarter_cylinder"]
+        return quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
+    return read_mesh(m["file"], dim)
 
 
 # ----------------------------------------------------------------------------- utilities

@@ -17,7 +17,7 @@ from orchestrator.case import (
     solvers_used,
 )
 from orchestrator.case_schema import CASE_SCHEMA, MODEL_KEYS
-from orchestrator.expressions import compile_expression
+from solvers.expressions import compile_expression
 
 HERE = Path(__file__).parent
 VALID = HERE / "valid_cases"

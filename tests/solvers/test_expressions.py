@@ -1,4 +1,4 @@
-"""Tests of orchestrator.expressions: values against numpy written out by hand, and
+"""Tests of solvers.expressions: values against numpy written out by hand, and
 rejection (with a one-line message) of everything outside the whitelist."""
 
 import ast
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator import expressions
-from orchestrator.expressions import (
+from solvers import expressions
+from solvers.expressions import (
     MAX_DEPTH,
     MAX_LENGTH,
     CompiledExpression,

@@ -1,4 +1,5 @@
-"""Safe arithmetic / boolean expressions for case files.
+"""Safe arithmetic / boolean expressions for case files (shared by the solvers, which evaluate them,
+and the orchestrator, which checks them before anything launches).
 
 Case files describe initial fields (``initial_velocity = ["0", "-200 * (z > 0.01)", ...]``)
 and boundary regions (``region = "z < 1e-6 and x <= 0.5"``) as short expression strings in
@@ -19,9 +20,20 @@ Accepted (everything else is an :class:`ExpressionError`):
 
 Expressions are statically typed: numbers and booleans do not mix (``x + (y > 0)`` is
 rejected, write ``where(y > 0, 1, 0)``).  Results are broadcast to the common shape of
-the inputs, so a constant expression still gives one value per point.  Numeric results
-that are not finite (``1/x`` at ``x = 0``, ``sqrt(-1)``) raise :class:`ExpressionError`
-at evaluation time instead of silently propagating NaN/inf into a simulation.
+the inputs, so a constant expression still gives one value per point.
+
+Finite values only.  Every arithmetic operation and function value must be finite where it
+is used: ``1/x`` at ``x = 0``, ``sqrt(-1)``, ``0/(x-x) > 1`` (a NaN compared is silently
+False), ``exp(1000) > 1`` raise :class:`ExpressionError` naming the sub-expression and the
+point, instead of propagating NaN/inf into a simulation or a region.  ``where(c, a, b)``
+evaluates ``a`` only where ``c`` holds and ``b`` only where it does not, so
+``where(x > 0, 1/x, 0)`` is valid at ``x = 0``.  Sub-expressions without variables are
+folded at compile time, so ``9**9**9**9`` is refused before any point exists.
+
+Bounded cost.  At most :data:`MAX_LENGTH` characters and :data:`MAX_DEPTH` levels; every
+number is a float64 (no Python big integers: ``9**9**9`` is ``inf``, refused); evaluation
+walks the points in chunks of :data:`CHUNK` so temporaries stay a few MB whatever the
+number of points (values are element-wise, so chunking does not change them).
 """
 
 from __future__ import annotations
@@ -40,6 +52,7 @@ __all__ = [
     "MAX_DEPTH",
     "FUNCTIONS",
     "CONSTANTS",
+    "CHUNK",
 ]
 
 MAX_LENGTH = 1000
@@ -47,6 +60,12 @@ MAX_LENGTH = 1000
 
 MAX_DEPTH = 40
 """Deepest accepted nesting of the syntax tree."""
+
+CHUNK = 1 << 16
+"""Points evaluated at once: with at most MAX_DEPTH live temporaries of CHUNK float64 each, an
+evaluation holds about 20 MB at most, whatever the number of points."""
+
+_N = " n"  # environment key of the chunk length (not an identifier, so never a variable name)
 
 CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
 
@@ -103,8 +122,30 @@ class ExpressionError(ValueError):
     allowed set.
     """
 
-    def __init__(self, message: str):
+    def __init__(self, message: str, *, segment: str | None = None, value: float | None = None,
+                 point: dict | None = None):
         super().__init__(" ".join(str(message).split()))
+        self.segment = segment  # the sub-expression that is not finite (None: other errors)
+        self.value = value      # its value there (nan, inf or -inf)
+        self.point = point      # {name: coordinate} of the first point where it is not finite
+
+
+class _NonFinite(Exception):
+    """Raised inside an evaluation: ``segment`` is not finite at entry ``index`` of the current
+    environment's arrays (remapped by where() to the enclosing environment on the way out)."""
+
+    def __init__(self, segment: str, index: int, value: float):
+        super().__init__(segment)
+        self.segment, self.index, self.value = segment, index, value
+
+
+def _non_finite_text(text: str, segment: str, value: float, point: dict | None) -> str:
+    where = ""
+    if point:
+        where = " at " + ", ".join(f"{k} = {v:.9g}" for k, v in point.items())
+    what = f"({value})" if segment == text.strip() else f"({segment!r} = {value})"
+    return (f"expression {_quote(text)} gives a non-finite value {what}{where}; allowed: finite "
+            f"results only (guard divisions and roots with where(cond, a, b))")
 
 
 def _quote(text: str, limit: int = 60) -> str:
@@ -163,22 +204,25 @@ class CompiledExpression:
             raise TypeError(f"missing value(s) for {', '.join(missing)}")
         arrays = {n: np.asarray(v, dtype=np.float64) for n, v in env.items()}
         shape = np.broadcast_shapes(*(a.shape for a in arrays.values()))
+        size = math.prod(shape)
+        flat = {n: np.broadcast_to(a, shape).reshape(-1) for n, a in arrays.items()}
+        out = np.empty(size, dtype=bool if self.kind == BOOL else np.float64)
         with np.errstate(all="ignore"):
-            result = np.asarray(self._fn(arrays))
-        if self.kind == BOOL:
-            out = np.empty(shape, dtype=bool)
-        else:
-            out = np.empty(shape, dtype=np.float64)
-        try:
-            out[...] = result  # broadcast scalars / lower-rank results to the input shape
-        except ValueError as exc:  # pragma: no cover - all inputs broadcast together
-            raise ExpressionError(f"expression {_quote(self.text)}: {exc}") from None
-        if self.kind == NUM and not np.all(np.isfinite(out)):
-            bad = int(np.count_nonzero(~np.isfinite(out)))
-            raise ExpressionError(
-                f"expression {_quote(self.text)} gives non-finite values (NaN or inf) at {bad} "
-                f"of {out.size} points; allowed: finite results only")
-        return out
+            for start in range(0, max(size, 1), CHUNK):
+                stop = min(start + CHUNK, size)
+                chunk = {n: a[start:stop] for n, a in flat.items()}
+                chunk[_N] = stop - start
+                try:
+                    out[start:stop] = self._fn(chunk)  # scalars broadcast to the chunk
+                    if self.kind == NUM and not np.all(np.isfinite(out[start:stop])):
+                        i = int(np.argmax(~np.isfinite(out[start:stop])))
+                        raise _NonFinite(self.text.strip(), i, float(out[start + i]))
+                except _NonFinite as exc:
+                    point = {n: float(a[start + exc.index]) for n, a in flat.items()
+                             if n in self.used_names}
+                    raise ExpressionError(_non_finite_text(self.text, exc.segment, exc.value, point),
+                                          segment=exc.segment, value=exc.value, point=point) from None
+        return out.reshape(shape)
 
     def at_points(self, points) -> np.ndarray:
         """Evaluate at the rows of a ``(n, d)`` coordinate array (columns x, y[, z]).
@@ -303,7 +347,37 @@ class _Compiler:
         method = _DISPATCH.get(type(node))  # the whitelist of node types
         if method is None:
             raise self._fail(f"{_describe(node)} {self._segment(node)!r}")
-        return method(self, node)
+        fn, kind = method(self, node)
+        if kind == NUM and not isinstance(node, (ast.Constant, ast.Name)) and self._constant(node):
+            fn = self._fold(fn)
+        return fn, kind
+
+    def _constant(self, node: ast.AST) -> bool:
+        return not any(isinstance(n, ast.Name) and n.id in self.names for n in ast.walk(node))
+
+    def _fold(self, fn: Evaluator) -> Evaluator:
+        """A sub-expression without variables, evaluated once now (the value every evaluation would
+        compute: the same numpy operations on the same float64 scalars)."""
+        try:
+            with np.errstate(all="ignore"):
+                value = fn({_N: 1})
+        except _NonFinite as exc:
+            raise ExpressionError(_non_finite_text(self.text, exc.segment, exc.value, None),
+                                  segment=exc.segment, value=exc.value) from None
+        return lambda env: value
+
+    def _finite(self, node: ast.AST, fn: Evaluator) -> Evaluator:
+        """``fn`` whose value is checked: NaN or inf anywhere raises :class:`_NonFinite`."""
+        segment = self._segment(node)
+
+        def run(env):
+            r = fn(env)
+            if not np.all(np.isfinite(r)):
+                bad = ~np.isfinite(np.broadcast_to(r, (env[_N],)))
+                i = int(np.argmax(bad))
+                raise _NonFinite(segment, i, float(np.broadcast_to(r, (env[_N],))[i]))
+            return r
+        return run
 
     def _c_Constant(self, node: ast.Constant):
         value = node.value
@@ -355,7 +429,7 @@ class _Compiler:
         right, rk = self.compile(node.right)
         self._need(node.left, lk, NUM, f"operator {sym!r}")
         self._need(node.right, rk, NUM, f"operator {sym!r}")
-        return (lambda env: ufunc(left(env), right(env))), NUM
+        return self._finite(node, lambda env: ufunc(left(env), right(env))), NUM
 
     def _c_UnaryOp(self, node: ast.UnaryOp):
         op = type(node.op)
@@ -436,13 +510,15 @@ class _Compiler:
                 raise ExpressionError(
                     f"where() branches must have the same type, got {ak} and {bk}, in "
                     f"expression {_quote(self.text)}; {self.allowed}")
-            return (lambda env: np.where(c(env), a(env), b(env))), ak
+            return _masked_where(c, a, b, ak), ak
         for arg, (_, k) in zip(node.args, compiled):
             self._need(arg, k, NUM, f"{name}()")
         fns = [fn for fn, _ in compiled]
         if len(fns) == 1:
             f0 = fns[0]
-            return (lambda env: impl(f0(env))), NUM
+            if name == "abs":  # |finite| is finite
+                return (lambda env: impl(f0(env))), NUM
+            return self._finite(node, lambda env: impl(f0(env))), NUM
 
         def run(env):
             acc = fns[0](env)
@@ -450,6 +526,35 @@ class _Compiler:
                 acc = impl(acc, f(env))
             return acc
         return run, NUM
+
+
+def _masked_where(c: Evaluator, a: Evaluator, b: Evaluator, kind: str) -> Evaluator:
+    """where(c, a, b) evaluating ``a`` only at the points where ``c`` holds and ``b`` only at the
+    others, so a branch's values where it is not selected (1/x at x = 0) are never computed."""
+
+    def sub(fn, env, idx):
+        part = {k: (v if k == _N else v[idx]) for k, v in env.items()}
+        part[_N] = idx.size
+        try:
+            return fn(part)
+        except _NonFinite as exc:
+            exc.index = int(idx[exc.index])
+            raise
+
+    def run(env):
+        n = env[_N]
+        cond = np.broadcast_to(np.asarray(c(env), dtype=bool), (n,))
+        yes = np.flatnonzero(cond)
+        if yes.size == n:
+            return a(env)
+        if yes.size == 0:
+            return b(env)
+        no = np.flatnonzero(~cond)
+        out = np.empty(n, dtype=bool if kind == BOOL else np.float64)
+        out[yes] = sub(a, env, yes)
+        out[no] = sub(b, env, no)
+        return out
+    return run
 
 
 _DISPATCH = {
