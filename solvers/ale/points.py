@@ -53,22 +53,22 @@ def fraction_samples(config: dict, dim: int) -> int:
     return int(config.get("fraction_samples") or DEFAULT_FRACTION_SAMPLES[int(dim)])
 
 
-def grid_points(lower, upper, cells, k: int | None = None, chunk: int = 1 << 16
-                ) -> Iterator[tuple[np.ndarray, np.ndarray]]:
-    """The points of the whole grid in chunks of about ``chunk`` points: ``(zones, points)`` with
-    the global (i, j[, k]) of the chunk's zones, (nz, dim), and their points, (nz * k^dim, dim),
-    zone by zone; ``k = None``: the zone centres (one point a zone), else the k^dim sub-cell
-    centres.  Memory stays bounded by ``chunk`` whatever the grid."""
+def grid_points(lower, upper, cells, k: int | None = None, zones_per_chunk: int = 1 << 12,
+                stride: int = 1) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """The points of the grid, ``zones_per_chunk`` zones at a time: ``(ijk, points)`` with the global
+    (i, j[, k]) of the chunk's zones, (nz, dim), and their points, (nz * k^dim, dim), zone by zone;
+    ``k = None``: the zone centres (one point a zone), else the k^dim sub-cell centres.  ``stride``
+    visits every stride-th zone only (in flat x-slowest order).  Memory stays bounded by the chunk
+    whatever the grid."""
     cells = [int(c) for c in cells]
     dim = len(cells)
     lo = np.asarray(lower, dtype=np.float64)
     h = spacing(lower, upper, cells)
     offs = None if k is None else subcell_offsets(k, h)
-    per_zone = 1 if offs is None else offs.shape[0]
-    step = max(1, chunk // per_zone)
     total = math.prod(cells)
+    step = max(1, int(zones_per_chunk)) * stride
     for start in range(0, total, step):
-        ids = np.arange(start, min(start + step, total), dtype=np.int64)
+        ids = np.arange(start, min(start + step, total), stride, dtype=np.int64)
         ijk = np.stack(np.unravel_index(ids, cells), axis=1)
         centres = np.empty((ids.size, dim))
         for d in range(dim):
