@@ -28,7 +28,7 @@ from pathlib import Path
 from solvers.ale.parallel import MIN_ZONES, split_possible
 from solvers.ale.points import DEFAULT_FRACTION_SAMPLES, several_materials
 
-from .case import CaseError, format_key
+from .case import CaseError, format_bytes, format_key
 
 # ---- measured costs (bytes) ---------------------------------------------------------------------
 # tracemalloc peaks of the real solvers, set-up + steps + output, as slopes between two sizes so the
@@ -139,15 +139,6 @@ def parse_size(text: str) -> int:
     if value < 1:
         raise ValueError(text)
     return value
-
-
-def format_bytes(n: int) -> str:
-    """``2.9 TiB``, ``23.4 GiB``, ``512 B`` (binary units)."""
-    n = int(n)
-    for unit, shift in (("EiB", 60), ("PiB", 50), ("TiB", 40), ("GiB", 30), ("MiB", 20), ("KiB", 10)):
-        if n >= 1 << shift:
-            return f"{n / (1 << shift):.3g} {unit}"
-    return f"{n} B"
 
 
 def this_machine(nodes: str | int | None = None, memory_per_node: str | None = None,
