@@ -13,10 +13,11 @@ launches (the CLI calls :func:`check_expressions` after the resource check):
   obstacles must leave some zone open.
 
 The points come from the solvers' own functions (solvers/ale/points.py, solvers/lagrange/mesh.py),
-one code path.  Evaluation goes chunk by chunk (memory bounded); a case with more than
-:data:`MAX_CHECK_POINTS` points on a body or grid (a cluster-sized case) is evaluated on every
-n-th zone or node only, so the check stays a few seconds (the solver still refuses a non-finite
-value at start-up, naming the expression).
+one code path.  Evaluation goes chunk by chunk (memory bounded).  Its cost is points times syntax
+tree nodes; past :data:`CHECK_BUDGET` node evaluations on a body or grid (a cluster-sized case, or
+the longest, most expensive expressions on a large one) every n-th zone or node only is evaluated,
+so the check stays within seconds (the solver still refuses a non-finite value at start-up, naming
+the expression).
 """
 from __future__ import annotations
 
@@ -30,10 +31,13 @@ from solvers.lagrange.mesh import body_mesh, box_axes
 
 from .case import CaseError, format_key
 
-__all__ = ["check_expressions", "MAX_CHECK_POINTS"]
+__all__ = ["check_expressions", "CHECK_BUDGET"]
 
-MAX_CHECK_POINTS = 1 << 24
-"""Points per body or grid evaluated at check time (16.7 M: about a second per expression)."""
+CHECK_BUDGET = 1 << 28
+"""Node-point evaluations per body or grid at check time: 2.7e8, at most 4-8 s for the costliest
+operations (15-29 ns a node and point for sin and **, tests/solvers/test_expressions.py), well under
+a second for typical regions (comparisons, arithmetic); e.g. a 10-node region on 2.7e7 points in
+full."""
 
 _CHUNK = 1 << 16
 
@@ -57,10 +61,15 @@ def _evaluate(key: str, text: str, fn, points: np.ndarray, where: str) -> np.nda
 
 
 # ---- Lagrangian bodies --------------------------------------------------------------------------
-def _body_points(body: dict, dim: int):
-    """Chunks of the body's nodes (the solver's ``X`` of that body); a box without building it."""
+def _stride(work: int) -> int:
+    return max(1, math.ceil(work / CHECK_BUDGET))
+
+
+def _body_points(body: dict, dim: int, cost: int):
+    """Chunks of the body's nodes (the solver's ``X`` of that body); a box without building it.
+    ``cost``: syntax tree nodes evaluated per point."""
     size = body["size"]["nodes"]
-    stride = max(1, math.ceil(size / MAX_CHECK_POINTS))
+    stride = _stride(size * cost)
     m = body["mesh"]
     if "box" in m:
         axes = box_axes(m["box"]["lower"], m["box"]["upper"], m["box"]["cells"])
@@ -88,7 +97,7 @@ def _check_lagrange(case: dict, names: tuple[str, ...]) -> None:
         if not todo:
             continue
         where = f"a node of body {body['name']!r}"
-        for pts in _body_points(body, dim):
+        for pts in _body_points(body, dim, sum(fn.size for _, _, fn in todo)):
             for key, text, fn in todo:
                 _evaluate(key, text, fn, pts, where)
 
@@ -99,18 +108,20 @@ def _check_ale(ale: dict, names: tuple[str, ...]) -> None:
     grid = ale["grid"]
     zones = math.prod(grid["cells"])
     k = fraction_samples(ale, dim) if several_materials(ale) else None
-    sets = [("regions", k)] + [(j, int(o.get("subsamples", 1))) for j, o in enumerate(ale["obstacles"])]
-    most = max(1 if kk is None else kk**dim for _, kk in sets)
-    stride = max(1, math.ceil(zones * most / MAX_CHECK_POINTS))
-    zpc = max(1, _CHUNK // most)
-    gens = [grid_points(grid["lower"], grid["upper"], grid["cells"], kk, zpc, stride) for _, kk in sets]
-
     regions = [(format_key(["ale", "regions", i, "region"]), r["region"],
                 compile_expression(r["region"], names, kind=BOOL))
                for i, r in enumerate(ale["regions"]) if r.get("region")]
     whole = any(not r.get("region") for r in ale["regions"])
     obstacles = [(format_key(["ale", "obstacles", j, "region"]), o["region"],
                   compile_expression(o["region"], names, kind=BOOL)) for j, o in enumerate(ale["obstacles"])]
+    # points a zone and syntax tree nodes of each set: the regions, then every obstacle
+    sets = [(1 if k is None else k**dim, sum(fn.size for _, _, fn in regions))]
+    sets += [(int(o.get("subsamples", 1)) ** dim, fn.size) for o, (_, _, fn) in zip(ale["obstacles"], obstacles)]
+    most = max(n for n, _ in sets)
+    stride = _stride(zones * sum(n * cost for n, cost in sets))
+    zpc = max(1, _CHUNK // most)
+    subs = [k] + [int(o.get("subsamples", 1)) for o in ale["obstacles"]]
+    gens = [grid_points(grid["lower"], grid["upper"], grid["cells"], kk, zpc, stride) for kk in subs]
     sampled = "zone centre" if k is None else f"fraction sample point ({k}^{dim} a zone)"
     any_open = not obstacles
     for chunks in zip(*gens):

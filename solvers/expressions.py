@@ -169,17 +169,19 @@ class CompiledExpression:
     or by keyword).
 
     Attributes: ``text``, ``names`` (accepted variables), ``kind`` (``"number"`` or
-    ``"boolean"``), ``used_names`` (variables that actually occur).
+    ``"boolean"``), ``used_names`` (variables that actually occur), ``size`` (syntax tree nodes:
+    the cost of one point is about ``size`` numpy operations).
     """
 
-    __slots__ = ("text", "names", "kind", "used_names", "_fn")
+    __slots__ = ("text", "names", "kind", "used_names", "size", "_fn")
 
     def __init__(self, text: str, names: tuple[str, ...], kind: str,
-                 used_names: frozenset[str], fn: Evaluator):
+                 used_names: frozenset[str], fn: Evaluator, size: int = 1):
         self.text = text
         self.names = names
         self.kind = kind
         self.used_names = used_names
+        self.size = size
         self._fn = fn
 
     def __repr__(self) -> str:
@@ -276,7 +278,8 @@ def compile_expression(text: str, names: Sequence[str] = ("x", "y", "z"), *,
         want = "a boolean (region)" if kind == BOOL else "a numeric"
         raise ExpressionError(f"expression {_quote(text)} gives a {result_kind} but {want} "
                               f"expression is required; {allowed}")
-    return CompiledExpression(text, names, result_kind, frozenset(compiler.used), fn)
+    return CompiledExpression(text, names, result_kind, frozenset(compiler.used), fn,
+                              size=sum(isinstance(n, ast.expr) for n in ast.walk(tree.body)))
 
 
 def _check_depth(root: ast.AST, text: str, allowed: str) -> None:
