@@ -110,8 +110,8 @@ resolve into, e.g. a shared mesh library; inherited by the launched ranks."""
 
 MESH_READ_FACTOR = 7
 """Reading a mesh file takes at least this many times its size in memory (tracemalloc peak of
-read_mesh on 50^3 hexahedra: Gmsh 2.2 ASCII 7.5x, Gmsh 4 ASCII 8.2x, Gmsh binary 14x, VTU ASCII
-9.3x, VTU binary 53x): a bigger file than memory / 7 cannot be read here."""
+read_mesh on 50^3 hexahedra, `immerse bench memory`: Gmsh 2.2 ASCII 7.5x, binary 14x, VTU binary 53x;
+Gmsh 4 ASCII 8.2x, VTU ASCII 9.3x): a file bigger than memory / 7 cannot be read here."""
 
 
 class _Missing:

@@ -31,27 +31,28 @@ from solvers.ale.points import DEFAULT_FRACTION_SAMPLES, several_materials
 from .case import CaseError, format_bytes, format_key
 
 # ---- measured costs (bytes) ---------------------------------------------------------------------
-# tracemalloc peaks of the real solvers, set-up + steps + output, as slopes between two sizes so the
-# fixed costs drop out: `immerse bench memory` (orchestrator/bench.py) measures every one of them
-# and writes bench-memory.json; the values below are its results on the reference machine
-# (2 cores, 24 GiB, Python 3.11, numpy 1.26).
+# `immerse bench memory` (orchestrator/bench.py -> bench-memory.json) measures every one of these:
+# tracemalloc peaks of the real solvers (set-up, steps, an output) as slopes between two sizes, so
+# fixed costs drop out.  Values of its run on the reference machine (2 cores, 24 GiB, Python 3.11).
 LAGRANGE_BYTES_PER_ELEMENT = {2: 514, 3: 896}
-"""Lagrangian solver on one rank, per element (box mesh: quads 150^2 -> 300^2, hexahedra 20^3 ->
-40^3; linear elastic and Johnson-Cook equal to 1 B)."""
-LAGRANGE_MESH_BYTES_PER_ELEMENT = {"box": {2: 254, 3: 429}, "built": {2: 370, 3: 940},
-                                   "file": {2: 1100, 3: 1100}}
+"""Lagrangian solver on one rank, per element (box meshes: quads 150^2 -> 300^2: 514.0, hexahedra
+20^3 -> 40^3: 896.1; linear elastic and Johnson-Cook within 1 B)."""
+LAGRANGE_MESH_BYTES_PER_ELEMENT = {"box": {2: 254, 3: 428}, "built": {3: 940},
+                                   "file": {2: 1084, 3: 1084}}
 """Held by EVERY Lagrangian rank (each builds the global mesh and its partition), per element:
-box meshes; quarter cylinders (the orientation pass of the generator peaks at 940 B); mesh files
-(meshio + orientation: 1068-1108 B for Gmsh 2.2/4 ASCII and binary and VTU, 50^3 hexahedra)."""
-ALE_BYTES_PER_ZONE = {2: 483, 3: 725}
-"""ALE solver, one material, per zone of the padded block (2 ghost layers a side): sedov 150^2 ->
-300^2 and 30^3 -> 50^3, Eulerian (remap arrays included)."""
-ALE_BYTES_PER_ZONE_MATERIAL = {2: 100, 3: 93}
-"""Several materials per zone (or void): per zone and material (2 and 3 materials)."""
-ALE_BYTES_PER_SAMPLE = {2: 81, 3: 110}
-"""Several materials: per fraction sample point at start-up (fraction_samples^dim a zone)."""
-ALE_OBSTACLE_BYTES_PER_ZONE = {2: 87, 3: 97}
-"""Static obstacles: blocked fractions, apertures, wall nodes, per zone."""
+box meshes (253.5, 427.8); quarter cylinders (939.6: the generator's orientation pass); mesh files
+(read_mesh of 50^3 hexahedra: Gmsh 2.2 ASCII 1068.0, binary 1059.5, VTU 1083.5; 2-D files are
+charged the 3-D figure)."""
+ALE_BYTES_PER_ZONE = {2: 483, 3: 719}
+"""ALE solver, one material, per zone of the padded block (2 ghost layers a side), Eulerian, remap
+arrays included (150^2 -> 300^2: 482.9; 24^3 -> 40^3: 718.6)."""
+ALE_BYTES_PER_ZONE_MATERIAL = {2: 104, 3: 93}
+"""Several materials per zone (or void): per zone and material (3 minus 2 materials: 103.6, 92.7;
+2 materials measured 685.6 and 910.6 against 690 and 905 by the sum)."""
+ALE_BYTES_PER_SAMPLE = {2: 77, 3: 110}
+"""Several materials: per fraction sample point at start-up, fraction_samples^dim a zone (76.6, 109.6)."""
+ALE_OBSTACLE_BYTES_PER_ZONE = {2: 78, 3: 94}
+"""Static obstacles: blocked fractions, apertures, wall nodes, per zone (78.4, 94.1)."""
 RANK_BYTES = 300 << 20
 """One solver rank before its data: Python, numpy, mpi4py, h5py, numba and the loaded kernels
 (VmHWM 248 MiB for the Lagrangian rank of elastic_bar_wave, 309 MiB for an ALE rank of sedov_2d on
