@@ -17,7 +17,7 @@ import os
 import shutil
 import stat
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -123,7 +123,6 @@ class Bad:
     args: tuple = ()                 # extra command-line arguments
     make: object = None              # make(case_dir, root) for files that are not plain text
     verbs: tuple = ("check", "run")
-    files: dict = field(default_factory=dict)  # extra files in the case directory
 
 
 def _fifo(case, root):
