@@ -150,7 +150,10 @@ def check_expressions(case: dict) -> None:
     """Evaluate every expression of the (loaded) case on its solver's points; CaseError naming
     the key, the expression, the sub-expression and the point of the first non-finite value."""
     names = ("x", "y", "z")[: case["run"]["dimension"]]
-    if "lagrange" in case and case["lagrange"]["bodies"]:
-        _check_lagrange(case, names)
-    if "ale" in case:
-        _check_ale(case["ale"], names)
+    for role, check in ROLES.items():
+        if case.get(role):
+            check(case, names)
+
+
+ROLES = {"lagrange": _check_lagrange, "ale": lambda case, names: _check_ale(case["ale"], names)}
+"""Per solver role (its case table): the check of its expressions on its points."""

@@ -185,34 +185,66 @@ def _mesh_value(body: dict):
     return m["file"].name
 
 
+def _lagrange_memory(case: dict, nranks: int) -> list[tuple[str, object, str, int]]:
+    """Per body: the distributed solver arrays once, the global mesh once per rank."""
+    dim = case["run"]["dimension"]
+    per_rank_base = LAGRANGE_BYTES_PER_ELEMENT[dim] - LAGRANGE_MESH_BYTES_PER_ELEMENT["box"][dim]
+    parts = []
+    for i, b in enumerate(case["lagrange"]["bodies"]):
+        mesh = LAGRANGE_MESH_BYTES_PER_ELEMENT[_mesh_kind(b)][dim]
+        parts.append((_mesh_key(i, b), _mesh_value(b), f"lagrange body {b['name']!r}",
+                      b["size"]["elements"] * (per_rank_base + nranks * mesh)))
+    return parts
+
+
+def _lagrange_ranks(case: dict, n: int) -> str | None:
+    """Every rank needs an element (the slab partition gives each one at least one then)."""
+    ne = sum(b["size"]["elements"] for b in case["lagrange"]["bodies"])
+    if n > ne:
+        return f"more ranks than the {ne} elements of the Lagrangian bodies; allowed: 1 to {ne}"
+    return None
+
+
+def _ale_memory(case: dict, nranks: int) -> list[tuple[str, object, str, int]]:
+    """The padded block (rank cuts add a little), materials, obstacles, start-up fraction samples."""
+    a, dim = case["ale"], case["run"]["dimension"]
+    cells = a["grid"]["cells"]
+    padded = math.prod(c + 2 * MIN_ZONES for c in cells)
+    per_zone = ALE_BYTES_PER_ZONE[dim]
+    samples = 0
+    if several_materials(a):
+        per_zone += len({r["material"] for r in a["regions"]}) * ALE_BYTES_PER_ZONE_MATERIAL[dim]
+        k = int(a.get("fraction_samples") or DEFAULT_FRACTION_SAMPLES[dim])
+        samples = math.prod(cells) * k**dim * ALE_BYTES_PER_SAMPLE[dim]
+    if a.get("obstacles"):
+        per_zone += ALE_OBSTACLE_BYTES_PER_ZONE[dim]
+    return [("ale.grid.cells", cells, "ale grid", padded * per_zone + samples)]
+
+
+def _ale_ranks(case: dict, n: int) -> str | None:
+    """The Cartesian split of solvers/ale/parallel.py must exist for n ranks."""
+    cells = case["ale"]["grid"]["cells"]
+    zones = math.prod(cells)
+    if n > zones:
+        return f"more ranks than the {zones} zones of ale.grid.cells = {cells}"
+    if not split_possible(n, cells):
+        return (f"ale.grid.cells = {cells} cannot be split over {n} ranks with at least {MIN_ZONES} "
+                "zones a rank along every split axis; choose a count whose factors fit the grid")
+    return None
+
+
+ROLES = {"lagrange": (_lagrange_memory, _lagrange_ranks), "ale": (_ale_memory, _ale_ranks)}
+"""Per solver role: (memory parts of the case for n ranks, why n ranks cannot work or None).  A role
+without an entry is charged its processes only."""
+
+
 def estimate(case: dict, ranks: dict[str, int], overridden=()) -> list[tuple[str, object, str, int]]:
     """Memory of the job by part: ``[(key, value, what, bytes)]`` (the key and value a refusal
     names for that part; ``overridden``: roles whose rank count came from --ranks)."""
-    dim = case["run"]["dimension"]
     parts = []
-    if "lagrange" in case and case["lagrange"]["bodies"]:
-        nr = int(ranks.get("lagrange", 1))
-        per_rank_base = LAGRANGE_BYTES_PER_ELEMENT[dim] - LAGRANGE_MESH_BYTES_PER_ELEMENT["box"][dim]
-        for i, b in enumerate(case["lagrange"]["bodies"]):
-            ne = b["size"]["elements"]
-            mesh = LAGRANGE_MESH_BYTES_PER_ELEMENT[_mesh_kind(b)][dim]
-            parts.append((_mesh_key(i, b), _mesh_value(b), f"lagrange body {b['name']!r}",
-                          ne * (per_rank_base + nr * mesh)))
-    if "ale" in case:
-        a = case["ale"]
-        cells = a["grid"]["cells"]
-        zones = math.prod(cells)
-        padded = math.prod(c + 2 * MIN_ZONES for c in cells)  # one block; rank cuts add a little
-        per_zone = ALE_BYTES_PER_ZONE[dim]
-        samples = 0
-        if several_materials(a):
-            nm = len({r["material"] for r in a["regions"]})
-            per_zone += nm * ALE_BYTES_PER_ZONE_MATERIAL[dim]
-            k = int(a.get("fraction_samples") or DEFAULT_FRACTION_SAMPLES[dim])
-            samples = zones * k**dim * ALE_BYTES_PER_SAMPLE[dim]
-        if a.get("obstacles"):
-            per_zone += ALE_OBSTACLE_BYTES_PER_ZONE[dim]
-        parts.append(("ale.grid.cells", cells, "ale grid", padded * per_zone + samples))
+    for role, n in ranks.items():
+        if role in ROLES and case.get(role):
+            parts += ROLES[role][0](case, int(n))
     nproc = 1 + sum(int(n) for n in ranks.values())
     most = max(ranks, key=lambda r: ranks[r]) if ranks else None
     parts.append((_rank_key(most, overridden) if most else "ranks", ranks.get(most),
@@ -229,24 +261,10 @@ def check_resources(case: dict, ranks: dict[str, int], machine: Machine, overrid
     beyond the machine; returns the memory estimate in bytes.  ``overridden``: roles whose count
     came from ``--ranks`` (named so in messages)."""
     # ranks per role against the work there is
-    if "lagrange" in ranks and "lagrange" in case:
-        ne = sum(b["size"]["elements"] for b in case["lagrange"]["bodies"])
-        if ranks["lagrange"] > ne:
-            raise CaseError(_rank_key("lagrange", overridden), ranks["lagrange"],
-                            f"more ranks than the {ne} elements of the Lagrangian bodies; allowed: "
-                            f"1 to {ne}")
-    if "ale" in ranks and "ale" in case:
-        cells = case["ale"]["grid"]["cells"]
-        zones = math.prod(cells)
-        n = ranks["ale"]
-        if n > zones:
-            raise CaseError(_rank_key("ale", overridden), n,
-                            f"more ranks than the {zones} zones of ale.grid.cells = {cells}")
-        if not split_possible(n, cells):
-            raise CaseError(_rank_key("ale", overridden), n,
-                            f"ale.grid.cells = {cells} cannot be split over {n} ranks with at least "
-                            f"{MIN_ZONES} zones a rank along every split axis; choose a count whose "
-                            "factors fit the grid")
+    for role, n in ranks.items():
+        why = ROLES[role][1](case, int(n)) if role in ROLES and case.get(role) else None
+        if why:
+            raise CaseError(_rank_key(role, overridden), n, why)
     # processes against cores
     nproc = 1 + sum(ranks.values())
     limit = PROCESSES_PER_CORE * machine.cores

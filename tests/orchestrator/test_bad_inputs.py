@@ -431,3 +431,19 @@ def test_launch_log_sees_a_launch(tmp_path):
     assert r.returncode == 0, r.stderr
     launched = _launches(tmp_path / "launches", tmp_path)
     assert "subprocess.Popen" in launched and "mpiexec" in launched
+
+
+def test_allowed_root_reaches_the_ranks(tmp_path):
+    """The refused `mesh_path_climbs_out` case runs once its directory is an allowed root
+    ($IMMERSE_ALLOW_PATH): the check accepts it and the ranks, which load the case again, too."""
+    case = tmp_path / "case"
+    case.mkdir()
+    _outside_mesh(case, tmp_path)
+    r = immerse("check", case)
+    assert r.returncode == 2 and "outside the case directory" in r.stderr
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("IMMERSE_ALLOW_PATH", str(tmp_path))
+        assert immerse("check", case).returncode == 0
+        r = immerse("run", case, "--out", tmp_path / "out", timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "out" / "summary.json").is_file()
