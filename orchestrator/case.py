@@ -5,15 +5,29 @@
 expressions kept as strings but already checked to compile) or raises :class:`CaseError`
 whose message is ONE line ``"<dotted.key> = <value repr>: <what is allowed>"``.
 
-Validation happens in three stages, the first failure wins:
+Validation happens in stages, the first failure wins:
 
-1. TOML parsing (``tomllib``); a syntax error is reported on the key ``case.toml``;
+1. reading: ``case.toml`` must be a regular file (not a FIFO, device, directory; checked with
+   ``stat`` and again on the opened descriptor, opened non-blocking so a FIFO cannot hang) of at
+   most :data:`MAX_CASE_BYTES` (256 KiB; at most that much is ever read), UTF-8; TOML parsing
+   (``tomllib``): a syntax error, or nesting beyond Python's recursion limit, is reported on the
+   key ``case.toml``;
 2. the JSON schema of :mod:`orchestrator.case_schema` (types, ranges, required keys,
    enums, unknown keys); the best error (``jsonschema.exceptions.best_match``) is
-   translated into a :class:`CaseError` on its dotted key path;
+   translated into a :class:`CaseError` on its dotted key path; then every float of the
+   file must be finite (``nan``/``inf`` pass JSON Schema's range checks), unless its key is
+   listed in :data:`orchestrator.case_schema.NON_FINITE_KEYS`;
 3. cross-field checks in Python: vector lengths vs ``run.dimension``, material references,
-   meshes (files exist, parse and hold the right cells), expressions, ranks roles, ...
-   Mesh files are read last so cheap mistakes are reported without waiting for a big mesh.
+   expressions (compiled; constant parts such as ``9**9**9`` folded and refused here), ranks
+   roles, sanity of finite numbers (extents whose zones underflow, more outputs than steps,
+   energy sources outside the grid, wave speeds that overflow), ...;
+4. mesh files last (reading them may be slow): the path must resolve (symlinks and ``..``
+   followed) inside the case directory or a directory of ``$IMMERSE_ALLOW_PATH``; a regular
+   file small enough to read here; parsed by meshio into the right cells.
+
+What needs the machine (rank counts, memory: :mod:`orchestrator.resources`) and the expressions
+evaluated on the case's own points (:mod:`orchestrator.expressions`) are checked by the CLI after
+this, before anything launches.
 
 Normalised layout (all keys always present)::
 
@@ -27,6 +41,9 @@ Normalised layout (all keys always present)::
      "boundaries": [ {type, ...} ],
      "check": None | {kind, params, metrics: {name: {reference, tolerance}}}}
 
+Every body also has ``size = {"elements": int, "nodes": int}`` (Python ints, computed without
+building the mesh, or counted after reading a mesh file).
+
 ``mesh`` is exactly one of ``{"box": {lower, upper, cells}}``,
 ``{"quarter_cylinder": {radius, length, radial_cells, axial_cells}}`` or
 ``{"file": Path}``; ``initial_velocity`` holds ``dimension`` items, each a float or an
@@ -36,17 +53,20 @@ expression string in the coordinates (``x, y`` in 2D, ``x, y, z`` in 3D).
 from __future__ import annotations
 
 import copy
+import itertools
 import json
 import math
 import os
 import re
+import stat
+import sys
 import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 import jsonschema
-from jsonschema.exceptions import ValidationError, best_match
+from jsonschema.exceptions import ValidationError, best_match, relevance
 
 from .case_schema import (
     CASE_SCHEMA,
@@ -54,9 +74,11 @@ from .case_schema import (
     KNOWN_ROLES,
     LAGRANGE_DEFAULTS,
     NAME_TEXT,
+    NON_FINITE_KEYS,
     RUN_DEFAULTS,
 )
-from .expressions import BOOL, NUM, ExpressionError, compile_expression
+from solvers.expressions import BOOL, NUM, ExpressionError, compile_expression
+from solvers.lagrange.mesh import body_mesh_size
 
 __all__ = [
     "CaseError",
@@ -71,6 +93,25 @@ __all__ = [
 
 CASE_FILE = "case.toml"
 _MAX_VALUE_REPR = 160
+
+MAX_CASE_BYTES = 256 << 10
+"""Largest accepted case.toml (256 KiB: 60 times the largest shipped case, about 1900 bodies; the
+check of a file this size takes about a second, of 1 MiB already 4-9 s on a loaded 2-core machine).
+A bigger file is refused before it is read, and no more than this is ever read (a /proc file
+claims size 0)."""
+
+_MAX_SCHEMA_ERRORS = 100
+"""best_match picks among the first errors only: a file full of mistakes costs no more to refuse
+than a valid one costs to accept."""
+
+ALLOW_PATH_ENV = "IMMERSE_ALLOW_PATH"
+"""Directories (``os.pathsep``-separated) besides the case directory that mesh and data paths may
+resolve into, e.g. a shared mesh library; inherited by the launched ranks."""
+
+MESH_READ_FACTOR = 7
+"""Reading a mesh file takes at least this many times its size in memory (tracemalloc peak of
+read_mesh on 50^3 hexahedra, `immerse bench memory`: Gmsh 2.2 ASCII 7.5x, binary 14x, VTU binary 53x;
+Gmsh 4 ASCII 8.2x, VTU ASCII 9.3x): a file bigger than memory / 7 cannot be read here."""
 
 
 class _Missing:
@@ -163,8 +204,16 @@ def format_key(path: Iterable[str | int]) -> str:
 
 # ----------------------------------------------------------------------------------
 # schema errors -> CaseError
+def _relevance(err: ValidationError):
+    """jsonschema's relevance without its sibling order (which prefers the LAST sibling): among
+    equally relevant errors the first in the file wins."""
+    key = relevance(err)
+    return key[:1] + key[2:]
+
+
 _VALIDATOR = jsonschema.Draft202012Validator
-_VALIDATOR.check_schema(CASE_SCHEMA)
+# (the schema itself is validated against the metaschema by the tests, not at every import: that
+# took 0.3-0.6 s of every `immerse` command and every rank's start)
 _SCHEMA_VALIDATOR = _VALIDATOR(CASE_SCHEMA)
 
 _TYPE_WORDS = {
@@ -356,41 +405,94 @@ def load_case(case_dir: str | os.PathLike) -> dict:
     ``case_dir`` may also be the path of the ``case.toml`` file itself.
     Raises :class:`CaseError` (one-line message) for any problem.
     """
-    case_dir = Path(case_dir).expanduser()
-    if case_dir.is_file() and case_dir.suffix == ".toml":
-        toml_path = case_dir.resolve()
+    given = Path(case_dir).expanduser()
+    if given.suffix == ".toml" and given.exists() and not given.is_dir():
+        toml_path = given.resolve()
         case_dir = toml_path.parent
     else:
-        if not case_dir.is_dir():
-            raise CaseError("case_dir", str(case_dir), "directory not found")
-        case_dir = case_dir.resolve()
+        if not given.is_dir():
+            raise CaseError("case_dir", str(given), "directory not found")
+        case_dir = given.resolve()
         toml_path = case_dir / CASE_FILE
-    data = _read_toml(toml_path)
+    try:
+        data = _read_toml(toml_path)
 
-    errors = _SCHEMA_VALIDATOR.iter_errors(data)
-    err = best_match(errors)
-    if err is not None:
-        raise _schema_error_to_case_error(err)
+        errors = itertools.islice(_SCHEMA_VALIDATOR.iter_errors(data), _MAX_SCHEMA_ERRORS)
+        err = best_match(errors, key=_relevance)
+        if err is not None:
+            raise _schema_error_to_case_error(err)
+        _check_finite(data)
 
-    case = _normalise(data, case_dir)
-    _check(case, data)
+        case = _normalise(data, case_dir)
+        _check(case, data)
+    except RecursionError:  # a structure nested past Python's limit anywhere in the pipeline
+        raise CaseError(CASE_FILE, str(toml_path), "nested too deeply (arrays or tables inside "
+                        "each other beyond what can be read)") from None
     return case
 
 
 # ----------------------------------------------------------------------------------
 # stages
 _TOML_POS = re.compile(r"at line (\d+), column (\d+)")
+_FILE_KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO (named pipe)"),
+               (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+               (stat.S_ISSOCK, "a socket"))
+
+
+def _file_kind(mode: int) -> str:
+    return next((name for test, name in _FILE_KINDS if test(mode)), "not a regular file")
+
+
+def format_bytes(n: int) -> str:
+    """``2.9 TiB``, ``23.4 GiB``, ``256 KiB``, ``512 B`` (binary units)."""
+    n = int(n)
+    for unit, shift in (("EiB", 60), ("PiB", 50), ("TiB", 40), ("GiB", 30), ("MiB", 20), ("KiB", 10)):
+        if n >= 1 << shift:
+            return f"{n / (1 << shift):.3g} {unit}"
+    return f"{n} B"
+
+
+def _read_regular(path: Path, key: str, value: Any, limit: int, what: str) -> bytes:
+    """At most ``limit`` bytes of a regular file, refused (CaseError on ``key``) if it is anything
+    else (FIFO, device, directory: checked before opening and on the opened descriptor, opened
+    non-blocking so that neither the open nor the check can hang) or larger than ``limit``."""
+    allowed = f"must be a regular {what} of at most {format_bytes(limit)}"
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise CaseError(key, value, "file not found") from None
+    except OSError as exc:
+        raise CaseError(key, value, f"cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise CaseError(key, value, f"is {_file_kind(st.st_mode)}; {allowed}")
+    if st.st_size > limit:
+        raise CaseError(key, value, f"is {format_bytes(st.st_size)}; {allowed}")
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise CaseError(key, value, f"cannot read: {exc.strerror or exc}") from None
+    try:
+        st = os.fstat(fd)  # the file opened, not the name: it may have been swapped meanwhile
+        if not stat.S_ISREG(st.st_mode):
+            raise CaseError(key, value, f"is {_file_kind(st.st_mode)}; {allowed}")
+        chunks, size = [], 0
+        while size <= limit:
+            chunk = os.read(fd, min(1 << 16, limit + 1 - size))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    except OSError as exc:
+        raise CaseError(key, value, f"cannot read: {exc.strerror or exc}") from None
+    finally:
+        os.close(fd)
+    if size > limit:
+        raise CaseError(key, value, f"is more than {format_bytes(limit)}; {allowed}")
+    return b"".join(chunks)
 
 
 def _read_toml(path: Path) -> dict:
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise CaseError(CASE_FILE, str(path), "file not found") from None
-    except IsADirectoryError:
-        raise CaseError(CASE_FILE, str(path), "is a directory, expected a TOML file") from None
-    except OSError as exc:
-        raise CaseError(CASE_FILE, str(path), f"cannot read: {exc.strerror or exc}") from None
+    raw = _read_regular(path, CASE_FILE, str(path), MAX_CASE_BYTES, "TOML file")
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
@@ -407,6 +509,30 @@ def _read_toml(path: Path) -> dict:
             if 1 <= lineno <= len(lines):
                 value = lines[lineno - 1].strip()
         raise CaseError(CASE_FILE, value, f"TOML syntax error: {msg}") from None
+
+
+def _check_finite(data: dict) -> None:
+    """Every float of the file is finite (``nan``, ``inf`` pass JSON Schema's ranges: nan > 0 is
+    false, so is nan <= 0), unless its key matches a pattern of NON_FINITE_KEYS.  Iterative, so
+    nesting depth costs no stack."""
+    stack: list[tuple[list, Any]] = [([], data)]
+    while stack:
+        path, value = stack.pop()
+        if isinstance(value, dict):
+            stack.extend((path + [k], v) for k, v in reversed(list(value.items())))
+        elif isinstance(value, list):
+            stack.extend((path + [i], v) for i, v in reversed(list(enumerate(value))))
+        elif isinstance(value, float) and not math.isfinite(value):
+            key = format_key(path)
+            if not any(_key_matches(key, pattern) for pattern in NON_FINITE_KEYS):
+                raise CaseError(key, value, "must be a finite number (not nan or inf)")
+
+
+def _key_matches(key: str, pattern: str) -> bool:
+    """``pattern``: a dotted key where ``*`` stands for any one table key and ``[]`` for any index,
+    e.g. ``check.metrics.*.reference``, ``ale.energy_sources[].energy``."""
+    rx = re.escape(pattern).replace(r"\*", r"[^.\[]+").replace(r"\[\]", r"\[\d+\]")
+    return re.fullmatch(rx, key) is not None
 
 
 def _f(v):
@@ -457,10 +583,12 @@ def _normalise(data: dict, case_dir: Path) -> dict:
             mesh = {"file": (case_dir / mesh_in["file"]).resolve()}
         mat = materials.get(b["material"], {})
         t0 = b.get("initial_temperature", mat.get("room_temperature", DEFAULT_ROOM_TEMPERATURE))
+        size = body_mesh_size({"mesh": mesh})  # None for a file: counted when it is read
         bodies.append({
             "name": b["name"],
             "material": b["material"],
             "mesh": mesh,
+            "size": None if size is None else {"elements": size[0], "nodes": size[1]},
             "initial_velocity": ([_num_or_expr(v) for v in b["initial_velocity"]]
                                  if "initial_velocity" in b else [0.0] * dim),
             "initial_temperature": _f(t0),
@@ -572,6 +700,14 @@ def _check(case: dict, data: dict) -> None:
     if run["output_interval"] > run["end_time"]:
         raise CaseError("run.output_interval", data["run"]["output_interval"],
                         f"must be <= run.end_time = {_fmt_num(data['run']['end_time'])} (s)")
+    # every output and checkpoint takes at least one step: more of them than run.max_steps means
+    # an interval far below what the run can resolve (1e-300 s: a run that never ends)
+    for k in ("output_interval", "checkpoint_interval"):
+        if run[k] is not None and run["end_time"] / run[k] > run["max_steps"]:
+            raise CaseError(f"run.{k}", data["run"].get(k, run[k]),
+                            f"gives {run['end_time'] / run[k]:.3g} {k.split('_')[0]}s over run.end_time "
+                            f"= {_fmt_num(run['end_time'])} s, more than run.max_steps = "
+                            f"{run['max_steps']} (each takes at least one step)")
 
     # at least one solver: Lagrangian bodies and/or a background
     if "ale" in case:
@@ -589,6 +725,7 @@ def _check(case: dict, data: dict) -> None:
 
     # [materials]
     for name, m in case["materials"].items():
+        _check_wave_speed(name, m, data["materials"][name])
         if m["model"] == "johnson_cook" and not m["melt_temperature"] > m["room_temperature"]:
             raw = data["materials"][name]
             raise CaseError(format_key(["materials", name, "melt_temperature"]),
@@ -619,6 +756,7 @@ def _check(case: dict, data: dict) -> None:
                     raise CaseError(format_key(base + ["mesh", "box", "upper"]), box["upper"],
                                     f"must be > lower component-wise (component {j}: "
                                     f"{_fmt_num(hi)} <= {_fmt_num(lo)})")
+            _check_extent(format_key(base + ["mesh", "box"]), body["mesh"]["box"], box)
         elif "quarter_cylinder" in mesh:
             if dim != 3:
                 raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
@@ -657,9 +795,12 @@ def _check(case: dict, data: dict) -> None:
         for k in ("point", "normal"):
             if k in raw:
                 _vec_len(format_key(base + [k]), raw[k], dim)
-        if "normal" in raw and not math.fsum(float(c) ** 2 for c in raw["normal"]) > 0.0:
-            raise CaseError(format_key(base + ["normal"]), raw["normal"],
-                            "must be a non-zero vector")
+        if "normal" in raw:  # its length squared is taken: it must neither vanish nor overflow
+            n2 = math.fsum(float(c) * float(c) for c in raw["normal"])
+            if not (n2 > 0.0 and math.isfinite(n2)):
+                raise CaseError(format_key(base + ["normal"]), raw["normal"],
+                                "must be a non-zero vector whose squared length is a finite "
+                                "float (e.g. a unit vector)")
 
     # [check]: kind must be a registered check
     if case["check"] is not None:
@@ -670,11 +811,13 @@ def _check(case: dict, data: dict) -> None:
             raise CaseError("check.kind", kind, "unknown check kind; registered: "
                             + ", ".join(sorted(CHECKS)))
 
-    # mesh files last: reading them may be slow
-    for i, body in enumerate(bodies):
-        if "file" in body["mesh"]:
-            _check_mesh_file(format_key(["lagrange", "bodies", i, "mesh", "file"]),
-                             raw_bodies[i]["mesh"]["file"], body["mesh"]["file"], dim)
+    # mesh files last: reading them may be slow; every path is checked before any file is read
+    files = [(format_key(["lagrange", "bodies", i, "mesh", "file"]), raw_bodies[i]["mesh"]["file"], body)
+             for i, body in enumerate(bodies) if "file" in body["mesh"]]
+    for key, raw, body in files:
+        check_path_inside(key, raw, body["mesh"]["file"], case["case_dir"])
+    for key, raw, body in files:
+        body["size"] = _check_mesh_file(key, raw, body["mesh"]["file"], dim)
 
 
 def _check_ale(ale: dict, raw: dict, dim: int) -> None:
@@ -686,6 +829,7 @@ def _check_ale(ale: dict, raw: dict, dim: int) -> None:
         if not hi > lo:
             raise CaseError("ale.grid.upper", raw["grid"]["upper"],
                             f"must be > lower component-wise (component {j})")
+    _check_extent("ale.grid", ale["grid"], raw["grid"])
     axes = ("x", "y", "z")[:dim]
     raw_faces = raw.get("boundaries", {})
     for f in raw_faces:
@@ -724,8 +868,13 @@ def _check_ale(ale: dict, raw: dict, dim: int) -> None:
         if "region" in r:
             _expr(format_key(base + ["region"]), r["region"], dim, BOOL)
     _check_ale_mixed(ale, raw)
+    lo, hi = ale["grid"]["lower"], ale["grid"]["upper"]
     for i, e in enumerate(raw.get("energy_sources", [])):
         _vec_len(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
+        if not all(a <= float(x) <= b for a, x, b in zip(lo, e["at"], hi)):
+            raise CaseError(format_key(["ale", "energy_sources", i, "at"]), e["at"],
+                            f"must lie in the grid, from ale.grid.lower = {raw['grid']['lower']} to "
+                            f"ale.grid.upper = {raw['grid']['upper']} (m)")
     for i, o in enumerate(raw.get("obstacles", [])):
         _expr(format_key(["ale", "obstacles", i, "region"]), o["region"], dim, BOOL)
         if ale["mode"] != "eulerian":
@@ -753,14 +902,75 @@ def _check_ale_mixed(ale: dict, raw: dict) -> None:
                             f"inflow faces are not supported yet with {what} in ale.regions")
 
 
+def _check_extent(key: str, box: dict, raw: dict) -> None:
+    """Finite numbers whose differences are not: an extent upper - lower that overflows, zones so
+    small that their volume underflows (the solvers divide by it)."""
+    widths = [hi - lo for lo, hi in zip(box["lower"], box["upper"])]
+    if not all(math.isfinite(w) for w in widths):
+        raise CaseError(f"{key}.upper", raw["upper"], "upper - lower must be a finite number "
+                        "(it overflows); allowed: extents below 1e308 m")
+    volume = math.prod(w / c for w, c in zip(widths, box["cells"]))
+    if not volume >= sys.float_info.min:
+        raise CaseError(f"{key}.cells", raw["cells"], f"zones of {_fmt_num(volume)} m^{len(widths)} "
+                        "are too small to compute with (their volume underflows a float); allowed: "
+                        "fewer cells or a larger extent")
+
+
+def _check_wave_speed(name: str, m: dict, raw: dict) -> None:
+    """The elastic wave speed sqrt(M / rho), M the P-wave modulus, sets the time step: it must be a
+    finite number (a huge modulus over a tiny density overflows it: dt = 0, a run that never ends)."""
+    nu = m["poisson_ratio"]
+    with_modulus = m["youngs_modulus"] * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    c2 = with_modulus / m["density"]
+    if not (math.isfinite(c2) and c2 > 0.0):
+        raise CaseError(format_key(["materials", name, "youngs_modulus"]), raw["youngs_modulus"],
+                        f"gives an elastic wave speed that is not a finite number with density = "
+                        f"{_fmt_num(m['density'])} kg/m^3; allowed: moduli and densities whose "
+                        "ratio is a float")
+
+
+def allowed_roots(case_dir: Path) -> list[Path]:
+    """The case directory and the directories of $IMMERSE_ALLOW_PATH, symlinks resolved."""
+    roots = [Path(case_dir).resolve()]
+    for d in os.environ.get(ALLOW_PATH_ENV, "").split(os.pathsep):
+        if d.strip():
+            roots.append(Path(d.strip()).expanduser().resolve())
+    return roots
+
+
+def check_path_inside(key: str, raw: str, path: Path, case_dir: Path) -> None:
+    """A data path of the case (already resolved: symlinks and '..' followed) must lie inside the
+    case directory or an allowed root, so a case file cannot make the run read elsewhere."""
+    roots = allowed_roots(case_dir)
+    if not any(Path(path).resolve().is_relative_to(r) for r in roots):
+        extra = "" if len(roots) == 1 else " or " + ", ".join(str(r) for r in roots[1:])
+        raise CaseError(key, raw, f"resolves to {str(path)!r}, outside the case directory{extra}; "
+                                  f"allowed: paths inside the case directory (symlinks and '..' "
+                                  f"followed), or inside a directory listed in ${ALLOW_PATH_ENV}")
+
+
 _CELL_TYPE = {2: "quad", 3: "hexahedron"}
 
 
-def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> None:
-    if not path.exists():
-        raise CaseError(key, raw, "file not found (paths are relative to the case directory)")
-    if not path.is_file():
-        raise CaseError(key, raw, "not a regular file")
+def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> dict:
+    """Read and check a body's mesh file; its ``{"elements", "nodes"}`` counts."""
+    from orchestrator.resources import machine_memory
+
+    memory = machine_memory()
+    limit = memory // MESH_READ_FACTOR
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise CaseError(key, raw, "file not found (paths are relative to the case directory)") from None
+    except OSError as exc:
+        raise CaseError(key, raw, f"cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise CaseError(key, raw, f"is {_file_kind(st.st_mode)}; must be a regular mesh file")
+    if st.st_size > limit:
+        raise CaseError(key, raw, f"is {format_bytes(st.st_size)}: reading it takes about "
+                                  f"{MESH_READ_FACTOR} times that, this machine has "
+                                  f"{format_bytes(memory)}; allowed: mesh files up to "
+                                  f"{format_bytes(limit)} here")
     if not os.access(path, os.R_OK):
         raise CaseError(key, raw, "file is not readable (permission denied)")
     from solvers.lagrange.mesh import MeshError, read_mesh  # lazy: heavy imports
@@ -777,3 +987,4 @@ def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> None:
     if getattr(mesh, "cell_type", expected) != expected or len(mesh.cells) == 0:
         raise CaseError(key, raw, f"must be a readable {expected} mesh (no {expected} cells "
                                   f"for a {dim}D case)")
+    return {"elements": int(len(mesh.cells)), "nodes": int(len(mesh.points))}

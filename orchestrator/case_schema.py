@@ -40,6 +40,11 @@ LAGRANGE_DEFAULTS = {
     "bulk_viscosity_linear": 0.06,
     "bulk_viscosity_quadratic": 1.5,
 }
+NON_FINITE_KEYS: tuple[str, ...] = ()
+"""Keys whose floats may be ``nan``/``inf`` (every other float of a case must be finite): dotted
+patterns, ``*`` for any one table key, ``[]`` for any index (``check.metrics.*.reference``).
+None today; a key that means "no limit" by ``inf`` would be listed here."""
+
 DEFAULT_ROOM_TEMPERATURE = 293.15
 """Initial temperature (K) of bodies whose material has no ``room_temperature``."""
 
@@ -288,7 +293,7 @@ ALE = _table(
             {"energy": _num("J", exclusiveMinimum=0), "at": _vector("m")}, required=("energy", "at"))},
         # static obstacles: blocked where the region holds (fraction of k^dim sub-points per zone)
         "obstacles": {"type": "array", "items": _table(
-            {"region": {"type": "string", "minLength": 1}, "subsamples": _int(minimum=1)},
+            {"region": {"type": "string", "minLength": 1}, "subsamples": _int(minimum=1, maximum=64)},
             required=("region",))},
     },
     required=("grid", "materials", "regions"),

@@ -1,7 +1,8 @@
 """`immerse` command line: check, run, view, bench.
 
-  immerse check CASE                          validate case.toml (and its meshes) only
-  immerse run CASE [--out DIR] [--ranks ROLE=N ...] [--restart FILE] [--replace]
+  immerse check CASE [--ranks ROLE=N ...] [MACHINE]   validate only (case, meshes, expressions, resources)
+  immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [MACHINE]
+      MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
   immerse bench NAME [--out FILE] [--quick]   NAME: lagrange
 
@@ -35,17 +36,45 @@ def _parse_ranks(items: list[str]) -> dict[str, int] | str:
     return ranks
 
 
+def _add_machine_flags(p) -> None:
+    """Flags of check and run that describe the machine the job runs on (orchestrator/resources.py)."""
+    p.add_argument("--nodes", metavar="N", help="the job spans N nodes of this machine's kind "
+                   "(memory and cores scale by N; default 1)")
+    p.add_argument("--memory-per-node", metavar="SIZE", help="memory of a node, e.g. 64GiB, 512G, "
+                   "1.5TB (default: this machine's)")
+    p.add_argument("--oversubscribe", action="store_true", help="allow more than 4 processes a core")
+
+
+def _admit(args, case: dict, ranks: dict, overridden) -> int:
+    """What check and run verify after the case file: rank counts and memory against the machine of
+    the flags, then every expression evaluated on the case's own points; the memory estimate.
+    Raises CaseError."""
+    from orchestrator.expressions import check_expressions
+    from orchestrator.resources import check_resources, this_machine
+
+    machine = this_machine(args.nodes, args.memory_per_node, args.oversubscribe)
+    estimate = check_resources(case, ranks, machine, overridden)
+    check_expressions(case)
+    return estimate
+
+
 def cmd_check(args) -> int:
-    from orchestrator.case import CaseError, load_case
+    from orchestrator.case import CaseError, load_case, ranks_for
 
     try:
         case = load_case(args.case)
+        overrides = _parse_ranks(args.ranks)
+        if isinstance(overrides, str):
+            return _fail(overrides)
+        ranks = ranks_for(case, overrides)
+        estimate = _admit(args, case, ranks, set(overrides))
     except CaseError as e:
         return _fail(str(e))
     from orchestrator.case import solvers_used
+    from orchestrator.resources import format_bytes
 
     print(f"{case['name']}: ok (dimension {case['run']['dimension']}, solvers: "
-          f"{', '.join(solvers_used(case))})")
+          f"{', '.join(solvers_used(case))}; memory about {format_bytes(estimate)})")
     return 0
 
 
@@ -58,7 +87,9 @@ def cmd_run(args) -> int:
         ranks = _parse_ranks(args.ranks)
         if isinstance(ranks, str):
             return _fail(ranks)
+        overridden = set(ranks)
         ranks = ranks_for(case, ranks)
+        _admit(args, case, ranks, overridden)
     except CaseError as e:
         return _fail(str(e))
     # everything is checked before anything is created or launched
@@ -108,11 +139,20 @@ def cmd_bench(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """Command-line errors are bad input too: one line, exit 2 (argparse prints usage + error)."""
+
+    def error(self, message):
+        self.exit(EXIT_BAD_INPUT, f"immerse: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="immerse", description=__doc__.split("\n")[0])
+    ap = _Parser(prog="immerse", description=__doc__.split("\n")[0])
     sub = ap.add_subparsers(dest="verb", required=True)
     p = sub.add_parser("check", help="validate a case directory")
     p.add_argument("case")
+    p.add_argument("--ranks", nargs="*", metavar="ROLE=N", help="ranks per solver, as for run")
+    _add_machine_flags(p)
     p.set_defaults(func=cmd_check)
     p = sub.add_parser("run", help="run a case directory")
     p.add_argument("case")
@@ -123,6 +163,7 @@ def main(argv=None) -> int:
     p.add_argument("--replace", action="store_true",
                    help="replace an earlier output of this case in OUT: deletes only the files immerse "
                         "wrote there")
+    _add_machine_flags(p)
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("view", help="render PNG pictures of a run's output")
     p.add_argument("out")

@@ -1,463 +1,159 @@
-"""Safe arithmetic / boolean expressions for case files.
+"""The case's expressions evaluated at check time, on the points the solvers evaluate them on.
 
-Case files describe initial fields (``initial_velocity = ["0", "-200 * (z > 0.01)", ...]``)
-and boundary regions (``region = "z < 1e-6 and x <= 0.5"``) as short expression strings in
-the initial coordinates ``x, y, z``.  They are compiled here WITHOUT ``eval``/``exec``: the
-text is parsed with ``ast.parse(mode="eval")`` and the tree is walked against a whitelist;
-every accepted node is turned into a small closure that evaluates on numpy arrays.
+``load_case`` compiles every expression (whitelist, types, constants folded: ``9**9**9**9`` is
+refused there).  What depends on the points (``0/(x-x)``, ``sqrt(-1-x*x)``, ``1/x`` at a node
+with x = 0) is found here, by evaluating each expression where its solver will, before anything
+launches (the CLI calls :func:`check_expressions` after the resource check):
 
-Accepted (everything else is an :class:`ExpressionError`):
+* ``lagrange.bodies[i].initial_velocity[j]``: every node of that body (solvers/lagrange/solver.py);
+* ``boundaries[i].region``: every node of every body (solvers/lagrange/boundary.py);
+* ``ale.regions[i].region``: the zone centres, or with several materials the fraction_samples^dim
+  sub-cell points of every zone (solvers/ale/solver.py, mixed.py); the regions must cover them all;
+* ``ale.obstacles[i].region``: the subsamples^dim sub-cell points of every zone (blocked.py); the
+  obstacles must leave some zone open.
 
-* numbers (finite int/float literals), ``True``/``False``;
-* the variable names given to :func:`compile_expression` (default ``x, y, z``) and the
-  constants ``pi`` and ``e``;
-* binary ``+ - * / ** %``, unary ``-``/``+``;
-* comparisons ``< <= > >= == !=`` (chained: ``0 < x < 1``);
-* ``and``, ``or``, ``not`` (operands must be boolean);
-* calls of ``abs sqrt sin cos tan exp log`` (one argument), ``min max`` (two or more
-  arguments, element-wise) and ``where(cond, a, b)``.
-
-Expressions are statically typed: numbers and booleans do not mix (``x + (y > 0)`` is
-rejected, write ``where(y > 0, 1, 0)``).  Results are broadcast to the common shape of
-the inputs, so a constant expression still gives one value per point.  Numeric results
-that are not finite (``1/x`` at ``x = 0``, ``sqrt(-1)``) raise :class:`ExpressionError`
-at evaluation time instead of silently propagating NaN/inf into a simulation.
+The points come from the solvers' own functions (solvers/ale/points.py, solvers/lagrange/mesh.py),
+one code path.  Evaluation goes chunk by chunk (memory bounded).  Its cost is points times syntax
+tree nodes; past :data:`CHECK_BUDGET` node evaluations on a body or grid (a cluster-sized case, or
+the longest, most expensive expressions on a large one) every n-th zone or node only is evaluated,
+so the check stays within seconds (the solver still refuses a non-finite value at start-up, naming
+the expression).
 """
-
 from __future__ import annotations
 
-import ast
 import math
-from collections.abc import Callable, Sequence
 
 import numpy as np
 
-__all__ = [
-    "ExpressionError",
-    "CompiledExpression",
-    "compile_expression",
-    "MAX_LENGTH",
-    "MAX_DEPTH",
-    "FUNCTIONS",
-    "CONSTANTS",
-]
+from solvers.ale.points import fraction_samples, grid_points, several_materials
+from solvers.expressions import BOOL, NUM, ExpressionError, compile_expression
+from solvers.lagrange.mesh import body_mesh, box_axes
 
-MAX_LENGTH = 1000
-"""Longest accepted expression text (characters)."""
+from .case import CaseError, format_key
 
-MAX_DEPTH = 40
-"""Deepest accepted nesting of the syntax tree."""
+__all__ = ["check_expressions", "CHECK_BUDGET"]
 
-CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e}
+CHECK_BUDGET = 1 << 28
+"""Node-point evaluations per body or grid at check time: 2.7e8, at most 4-8 s for the costliest
+operations (15-29 ns a node and point for sin and **, tests/solvers/test_expressions.py), well under
+a second for typical regions (comparisons, arithmetic); e.g. a 10-node region on 2.7e7 points in
+full."""
 
-# name -> (numpy implementation, minimum arity, maximum arity or None)
-FUNCTIONS: dict[str, tuple[Callable, int, int | None]] = {
-    "abs": (np.abs, 1, 1),
-    "sqrt": (np.sqrt, 1, 1),
-    "sin": (np.sin, 1, 1),
-    "cos": (np.cos, 1, 1),
-    "tan": (np.tan, 1, 1),
-    "exp": (np.exp, 1, 1),
-    "log": (np.log, 1, 1),
-    "min": (np.minimum, 2, None),
-    "max": (np.maximum, 2, None),
-    "where": (np.where, 3, 3),
-}
-
-_BINOPS = {
-    ast.Add: ("+", np.add),
-    ast.Sub: ("-", np.subtract),
-    ast.Mult: ("*", np.multiply),
-    ast.Div: ("/", np.true_divide),
-    ast.Pow: ("**", np.power),
-    ast.Mod: ("%", np.mod),
-}
-_COMPARE = {
-    ast.Lt: ("<", np.less),
-    ast.LtE: ("<=", np.less_equal),
-    ast.Gt: (">", np.greater),
-    ast.GtE: (">=", np.greater_equal),
-    ast.Eq: ("==", np.equal),
-    ast.NotEq: ("!=", np.not_equal),
-}
-# Symbols of operators we refuse, for messages.
-_REJECTED_OPS = {
-    ast.FloorDiv: "//", ast.MatMult: "@", ast.LShift: "<<", ast.RShift: ">>",
-    ast.BitAnd: "&", ast.BitOr: "|", ast.BitXor: "^", ast.Invert: "~",
-    ast.Is: "is", ast.IsNot: "is not", ast.In: "in", ast.NotIn: "not in",
-}
-_HINTS = {
-    "&": " (use 'and')", "|": " (use 'or')", "~": " (use 'not')", "//": " (use '/')",
-}
-
-NUM = "number"
-BOOL = "boolean"
-
-Evaluator = Callable[[dict], np.ndarray]
+_CHUNK = 1 << 16
 
 
-class ExpressionError(ValueError):
-    """An expression is not accepted (or evaluates to non-finite values).
-
-    ``str(error)`` is always a single line naming the offending construct and the
-    allowed set.
-    """
-
-    def __init__(self, message: str):
-        super().__init__(" ".join(str(message).split()))
-
-
-def _quote(text: str, limit: int = 60) -> str:
-    """repr() of an expression text, shortened for messages (always one line)."""
-    if len(text) > limit:
-        text = text[: limit - 3] + "..."
-    return repr(text)
+def _refusal(key: str, text: str, exc: ExpressionError, where: str) -> CaseError:
+    if exc.segment is None:  # pragma: no cover - compile errors are load_case's
+        return CaseError(key, text, str(exc))
+    sub = "" if exc.segment == text.strip() else f" (sub-expression {exc.segment!r} = {exc.value})"
+    what = f"{exc.value}" if not sub else "a non-finite value"
+    at = ", ".join(f"{k} = {v:.9g}" for k, v in (exc.point or {}).items())
+    return CaseError(key, text, f"gives {what}{sub} at {at or 'every point'} ({where}); allowed: "
+                                "finite values at every point (guard divisions and roots with "
+                                "where(cond, a, b))")
 
 
-def _allowed_text(names: Sequence[str]) -> str:
-    return (
-        "allowed: numbers, True/False, names "
-        + ", ".join(list(names) + list(CONSTANTS))
-        + "; operators + - * / ** % and unary -, comparisons < <= > >= == != (chainable),"
-        " and/or/not; functions " + ", ".join(FUNCTIONS) + "(cond, a, b)"
-    )
-
-
-class CompiledExpression:
-    """A checked expression; call it with numpy arrays (positional in ``names`` order,
-    or by keyword).
-
-    Attributes: ``text``, ``names`` (accepted variables), ``kind`` (``"number"`` or
-    ``"boolean"``), ``used_names`` (variables that actually occur).
-    """
-
-    __slots__ = ("text", "names", "kind", "used_names", "_fn")
-
-    def __init__(self, text: str, names: tuple[str, ...], kind: str,
-                 used_names: frozenset[str], fn: Evaluator):
-        self.text = text
-        self.names = names
-        self.kind = kind
-        self.used_names = used_names
-        self._fn = fn
-
-    def __repr__(self) -> str:
-        return f"CompiledExpression({self.text!r}, names={self.names!r}, kind={self.kind!r})"
-
-    def __call__(self, *args, **kwargs) -> np.ndarray:
-        if len(args) > len(self.names):
-            raise TypeError(f"expression takes {len(self.names)} arguments "
-                            f"({', '.join(self.names)}), got {len(args)}")
-        env: dict[str, np.ndarray] = {}
-        for name, value in zip(self.names, args):
-            env[name] = value
-        for name, value in kwargs.items():
-            if name not in self.names:
-                raise TypeError(f"unexpected variable {name!r}; expression variables: "
-                                f"{', '.join(self.names)}")
-            if name in env:
-                raise TypeError(f"variable {name!r} given twice")
-            env[name] = value
-        missing = [n for n in self.names if n not in env]
-        if missing:
-            raise TypeError(f"missing value(s) for {', '.join(missing)}")
-        arrays = {n: np.asarray(v, dtype=np.float64) for n, v in env.items()}
-        shape = np.broadcast_shapes(*(a.shape for a in arrays.values()))
-        with np.errstate(all="ignore"):
-            result = np.asarray(self._fn(arrays))
-        if self.kind == BOOL:
-            out = np.empty(shape, dtype=bool)
-        else:
-            out = np.empty(shape, dtype=np.float64)
-        try:
-            out[...] = result  # broadcast scalars / lower-rank results to the input shape
-        except ValueError as exc:  # pragma: no cover - all inputs broadcast together
-            raise ExpressionError(f"expression {_quote(self.text)}: {exc}") from None
-        if self.kind == NUM and not np.all(np.isfinite(out)):
-            bad = int(np.count_nonzero(~np.isfinite(out)))
-            raise ExpressionError(
-                f"expression {_quote(self.text)} gives non-finite values (NaN or inf) at {bad} "
-                f"of {out.size} points; allowed: finite results only")
-        return out
-
-    def at_points(self, points) -> np.ndarray:
-        """Evaluate at the rows of a ``(n, d)`` coordinate array (columns x, y[, z]).
-
-        Variables beyond the number of columns (``z`` for 2D points) are zero.
-        """
-        pts = np.asarray(points, dtype=np.float64)
-        if pts.ndim != 2:
-            raise ValueError(f"points must be a 2-D array (n, dim), got shape {pts.shape}")
-        cols = {}
-        for i, name in enumerate(self.names):
-            cols[name] = pts[:, i] if i < pts.shape[1] else np.zeros(pts.shape[0])
-        return self(**cols)
-
-
-def compile_expression(text: str, names: Sequence[str] = ("x", "y", "z"), *,
-                       kind: str | None = None) -> CompiledExpression:
-    """Compile ``text`` into a :class:`CompiledExpression` of the variables ``names``.
-
-    ``kind`` may require the result type: ``"number"`` (initial fields) or ``"boolean"``
-    (regions).  Raises :class:`ExpressionError` (one-line message) for anything outside
-    the whitelist described in the module docstring.
-    """
-    names = tuple(names)
-    for n in names:
-        if not isinstance(n, str) or not n.isidentifier() or n in FUNCTIONS or n in CONSTANTS:
-            raise ValueError(f"invalid expression variable name {n!r}")
-    if kind not in (None, NUM, BOOL):
-        raise ValueError(f"kind must be None, {NUM!r} or {BOOL!r}, got {kind!r}")
-    allowed = _allowed_text(names)
-    if not isinstance(text, str):
-        raise ExpressionError(f"expression must be a string, got {type(text).__name__}; "
-                              f"{allowed}")
-    if len(text) > MAX_LENGTH:
-        raise ExpressionError(f"expression is too long ({len(text)} characters, at most "
-                              f"{MAX_LENGTH}); {allowed}")
-    if not text.strip():
-        raise ExpressionError(f"expression is empty; {allowed}")
+def _evaluate(key: str, text: str, fn, points: np.ndarray, where: str) -> np.ndarray:
     try:
-        tree = ast.parse(text.strip(), mode="eval")
-    except SyntaxError as exc:
-        where = f" at column {exc.offset}" if exc.offset else ""
-        raise ExpressionError(f"syntax error in {_quote(text)}{where}: {exc.msg}; {allowed}") from None
-    except (RecursionError, MemoryError, ValueError) as exc:
-        raise ExpressionError(f"expression {_quote(text)} cannot be parsed "
-                              f"({type(exc).__name__}); {allowed}") from None
-    _check_depth(tree.body, text, allowed)
-    compiler = _Compiler(text.strip(), names, allowed)
-    fn, result_kind = compiler.compile(tree.body)
-    if kind is not None and result_kind != kind:
-        want = "a boolean (region)" if kind == BOOL else "a numeric"
-        raise ExpressionError(f"expression {_quote(text)} gives a {result_kind} but {want} "
-                              f"expression is required; {allowed}")
-    return CompiledExpression(text, names, result_kind, frozenset(compiler.used), fn)
+        return fn(*points.T)
+    except ExpressionError as exc:
+        raise _refusal(key, text, exc, where) from None
 
 
-def _check_depth(root: ast.AST, text: str, allowed: str) -> None:
-    # Iterative, so a pathological tree cannot blow the Python stack here; the recursive
-    # compiler below then only ever sees trees at most MAX_DEPTH deep.
-    stack = [(root, 1)]
-    while stack:
-        node, depth = stack.pop()
-        if depth > MAX_DEPTH:
-            raise ExpressionError(f"expression {_quote(text)} is nested too deeply (more than "
-                                  f"{MAX_DEPTH} levels); {allowed}")
-        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node))
+# ---- Lagrangian bodies --------------------------------------------------------------------------
+def _stride(work: int) -> int:
+    return max(1, math.ceil(work / CHECK_BUDGET))
 
 
-def _describe(node: ast.AST) -> str:
-    return {
-        ast.Attribute: "attribute access",
-        ast.Subscript: "subscript",
-        ast.Lambda: "lambda",
-        ast.ListComp: "list comprehension",
-        ast.SetComp: "set comprehension",
-        ast.DictComp: "dict comprehension",
-        ast.GeneratorExp: "generator expression",
-        ast.List: "list",
-        ast.Tuple: "tuple",
-        ast.Set: "set",
-        ast.Dict: "dict",
-        ast.IfExp: "conditional expression (use where(cond, a, b))",
-        ast.NamedExpr: "assignment expression ':='",
-        ast.JoinedStr: "f-string",
-        ast.FormattedValue: "f-string",
-        ast.Starred: "starred argument",
-        ast.Await: "await",
-        ast.Yield: "yield",
-        ast.YieldFrom: "yield",
-        ast.Slice: "slice",
-    }.get(type(node), type(node).__name__)
+def _body_points(body: dict, dim: int, cost: int):
+    """Chunks of the body's nodes (the solver's ``X`` of that body); a box without building it.
+    ``cost``: syntax tree nodes evaluated per point."""
+    size = body["size"]["nodes"]
+    stride = _stride(size * cost)
+    m = body["mesh"]
+    if "box" in m:
+        axes = box_axes(m["box"]["lower"], m["box"]["upper"], m["box"]["cells"])
+        shape = tuple(a.size for a in axes)
+        for start in range(0, size, _CHUNK * stride):
+            ids = np.arange(start, min(start + _CHUNK * stride, size), stride, dtype=np.int64)
+            ijk = np.unravel_index(ids, shape, order="F")  # node id = i + (nx+1)(j + (ny+1)k)
+            yield np.stack([a[i] for a, i in zip(axes, ijk)], axis=1)
+        return
+    points = body_mesh(body, dim).points[::stride]
+    for start in range(0, len(points), _CHUNK):
+        yield points[start:start + _CHUNK]
 
 
-class _Compiler:
-    def __init__(self, text: str, names: tuple[str, ...], allowed: str):
-        self.text = text
-        self.names = names
-        self.allowed = allowed
-        self.used: set[str] = set()
-
-    # -- helpers -----------------------------------------------------------------
-    def _segment(self, node: ast.AST) -> str:
-        seg = ast.get_source_segment(self.text, node)
-        if seg is None:  # pragma: no cover - all nodes here carry positions
-            seg = type(node).__name__
-        if len(seg) > 60:
-            seg = seg[:57] + "..."
-        return seg
-
-    def _fail(self, what: str) -> ExpressionError:
-        return ExpressionError(f"{what} is not allowed in expression {_quote(self.text)}; "
-                               f"{self.allowed}")
-
-    def _need(self, node: ast.AST, kind: str, want: str, context: str) -> None:
-        if kind != want:
-            raise ExpressionError(
-                f"{context} needs a {want} operand but {self._segment(node)!r} is a {kind} "
-                f"in expression {_quote(self.text)}; {self.allowed}")
-
-    # -- dispatcher --------------------------------------------------------------
-    def compile(self, node: ast.AST) -> tuple[Evaluator, str]:
-        method = _DISPATCH.get(type(node))  # the whitelist of node types
-        if method is None:
-            raise self._fail(f"{_describe(node)} {self._segment(node)!r}")
-        return method(self, node)
-
-    def _c_Constant(self, node: ast.Constant):
-        value = node.value
-        if isinstance(value, bool):
-            const_b = np.bool_(value)
-            return (lambda env: const_b), BOOL
-        if isinstance(value, (int, float)):
-            try:
-                f = float(value)
-            except OverflowError:
-                raise self._fail(f"number {self._segment(node)!r} (too large)") from None
-            if not math.isfinite(f):
-                raise self._fail(f"number {self._segment(node)!r} (not finite)")
-            const_f = np.float64(f)
-            return (lambda env: const_f), NUM
-        if isinstance(value, str):
-            what = "string"
-        elif isinstance(value, bytes):
-            what = "bytes"
-        elif isinstance(value, complex):
-            what = "complex number"
-        elif value is None:
-            what = "None"
-        elif value is Ellipsis:
-            what = "Ellipsis"
-        else:  # pragma: no cover
-            what = type(value).__name__
-        raise self._fail(f"{what} {self._segment(node)!r}")
-
-    def _c_Name(self, node: ast.Name):
-        name = node.id
-        if name in self.names:
-            self.used.add(name)
-            return (lambda env: env[name]), NUM
-        if name in CONSTANTS:
-            c = np.float64(CONSTANTS[name])
-            return (lambda env: c), NUM
-        if name in FUNCTIONS:
-            raise self._fail(f"bare function name {name!r} (call it, e.g. {name}(x))")
-        raise self._fail(f"name {name!r}")
-
-    def _c_BinOp(self, node: ast.BinOp):
-        op = type(node.op)
-        if op not in _BINOPS:
-            sym = _REJECTED_OPS.get(op, op.__name__)
-            raise self._fail(f"operator {sym!r}{_HINTS.get(sym, '')}")
-        sym, ufunc = _BINOPS[op]
-        left, lk = self.compile(node.left)
-        right, rk = self.compile(node.right)
-        self._need(node.left, lk, NUM, f"operator {sym!r}")
-        self._need(node.right, rk, NUM, f"operator {sym!r}")
-        return (lambda env: ufunc(left(env), right(env))), NUM
-
-    def _c_UnaryOp(self, node: ast.UnaryOp):
-        op = type(node.op)
-        operand, k = self.compile(node.operand)
-        if op is ast.USub:
-            self._need(node.operand, k, NUM, "unary '-'")
-            return (lambda env: np.negative(operand(env))), NUM
-        if op is ast.UAdd:
-            self._need(node.operand, k, NUM, "unary '+'")
-            return operand, NUM
-        if op is ast.Not:
-            self._need(node.operand, k, BOOL, "'not'")
-            return (lambda env: np.logical_not(operand(env))), BOOL
-        sym = _REJECTED_OPS.get(op, op.__name__)
-        raise self._fail(f"operator {sym!r}{_HINTS.get(sym, '')}")
-
-    def _c_BoolOp(self, node: ast.BoolOp):
-        word = "and" if isinstance(node.op, ast.And) else "or"
-        ufunc = np.logical_and if word == "and" else np.logical_or
-        parts = []
-        for v in node.values:
-            fn, k = self.compile(v)
-            self._need(v, k, BOOL, f"'{word}'")
-            parts.append(fn)
-
-        def run(env):
-            acc = parts[0](env)
-            for p in parts[1:]:
-                acc = ufunc(acc, p(env))
-            return acc
-        return run, BOOL
-
-    def _c_Compare(self, node: ast.Compare):
-        operands = [node.left, *node.comparators]
-        fns = []
-        for o in operands:
-            fn, k = self.compile(o)
-            self._need(o, k, NUM, "comparison")
-            fns.append(fn)
-        ufuncs = []
-        for op in node.ops:
-            t = type(op)
-            if t not in _COMPARE:
-                raise self._fail(f"comparison {_REJECTED_OPS.get(t, t.__name__)!r}")
-            ufuncs.append(_COMPARE[t][1])
-
-        def run(env):
-            values = [f(env) for f in fns]
-            acc = ufuncs[0](values[0], values[1])
-            for i in range(1, len(ufuncs)):
-                acc = np.logical_and(acc, ufuncs[i](values[i], values[i + 1]))
-            return acc
-        return run, BOOL
-
-    def _c_Call(self, node: ast.Call):
-        if not isinstance(node.func, ast.Name):
-            raise self._fail(f"call of {self._segment(node.func)!r}")
-        name = node.func.id
-        if name not in FUNCTIONS:
-            raise self._fail(f"call of {name!r}")
-        if node.keywords:
-            raise self._fail(f"keyword argument in {self._segment(node)!r}")
-        for a in node.args:
-            if isinstance(a, ast.Starred):
-                raise self._fail(f"starred argument {self._segment(a)!r}")
-        impl, lo, hi = FUNCTIONS[name]
-        n = len(node.args)
-        if n < lo or (hi is not None and n > hi):
-            want = str(lo) if hi == lo else f"at least {lo}"
-            raise ExpressionError(
-                f"{name}() takes {want} argument{'s' if lo > 1 else ''}, got {n}, in expression "
-                f"{_quote(self.text)}; {self.allowed}")
-        compiled = [self.compile(a) for a in node.args]
-        if name == "where":
-            (c, ck), (a, ak), (b, bk) = compiled
-            self._need(node.args[0], ck, BOOL, "where() condition")
-            if ak != bk:
-                raise ExpressionError(
-                    f"where() branches must have the same type, got {ak} and {bk}, in "
-                    f"expression {_quote(self.text)}; {self.allowed}")
-            return (lambda env: np.where(c(env), a(env), b(env))), ak
-        for arg, (_, k) in zip(node.args, compiled):
-            self._need(arg, k, NUM, f"{name}()")
-        fns = [fn for fn, _ in compiled]
-        if len(fns) == 1:
-            f0 = fns[0]
-            return (lambda env: impl(f0(env))), NUM
-
-        def run(env):
-            acc = fns[0](env)
-            for f in fns[1:]:
-                acc = impl(acc, f(env))
-            return acc
-        return run, NUM
+def _check_lagrange(case: dict, names: tuple[str, ...]) -> None:
+    dim = len(names)
+    regions = [(format_key(["boundaries", i, "region"]), bc["region"],
+                compile_expression(bc["region"], names, kind=BOOL))
+               for i, bc in enumerate(case.get("boundaries", [])) if "region" in bc]
+    for i, body in enumerate(case["lagrange"]["bodies"]):
+        velocity = [(format_key(["lagrange", "bodies", i, "initial_velocity", j]), comp,
+                     compile_expression(comp, names, kind=NUM))
+                    for j, comp in enumerate(body["initial_velocity"]) if isinstance(comp, str)]
+        todo = velocity + regions
+        if not todo:
+            continue
+        where = f"a node of body {body['name']!r}"
+        for pts in _body_points(body, dim, sum(fn.size for _, _, fn in todo)):
+            for key, text, fn in todo:
+                _evaluate(key, text, fn, pts, where)
 
 
-_DISPATCH = {
-    ast.Constant: _Compiler._c_Constant,
-    ast.Name: _Compiler._c_Name,
-    ast.BinOp: _Compiler._c_BinOp,
-    ast.UnaryOp: _Compiler._c_UnaryOp,
-    ast.BoolOp: _Compiler._c_BoolOp,
-    ast.Compare: _Compiler._c_Compare,
-    ast.Call: _Compiler._c_Call,
-}
+# ---- ALE background -----------------------------------------------------------------------------
+def _check_ale(ale: dict, names: tuple[str, ...]) -> None:
+    dim = len(names)
+    grid = ale["grid"]
+    zones = math.prod(grid["cells"])
+    k = fraction_samples(ale, dim) if several_materials(ale) else None
+    regions = [(format_key(["ale", "regions", i, "region"]), r["region"],
+                compile_expression(r["region"], names, kind=BOOL))
+               for i, r in enumerate(ale["regions"]) if r.get("region")]
+    whole = any(not r.get("region") for r in ale["regions"])
+    obstacles = [(format_key(["ale", "obstacles", j, "region"]), o["region"],
+                  compile_expression(o["region"], names, kind=BOOL)) for j, o in enumerate(ale["obstacles"])]
+    # points a zone and syntax tree nodes of each set: the regions, then every obstacle
+    sets = [(1 if k is None else k**dim, sum(fn.size for _, _, fn in regions))]
+    sets += [(int(o.get("subsamples", 1)) ** dim, fn.size) for o, (_, _, fn) in zip(ale["obstacles"], obstacles)]
+    most = max(n for n, _ in sets)
+    stride = _stride(zones * sum(n * cost for n, cost in sets))
+    zpc = max(1, _CHUNK // most)
+    subs = [k] + [int(o.get("subsamples", 1)) for o in ale["obstacles"]]
+    gens = [grid_points(grid["lower"], grid["upper"], grid["cells"], kk, zpc, stride) for kk in subs]
+    sampled = "zone centre" if k is None else f"fraction sample point ({k}^{dim} a zone)"
+    any_open = not obstacles
+    for chunks in zip(*gens):
+        ijk, pts = chunks[0]
+        covered = np.full(len(pts), whole)
+        for key, text, fn in regions:
+            covered |= _evaluate(key, text, fn, pts, f"a {sampled} of the ALE grid")
+        if not covered.all():
+            first = int(np.argmax(~covered))
+            zone = tuple(int(v) for v in ijk[first // (len(pts) // len(ijk))])
+            at = ", ".join(f"{n} = {v:.9g}" for n, v in zip(names, pts[first]))
+            raise CaseError("ale.regions", [r.get("region") for r in ale["regions"]],
+                            f"zone {zone} is not covered by any region (at {at}); allowed: regions "
+                            "covering the whole grid (a region without `region` covers all of it)")
+        blocked = np.zeros(len(ijk), bool)
+        for (key, text, fn), (oijk, opts) in zip(obstacles, chunks[1:]):
+            inside = _evaluate(key, text, fn, opts, "a sub-cell point of the ALE grid")
+            blocked |= inside.reshape(len(oijk), -1).all(axis=1)  # every sub-point inside: solid
+        any_open = any_open or not blocked.all()
+    if not any_open and stride == 1:  # (a subset of the zones cannot tell)
+        raise CaseError("ale.obstacles", [o["region"] for o in ale["obstacles"]],
+                        "block every zone of the ALE grid; allowed: obstacles that leave some zone open")
+
+
+def check_expressions(case: dict) -> None:
+    """Evaluate every expression of the (loaded) case on its solver's points; CaseError naming
+    the key, the expression, the sub-expression and the point of the first non-finite value."""
+    names = ("x", "y", "z")[: case["run"]["dimension"]]
+    for role, check in ROLES.items():
+        if case.get(role):
+            check(case, names)
+
+
+ROLES = {"lagrange": _check_lagrange, "ale": lambda case, names: _check_ale(case["ale"], names)}
+"""Per solver role (its case table): the check of its expressions on its points."""

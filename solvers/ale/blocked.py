@@ -79,10 +79,11 @@ import math
 import numpy as np
 from numba import njit
 
-from orchestrator.expressions import compile_expression
+from solvers.expressions import compile_expression
 from solvers.ale import eos as _eos
 from solvers.ale.boundary import constrain as _constrain_kernel
 from solvers.ale.grid import GHOST
+from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
 from solvers.ale.remap import set_positions
 from solvers.lagrange.kernels import hex_bvectors, quad_bvectors
@@ -106,10 +107,9 @@ def obstacle_fractions(block, obstacles) -> np.ndarray:
         k = int(ob.get("subsamples", 1))
         if k < 1:
             raise ValueError(f"obstacle subsamples must be >= 1, got {k}")
-        offs = (np.arange(k) + 0.5) / k - 0.5
         inside = np.zeros(real.size)
-        for sub in np.ndindex(*([k] * dim)):
-            pts = centres + np.array([offs[s] for s in sub]) * block.h
+        for off in subcell_offsets(k, block.h):  # one sub-cell centre of every zone at a time
+            pts = centres + off
             inside += np.broadcast_to(np.asarray(fn(*pts.T), dtype=bool), (real.size,))
         b[real] = np.maximum(b[real], inside / k ** dim)
     return b

@@ -44,6 +44,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from solvers.ale.points import axis_centres, spacing
+
 
 GHOST = 2
 
@@ -79,7 +81,7 @@ class Block:
             raise GridError(f"grid needs cells >= 1 and upper > lower, got {cells}, {lower}, {upper}")
         self.dim = dim
         self.lower, self.upper, self.cells = lower, upper, cells
-        self.h = (upper - lower) / cells
+        self.h = spacing(lower, upper, cells)
         self.offset = np.zeros(dim, np.int64) if offset is None else np.asarray(offset, np.int64)
         n = cells.copy() if local_cells is None else np.asarray(local_cells, np.int64)
         self.n = n
@@ -214,7 +216,7 @@ class Block:
             gi = self.offset[d] + np.arange(self.zdims[d]) - GHOST
             shape = [1, 1, 1]
             shape[d] = self.zdims[d]
-            ov[..., d] = (self.lower[d] + (gi + 0.5) * self.h[d]).reshape(shape)
+            ov[..., d] = axis_centres(self.lower[d], self.h[d], gi).reshape(shape)
         return out
 
     def zview(self, a):

@@ -55,6 +55,7 @@ from numba import njit
 
 from solvers.ale import eos as _eos
 from solvers.ale import plic
+from solvers.ale.points import fraction_samples, subcell_offsets
 from solvers.ale.remap import face_flux
 
 VOID = -1
@@ -480,7 +481,7 @@ class Materials:
             setattr(self, f, np.zeros((nz, nm)))
         self.FC = np.zeros((max(nm - 1, 1), nz))
         self.h = np.ascontiguousarray(B.h[: s.dim], dtype=np.float64)
-        self.samples = int(config.get("fraction_samples") or (8 if s.dim == 2 else 4))
+        self.samples = fraction_samples(config, s.dim)
         self.has_void = bool(np.any(self.code == VOID))
 
     # ---- initial state -------------------------------------------------------------------------
@@ -488,15 +489,13 @@ class Materials:
         """Zone-average density, specific energy and velocity of the real zones from the regions
         evaluated at ``samples^dim`` points per zone; keeps the per-material fractions, densities
         and energies for :meth:`set_initial`."""
-        from orchestrator.expressions import compile_expression
+        from solvers.expressions import compile_expression
 
         B, dim = s.block, s.dim
         real = B.real_zone
         centres = B.zone_centres()[real][:, :dim]
         nreal = centres.shape[0]
-        n = self.samples
-        off1 = ((np.arange(n) + 0.5) / n - 0.5)
-        offs = np.stack(np.meshgrid(*([off1] * dim), indexing="ij"), axis=-1).reshape(-1, dim) * B.h[:dim]
+        offs = subcell_offsets(self.samples, B.h[:dim])
         ns = offs.shape[0]
         pts = (centres[:, None, :] + offs[None, :, :]).reshape(-1, dim)
         names = ("x", "y", "z")[:dim]

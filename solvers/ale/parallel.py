@@ -42,6 +42,8 @@ bitwise the one-rank run; only reductions over ranks (diagnostic sums) change th
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from solvers.ale.grid import GHOST, GridError
@@ -62,6 +64,23 @@ def _factorisations(size: int, dim: int):
 def _feasible(dims, cells, size) -> bool:
     return (int(np.prod(dims)) == size
             and all(p == 1 or c // p >= MIN_ZONES for p, c in zip(dims, cells)))
+
+
+def split_possible(size: int, cells) -> bool:
+    """Whether ``size`` ranks can split a grid of ``cells`` zones by the rule of split_dims (every
+    split axis keeps MIN_ZONES zones a block).  Pure Python over the divisors of ``size`` (about
+    sqrt(size) steps), no MPI: the orchestrator asks before anything launches."""
+    size = int(size)
+    if size < 1:
+        return False
+    cap = [max(1, int(c) // MIN_ZONES) for c in cells]  # the most blocks an axis can take
+    divisors = sorted({d for i in range(1, math.isqrt(size) + 1) if size % i == 0 for d in (i, size // i)})
+
+    def fits(rest: int, axes: list[int]) -> bool:
+        if len(axes) == 1:
+            return rest <= axes[0]
+        return any(rest % p == 0 and fits(rest // p, axes[1:]) for p in divisors if p <= min(axes[0], rest))
+    return fits(size, cap)
 
 
 def split_dims(size: int, cells) -> list[int]:

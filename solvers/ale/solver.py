@@ -58,12 +58,13 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from orchestrator.expressions import compile_expression
+from solvers.expressions import compile_expression
 from solvers.ale import eos as _eos
 from solvers.ale import hydro, remap
 from solvers.ale.boundary import Boundaries
 from solvers.ale.grid import (CUT, FACE_NAMES, GHOST, INFLOW, OUTFLOW, PERIODIC, WALL, Z_OPEN, Block)
 from solvers.ale.parallel import Decomposition, Halo, structured_cells
+from solvers.ale.points import several_materials
 
 # artificial viscosity defaults per mode (linear, quadratic): the remap of Eulerian mode adds its own
 # dissipation, so a lighter q keeps shocks sharper there (Sedov 40^2: front half-height 1.6 % vs
@@ -120,7 +121,7 @@ class AleSolver:
         # materials: one (the zone state is the material's), or several per zone / void (mixed.py)
         used = list(dict.fromkeys(r["material"] for r in config["regions"]))
         self.mm = None
-        if len(used) > 1 or config["materials"][used[0]]["eos"] == "void":
+        if several_materials(config):
             self._check_mixed_supported(config)
             from solvers.ale.mixed import Materials
             self.mm = Materials(self, config)

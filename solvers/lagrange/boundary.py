@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from orchestrator.expressions import compile_expression
+from solvers.expressions import compile_expression
 from solvers.lagrange.nodal import rigid_wall
 
 AXES = {"x": 0, "y": 1, "z": 2}

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -23,6 +24,9 @@ __all__ = [
     "Mesh",
     "MeshError",
     "box_mesh",
+    "box_axes",
+    "body_mesh",
+    "body_mesh_size",
     "quarter_disk_mesh",
     "quarter_cylinder_mesh",
     "extrude",
@@ -153,6 +157,14 @@ def _orient(points: np.ndarray, cells: np.ndarray) -> tuple[np.ndarray, np.ndarr
 
 
 # ----------------------------------------------------------------------------- generators
+def box_axes(lower, upper, cells) -> list[np.ndarray]:
+    """Node coordinates along each axis of a box mesh: node (i, j[, k]) of box_mesh is
+    (axes[0][i], axes[1][j][, axes[2][k]]) exactly."""
+    lo = np.asarray(lower, dtype=np.float64)
+    hi = np.asarray(upper, dtype=np.float64)
+    return [np.linspace(lo[k], hi[k], int(cells[k]) + 1) for k in range(lo.size)]
+
+
 def box_mesh(lower: Sequence[float], upper: Sequence[float], cells: Sequence[int]) -> Mesh:
     """Structured box [lower, upper] with ``cells`` cells per direction (2D if len(lower)==2).
 
@@ -171,7 +183,7 @@ def box_mesh(lower: Sequence[float], upper: Sequence[float], cells: Sequence[int
         raise MeshError(f"box_mesh cells must be integers >= 1, got {list(cells)}")
     nc = nc.astype(np.int64)
     n1 = nc + 1
-    axes = [np.linspace(lo[k], hi[k], n1[k]) for k in range(d)]
+    axes = box_axes(lo, hi, nc)
     grids = np.meshgrid(*axes, indexing="ij")
     points = np.stack([g.ravel(order="F") for g in grids], axis=1)
 
@@ -353,6 +365,45 @@ def read_mesh(path, dim: int) -> Mesh:
         raise MeshError(f"{path.name}: {int(bad.sum())} degenerate {wanted} cell(s) "
                         f"(zero volume), e.g. cell {int(np.argmax(bad))}")
     return Mesh(points, cells)
+
+
+def body_mesh(spec: dict, dim: int) -> Mesh:
+    """The mesh of one body of the case (``spec``: an entry of ``lagrange.bodies``): the solver's
+    nodes, and the points ``immerse check`` evaluates the body's expressions on."""
+    m = spec["mesh"]
+    if "box" in m:
+        b = m["box"]
+        return box_mesh(b["lower"], b["upper"], b["cells"])
+    if "quarter_cylinder" in m:
+        q = m["quarter_cylinder"]
+        return quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
+    return read_mesh(m["file"], dim)
+
+
+def _core_cells(radial_cells: int, core_fraction: float = 0.5) -> int:
+    """m of quarter_disk_mesh: core cells per side (Python ints: exact for any size)."""
+    n = int(radial_cells)
+    m = (n + 1) // 2 if core_fraction == 0.5 else int(math.floor(core_fraction * n + 0.5))
+    return min(max(m, 1), n - 1)
+
+
+def body_mesh_size(spec: dict) -> tuple[int, int] | None:
+    """(cells, nodes) of the generated mesh of a body (box or quarter_cylinder) without building
+    it, in Python integers (no overflow however large); None for a mesh file (known after reading).
+    The counts follow box_mesh and quarter_disk_mesh/extrude exactly (tests compare them)."""
+    m = spec["mesh"]
+    if "box" in m:
+        cells = [int(c) for c in m["box"]["cells"]]
+        return math.prod(cells), math.prod(c + 1 for c in cells)
+    if "quarter_cylinder" in m:
+        q = m["quarter_cylinder"]
+        n, layers = int(q["radial_cells"]), int(q["axial_cells"])
+        core = _core_cells(n)
+        ring = n - core
+        cells2d = core * core + ring * 2 * core
+        nodes2d = (core + 1) ** 2 + ring * (2 * core + 1)
+        return cells2d * layers, nodes2d * (layers + 1)
+    return None
 
 
 # ----------------------------------------------------------------------------- utilities

@@ -18,26 +18,15 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from orchestrator.expressions import compile_expression
+from solvers.expressions import compile_expression
 from solvers.lagrange import kernels, materials, nodal
 from solvers.lagrange.boundary import BoundaryConditions
-from solvers.lagrange.mesh import box_mesh, cell_volumes, concatenate, quarter_cylinder_mesh, read_mesh
+from solvers.lagrange.mesh import body_mesh, cell_volumes, concatenate
 from solvers.lagrange.partition import partition
 
 
 class SolverError(RuntimeError):
     """A physical failure (inverted element, NaN) with the element, step and time named."""
-
-
-def body_mesh(spec: dict, dim: int):
-    m = spec["mesh"]
-    if "box" in m:
-        b = m["box"]
-        return box_mesh(b["lower"], b["upper"], b["cells"])
-    if "quarter_cylinder" in m:
-        q = m["quarter_cylinder"]
-        return quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
-    return read_mesh(m["file"], dim)
 
 
 def _material_table(case: dict):

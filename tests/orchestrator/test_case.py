@@ -1,6 +1,7 @@
 """Tests of orchestrator.case: valid cases load with the right defaults, every bad case
 directory fails with a one-line CaseError on the exact dotted key."""
 
+import os
 import pickle
 import shutil
 from pathlib import Path
@@ -17,7 +18,7 @@ from orchestrator.case import (
     solvers_used,
 )
 from orchestrator.case_schema import CASE_SCHEMA, MODEL_KEYS
-from orchestrator.expressions import compile_expression
+from solvers.expressions import compile_expression
 
 HERE = Path(__file__).parent
 VALID = HERE / "valid_cases"
@@ -399,3 +400,161 @@ def test_schema_is_draft_2020_12_and_closed():
             tables += 1
             assert node.get("additionalProperties") is False, path
     assert tables >= 10
+
+
+# --------------------------------------------------------------------------- issue 7: hostile input
+@pytest.mark.parametrize("old, new, key", [
+    ("end_time = 2.0e-5", "end_time = nan", "run.end_time"),
+    ("end_time = 2.0e-5", "end_time = inf", "run.end_time"),
+    ("dt_scale = 0.8", "dt_scale = nan", "run.dt_scale"),                    # nan <= 1 is false too
+    ("hourglass = 0.05", "hourglass = -nan", "lagrange.hourglass"),
+    ("youngs_modulus = 5e6", "youngs_modulus = inf", "materials.rubber.youngs_modulus"),
+    ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, nan, 1.0]", "boundaries[3].normal[1]"),
+    ("velocity = { y = 0.0 }", "velocity = { y = -inf }", "boundaries[2].velocity.y"),
+    ("tolerance = 0.01", "tolerance = inf", "check.metrics.total_momentum_z.tolerance"),
+    ("samples = [1, 2, 3]", "samples = [1, 2, nan]", "check.params.samples[2]"),
+])
+def test_non_finite_numbers_are_refused_anywhere(tmp_path, old, new, key):
+    with pytest.raises(CaseError) as ei:
+        load_case(_edited(tmp_path, old, new))
+    assert ei.value.key == key and ei.value.allowed == "must be a finite number (not nan or inf)"
+    assert_one_line(ei.value)
+
+
+def test_a_key_may_allow_non_finite_numbers(tmp_path, monkeypatch):
+    import orchestrator.case as C
+
+    d = _edited(tmp_path, "tolerance = 0.01", "tolerance = 0.01\nreference_max = inf")
+    with pytest.raises(CaseError):
+        load_case(d)  # unknown key first (the schema runs before the finite rule)
+    d = _edited(tmp_path / "b", "samples = [1, 2, 3]", "samples = [1, 2, inf]")
+    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("check.params.samples[]",))
+    assert load_case(d)["check"]["params"]["samples"][2] == float("inf")
+    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("check.params.*",))
+    with pytest.raises(CaseError):  # '*' is one table key, not an index
+        load_case(d)
+
+
+@pytest.mark.parametrize("old, new, key, fragment", [
+    ("end_time = 2.0e-5", "end_time = 2.0e-5\noutput_interval = 1e-300", "run.output_interval",
+     "more than run.max_steps = 10000000"),
+    ("checkpoint_interval = 1.0e-5", "checkpoint_interval = 1e-14", "run.checkpoint_interval",
+     "2e+09 checkpoints"),
+    ("lower = [0.0, 0.0, 0.0], upper = [0.004, 0.004, 0.02]", "lower = [-1e308, 0.0, 0.0], upper = [1e308, 0.004, 0.02]",
+     "lagrange.bodies[0].mesh.box.upper", "overflows"),
+    ("lower = [0.0, 0.0, 0.0], upper = [0.004, 0.004, 0.02]", "lower = [0.0, 0.0, 0.0], upper = [1e-110, 1e-110, 1e-110]",
+     "lagrange.bodies[0].mesh.box.cells", "underflows"),
+    ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, 0.0, 1e200]", "boundaries[3].normal", "finite float"),
+    ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, 0.0, 1e-200]", "boundaries[3].normal", "non-zero"),
+    ("density = 1100", "density = 1e-305", "materials.rubber.youngs_modulus", "wave speed"),
+    ('initial_velocity = [0.0, 0.0, "-190.0 * where(z > 0.001, 1, 0.5)"]',
+     'initial_velocity = [0.0, 0.0, "9**9**9**9"]', "lagrange.bodies[0].initial_velocity[2]", "'9**9**9' = inf"),
+])
+def test_finite_but_absurd_numbers(tmp_path, old, new, key, fragment):
+    with pytest.raises(CaseError) as ei:
+        load_case(_edited(tmp_path, old, new))
+    assert ei.value.key == key and fragment in ei.value.allowed, str(ei.value)
+    assert_one_line(ei.value)
+
+
+def test_case_file_that_is_not_a_regular_file_or_too_big(tmp_path):
+    import os
+
+    from orchestrator.case import MAX_CASE_BYTES
+
+    fifo = tmp_path / "fifo"
+    fifo.mkdir()
+    os.mkfifo(fifo / "case.toml")                 # no writer: a blocking open would hang
+    with pytest.raises(CaseError, match="is a FIFO"):
+        load_case(fifo)
+    with pytest.raises(CaseError, match="is a FIFO"):
+        load_case(fifo / "case.toml")
+    dev = tmp_path / "dev"
+    dev.mkdir()
+    (dev / "case.toml").symlink_to("/dev/zero")
+    with pytest.raises(CaseError, match="is a character device"):
+        load_case(dev)
+    big = tmp_path / "big"
+    big.mkdir()
+    text = (VALID / "box2d" / "case.toml").read_text()
+    (big / "case.toml").write_text(text + "#" * (MAX_CASE_BYTES - len(text) - 1) + "\n")
+    assert load_case(big)["name"] == "big"        # exactly the limit: read
+    with open(big / "case.toml", "a") as f:
+        f.write("#")
+    with pytest.raises(CaseError) as ei:
+        load_case(big)
+    assert "must be a regular TOML file of at most 256 KiB" in ei.value.allowed
+
+
+def test_nesting_beyond_the_recursion_limit(tmp_path):
+    (tmp_path / "case.toml").write_text("[run]\ndimension = 2\nx = " + "[" * 5000 + "]" * 5000 + "\n")
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == "case.toml" and "nested too deeply" in ei.value.allowed
+
+
+def test_first_schema_error_in_file_order(tmp_path):
+    text = (VALID / "box2d" / "case.toml").read_text()
+    (tmp_path / "case.toml").write_text(text.replace("[run]\n", "[run]\nbogus1 = 1\nbogus2 = 2\n"))
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == "run.bogus1"
+
+
+def _file_case(tmp_path, mesh_path, name="case"):
+    d = tmp_path / name
+    d.mkdir()
+    (d / "case.toml").write_text((VALID / "file3d" / "case.toml").read_text().replace(
+        'file = "column.msh"', f"file = {str(mesh_path)!r}"))
+    return d
+
+
+def test_mesh_paths_stay_inside_the_case_directory(tmp_path, monkeypatch):
+    from orchestrator.case import ALLOW_PATH_ENV
+
+    monkeypatch.delenv(ALLOW_PATH_ENV, raising=False)
+    library = tmp_path / "library"
+    library.mkdir()
+    shutil.copy(VALID / "file3d" / "column.msh", library / "column.msh")
+    for name, path in [("up", "../library/column.msh"), ("abs", library / "column.msh"),
+                       ("etc", "../../../../../../../../etc/passwd")]:
+        d = _file_case(tmp_path, path, name)
+        with pytest.raises(CaseError) as ei:
+            load_case(d)
+        assert ei.value.key == "lagrange.bodies[0].mesh.file" and "outside the case directory" in ei.value.allowed
+    link = _file_case(tmp_path, "column.msh", "link")
+    (link / "column.msh").symlink_to(library / "column.msh")     # a symlink is followed first
+    with pytest.raises(CaseError, match="outside the case directory"):
+        load_case(link)
+    inside = _file_case(tmp_path, "meshes/../sub/column.msh", "inside")   # '..' that stays inside
+    (inside / "sub").mkdir()
+    shutil.copy(library / "column.msh", inside / "sub" / "column.msh")
+    assert load_case(inside)["lagrange"]["bodies"][0]["size"] == {"elements": 2, "nodes": 12}
+    # an explicit allowed root: $IMMERSE_ALLOW_PATH (inherited by the ranks)
+    monkeypatch.setenv(ALLOW_PATH_ENV, f"{tmp_path / 'nowhere'}{os.pathsep}{library}")
+    for name in ("up", "abs", "link"):
+        assert load_case(tmp_path / name)["lagrange"]["bodies"][0]["mesh"]["file"] == (library / "column.msh").resolve()
+    with pytest.raises(CaseError, match=f"or {tmp_path / 'nowhere'}, {library}"):
+        load_case(tmp_path / "etc")
+
+
+def test_mesh_files_that_are_not_regular_or_too_big(tmp_path, monkeypatch):
+    import orchestrator.resources as R
+
+    d = _file_case(tmp_path, "column.msh")
+    os.mkfifo(d / "column.msh")
+    with pytest.raises(CaseError, match="is a FIFO"):
+        load_case(d)
+    (d / "column.msh").unlink()
+    shutil.copy(VALID / "file3d" / "column.msh", d / "column.msh")    # 990 bytes
+    assert load_case(d)["lagrange"]["bodies"][0]["size"] == {"elements": 2, "nodes": 12}
+    monkeypatch.setattr(R, "machine_memory", lambda: 7 * 900)          # reading needs ~7x the size
+    with pytest.raises(CaseError) as ei:
+        load_case(d)
+    assert "reading it takes about 7 times that, this machine has 6.15 KiB" in ei.value.allowed
+
+
+def test_body_sizes(tmp_path):
+    case = load_case(VALID / "box3d")
+    assert [b["size"] for b in case["lagrange"]["bodies"]] == [{"elements": 32, "nodes": 3 * 3 * 9},
+                                                               {"elements": 4, "nodes": 3 * 3 * 2}]
