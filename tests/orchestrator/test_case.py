@@ -437,7 +437,7 @@ def test_a_key_may_allow_non_finite_numbers(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("old, new, key, fragment", [
     ("end_time = 2.0e-5", "end_time = 2.0e-5\noutput_interval = 1e-300", "run.output_interval",
-     "more than run.max_steps = 10000000"),
+     "more than 1,000,000"),
     ("checkpoint_interval = 1.0e-5", "checkpoint_interval = 1e-14", "run.checkpoint_interval",
      "2e+09 checkpoints"),
     ("lower = [0.0, 0.0, 0.0], upper = [0.004, 0.004, 0.02]", "lower = [-1e308, 0.0, 0.0], upper = [1e308, 0.004, 0.02]",
