@@ -24,11 +24,12 @@ from tests.conftest import immerse as _immerse
 
 
 def bar_case(where: Path, name="bar", **replace) -> Path:
-    """elastic_bar_wave cut to 5 outputs (a few seconds)."""
+    """elastic_bar_wave cut to 5 outputs (a few seconds), without its [check]: these tests are about
+    the output directory, and the check's tolerances are set for the full 16 us."""
     case = where / name
     shutil.copytree(CASES / "elastic_bar_wave", case, ignore=shutil.ignore_patterns("out"))
     text = (case / "case.toml").read_text().replace("end_time = 16.0e-6", "end_time = 4.0e-6")
-    text = text.replace("until_time = 16.0e-6", "until_time = 4.0e-6")
+    text = text[:text.index("[check]")]
     for a, b in replace.items():
         assert a in text, a
         text = text.replace(a, b)
