@@ -457,9 +457,9 @@ def time_outputs(n_outputs: int, tmp: Path) -> dict:
         index.append(i, ["lagrange"])
         step_s.append(t1 - t0)
         index_s.append(time.perf_counter() - t1)
-    # the appended index must equal the one rebuilt from the step files (the recovery path)
+    # the appended index must equal the one rebuilt from every step file
     appended = _index_contents(out)
-    output.write_index(out)
+    output.OutputIndex(out)
     if _index_contents(out) != appended:
         raise RuntimeError(f"appended index of {n_outputs} outputs differs from the rebuilt one")
     return {"step": np.array(step_s), "index": np.array(index_s)}

@@ -47,18 +47,21 @@ attributes and shapes:
   Every intermediate state (also a partly written G, or a write torn at any byte) is one
   well-formed document: G never contains "?>" (ElementTree escapes ">" in text and attributes),
   "<?" inside a PI is plain content, and the target name is always followed by a space (a torn
-  step 3 leaves "<?immerse-append ? G...", still one PI). A test replays every torn state. The fdatasync orders step 3 after steps 1-2 on disk
-  (power loss). When the room is used up the whole file is rewritten atomically (temporary
-  file + rename) with a room as large as what the collection holds (at least 64 kB), so
-  rewrites get geometrically rarer and the amortised cost per output stays constant.
+  step 3 leaves "<?immerse-append ? G...", still one PI); a test replays every torn state. The
+  fdatasync orders step 3 after steps 1-2 on disk (power loss). When the room is used up the
+  whole file is rewritten atomically (temporary file + rename) with a room as large as what the
+  collection holds (at least 64 kB), so rewrites get geometrically rarer and the amortised cost
+  per output stays constant.
   ParaView 5.11's three XDMF readers (XDMF Reader, Xdmf3ReaderS, Xdmf3ReaderT) and
   ElementTree/meshio ignore the processing instructions (tests/orchestrator/test_paraview.py).
   XInclude of per-step files was tried and rejected: the Xdmf3 readers do not follow it.
+* results.xdmf is always written before results.h5, so a results.h5 that lists a step means
+  results.xdmf has it too.
 
-:func:`write_index` is the recovery path: it scans out/steps, re-reads every step file and
-rewrites both files atomically (the launcher calls it after a run; it yields the same index as
-the appends: tests/orchestrator/test_output.py). ``immerse bench output`` measures the cost per
-output at 10, 100 and 1000 outputs.
+:func:`write_index` is the recovery path (the launcher calls it after a run): unless the index
+already lists exactly the step files on disk, it re-reads every step file and rewrites both files
+atomically; it yields the same index as the appends (tests/orchestrator/test_output.py).
+``immerse bench output`` measures the cost per output at 10, 100 and 1000 outputs.
 
 External links are stored relative to results.h5 ("steps/<file>"); HDF5 resolves a
 relative external link in the directory of the parent file before trying the current
@@ -454,8 +457,8 @@ class OutputIndex:
             if role in meshes:
                 entry.mesh = _describe_mesh(meshes[role])
                 entry.mesh_file = meshes[role].name if entry.mesh is not None else None
-        self._write_h5()
         self._write_xdmf()
+        self._write_h5()  # second: a results.h5 that lists a step means results.xdmf has it
 
     @property
     def paths(self) -> tuple[Path, Path]:
@@ -494,11 +497,11 @@ class OutputIndex:
                 entry.steps.append(row)
             added.append(role)
         if rewrite or (added and not (self.out / INDEX_H5).is_file()):
-            self._write_h5()
             self._write_xdmf()
+            self._write_h5()
         elif added:
-            self._append_h5(added)
             self._append_xdmf(added)
+            self._append_h5(added)  # second, as in __init__
         return added
 
     # ---- results.h5 -----------------------------------------------------------------------------
@@ -628,10 +631,47 @@ class OutputIndex:
 
 
 def write_index(out_dir) -> tuple[Path, Path]:
-    """Scan out/steps, re-read every step file and rewrite out/results.h5 and out/results.xdmf
-    atomically: the recovery path (e.g. after a failed run); a running job appends with an
-    :class:`OutputIndex` instead."""
-    return OutputIndex(out_dir).paths
+    """Make out/results.h5 and out/results.xdmf index the step files on disk: the recovery path
+    (the launcher calls it after a run; a running job appends with an :class:`OutputIndex`).
+
+    An index the appends completed is left as it is: results.h5 lists exactly the step and mesh
+    files on disk and none of them is newer than it (checked from the directory listing, without
+    reading the step files; results.h5 is written after results.xdmf, so that one is complete
+    too). Otherwise both files are rebuilt atomically from every step file."""
+    out_dir = Path(out_dir)
+    if not _index_is_current(out_dir):
+        OutputIndex(out_dir)
+    return out_dir / INDEX_H5, out_dir / INDEX_XDMF
+
+
+def _index_is_current(out_dir: Path) -> bool:
+    h5, xdmf = out_dir / INDEX_H5, out_dir / INDEX_XDMF
+    try:
+        written = h5.stat().st_mtime_ns
+        if not xdmf.is_file():
+            return False
+        listed = {}
+        with h5py.File(h5, "r") as f:
+            for role in f:
+                g = f[role]
+                listed[role] = (sorted(int(i) for i in g["indices"][()]), "mesh" in g)
+    except (OSError, KeyError, ValueError, TypeError):
+        return False
+    steps, meshes = {}, set()
+    sdir = out_dir / STEPS_DIR
+    entries = list(os.scandir(sdir)) if sdir.is_dir() else []
+    for entry in entries:
+        m = _STEP_RE.match(entry.name)
+        if m:
+            steps.setdefault(m["role"], []).append(int(m["index"]))
+        elif _MESH_RE.match(entry.name):
+            meshes.add(entry.name[: -len("_mesh.h5")])
+        else:
+            continue
+        if entry.stat().st_mtime_ns > written:
+            return False
+    on_disk = {r: (sorted(steps.get(r, [])), r in meshes) for r in set(steps) | meshes}
+    return on_disk == listed
 
 
 # ----------------------------------------------------------------------------- readers

@@ -425,7 +425,7 @@ def test_append_equals_rebuild(tmp_path):
         appended = index_contents(out)
         shutil.rmtree(rebuilt, ignore_errors=True)
         shutil.copytree(out, rebuilt)
-        write_index(rebuilt)
+        OutputIndex(rebuilt)  # the full rescan (write_index would find the index complete)
         assert index_contents(rebuilt) == appended, f"after output {i}"
     assert [s[2] for s in read_steps(out, "lagrange")] == [0, 1, 2, 3, 4, 5, 6]
     assert [s[2] for s in read_steps(out, "ale")] == [1, 2, 3, 4, 5, 6]
@@ -436,9 +436,47 @@ def test_append_equals_rebuild(tmp_path):
     write_step(out, "lagrange", 7, 70, 3.5, hexes.points, pd, cd)
     index.append(7, ["lagrange", "ale"])
     appended = index_contents(out)
-    write_index(out)
+    OutputIndex(out)
     assert index_contents(out) == appended
     assert read_steps(out, "lagrange")[-1] == (3.5, 70, 7)
+
+
+def test_write_index_rebuilds_only_what_is_not_indexed(tmp_path, monkeypatch):
+    """The recovery path leaves a complete index alone (a successful run: no step file re-read),
+    and rebuilds it when a step file is not indexed, is gone, or was written after the index."""
+    out = tmp_path / "out"
+    mesh = box_mesh([0, 0, 0], [1, 1, 1], [2, 1, 1])
+    write_mesh(out, ROLE, mesh.cells, mesh.cell_type)
+    index = OutputIndex(out)
+    for i in range(4):
+        pd, cd = fields(mesh, i)
+        write_step(out, ROLE, i, 10 * i, 0.5 * i, mesh.points, pd, cd)
+        index.append(i, [ROLE])
+    described = []
+    describe = output._describe_step
+    monkeypatch.setattr(output, "_describe_step", lambda path: described.append(path.name) or describe(path))
+    before = index_contents(out)
+    write_index(out)
+    assert described == [] and index_contents(out) == before
+    # a step the coupler had no time to index (killed between the step file and the append)
+    pd, cd = fields(mesh, 4)
+    write_step(out, ROLE, 4, 40, 2.0, mesh.points, pd, cd)
+    write_index(out)
+    assert len(described) == 5 and [s[2] for s in read_steps(out, ROLE)] == [0, 1, 2, 3, 4]
+    # a step file gone (a restart drops the steps it writes again)
+    step_path(out, ROLE, 4).unlink()
+    write_index(out)
+    assert [s[2] for s in read_steps(out, ROLE)] == [0, 1, 2, 3]
+    # a step file written again after the index (a later modification time)
+    time.sleep(0.01)
+    write_step(out, ROLE, 3, 31, 1.55, mesh.points, pd, cd)
+    write_index(out)
+    assert read_steps(out, ROLE)[-1] == (1.55, 31, 3)
+    check_xdmf(out / INDEX_XDMF, expected_times=[0.0, 0.5, 1.0, 1.55])
+    # an unreadable results.h5 is rebuilt too
+    (out / INDEX_H5).write_bytes(b"not hdf5")
+    write_index(out)
+    assert read_steps(out, ROLE)[-1] == (1.55, 31, 3)
 
 
 def test_append_reads_only_the_new_step(tmp_path, monkeypatch):
