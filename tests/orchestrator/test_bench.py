@@ -55,5 +55,5 @@ def test_bench_output_quick(tmp_path):
     assert all(x["unit"] == "ms" and x["value"] > 0 and x["params"]["index_append_ms"] > 0 for x in per_output)
     walls = [x for x in res if x["name"] == "elastic_bar_wave" and x["metric"] == "wall_time"]
     assert [x["params"]["output_steps"] for x in walls] == [13, 49]  # output_interval end/12, end/48, and t = 0
-    extra = next(x for x in res if x["metric"] == "wall_time_per_extra_output")
+    extra = next(x for x in res if x["metric"] == "wall_time_per_extra_output")  # one for each pair of runs
     assert extra["params"]["outputs"] == [13, 49] and "write_time_per_output_ms" in extra["params"]
