@@ -57,6 +57,11 @@ class LagrangeAdapter(SolverAdapter):
         X = s.gather_nodes(s.X)
         cells = {k: s.gather_cells(a) for k, a in s.cell_fields().items()}
         if self.comm.rank == 0:
+            # scalars of the stress for ParaView users (no calculator needed); pressure = -trace/3
+            cells["von_mises_stress"] = output.von_mises(cells["stress"])
+            cells["pressure"] = output.pressure(cells["stress"])
+            # points are the deformed coordinates; displacement is for colouring (README: Warp By
+            # Vector with it would deform twice)
             output.write_step(
                 self.out_dir, self.role, index, step, time, _pad3(x),
                 point_data={"velocity": _pad3(v), "displacement": _pad3(x - X)},

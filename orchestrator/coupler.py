@@ -2,13 +2,14 @@
 
 Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land on
 end_time), commands every group to advance, and collects their next stable step and diagnostics.
-It decides when to write output (then rebuilds the XDMF/HDF5 index) and checkpoints, keeps the
+It decides when to write output (then appends to the XDMF/HDF5 index) and checkpoints, keeps the
 diagnostics history and, at the end, writes summary.json with the case's own check.
 Constraint coupling between groups (Lagrange multipliers) slots in between predict and correct.
 """
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import signal
@@ -96,12 +97,19 @@ class Coupler:
 
     # ---- output and checkpoints ----------------------------------------------------------------
     def write_output(self) -> None:
-        from orchestrator import output
-
+        index = self.output_index  # (built on first use, before this output's files exist)
         self._broadcast(P.command(P.CMD_WRITE, step=self.step, time=self.t, index=self.out_index))
         self._receive_all()
-        output.write_index(self.out)
+        index.append(self.out_index, self.roles)  # a cost independent of the outputs before
         self.out_index += 1
+
+    @functools.cached_property
+    def output_index(self):
+        """The output index held in memory for the whole run, built once from the files on disk
+        (on restart: the steps before the checkpoint)."""
+        from orchestrator import output
+
+        return output.OutputIndex(self.out)
 
     def checkpoint(self) -> None:
         self._broadcast(P.command(P.CMD_CHECKPOINT, step=self.step, time=self.t))

@@ -40,3 +40,20 @@ def test_bench_advect_quick(tmp_path):
     assert all(x["params"]["interface_position_error_cells"] <= 2.0 for x in wa)
     ball = {x["params"]["materials"]: x for x in res if x["name"] == "advected_ball_3d"}
     assert set(ball) == {"one_material", "two_materials"} and ball["two_materials"]["params"]["mixed_zone_share"] > 0
+
+
+def test_bench_output_quick(tmp_path):
+    """The output bench: per-output cost at 10 and 100 outputs (the bench itself fails if the
+    appended index differs from the one rebuilt from the step files) and the bar wave's wall time
+    at two output counts; timings are reported, not asserted."""
+    out = tmp_path / "bench-output.json"
+    r = immerse("bench", "output", "--quick", "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(out.read_text())["results"]
+    per_output = [x for x in res if x["metric"] == "time_per_output"]
+    assert [x["params"]["outputs"] for x in per_output] == [10, 100]
+    assert all(x["unit"] == "ms" and x["value"] > 0 and x["params"]["index_append_ms"] > 0 for x in per_output)
+    walls = [x for x in res if x["name"] == "elastic_bar_wave" and x["metric"] == "wall_time"]
+    assert [x["params"]["output_steps"] for x in walls] == [13, 49]  # output_interval end/12, end/48, and t = 0
+    extra = next(x for x in res if x["metric"] == "wall_time_per_extra_output")  # one for each pair of runs
+    assert extra["params"]["outputs"] == [13, 49] and "write_time_per_output_ms" in extra["params"]
