@@ -172,12 +172,16 @@ class Coupler:
     # ---- the time loop ---------------------------------------------------------------------------
     def _next_target(self) -> float:
         """The next time the run must land on exactly: the end, the next output time
-        out_index * output_interval, or the next checkpoint time ckpt_index * checkpoint_interval."""
-        target = self.end_time
-        if self.out_index * self.output_interval > self.t:
-            target = min(target, self.out_index * self.output_interval)
-        if self.checkpoint_interval and self.ckpt_index * self.checkpoint_interval > self.t:
-            target = min(target, self.ckpt_index * float(self.checkpoint_interval))
+        out_index * output_interval, or the next checkpoint time ckpt_index * checkpoint_interval.
+        Times within round-off (1e-12 relative) of the end or of the current time are not targets
+        of their own: 20 * 4e-6 is one ulp below 8e-5, and a step to it would leave a 1e-20 s sliver."""
+        end = self.end_time
+        target = end
+        for k, interval in ((self.out_index, self.output_interval), (self.ckpt_index, self.checkpoint_interval)):
+            if interval:
+                tk = k * float(interval)
+                if self.t * (1 + 1e-12) < tk < end * (1 - 1e-12):
+                    target = min(target, tk)
         return target
 
     def run(self) -> dict:
@@ -250,6 +254,7 @@ class Coupler:
         final = {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")}
         s = {
             "case": self.case["name"],
+            "case_dir": str(self.case["case_dir"]),
             "wall_time_s": wall,
             "first_step_s": self.first_step_s,
             "steps": self.step,
