@@ -127,7 +127,7 @@ def scalar_field(name: str, values) -> tuple[str, np.ndarray]:
     if a.shape[1] == 1:
         return name, a[:, 0]
     if a.shape[1] in (6, 9):
-        return f"{name} (von Mises)", _tensor_von_mises(a)
+        return f"{name}, von Mises", _tensor_von_mises(a)
     return f"{name} magnitude", np.linalg.norm(a, axis=1)
 
 
@@ -291,7 +291,7 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
         lo, hi = lo - pad, hi + pad
     font = max(6, round(window_size[0] / 70))
     small = window_size[0] < 600
-    edges = grid.n_cells <= 20_000 if show_edges is None else show_edges
+    edges = grid.n_cells <= 5_000 if show_edges is None else show_edges  # denser: edges hide the colours
     bar_title = with_unit(label, field)
     plotter = pv.Plotter(off_screen=True, window_size=list(window_size))
     try:
@@ -301,15 +301,21 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
                          scalar_bar_args={"title": bar_title, "color": "black",
                                           "fmt": "%.3g", "n_labels": 3 if small else 5,
                                           "title_font_size": font, "label_font_size": font,
-                                          "position_x": 0.2, "width": 0.6})
+                                          "position_x": 0.2, "position_y": 0.07, "width": 0.6,
+                                          "height": 0.05})
+        # tick labels below the bar, the title above it: they overlapped on the same side
+        plotter.scalar_bar.SetTextPositionToPrecedeScalarBar()
         plotter.add_text(title, position="upper_left", font_size=font, color="black")
+        # coordinate axes with units along the bounds: two labels each (ends) keep them readable
         plotter.show_bounds(xtitle="x (m)", ytitle="y (m)", ztitle="z (m)", color="black",
-                            font_size=font, fmt="%.3g", grid=False, location="outer",
-                            n_xlabels=3, n_ylabels=3, n_zlabels=3, show_zaxis=not planar)
+                            font_size=font, fmt="%.3g", grid=False, location="outer", ticks="outside",
+                            n_xlabels=2, n_ylabels=2, n_zlabels=2, show_zaxis=not planar,
+                            show_zlabels=not planar)
         if planar:
             plotter.view_xy()
         else:
             plotter.view_isometric()
+        plotter.camera.zoom(0.75)  # room for the axis titles, the text and the colour bar
         plotter.screenshot(str(path))
     except Exception as e:
         raise RuntimeError(f"rendering {path.name} failed: {e}; VTK said: {sink.GetOutput().strip()}") from e
