@@ -202,7 +202,8 @@ class Coupler:
             # clip the step to land exactly on the end, output and checkpoint times (never stretch
             # it: the stable step is a limit), so that profiles are written at the stated times
             target = self._next_target()
-            if self.t + dt >= target * (1 - 1e-12):
+            clipped = self.t + dt >= target * (1 - 1e-12)
+            if clipped:
                 dt, t_new = target - self.t, target
             else:
                 t_new = self.t + dt
@@ -212,8 +213,9 @@ class Coupler:
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
             self._receive_all()
             self.t = t_new
-            self.dt_min = min(self.dt_min, dt)
-            self.dt_max = max(self.dt_max, dt)
+            if not clipped:  # dt statistics of the steps the stability limit set
+                self.dt_min = min(self.dt_min, dt)
+                self.dt_max = max(self.dt_max, dt)
             if self.first_step_s is None:
                 self.first_step_s = process_age_s()
                 if self.first_step_s is not None:
