@@ -123,3 +123,20 @@ def _reflected_shock(case: dict, params: dict, t: float) -> ExactProfile:
         return {"density": rho, "velocity": u, "pressure": p}
 
     return ExactProfile(_axis(params), "exact (reflected shock)", sample)
+
+
+@register_profile("bar_wave")
+def _bar_wave(case: dict, params: dict, t: float) -> ExactProfile:
+    """A bar along x struck at x = 0 (the bar_wave check): the elastic 1-D bar wave, front at c t with
+    c = sqrt(E / rho) of the first body's material, behind it the compression `expected_amplitude`
+    and the particle velocity amplitude / (rho c)."""
+    body = case["lagrange"]["bodies"][0]
+    mat = case["materials"][body["material"]]
+    rho, c = float(mat["density"]), float(np.sqrt(mat["youngs_modulus"] / mat["density"]))
+    amp = abs(float(params["expected_amplitude"]))
+
+    def sample(x):
+        behind = np.asarray(x, np.float64) < c * t
+        return {"stress": np.where(behind, -amp, 0.0), "velocity": np.where(behind, amp / (rho * c), 0.0)}
+
+    return ExactProfile(0, "exact (1-D bar wave)", sample)

@@ -221,7 +221,8 @@ def line_profile(out_dir, role: str, field: str, index: int, axis: int, case=Non
         label, v = _axial(field, cd[field], axis)
         x, vals = _stations(points0[cells].mean(axis=1)[:, axis], points[cells].mean(axis=1)[:, axis], v)
     prof = LineProfile(role, field, axis, time, step, x, vals, label)
-    if case is not None and label in (field, f"{field} {_AXES[axis]}"):
+    c = _AXES[axis]
+    if case is not None and label in (field, f"{field} {c}", f"{field} {c}{c}"):
         from orchestrator.exact_profiles import exact_profile
 
         try:

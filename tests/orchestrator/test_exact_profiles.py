@@ -12,7 +12,7 @@ from solvers.ale.exact.riemann import RiemannSolution
 
 
 def test_registry_is_keyed_by_check_kinds():
-    assert set(PROFILES) == {"riemann", "piston", "reflected_shock"}
+    assert set(PROFILES) == {"riemann", "piston", "reflected_shock", "bar_wave"}
     assert set(PROFILES) <= set(checks.CHECKS)
     assert exact_profile({"check": {"kind": "taylor_bar"}}, 1.0) is None
     assert exact_profile({"check": None}, 1.0) is None
@@ -75,3 +75,14 @@ def test_reflected_shock_profile():
 def test_bad_params_raise():
     with pytest.raises(KeyError):
         exact_profile({"check": {"kind": "riemann", "params": {}}}, 0.1)
+
+
+def test_bar_wave_profile():
+    """c = sqrt(E / rho) = 5000 m/s; behind the front sigma_xx = -4e7 Pa and v = sigma / (rho c) = 1 m/s."""
+    case = {"lagrange": {"bodies": [{"material": "steel"}]},
+            "materials": {"steel": {"density": 8000.0, "youngs_modulus": 200e9}},
+            "check": {"kind": "bar_wave", "params": {"expected_amplitude": 4.0e7}}}
+    prof = exact_profile(case, 10e-6)
+    got = prof.sample(np.array([0.0, 0.049, 0.051, 0.1]))
+    np.testing.assert_array_equal(got["stress"], [-4e7, -4e7, 0.0, 0.0])
+    np.testing.assert_allclose(got["velocity"], [1.0, 1.0, 0.0, 0.0], rtol=1e-15)
