@@ -1,7 +1,8 @@
 """The coupler: rank 0 of the job, owner of the time loop.
 
-Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land on
-end_time), commands every group to advance, and collects their next stable step and diagnostics.
+Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land
+exactly on every output time k * output_interval, every checkpoint time and end_time), commands
+every group to advance, and collects their next stable step and diagnostics.
 It decides when to write output (then rebuilds the XDMF/HDF5 index) and checkpoints, keeps the
 diagnostics history and, at the end, writes summary.json with the case's own check.
 Constraint coupling between groups (Lagrange multipliers) slots in between predict and correct.
