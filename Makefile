@@ -4,6 +4,11 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 STAMP  := $(VENV)/.installed
+# numba compiles the solver kernels on first use (~20 s) and caches them by source content next to the
+# sources (or under NUMBA_CACHE_DIR): compile them here, once, and again whenever a solver changes.
+# The stamp lives with the cache, so deleting the cache (__pycache__) re-warms too.
+WARM   := $(or $(NUMBA_CACHE_DIR),solvers/__pycache__)/.immerse-kernels-warm
+KERNEL_SOURCES := $(shell find solvers -name '*.py') orchestrator/warmup.py
 # One thread per MPI rank so ranks do not oversubscribe the cores.
 export NUMBA_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
@@ -18,7 +23,12 @@ $(STAMP): requirements.txt pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-venv: $(STAMP)
+$(WARM): $(STAMP) $(KERNEL_SOURCES)
+	$(PY) -m orchestrator.warmup
+	mkdir -p $(dir $(WARM))
+	touch $(WARM)
+
+venv: $(STAMP) $(WARM)
 
 demo: venv
 	$(VENV)/bin/immerse run cases/taylor_bar --out cases/taylor_bar/out --replace

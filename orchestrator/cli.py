@@ -118,13 +118,18 @@ def cmd_run(args) -> int:
 
 
 def cmd_view(args) -> int:
-    from orchestrator.view import render
+    from orchestrator.output import OutputError
+    from orchestrator.view import ViewError, render
 
     out = Path(args.out)
     if not (out / "results.h5").is_file():
         return _fail(f"OUT = {str(out)!r}: no results.h5 there (run the case first)")
     steps = tuple(args.step) if args.step else ("last",)
-    for p in render(out, fields=args.field or None, steps=steps):
+    try:
+        paths = render(out, fields=args.field or None, steps=steps)
+    except (ViewError, OutputError) as e:
+        return _fail(str(e))
+    for p in paths:
         print(p)
     return 0
 

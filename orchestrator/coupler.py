@@ -1,7 +1,8 @@
 """The coupler: rank 0 of the job, owner of the time loop.
 
-Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land on
-end_time), commands every group to advance, and collects their next stable step and diagnostics.
+Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land
+exactly on every output time k * output_interval, every checkpoint time and end_time), commands
+every group to advance, and collects their next stable step and diagnostics.
 It decides when to write output (then appends to the XDMF/HDF5 index) and checkpoints, keeps the
 diagnostics history and, at the end, writes summary.json with the case's own check.
 Constraint coupling between groups (Lagrange multipliers) slots in between predict and correct.
@@ -26,6 +27,43 @@ from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
 from orchestrator.restart import check_restart
 
 WAIT_SLICE_S = 50e-6  # sleep slice of the coupler while solver groups compute
+
+
+def process_age_s() -> float | None:
+    """Seconds since this process started (Linux /proc; None elsewhere): the coupler starts with the
+    job, so at the end of step 1 this is the job's start-up (imports, solver set-up, kernels)."""
+    try:
+        with open("/proc/self/stat") as fh:
+            start_ticks = int(fh.read().rsplit(")", 1)[1].split()[19])  # field 22: starttime
+        with open("/proc/uptime") as fh:
+            uptime = float(fh.read().split()[0])
+        return max(uptime - start_ticks / os.sysconf("SC_CLK_TCK"), 0.0)
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def conservation_residuals(hist: dict[str, np.ndarray], roles) -> dict[str, float]:
+    """summary.json's `conservation`: for each balanced quantity Q (mass, energy, momentum, ...)
+    `Q_rel` = the largest |Q_balance_rel| over the run and over the solver roles, where every solver
+    defines Q_balance_rel = (Q(t) - Q(0) - what crossed the boundary up to t) / scale (the solver's
+    own diagnostic of that name, the same figure the case checks report as `Q_balance_rel`).
+    A solver whose mass cannot cross its boundary (Lagrangian bodies) reports no mass balance:
+    its residual is then (M(t) - M(0)) / M(0) from its mass history: the same definition with
+    nothing crossing."""
+    rel: dict[str, float] = {}
+
+    def put(name: str, a) -> None:
+        rel[name] = max(rel.get(name, 0.0), float(np.max(np.abs(a))))
+
+    for r in roles:
+        prefix = f"{r}."
+        for k, a in hist.items():
+            if k.startswith(prefix) and k.endswith("_balance_rel") and len(a):
+                put(k[len(prefix):].replace("_balance_rel", "_rel"), a)
+        m = hist.get(f"{r}.mass")
+        if f"{r}.mass_balance_rel" not in hist and m is not None and len(m) and m[0] != 0:
+            put("mass_rel", m / m[0] - 1.0)
+    return rel
 
 
 class Coupler:
@@ -163,10 +201,25 @@ class Coupler:
         self.log(f"restarted from {path.name}: step {self.step}, t = {self.t:.6e} s")
 
     # ---- the time loop ---------------------------------------------------------------------------
+    def _next_target(self) -> float:
+        """The next time the run must land on exactly: the end, the next output time
+        out_index * output_interval, or the next checkpoint time ckpt_index * checkpoint_interval.
+        Times within round-off (1e-12 relative) of the end or of the current time are not targets
+        of their own: 20 * 4e-6 is one ulp below 8e-5, and a step to it would leave a 1e-20 s sliver."""
+        end = self.end_time
+        target = end
+        for k, interval in ((self.out_index, self.output_interval), (self.ckpt_index, self.checkpoint_interval)):
+            if interval:
+                tk = k * float(interval)
+                if self.t * (1 + 1e-12) < tk < end * (1 - 1e-12):
+                    target = min(target, tk)
+        return target
+
     def run(self) -> dict:
         from orchestrator.progress import Progress
 
         wall0 = _time.perf_counter()
+        self.first_step_s = None
         self.log(f"case {self.case['name']}: solvers {', '.join(self.roles)}; end time {self.end_time:g} s")
         if self.out_index == 0:
             self.write_output()
@@ -177,18 +230,28 @@ class Coupler:
             dt = self.dt_scale * stable
             if not np.isfinite(dt) or dt <= 0.0:
                 raise RuntimeError(f"stable time step is {dt} at step {self.step}, t={self.t:.6g} s")
-            if self.t + dt >= self.end_time:
-                dt = self.end_time - self.t
-                t_new, done = self.end_time, True
+            # clip the step to land exactly on the end, output and checkpoint times (never stretch
+            # it: the stable step is a limit), so that profiles are written at the stated times
+            target = self._next_target()
+            clipped = self.t + dt >= target * (1 - 1e-12)
+            if clipped:
+                dt, t_new = target - self.t, target
             else:
                 t_new = self.t + dt
+            done = t_new >= self.end_time
             self.step += 1
             diag = done or self.step % self.diag_every == 0
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
             self._receive_all()
             self.t = t_new
-            self.dt_min = min(self.dt_min, dt)
-            self.dt_max = max(self.dt_max, dt)
+            if not clipped:  # dt statistics of the steps the stability limit set
+                self.dt_min = min(self.dt_min, dt)
+                self.dt_max = max(self.dt_max, dt)
+            if self.first_step_s is None:
+                self.first_step_s = process_age_s()
+                if self.first_step_s is not None:
+                    self.log(f"first step done {self.first_step_s:.2f} s after start "
+                             f"(imports, set-up, kernels loaded or compiled)")
             if diag:
                 self._record()
             if self.t >= self.out_index * self.output_interval * (1 - 1e-12) or done:
@@ -220,18 +283,13 @@ class Coupler:
             for k, a in hist.items():
                 h.create_dataset(k, data=a)
         os.replace(self.out / "diagnostics.h5.tmp", self.out / "diagnostics.h5")
-        conservation = {}
-        for k, a in hist.items():
-            if k.endswith("_balance_rel"):
-                conservation[k.split(".", 1)[1].replace("_balance_rel", "_rel")] = float(np.max(np.abs(a)))
-        for r in self.roles:
-            m = hist.get(f"{r}.mass")
-            if m is not None and m[0] != 0:
-                conservation["mass_rel"] = float(np.max(np.abs(m / m[0] - 1)))
+        conservation = conservation_residuals(hist, self.roles)
         final = {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")}
         s = {
             "case": self.case["name"],
+            "case_dir": str(self.case["case_dir"]),
             "wall_time_s": wall,
+            "first_step_s": self.first_step_s,
             "steps": self.step,
             "end_time": self.t,
             "dt": {"min": self.dt_min if np.isfinite(self.dt_min) else None, "max": self.dt_max},

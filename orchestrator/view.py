@@ -1,27 +1,121 @@
-"""Off-screen pictures of output steps (PNG) with pyvista.
+"""Pictures of output steps (PNG): line plots for 1-D runs, off-screen pyvista renderings otherwise.
 
-render(out_dir) writes out/pictures/<role>_<field>_<index:06d>.png, one per (role, field,
-step): vector fields are coloured by their magnitude, (n, 6) symmetric tensors
-(Voigt order xx yy zz xy yz zx, see orchestrator.output) by the von Mises equivalent,
-scalars as they are.
-Each picture has a scalar bar and a title with the role, field, time and step number.
+render(out_dir) writes out/pictures/<role>_<field>_<index:06d>.png, one per (role, field, step).
+
+* A run that is one zone (element) across in every direction but one (a shock tube, a bar) is drawn
+  as a line plot (matplotlib) of the field along that axis, against the case's exact solution when
+  its `[check]` kind has one (orchestrator.exact_profiles); vectors are drawn by their component
+  along the axis, (n, 6) tensors by their normal component along it.
+* Anything else is rendered with pyvista: vectors coloured by their magnitude, tensors by the von
+  Mises equivalent, scalars as they are, with a colour bar and axes that carry units
+  (orchestrator.units).
+
+Unknown fields or steps are refused before anything is drawn (ViewError, one line listing what the
+output holds).  VTK's own chatter (e.g. "bad X server connection" on a machine without a display)
+never reaches the terminal: rendering goes to an off-screen EGL window where libEGL exists, and
+VTK's log and warning output are switched off (captured into the error if rendering fails).
 """
 
 from __future__ import annotations
 
+import ctypes.util
+import json
+import os
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable, Sequence
 
+import h5py
 import numpy as np
 
-from orchestrator.output import list_roles, read_mesh_file, read_step, read_steps, von_mises
+from orchestrator.output import (TENSOR6_COMPONENTS, list_roles, read_mesh_file, read_step, read_steps,
+                                 step_path, von_mises)
+from orchestrator.units import with_unit
 
-__all__ = ["render", "scalar_field", "PICTURES_DIR"]
+__all__ = ["render", "scalar_field", "available", "line_profile", "line_figure", "ViewError",
+           "PICTURES_DIR"]
 
 PICTURES_DIR = "pictures"
 _VTK_CELL = {"quad": 9, "hexahedron": 12}  # VTK_QUAD, VTK_HEXAHEDRON
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
+_AXES = "xyz"
+
+
+class ViewError(ValueError):
+    """A request the output cannot satisfy (unknown field or step): one line naming what exists."""
+
+
+# ---------------------------------------------------------------------------------------------
+# what an output holds
+def _field_names(out: Path, role: str, index: int) -> tuple[list[str], list[str]]:
+    with h5py.File(step_path(out, role, index), "r") as f:
+        return sorted(f.get("point_data", {}).keys()), sorted(f.get("cell_data", {}).keys())
+
+
+def available(out_dir) -> dict[str, dict]:
+    """{role: {"fields": [names], "steps": [(time, step, index)]}} of every role with output."""
+    out = Path(out_dir)
+    found = {}
+    for r in list_roles(out):
+        steps = read_steps(out, r)
+        if steps:
+            pd, cd = _field_names(out, r, steps[0][2])
+            found[r] = {"fields": pd + cd, "steps": steps}
+    return found
+
+
+def _ranges(indices: Sequence[int]) -> str:
+    """[0, 1, 2, 3, 7] -> "0-3, 7"."""
+    parts, i = [], 0
+    while i < len(indices):
+        j = i
+        while j + 1 < len(indices) and indices[j + 1] == indices[j] + 1:
+            j += 1
+        parts.append(str(indices[i]) if i == j else f"{indices[i]}-{indices[j]}")
+        i = j + 1
+    return ", ".join(parts)
+
+
+def _holdings(found: dict, what: str) -> str:
+    if what == "fields":
+        return "; ".join(f"{r}: {', '.join(v['fields'])}" for r, v in found.items())
+    return "; ".join(f"{r}: {_ranges([s[2] for s in v['steps']])} (or first, last, all)"
+                     for r, v in found.items())
+
+
+def _select_steps(available_steps: list[tuple[float, int, int]], wanted: Iterable) -> list[tuple[float, int, int]]:
+    """The output steps named by `wanted` ('first', 'last', 'all' or output indices).
+    Raises ViewError naming the first entry that names no step (with the role's caller context)."""
+    by_index = {s[2]: s for s in available_steps}
+    chosen: list[tuple[float, int, int]] = []
+    for w in wanted:
+        if isinstance(w, str) and w.strip().lstrip("-").isdigit():
+            w = int(w)  # e.g. from the command line
+        if w == "last":
+            picks = available_steps[-1:]
+        elif w == "first":
+            picks = available_steps[:1]
+        elif w == "all":
+            picks = available_steps
+        elif isinstance(w, (int, np.integer)) and not isinstance(w, bool):
+            if int(w) not in by_index:
+                raise ViewError(f"--step {w}: no output step with that index")
+            picks = [by_index[int(w)]]
+        else:
+            raise ViewError(f"--step {w!r}: must be first, last, all or an output index")
+        chosen.extend(p for p in picks if p not in chosen)
+    return chosen
+
+
+# ---------------------------------------------------------------------------------------------
+# values to draw
+def _tensor_von_mises(a: np.ndarray) -> np.ndarray:
+    if a.shape[1] == 6:
+        return von_mises(a)
+    t = a.reshape(len(a), 3, 3)
+    s = t - np.trace(t, axis1=1, axis2=2)[:, None, None] * np.eye(3) / 3.0
+    return np.sqrt(1.5 * np.einsum("nij,nij->n", s, s))
 
 
 def scalar_field(name: str, values) -> tuple[str, np.ndarray]:
@@ -32,33 +126,155 @@ def scalar_field(name: str, values) -> tuple[str, np.ndarray]:
     a = a.reshape(len(a), -1)
     if a.shape[1] == 1:
         return name, a[:, 0]
-    if a.shape[1] == 6:
-        return f"{name} (von Mises)", von_mises(a)
+    if a.shape[1] in (6, 9):
+        return f"{name}, von Mises", _tensor_von_mises(a)
     return f"{name} magnitude", np.linalg.norm(a, axis=1)
 
 
-def _select_steps(available: list[tuple[float, int, int]], wanted: Iterable) -> list[tuple[float, int, int]]:
-    by_index = {s[2]: s for s in available}
-    chosen: list[tuple[float, int, int]] = []
-    for w in wanted:
-        if isinstance(w, str) and w.strip().lstrip("-").isdigit():
-            w = int(w)  # e.g. from the command line
-        if w == "last":
-            picks = available[-1:]
-        elif w == "first":
-            picks = available[:1]
-        elif w == "all":
-            picks = available
-        elif isinstance(w, (int, np.integer)) and not isinstance(w, bool):
-            if int(w) not in by_index:
-                raise ValueError(f"no output step with index {w} (available: "
-                                 f"{[s[2] for s in available]})")
-            picks = [by_index[int(w)]]
-        else:
-            raise ValueError(f"steps entries must be 'first', 'last', 'all' or an output index, "
-                             f"got {w!r}")
-        chosen.extend(p for p in picks if p not in chosen)
-    return chosen
+def _axial(name: str, values, axis: int) -> tuple[str, np.ndarray]:
+    """(label, one value per row) of a field along `axis`: vectors by that component, tensors by
+    their normal component along it, scalars as they are."""
+    a = np.asarray(values, dtype=np.float64)
+    if a.ndim == 1:
+        return name, a
+    a = a.reshape(len(a), -1)
+    if a.shape[1] == 1:
+        return name, a[:, 0]
+    c = _AXES[axis]
+    if a.shape[1] == 6:
+        return f"{name} {c}{c}", a[:, TENSOR6_COMPONENTS.index(c + c)]
+    if a.shape[1] == 9:
+        return f"{name} {c}{c}", a[:, 4 * axis]
+    return f"{name} {c}", a[:, axis]
+
+
+def one_d_axis(points: np.ndarray, cells: np.ndarray) -> int | None:
+    """The axis of a mesh that is one cell across in every other direction, else None."""
+    centres = points[cells].mean(axis=1)
+    span = float(np.max(np.ptp(points, axis=0))) or 1.0
+    varying = [d for d in range(3) if len(np.unique(np.round(centres[:, d] / span, 9))) > 1]
+    if len(varying) == 1 and len(cells) > 1:
+        return varying[0]
+    return None
+
+
+@dataclass
+class LineProfile:
+    """A 1-D picture's data: the computed values along the axis and, if the case has one, the
+    exact solution at the same time."""
+    role: str
+    field: str
+    axis: int
+    time: float
+    step: int
+    x: np.ndarray
+    values: np.ndarray
+    label: str  # e.g. "velocity x"
+    exact_x: np.ndarray | None = None
+    exact_values: np.ndarray | None = None
+    exact_label: str | None = None
+
+    @property
+    def xlabel(self) -> str:
+        return f"{_AXES[self.axis]} (m)"
+
+    @property
+    def ylabel(self) -> str:
+        return with_unit(self.label, self.field)
+
+
+def _stations(coord0: np.ndarray, coord: np.ndarray, values: np.ndarray):
+    """Average rows that share a station (same initial coordinate along the axis)."""
+    span = float(np.ptp(coord0)) or 1.0
+    keys, inv = np.unique(np.round(coord0 / span, 9), return_inverse=True)
+    n = np.bincount(inv)
+    x = np.bincount(inv, weights=coord) / n
+    v = np.bincount(inv, weights=values) / n
+    order = np.argsort(x)
+    return x[order], v[order]
+
+
+def _load_case(out: Path):
+    """The validated case of a run (summary.json names its directory), or None."""
+    try:
+        case_dir = json.loads((out / "summary.json").read_text())["case_dir"]
+        from orchestrator.case import load_case
+
+        return load_case(case_dir)
+    except Exception:  # no summary yet, case moved or changed: draw without the exact curve
+        return None
+
+
+def line_profile(out_dir, role: str, field: str, index: int, axis: int, case=None) -> LineProfile:
+    """The profile of `field` along `axis` at output step `index` (see LineProfile)."""
+    out = Path(out_dir)
+    steps = {s[2]: s for s in read_steps(out, role)}
+    time, step, _ = steps[index]
+    cells, _ = read_mesh_file(out, role)
+    first = min(steps)
+    points0 = read_step(out, role, first)[0]
+    points, pd, cd = read_step(out, role, index)
+    if field in pd:
+        label, v = _axial(field, pd[field], axis)
+        x, vals = _stations(points0[:, axis], points[:, axis], v)
+    else:
+        label, v = _axial(field, cd[field], axis)
+        x, vals = _stations(points0[cells].mean(axis=1)[:, axis], points[cells].mean(axis=1)[:, axis], v)
+    prof = LineProfile(role, field, axis, time, step, x, vals, label)
+    c = _AXES[axis]
+    if case is not None and label in (field, f"{field} {c}", f"{field} {c}{c}"):
+        from orchestrator.exact_profiles import exact_profile
+
+        try:
+            ex = exact_profile(case, time)
+        except (KeyError, ValueError, TypeError):
+            ex = None  # the check's parameters do not describe a profile at this time
+        if ex is not None and ex.axis == axis:
+            xs = np.linspace(float(points[:, axis].min()), float(points[:, axis].max()), 2001)
+            sampled = ex.sample(xs)
+            if field in sampled:
+                prof.exact_x, prof.exact_values, prof.exact_label = xs, np.asarray(sampled[field]), ex.label
+    return prof
+
+
+def line_figure(prof: LineProfile, size: tuple[int, int] = (1024, 768)):
+    """A matplotlib Figure of a LineProfile (computed: markers and line; exact: black line)."""
+    from matplotlib.figure import Figure
+
+    dpi = 100
+    fig = Figure(figsize=(size[0] / dpi, size[1] / dpi), dpi=dpi)
+    ax = fig.add_subplot()
+    if prof.exact_x is not None:
+        ax.plot(prof.exact_x, prof.exact_values, color="black", linewidth=1.2, label=prof.exact_label,
+                zorder=3)
+    ax.plot(prof.x, prof.values, color="tab:blue", marker="o", markersize=2.5, linewidth=0.8,
+            label=f"{prof.role} ({len(prof.x)} stations)", zorder=2)
+    ax.set_xlabel(prof.xlabel)
+    ax.set_ylabel(prof.ylabel)
+    ax.set_title(f"{prof.role}: {prof.label}, t = {prof.time:.6g} s (step {prof.step})")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best")
+    fig.tight_layout()
+    return fig
+
+
+# ---------------------------------------------------------------------------------------------
+# pyvista
+def _quiet_vtk():
+    """Import pyvista with VTK's terminal output off and an off-screen window that needs no X."""
+    if ctypes.util.find_library("EGL"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    os.environ.setdefault("EGL_LOG_LEVEL", "fatal")
+    from vtkmodules.vtkCommonCore import vtkLogger, vtkObject, vtkOutputWindow, vtkStringOutputWindow
+
+    vtkLogger.SetStderrVerbosity(vtkLogger.VERBOSITY_OFF)
+    vtkObject.GlobalWarningDisplayOff()
+    sink = vtkStringOutputWindow()
+    vtkOutputWindow.SetInstance(sink)
+    import pyvista
+
+    pyvista.OFF_SCREEN = True
+    return pyvista, sink
 
 
 def _grid(pv, points: np.ndarray, cells: np.ndarray, cell_type: str):
@@ -68,6 +284,47 @@ def _grid(pv, points: np.ndarray, cells: np.ndarray, cell_type: str):
     return pv.UnstructuredGrid(conn, types, np.asarray(points, dtype=np.float64))
 
 
+def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, preference: str,
+                    title: str, planar: bool, window_size, show_edges):
+    lo, hi = float(np.min(values)), float(np.max(values))
+    if not hi > lo:  # constant field: give the colour map a finite range
+        pad = max(abs(lo), 1.0) * 1e-6
+        lo, hi = lo - pad, hi + pad
+    font = max(6, round(window_size[0] / 70))
+    small = window_size[0] < 600
+    edges = grid.n_cells <= 5_000 if show_edges is None else show_edges  # denser: edges hide the colours
+    bar_title = with_unit(label, field)
+    plotter = pv.Plotter(off_screen=True, window_size=list(window_size))
+    try:
+        plotter.set_background("white")
+        plotter.add_mesh(grid, scalars=label, preference=preference, cmap="viridis",
+                         clim=(lo, hi), show_edges=edges, edge_color="grey",
+                         scalar_bar_args={"title": bar_title, "color": "black",
+                                          "fmt": "%.3g", "n_labels": 3 if small else 5,
+                                          "title_font_size": font, "label_font_size": font,
+                                          "position_x": 0.2, "position_y": 0.07, "width": 0.6,
+                                          "height": 0.05})
+        # tick labels below the bar, the title above it: they overlapped on the same side
+        plotter.scalar_bar.SetTextPositionToPrecedeScalarBar()
+        plotter.add_text(title, position="upper_left", font_size=font, color="black")
+        # coordinate axes with units along the bounds: two labels each (ends) keep them readable
+        plotter.show_bounds(xtitle="x (m)", ytitle="y (m)", ztitle="z (m)", color="black",
+                            font_size=font, fmt="%.3g", grid=False, location="outer", ticks="outside",
+                            n_xlabels=2, n_ylabels=2, n_zlabels=2, show_zaxis=not planar,
+                            show_zlabels=not planar)
+        if planar:
+            plotter.view_xy()
+        else:
+            plotter.view_isometric()
+        plotter.camera.zoom(0.75)  # room for the axis titles, the text and the colour bar
+        plotter.screenshot(str(path))
+    except Exception as e:
+        raise RuntimeError(f"rendering {path.name} failed: {e}; VTK said: {sink.GetOutput().strip()}") from e
+    finally:
+        plotter.close()
+
+
+# ---------------------------------------------------------------------------------------------
 def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("last",),
            role: str | None = None, *, window_size: tuple[int, int] = (1024, 768),
            show_edges: bool | None = None) -> list[Path]:
@@ -75,75 +332,71 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
 
     fields: names of point or cell data (None: all of them); steps: 'first', 'last',
     'all' or output indices; role: one role (None: every role with output).
+    Raises ViewError (nothing written) for a field or step the output does not hold.
     """
-    import pyvista
-
-    pyvista.OFF_SCREEN = True
     out_dir = Path(out_dir)
     if isinstance(steps, (str, int, np.integer)):
         steps = (steps,)
     if isinstance(fields, str):
         fields = (fields,)
-    roles = [role] if role is not None else list_roles(out_dir)
+    found = available(out_dir)
+    if role is not None:
+        if role not in found:
+            raise ViewError(f"role {role!r}: no output of that role; roles: {', '.join(found) or 'none'}")
+        found = {role: found[role]}
+    if not found:
+        raise ViewError(f"{out_dir}: no output steps yet")
+    # check the whole request before drawing anything
+    if fields is not None:
+        missing = [f for f in fields if not any(f in v["fields"] for v in found.values())]
+        if missing:
+            raise ViewError(f"--field {' '.join(missing)}: not in this output; fields: "
+                            f"{_holdings(found, 'fields')}")
+    plan = []
+    for r, info in found.items():
+        try:
+            chosen = _select_steps(info["steps"], steps)
+        except ViewError as e:
+            raise ViewError(f"{e} in {r}; steps: {_holdings(found, 'steps')}") from None
+        names = [f for f in (fields or info["fields"]) if f in info["fields"]]
+        plan.append((r, chosen, names))
+
     pictures = out_dir / PICTURES_DIR
     written: list[Path] = []
-    rendered_fields: set[str] = set()
-    for r in roles:
-        available = read_steps(out_dir, r)
-        if not available:
-            continue
+    pv = sink = None
+    case = None
+    for r, chosen, names in plan:
         cells, cell_type = read_mesh_file(out_dir, r)
-        planar = None
-        for time, step, index in _select_steps(available, steps):
+        first_points = read_step(out_dir, r, min(s[2] for s in found[r]["steps"]))[0]
+        axis = one_d_axis(first_points, cells)
+        if axis is not None and case is None:
+            case = _load_case(out_dir) or False
+        planar = bool(np.all(first_points[:, 2] == first_points[0, 2]))
+        for time, step, index in chosen:
+            pictures.mkdir(parents=True, exist_ok=True)
+            if axis is not None:
+                for name in names:
+                    path = pictures / f"{_SAFE.sub('_', r)}_{_SAFE.sub('_', name)}_{index:06d}.png"
+                    fig = line_figure(line_profile(out_dir, r, name, index, axis, case or None), window_size)
+                    fig.savefig(path)
+                    written.append(path)
+                continue
+            if pv is None:
+                pv, sink = _quiet_vtk()
             points, point_data, cell_data = read_step(out_dir, r, index)
-            if planar is None:
-                planar = bool(np.all(points[:, 2] == points[0, 2]))
-            names = list(fields) if fields is not None else sorted(point_data) + sorted(cell_data)
-            grid = _grid(pyvista, points, cells, cell_type)
+            grid = _grid(pv, points, cells, cell_type)
             for name in names:
                 if name in point_data:
                     label, values = scalar_field(name, point_data[name])
                     grid.point_data[label] = values
                     preference = "point"
-                elif name in cell_data:
+                else:
                     label, values = scalar_field(name, cell_data[name])
                     grid.cell_data[label] = values
                     preference = "cell"
-                else:
-                    continue
-                rendered_fields.add(name)
-                pictures.mkdir(parents=True, exist_ok=True)
                 path = pictures / f"{_SAFE.sub('_', r)}_{_SAFE.sub('_', name)}_{index:06d}.png"
-                lo, hi = float(np.min(values)), float(np.max(values))
-                if not hi > lo:  # constant field: give the colour map a finite range
-                    pad = max(abs(lo), 1.0) * 1e-6
-                    lo, hi = lo - pad, hi + pad
-                font = max(6, round(window_size[0] / 70))
-                small = window_size[0] < 600
-                edges = grid.n_cells <= 20_000 if show_edges is None else show_edges
-                plotter = pyvista.Plotter(off_screen=True, window_size=list(window_size))
-                try:
-                    plotter.set_background("white")
-                    plotter.add_mesh(grid, scalars=label, preference=preference, cmap="viridis",
-                                     clim=(lo, hi), show_edges=edges, edge_color="grey",
-                                     scalar_bar_args={"title": label, "color": "black",
-                                                      "fmt": "%.3g", "n_labels": 3 if small else 5,
-                                                      "title_font_size": font,
-                                                      "label_font_size": font,
-                                                      "position_x": 0.2, "width": 0.6})
-                    plotter.add_text(f"{r}: {label}\nt = {time:.6g} s (step {step})",
-                                     position="upper_left", font_size=font, color="black")
-                    if planar:
-                        plotter.view_xy()
-                    else:
-                        plotter.view_isometric()
-                    plotter.screenshot(str(path))
-                finally:
-                    plotter.close()
+                _render_pyvista(pv, sink, path, grid, label, name, values, preference,
+                                f"{r}: {label}\nt = {time:.6g} s (step {step})", planar,
+                                window_size, show_edges)
                 written.append(path)
-    if fields is not None:
-        missing = [f for f in fields if f not in rendered_fields]
-        if missing:
-            raise ValueError(f"field(s) {missing} not found in the output of "
-                             f"{roles if role is None else role}")
     return written

@@ -706,7 +706,10 @@ class AleSolver:
         dm = self.m[bn] - m0 - self.PHI[bn] + self.PHI[bn + nsd]
         self.b_momentum += (dm[:, None] * v0).sum(axis=0)
         zl = self._open_nodes_z
-        w = (self.M[zl] * self._real_f[zl]).sum(axis=1) / (2 ** self.dim) / self.m[bn]
+        # a massless node (void or a blocked corner at the face) has no defect: share 1, not 0/0
+        m = self.m[bn]
+        w = np.divide((self.M[zl] * self._real_f[zl]).sum(axis=1) / (2 ** self.dim), m,
+                      out=np.ones_like(m), where=m > 0.0)
         self.b_energy -= float(np.sum((1.0 - w) * self.dK[bn]))
         for (dd, s), nodes in self._open_face_nodes.items():
             if dd != d:

@@ -1,14 +1,22 @@
-"""Tests for orchestrator/view.py: off-screen PNGs from a small synthetic output."""
+"""Tests for orchestrator/view.py: off-screen PNGs from small synthetic outputs; 1-D runs as line
+plots against the exact solution; units in the labels; bad requests refused through the CLI with
+one line (exit 2) and nothing written; nothing from VTK on stderr."""
+
+import json
 
 import numpy as np
 import pytest
 
 from orchestrator.output import write_index, write_mesh, write_step
-from orchestrator.view import render, scalar_field
+from orchestrator.units import unit_of, with_unit
+from orchestrator.view import ViewError, line_figure, line_profile, one_d_axis, render, scalar_field
+from solvers.ale.exact.riemann import RiemannSolution
 from solvers.lagrange.mesh import box_mesh, quarter_cylinder_mesh
+from tests.conftest import immerse
 
 pytest.importorskip("pyvista")
 mpimg = pytest.importorskip("matplotlib.image")
+Image = pytest.importorskip("PIL.Image")
 
 
 def _synthetic(out, mesh, role="lagrange", n=2):
@@ -40,7 +48,22 @@ def test_scalar_field():
     np.testing.assert_allclose(v, [5.0, 1.0])
     label, v = scalar_field("stress", [[2.0, 0, 0, 0, 0, 0]])
     assert "von Mises" in label and v[0] == pytest.approx(2.0)
+    # a full 3x3 tensor gives the same equivalent: uniaxial 2 plus a hydrostatic part
+    label, v = scalar_field("stress", [[5.0, 0, 0, 0, 3.0, 0, 0, 0, 3.0]])
+    assert "von Mises" in label and v[0] == pytest.approx(2.0)
     assert scalar_field("T", [1.0, 2.0])[0] == "T"
+
+
+def test_units_table():
+    assert with_unit("density", "density") == "density (kg/m^3)"
+    assert with_unit("pressure", "pressure") == "pressure (Pa)"
+    assert with_unit("velocity x", "velocity") == "velocity x (m/s)"
+    assert with_unit("stress, von Mises", "stress") == "stress, von Mises (Pa)"
+    assert with_unit("specific_internal_energy", "specific_internal_energy") == "specific_internal_energy (J/kg)"
+    assert with_unit("temperature", "temperature") == "temperature (K)"
+    assert with_unit("plastic_strain", "plastic_strain") == "plastic_strain (-)"
+    assert unit_of("density_water") == "kg/m^3" and unit_of("volume_fraction_air") == "1"
+    assert with_unit("mystery", "mystery") == "mystery"  # no unit rather than a guessed one
 
 
 def test_render_2d_all_fields_last_step(tmp_path):
@@ -54,6 +77,7 @@ def test_render_2d_all_fields_last_step(tmp_path):
     assert all(p.parent == out / "pictures" for p in paths)
     for p in paths:
         _check_png(p, size)
+        assert "Software" not in Image.open(p).info  # a VTK rendering
 
 
 def test_render_3d_selected_steps(tmp_path):
@@ -65,9 +89,149 @@ def test_render_3d_selected_steps(tmp_path):
     assert [p.name for p in paths] == ["lagrange_stress_000000.png", "lagrange_stress_000002.png"]
     for p in paths:
         _check_png(p, size)
-    with pytest.raises(ValueError):
-        render(out, fields=["nope"], window_size=size)
-    with pytest.raises(ValueError):
-        render(out, steps=(7,), window_size=size)
-    with pytest.raises(ValueError):
-        render(out, steps=("middle",), window_size=size)
+
+
+@pytest.mark.parametrize("request_kw, fragment", [
+    ({"fields": ["nope"]}, "--field nope: not in this output; fields: lagrange: temperature, velocity, stress"),
+    ({"fields": ["stress", "nope"]}, "--field nope"),
+    ({"steps": (7,)}, "--step 7: no output step with that index in lagrange; steps: lagrange: 0-2"),
+    ({"steps": ("middle",)}, "--step 'middle': must be first, last, all or an output index"),
+    ({"role": "ale"}, "role 'ale': no output of that role; roles: lagrange"),
+])
+def test_bad_requests_are_refused_before_drawing(tmp_path, request_kw, fragment):
+    out = tmp_path / "out"
+    _synthetic(out, quarter_cylinder_mesh(1.0, 2.0, 4, 4), n=3)
+    with pytest.raises(ViewError) as e:
+        render(out, window_size=(320, 240), **request_kw)
+    assert fragment in str(e.value) and "\n" not in str(e.value)
+    assert not (out / "pictures").exists()
+
+
+# ------------------------------------------------------------------------------------------ 1-D
+SOD = dict(left=(1.0, 0.0, 1.0), right=(0.125, 0.0, 0.1), gamma_l=1.4)
+SOD_CASE = """
+[run]
+dimension = 2
+end_time = 0.2
+
+[ale]
+grid = { lower = [0.0, 0.0], upper = [1.0, 0.01], cells = [100, 1] }
+materials.gas = { eos = "ideal_gas", gamma = 1.4 }
+regions = [
+  { material = "gas", density = 1.0, pressure = 1.0 },
+  { material = "gas", region = "x > 0.5", density = 0.125, pressure = 0.1 },
+]
+
+[check]
+kind = "riemann"
+params = { axis = "x", x0 = 0.5, left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1], gamma_left = 1.4 }
+metrics.p_star = { reference = 0.30313, tolerance = 0.02 }
+"""
+
+
+def _sod_output(tmp_path, nx=100, times=(0.0, 0.1, 0.2)):
+    """A 1-D (nx x 1 zones) ALE output holding the exact Sod solution sampled at zone centres (and
+    at the nodes for the velocity), with a summary.json naming its case, as `immerse run` leaves it."""
+    case = tmp_path / "case"
+    case.mkdir()
+    (case / "case.toml").write_text(SOD_CASE)
+    out = tmp_path / "out"
+    mesh = box_mesh([0.0, 0.0], [1.0, 0.01], [nx, 1])
+    write_mesh(out, "ale", mesh.cells, mesh.cell_type)
+    ex = RiemannSolution(**SOD)
+    xc = mesh.points[mesh.cells].mean(axis=1)[:, 0]
+    for i, t in enumerate(times):
+        rho, _, p, e = ex.sample(xc, t, 0.5)
+        u = ex.sample(mesh.points[:, 0], t, 0.5)[1]
+        vel = np.zeros((mesh.num_points, 3))
+        vel[:, 0] = u
+        write_step(out, "ale", i, 10 * i, t, mesh.points, {"velocity": vel},
+                   {"density": rho, "pressure": p, "specific_internal_energy": e})
+    write_index(out)
+    (out / "summary.json").write_text(json.dumps({"case": "sod", "case_dir": str(case)}))
+    return out, ex
+
+
+def test_one_d_axis():
+    assert one_d_axis(*_pc(box_mesh([0, 0], [1, 0.01], [50, 1]))) == 0
+    assert one_d_axis(*_pc(box_mesh([0, 0, 0], [0.01, 0.01, 1], [1, 1, 30]))) == 2
+    assert one_d_axis(*_pc(box_mesh([0, 0], [1, 1], [50, 2]))) is None
+    assert one_d_axis(*_pc(quarter_cylinder_mesh(1.0, 2.0, 4, 4))) is None
+
+
+def _pc(mesh):
+    p = np.zeros((mesh.num_points, 3))
+    p[:, : mesh.points.shape[1]] = mesh.points
+    return p, mesh.cells
+
+
+def test_one_d_run_is_a_line_plot_against_the_exact_solution(tmp_path):
+    out, ex = _sod_output(tmp_path)
+    size = (800, 500)
+    paths = render(out, fields=["density", "velocity"], steps="last", window_size=size)
+    assert [p.name for p in paths] == ["ale_density_000002.png", "ale_velocity_000002.png"]
+    for p in paths:  # a full-size matplotlib chart, not a one-pixel strip rendered by VTK
+        _check_png(p, size)
+        assert Image.open(p).info.get("Software", "").startswith("Matplotlib")
+    prof = line_profile(out, "ale", "density", 2, axis=0, case=_case(tmp_path))
+    assert prof.time == 0.2 and len(prof.x) == 100
+    np.testing.assert_allclose(prof.x, np.linspace(0.005, 0.995, 100), rtol=1e-12)
+    assert prof.exact_x is not None and len(prof.exact_x) > 1000
+    np.testing.assert_allclose(prof.exact_values, ex.sample(prof.exact_x, 0.2, 0.5)[0])
+    fig = line_figure(prof, size)
+    ax = fig.axes[0]
+    assert ax.get_xlabel() == "x (m)" and ax.get_ylabel() == "density (kg/m^3)"
+    lines = {ln.get_label(): ln for ln in ax.get_lines()}
+    assert set(lines) == {"exact (Riemann)", "ale (100 stations)"}
+    np.testing.assert_array_equal(lines["exact (Riemann)"].get_xdata(), prof.exact_x)
+    np.testing.assert_array_equal(lines["ale (100 stations)"].get_ydata(), prof.values)
+    assert tuple(fig.get_size_inches() * fig.dpi) == size
+    # nodes: the velocity along the axis, the two nodes of each station averaged
+    v = line_profile(out, "ale", "velocity", 2, axis=0, case=_case(tmp_path))
+    assert v.ylabel == "velocity x (m/s)" and len(v.x) == 101
+    np.testing.assert_allclose(v.values, ex.sample(np.linspace(0, 1, 101), 0.2, 0.5)[1], atol=1e-12)
+
+
+def _case(tmp_path):
+    from orchestrator.case import load_case
+
+    return load_case(tmp_path / "case")
+
+
+def test_one_d_without_a_known_case_has_no_exact_curve(tmp_path):
+    out, _ = _sod_output(tmp_path)
+    (out / "summary.json").unlink()  # e.g. viewed while running
+    paths = render(out, fields=["pressure"], window_size=(400, 300))
+    assert len(paths) == 1
+    prof = line_profile(out, "ale", "pressure", 2, axis=0, case=None)
+    assert prof.exact_x is None and prof.ylabel == "pressure (Pa)"
+
+
+# ------------------------------------------------------------------------------------------ CLI
+def test_cli_view_is_quiet_on_success(tmp_path):
+    """stdout lists the pictures; stderr stays empty (VTK's "bad X server connection" and other
+    chatter must not reach the user), for a 3-D rendering and for a 1-D line plot."""
+    out3 = tmp_path / "three"
+    _synthetic(out3, quarter_cylinder_mesh(1.0, 2.0, 4, 4))
+    r = immerse("view", out3, "--field", "stress", "velocity")
+    assert r.returncode == 0 and r.stderr == ""
+    assert [ln.rsplit("/", 1)[1] for ln in r.stdout.split()] == [
+        "lagrange_stress_000001.png", "lagrange_velocity_000001.png"]
+    out1, _ = _sod_output(tmp_path)
+    r = immerse("view", out1, "--field", "density", "--step", "all")
+    assert r.returncode == 0 and r.stderr == ""
+    assert len(r.stdout.split()) == 3
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--field", "nope"], "--field nope: not in this output; fields: ale: velocity, density, pressure, "
+                          "specific_internal_energy"),
+    (["--step", "9"], "--step 9: no output step with that index in ale; steps: ale: 0-2 (or first, last, all)"),
+    (["--step", "middle"], "--step 'middle': must be first, last, all or an output index"),
+])
+def test_cli_view_unknown_field_or_step(tmp_path, args, fragment):
+    out, _ = _sod_output(tmp_path)
+    r = immerse("view", out, *args)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and fragment in r.stderr, r.stderr
+    assert r.stdout == "" and not (out / "pictures").exists()

@@ -1,0 +1,142 @@
+"""Exact 1-D profiles of the cases that have one, keyed by the kind of the case's `[check]`.
+
+A case whose `[check] kind` is registered here has an exact solution along one axis at any time
+(`solvers.ale.exact`): `exact_profile(case, t)` returns it as an :class:`ExactProfile`, whose
+`sample(x)` gives the fields under their output names (density, pressure, velocity = the component
+along the axis, specific_internal_energy where the solution has it) at positions x on that axis.
+Pictures (`orchestrator.view`) draw it beside the computed profile; the case checks
+(`orchestrator.checks`) compare the same solutions with the run.  A new exact solution is one
+function with `@register_profile("<check kind>")`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+PROFILES: dict[str, Callable[[dict, dict, float], "ExactProfile"]] = {}
+
+
+def register_profile(kind: str):
+    def deco(fn):
+        PROFILES[kind] = fn
+        return fn
+
+    return deco
+
+
+@dataclass(frozen=True)
+class ExactProfile:
+    axis: int  # 0, 1, 2: the axis the solution varies along
+    label: str  # what to call it in a legend
+    sample: Callable[[np.ndarray], dict[str, np.ndarray]]  # x on the axis -> {field: values}
+
+
+def exact_profile(case: dict, t: float) -> ExactProfile | None:
+    """The exact profile of the case at time t, or None if its check kind has none."""
+    spec = case.get("check") or {}
+    fn = PROFILES.get(spec.get("kind"))
+    return fn(case, spec.get("params", {}) or {}, float(t)) if fn is not None else None
+
+
+def _axis(params: dict) -> int:
+    return "xyz".index(params.get("axis", "x"))
+
+
+# ----------------------------------------------------------------------------------------------
+def riemann_solution(params: dict):
+    """The exact Riemann solution of a `riemann` check's params (stiffened gases; ideal: p_inf 0)."""
+    from solvers.ale.exact.riemann import RiemannSolution
+
+    g_l = float(params["gamma_left"])
+    return RiemannSolution(left=tuple(params["left"]), right=tuple(params["right"]), gamma_l=g_l,
+                           gamma_r=float(params.get("gamma_right", g_l)),
+                           p_inf_l=float(params.get("p_inf_left", 0.0)),
+                           p_inf_r=float(params.get("p_inf_right", 0.0)))
+
+
+@register_profile("riemann")
+def _riemann(case: dict, params: dict, t: float) -> ExactProfile:
+    ex = riemann_solution(params)
+    x0 = float(params["x0"])
+
+    def sample(x):
+        rho, u, p, e = ex.sample(np.asarray(x, np.float64), t, x0)
+        return {"density": rho, "velocity": u, "pressure": p, "specific_internal_energy": e}
+
+    return ExactProfile(_axis(params), "exact (Riemann)", sample)
+
+
+def piston_solution(case: dict):
+    """(exact PistonShock, axis, x of the piston face at t = 0, +1 if the piston drives along +axis
+    else -1) of a case with one `{ piston = { velocity } }` face."""
+    from solvers.ale.exact import piston as exact
+
+    ale = case["ale"]
+    faces = [(f, b["piston"]["velocity"]) for f, b in ale["boundaries"].items()
+             if isinstance(b, dict) and "piston" in b]
+    if len(faces) != 1:
+        raise ValueError(f"piston: needs exactly one piston face (found {len(faces)})")
+    face, u_p = faces[0]
+    axis = "xyz".index(face[0])
+    lower = face.endswith("lower")
+    region = ale["regions"][0]
+    mat = dict(ale["materials"][region["material"]])
+    if mat["eos"] == "tait":
+        ex = exact.tait(u_p, mat["rho0"], mat["bulk_modulus"], mat["exponent"], mat.get("p0", 0.0),
+                        rho0=region["density"])
+    elif mat["eos"] in ("stiffened_gas", "ideal_gas"):
+        ex = exact.stiffened_gas(u_p, region["density"], region["pressure"], mat["gamma"], mat.get("p_inf", 0.0))
+    else:
+        raise ValueError(f"piston: eos {mat['eos']!r} (needs tait, stiffened_gas or ideal_gas)")
+    g = ale["grid"]
+    x_face = g["lower"][axis] if lower else g["upper"][axis]
+    return ex, axis, float(x_face), 1.0 if lower else -1.0
+
+
+@register_profile("piston")
+def _piston(case: dict, params: dict, t: float) -> ExactProfile:
+    ex, axis, x_face, sign = piston_solution(case)
+
+    def sample(x):
+        rho, u, p = ex.sample(sign * (np.asarray(x, np.float64) - x_face), t)
+        return {"density": rho, "velocity": sign * u, "pressure": p}
+
+    return ExactProfile(axis, "exact (piston shock)", sample)
+
+
+def reflected_shock_solution(params: dict):
+    from solvers.ale.exact.reflected_shock import ReflectedShock
+
+    return ReflectedShock(tuple(params["ahead"]), float(params["gamma"]), mach=float(params["mach"]),
+                          p_inf=float(params.get("p_inf", 0.0)))
+
+
+@register_profile("reflected_shock")
+def _reflected_shock(case: dict, params: dict, t: float) -> ExactProfile:
+    ex = reflected_shock_solution(params)
+    x0, x_wall = float(params["x_shock0"]), float(params["x_wall"])
+
+    def sample(x):
+        rho, u, p = ex.sample(np.asarray(x, np.float64), t, x0, x_wall)
+        return {"density": rho, "velocity": u, "pressure": p}
+
+    return ExactProfile(_axis(params), "exact (reflected shock)", sample)
+
+
+@register_profile("bar_wave")
+def _bar_wave(case: dict, params: dict, t: float) -> ExactProfile:
+    """A bar along x struck at x = 0 (the bar_wave check): the elastic 1-D bar wave, front at c t with
+    c = sqrt(E / rho) of the first body's material, behind it the compression `expected_amplitude`
+    and the particle velocity amplitude / (rho c)."""
+    body = case["lagrange"]["bodies"][0]
+    mat = case["materials"][body["material"]]
+    rho, c = float(mat["density"]), float(np.sqrt(mat["youngs_modulus"] / mat["density"]))
+    amp = abs(float(params["expected_amplitude"]))
+
+    def sample(x):
+        behind = np.asarray(x, np.float64) < c * t
+        return {"stress": np.where(behind, -amp, 0.0), "velocity": np.where(behind, amp / (rho * c), 0.0)}
+
+    return ExactProfile(0, "exact (1-D bar wave)", sample)

@@ -1,0 +1,286 @@
+"""Compile (or load) every numba kernel specialisation of the solvers once, at install time.
+
+The solver kernels are `njit(cache=True)`: the first process that calls one compiles it (seconds per
+kernel, ~10-25 s for a whole solver) and stores the machine code next to its source (`__pycache__`,
+or under NUMBA_CACHE_DIR when that is set); every later process, every MPI rank included, loads it
+in milliseconds.  Numba keys the cache on the source file's path and content, the argument types and
+the CPU, so the ranks of `immerse run` find what this module compiled as long as they import the
+same source tree (the editable install of `make venv`) on the same machine.
+
+`python -m orchestrator.warmup` (run by the Makefile after installing, and again whenever a solver
+source changes) steps tiny cases through the solver classes in this one process (no MPI job): 2-D
+and 3-D, every material model and EOS, one and several materials per zone and void, obstacles and
+moving blocked fractions, inflow/outflow/periodic/piston faces, both artificial viscosity kinds,
+both ALE modes, energy sources, and writes their output and diagnostics.
+
+`python -m orchestrator.warmup --check CASE_DIR ...` steps the given cases the same way and prints,
+as JSON, the kernels that had to be compiled instead of loaded ({} after a complete warm-up).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+STEPS = 3  # enough for the first-step, later-step and both sweep-order paths
+
+# ----------------------------------------------------------------------------------------------
+# the cases (case.toml text, validated by orchestrator.case like any user's case)
+_RUN2 = "[run]\ndimension = 2\nend_time = 1.0\n"
+_RUN3 = "[run]\ndimension = 3\nend_time = 1.0\n"
+_EOS = {
+    "ideal_gas": '{ eos = "ideal_gas", gamma = 1.4 }',
+    "stiffened_gas": '{ eos = "stiffened_gas", gamma = 4.4, p_inf = 6.0e8 }',
+    "tait": '{ eos = "tait", rho0 = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }',
+    "jwl": '{ eos = "jwl", A = 3.712e11, B = 3.231e9, R1 = 4.15, R2 = 0.95, omega = 0.3, rho0 = 1630.0 }',
+}
+# a state each EOS accepts (density, pressure)
+_STATE = {"ideal_gas": (1.0, 1.0), "stiffened_gas": (1000.0, 1.0e9), "tait": (1000.0, 1.0e5),
+          "jwl": (1630.0, 1.0e9)}
+
+
+def _grid(dim: int) -> str:
+    if dim == 2:
+        return "grid = { lower = [0.0, 0.0], upper = [1.0, 0.5], cells = [6, 3] }\n"
+    return "grid = { lower = [0.0, 0.0, 0.0], upper = [1.0, 0.5, 0.5], cells = [4, 3, 3] }\n"
+
+
+def _single(dim: int, eos: str, mode: str, q: str, boundaries: str = "", extra: str = "") -> str:
+    rho, p = _STATE[eos]
+    vel = ", ".join(["1.0"] + ["0.0"] * (dim - 1))
+    return ((_RUN2 if dim == 2 else _RUN3) + "[ale]\n"
+            f'mode = "{mode}"\n' + _grid(dim) + boundaries
+            + f'viscosity = {{ kind = "{q}" }}\n'
+            + f"materials.m = {_EOS[eos]}\n"
+            + f'regions = [ {{ material = "m", density = {rho}, pressure = {p} }},\n'
+            + f'  {{ material = "m", region = "x > 0.5", density = {0.5 * rho}, pressure = {0.9 * p},'
+            + f" velocity = [{vel}] }} ]\n" + extra)
+
+
+def _mixed(dim: int, eos: tuple[str, ...], q: str, void: bool = False, boundaries: str = "") -> str:
+    mats = "".join(f"materials.m{i} = {_EOS[e]}\n" for i, e in enumerate(eos))
+    regions = [f'{{ material = "m0", density = {_STATE[eos[0]][0]}, pressure = {_STATE[eos[0]][1]} }}']
+    cuts = ["x > 0.45", "y > 0.3"]
+    for i, e in enumerate(eos[1:], start=1):
+        regions.append(f'{{ material = "m{i}", region = "{cuts[i - 1]}", density = {_STATE[e][0]}, '
+                       f"pressure = {_STATE[e][1]} }}")
+    if void:
+        mats += 'materials.vacuum = { eos = "void" }\n'
+        regions.append('{ material = "vacuum", region = "x > 0.6 and x < 0.8" }')
+    return ((_RUN2 if dim == 2 else _RUN3) + '[ale]\nmode = "eulerian"\n' + _grid(dim) + boundaries
+            + f'viscosity = {{ kind = "{q}" }}\nfraction_samples = 3\n' + mats
+            + "regions = [\n  " + ",\n  ".join(regions) + " ]\n")
+
+
+WALL = '"wall"'
+
+
+def _faces(dim: int, **kinds) -> str:
+    names = [f"{a}_{s}" for a in "xyz"[:dim] for s in ("lower", "upper")]
+    items = ", ".join(f"{n} = {kinds.get(n, WALL)}" for n in names)
+    return f"boundaries = {{ {items} }}\n"
+
+
+def _inflow(dim: int) -> str:
+    vel = ", ".join(["0.5"] + ["0.0"] * (dim - 1))
+    return f"{{ inflow = {{ density = 1.0, velocity = [{vel}], pressure = 1.0 }} }}"
+
+
+_MAT = {
+    "linear_elastic": 'model = "linear_elastic"\ndensity = 7850.0\nyoungs_modulus = 210e9\npoisson_ratio = 0.3\n',
+    "neo_hookean": 'model = "neo_hookean"\ndensity = 1100.0\nyoungs_modulus = 5e6\npoisson_ratio = 0.45\n',
+    "johnson_cook": ('model = "johnson_cook"\ndensity = 7830.0\nyoungs_modulus = 206.9e9\n'
+                     "poisson_ratio = 0.3\nyield_stress = 806.0e6\nhardening_modulus = 614.0e6\n"
+                     "hardening_exponent = 0.168\nstrain_rate_coefficient = 0.0089\n"
+                     "reference_strain_rate = 1.0\nthermal_exponent = 1.1\nmelt_temperature = 1813.15\n"
+                     "room_temperature = 293.15\nspecific_heat = 460.0\ntaylor_quinney = 0.9\n"),
+}
+
+
+def _lagrange(dim: int, mesh: str) -> str:
+    """Every material model in one run (one body each) and every boundary kind."""
+    run = (_RUN2 if dim == 2 else _RUN3).replace("end_time = 1.0", "end_time = 1.0e-3")
+    text = run + "".join(f"[materials.{m}]\n{body}" for m, body in _MAT.items())
+    vel = ", ".join(["0.0"] * (dim - 1) + ["-200.0"])
+    for i, m in enumerate(_MAT):
+        lo = [0.0] * dim
+        lo[0] = 0.01 * i
+        hi = [0.01 * i + 0.008] + [0.004] * (dim - 1)
+        hi[-1] = 0.02
+        if mesh == "quarter_cylinder" and dim == 3 and m == "johnson_cook":
+            shape = "{ quarter_cylinder = { radius = 0.004, length = 0.02, radial_cells = 2, axial_cells = 4 } }"
+        else:
+            cells = [2] * (dim - 1) + [4]
+            shape = f"{{ box = {{ lower = {lo}, upper = {hi}, cells = {cells} }} }}"
+        text += (f'[[lagrange.bodies]]\nname = "b{i}"\nmaterial = "{m}"\nmesh = {shape}\n'
+                 f'initial_velocity = [{vel}]\n')
+    up = "xyz"[dim - 1]
+    normal = [0.0] * dim
+    normal[-1] = 1.0
+    text += ('[[boundaries]]\ntype = "symmetry"\naxis = "x"\nat = 0.0\n'
+             f'[[boundaries]]\ntype = "velocity"\nregion = "{up} > 0.02 - 1e-9 and x > 0.015"\n'
+             f"velocity = {{ {up} = -10.0 }}\n"
+             f'[[boundaries]]\ntype = "fixed"\nregion = "{up} > 0.02 - 1e-9 and x > 0.025"\n'
+             f'[[boundaries]]\ntype = "rigid_wall"\npoint = {[0.0] * dim}\nnormal = {normal}\n')
+    return text
+
+
+def cases() -> dict[str, str]:
+    """name -> case.toml text of every warm-up case."""
+    out: dict[str, str] = {}
+    for dim in (2, 3):
+        out[f"lagrange_{dim}d"] = _lagrange(dim, "box")
+        for eos in _EOS:
+            out[f"ale_{dim}d_{eos}_eulerian"] = _single(dim, eos, "eulerian", "scalar")
+        for q in ("scalar", "monotonic"):
+            out[f"ale_{dim}d_{q}_open"] = _single(
+                dim, "ideal_gas", "eulerian", q, _faces(dim, x_lower='"outflow"', x_upper='"outflow"'),
+                extra="energy_sources = [ { energy = 0.1, at = %s } ]\n" % ([0.0] * dim))
+            out[f"ale_{dim}d_{q}_periodic"] = _single(
+                dim, "ideal_gas", "eulerian", q, _faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim]
+                                                              for s in ("lower", "upper")}))
+            out[f"ale_{dim}d_{q}_inflow_obstacle"] = _single(
+                dim, "ideal_gas", "eulerian", q, _faces(dim, x_lower=_inflow(dim), x_upper='"outflow"'),
+                extra='obstacles = [ { region = "x > 0.5 and x < 0.7 and y < 0.3", subsamples = 2 } ]\n')
+            out[f"ale_{dim}d_{q}_obstacle_walls"] = _single(
+                dim, "stiffened_gas", "eulerian", q,
+                extra='obstacles = [ { region = "x > 0.75" } ]\n')
+            for eos in ("ideal_gas", "tait"):
+                out[f"ale_{dim}d_{q}_{eos}_lagrangian_piston"] = _single(
+                    dim, eos, "lagrangian", q, _faces(dim, x_lower="{ piston = { velocity = 5.0 } }"))
+            out[f"ale_{dim}d_{q}_lagrangian_walls"] = _single(dim, "stiffened_gas", "lagrangian", q)
+            out[f"ale_{dim}d_{q}_mixed2"] = _mixed(dim, ("stiffened_gas", "ideal_gas"), q)
+            out[f"ale_{dim}d_{q}_mixed3_void"] = _mixed(dim, ("ideal_gas", "jwl", "tait"), q, void=True,
+                                                         boundaries=_faces(dim, x_upper='"outflow"'))
+            out[f"ale_{dim}d_{q}_mixed2_periodic"] = _mixed(
+                dim, ("ideal_gas", "ideal_gas"), q,
+                boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
+    out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
+    return out
+
+
+# ----------------------------------------------------------------------------------------------
+# stepping a case in this process
+def _step_ale(case: dict, comm, steps: int, blocked: bool) -> None:
+    from solvers.ale.solver import AleSolver
+
+    s = AleSolver(comm, case["ale"])
+    ne = int(np.prod(case["ale"]["grid"]["cells"]))
+    for n in range(steps):
+        dt = 0.5 * s.stable_dt()
+        s.predict(dt)
+        s.correct(None, step=n + 1, time=0.0)
+        fractions = None
+        if blocked and s.mode == "eulerian" and s.mm is None:  # a moving coupled body's fractions
+            fractions = np.zeros(ne)
+            fractions[: max(1, ne // 4)] = 0.5
+        s.remap(fractions)
+        s.diagnostics()
+    s.output()
+
+
+def _step_lagrange(case: dict, comm, steps: int) -> None:
+    from solvers.lagrange.solver import LagrangeSolver
+
+    s = LagrangeSolver(comm, case)
+    for n in range(steps):
+        s.predict(0.5 * s.stable_dt())
+        s.correct(None, step=n + 1, time=0.0)
+        s.diagnostics()
+    s.gather_nodes(s.x)
+    {k: s.gather_cells(a) for k, a in s.cell_fields().items()}
+
+
+def step_case(case: dict, steps: int = STEPS, blocked: bool = False) -> None:
+    """A few steps of every solver the case uses, on one rank of this process (no MPI job)."""
+    from mpi4py import MPI
+
+    from orchestrator.case import solvers_used
+
+    for role in solvers_used(case):
+        if role == "ale":
+            _step_ale(case, MPI.COMM_SELF, steps, blocked)
+        elif role == "lagrange":
+            _step_lagrange(case, MPI.COMM_SELF, steps)
+
+
+def dispatchers() -> dict[str, object]:
+    """Every numba function of the loaded solver modules, by qualified name."""
+    from numba.core.dispatcher import Dispatcher
+
+    found = {}
+    for name, mod in list(sys.modules.items()):
+        if not name.startswith("solvers.") or mod is None:
+            continue
+        for attr, obj in vars(mod).items():
+            if isinstance(obj, Dispatcher) and obj.py_func.__module__ == name:
+                found[f"{name}.{attr}"] = obj
+    return found
+
+
+def compiled() -> dict[str, int]:
+    """Kernels compiled in this process (not found in the cache): name -> number of signatures."""
+    return {k: sum(d._cache_misses.values()) for k, d in dispatchers().items() if d._cache_misses}
+
+
+def loaded() -> int:
+    return sum(sum(d._cache_hits.values()) for d in dispatchers().values())
+
+
+def _import_solvers() -> None:
+    import solvers.ale.solver  # noqa: F401  (and their kernel modules)
+    import solvers.ale.blocked  # noqa: F401
+    import solvers.ale.mixed  # noqa: F401
+    import solvers.lagrange.solver  # noqa: F401
+
+
+def warm(log=print) -> dict:
+    """Step every warm-up case; return counts and the wall time."""
+    from orchestrator.case import load_case
+
+    t0 = time.perf_counter()
+    _import_solvers()
+    table = cases()
+    with tempfile.TemporaryDirectory(prefix="immerse-warmup-") as tmp:
+        for name, text in table.items():
+            d = Path(tmp) / name
+            d.mkdir()
+            (d / "case.toml").write_text(text)
+            step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
+    report = {"cases": len(table), "kernels": len(dispatchers()),
+              "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
+              "seconds": round(time.perf_counter() - t0, 2)}
+    log(f"numba kernels warm: {report['cases']} tiny cases, {report['compiled']} specialisations "
+        f"compiled, {report['loaded_from_cache']} loaded from the cache, {report['seconds']} s")
+    return report
+
+
+def check(case_dirs) -> dict[str, int]:
+    """Step each case a few steps; return the kernels that had to be compiled (empty: all cached)."""
+    from orchestrator.case import load_case
+
+    _import_solvers()
+    for d in case_dirs:
+        step_case(load_case(d), steps=2)
+    return compiled()
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m orchestrator.warmup", description=__doc__.split("\n")[0])
+    ap.add_argument("--check", nargs="+", metavar="CASE_DIR",
+                    help="step these cases and print the kernels compiled instead of loaded (JSON)")
+    args = ap.parse_args(argv)
+    if args.check:
+        print(json.dumps(check(args.check)))
+    else:
+        warm()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
