@@ -88,8 +88,7 @@ class Coupler:
         self.history: dict[str, list[np.ndarray]] = {r: [] for r in self.roles}
         self.t = 0.0
         self.step = 0
-        self.out_index = 0
-        self.ckpt_index = 1
+        self.out_index = 0  # number of the next output step's files (not a time: see _next_multiple)
         self.dt_min = np.inf
         self.dt_max = 0.0
         self._receive_all()
@@ -157,7 +156,7 @@ class Coupler:
         tmp = path.with_suffix(".tmp")
         ident = self._case_identity()
         with h5py.File(tmp, "w") as h:
-            for k in ("t", "step", "out_index", "ckpt_index", "dt_min", "dt_max"):
+            for k in ("t", "step", "out_index", "dt_min", "dt_max"):
                 h.attrs[k] = getattr(self, k)
             # which case this state belongs to: a restart of any other case is refused
             h.attrs["format"] = CHECKPOINT_FORMAT
@@ -171,7 +170,6 @@ class Coupler:
             h.create_dataset("history/t", data=np.array(self.history_t))
             h.create_dataset("history/step", data=np.array(self.history_step))
         os.replace(tmp, path)
-        self.ckpt_index += 1
         self.log(f"checkpoint {path.relative_to(self.out)} at step {self.step}, t = {self.t:.6e} s")
 
     def _case_identity(self) -> dict:
@@ -191,7 +189,6 @@ class Coupler:
             self.t = float(h.attrs["t"])
             self.step = int(h.attrs["step"])
             self.out_index = int(h.attrs["out_index"])
-            self.ckpt_index = int(h.attrs["ckpt_index"])
             self.dt_min = float(h.attrs["dt_min"])
             self.dt_max = float(h.attrs["dt_max"])
             self.history_t = list(h["history/t"][...])
@@ -201,18 +198,25 @@ class Coupler:
         self.log(f"restarted from {path.name}: step {self.step}, t = {self.t:.6e} s")
 
     # ---- the time loop ---------------------------------------------------------------------------
+    def _next_multiple(self, interval: float | None) -> float:
+        """The first multiple k * interval after the current time (inf without an interval). Derived
+        from t, not counted: a restart with another output or checkpoint interval continues on the
+        new interval's times instead of catching up on every step. A time within round-off (1e-12
+        relative) of t counts as reached: the step that landed on it was clipped there exactly."""
+        if not interval:
+            return np.inf
+        k = np.floor(self.t / interval * (1 + 1e-12)) + 1.0
+        return float(k * interval)
+
     def _next_target(self) -> float:
-        """The next time the run must land on exactly: the end, the next output time
-        out_index * output_interval, or the next checkpoint time ckpt_index * checkpoint_interval.
-        Times within round-off (1e-12 relative) of the end or of the current time are not targets
-        of their own: 20 * 4e-6 is one ulp below 8e-5, and a step to it would leave a 1e-20 s sliver."""
+        """The next time the run must land on exactly: the end, the next output time or the next
+        checkpoint time. Times within round-off of the end are not targets of their own: 20 * 4e-6
+        is one ulp below 8e-5, and a step to it would leave a 1e-20 s sliver."""
         end = self.end_time
         target = end
-        for k, interval in ((self.out_index, self.output_interval), (self.ckpt_index, self.checkpoint_interval)):
-            if interval:
-                tk = k * float(interval)
-                if self.t * (1 + 1e-12) < tk < end * (1 - 1e-12):
-                    target = min(target, tk)
+        for tk in (self.next_output_t, self.next_checkpoint_t):
+            if tk < end * (1 - 1e-12):
+                target = min(target, tk)
         return target
 
     def run(self) -> dict:
@@ -223,6 +227,8 @@ class Coupler:
         self.log(f"case {self.case['name']}: solvers {', '.join(self.roles)}; end time {self.end_time:g} s")
         if self.out_index == 0:
             self.write_output()
+        self.next_output_t = self._next_multiple(self.output_interval)
+        self.next_checkpoint_t = self._next_multiple(self.checkpoint_interval)
         prog = Progress(self.end_time, self.t, bool(os.environ.get("IMMERSE_TTY")), self.log)
         done = self.t >= self.end_time
         while not done and self.step < self.max_steps:
@@ -254,10 +260,12 @@ class Coupler:
                              f"(imports, set-up, kernels loaded or compiled)")
             if diag:
                 self._record()
-            if self.t >= self.out_index * self.output_interval * (1 - 1e-12) or done:
+            if self.t >= self.next_output_t * (1 - 1e-12) or done:
                 self.write_output()
-            if self.checkpoint_interval and self.t >= self.ckpt_index * self.checkpoint_interval * (1 - 1e-12) and not done:
+                self.next_output_t = self._next_multiple(self.output_interval)
+            if self.t >= self.next_checkpoint_t * (1 - 1e-12) and not done:
                 self.checkpoint()
+                self.next_checkpoint_t = self._next_multiple(self.checkpoint_interval)
             prog.update(self.t, self.step)
         prog.close()
         self._broadcast(P.command(P.CMD_STOP))

@@ -16,7 +16,7 @@ from pathlib import Path
 
 FORMAT = "immerse-checkpoint-1"
 EXPECTED = "expected a checkpoint manifest OUT/checkpoints/checkpoint_<step>.h5"
-COUPLER_STATE = ("t", "step", "out_index", "ckpt_index", "dt_min", "dt_max")
+COUPLER_STATE = ("t", "step", "out_index", "dt_min", "dt_max")
 
 
 class RestartError(ValueError):

@@ -171,6 +171,26 @@ def test_restart_with_a_later_end_time(run_a, tmp_path):
     assert sa["final"] == sb["final"] and sa["steps"] == sb["steps"]
 
 
+def test_restart_with_another_output_interval(run_a, tmp_path):
+    """Outputs after a restart land on the new interval's times, one per interval: the schedule
+    follows the time, not a count of earlier outputs (a halved interval once wrote an output on
+    every step until the count caught up)."""
+    case_a, out_a, ckpt = run_a
+    finer = tmp_path / "finer"
+    shutil.copytree(case_a, finer)
+    (finer / "case.toml").write_text((finer / "case.toml").read_text().replace(
+        "output_interval = 1.0e-6", "output_interval = 0.25e-6"))
+    cont = tmp_path / "cont"
+    shutil.copytree(out_a, cont, symlinks=True)
+    r = immerse("run", finer, "--out", cont, "--restart", cont / "checkpoints" / ckpt.name, timeout=300)
+    assert r.returncode == 0, r.stderr
+    times = np.array(_last_step(cont)[1])
+    # before the checkpoint at 2 us: 0, 1, 2 us; after it every 0.25 us up to the end at 4 us
+    expected = np.concatenate([[0.0, 1e-6, 2e-6], 2e-6 + 0.25e-6 * np.arange(1, 9)])
+    assert len(times) == len(expected), times
+    assert np.max(np.abs(times - expected)) <= 1e-12 * 4e-6, times
+
+
 def test_restart_on_another_rank_count(run_a, tmp_path):
     """A one-rank Lagrangian checkpoint continued on two ranks ends equal to the one-rank run to
     round-off (measured: bitwise here; partitioned runs equal one rank to ~1e-15)."""
