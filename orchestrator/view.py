@@ -324,6 +324,10 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
         plotter.close()
 
 
+def _picture_path(pictures: Path, role: str, name: str, index: int) -> Path:
+    return pictures / f"{_SAFE.sub('_', role)}_{_SAFE.sub('_', name)}_{index:06d}.png"
+
+
 # ---------------------------------------------------------------------------------------------
 def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("last",),
            role: str | None = None, *, window_size: tuple[int, int] = (1024, 768),
@@ -362,6 +366,17 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
         plan.append((r, chosen, names))
 
     pictures = out_dir / PICTURES_DIR
+    # immerse never overwrites a file it did not write (orchestrator/outdir.py): a picture path
+    # taken by a file of the user's refuses the request before anything is drawn
+    from orchestrator import outdir
+
+    for r, chosen, names in plan:
+        for _, _, index in chosen:
+            for name in names:
+                path = _picture_path(pictures, r, name, index)
+                if not outdir.may_write(out_dir, path):
+                    raise ViewError(f"{path}: a file immerse did not write is there; move it away "
+                                    "(immerse never overwrites a file it did not write)")
     written: list[Path] = []
     pv = sink = None
     case = None
@@ -376,9 +391,10 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
             pictures.mkdir(parents=True, exist_ok=True)
             if axis is not None:
                 for name in names:
-                    path = pictures / f"{_SAFE.sub('_', r)}_{_SAFE.sub('_', name)}_{index:06d}.png"
+                    path = _picture_path(pictures, r, name, index)
                     fig = line_figure(line_profile(out_dir, r, name, index, axis, case or None), window_size)
                     fig.savefig(path)
+                    outdir.record_written(out_dir, path)
                     written.append(path)
                 continue
             if pv is None:
@@ -394,9 +410,10 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                     label, values = scalar_field(name, cell_data[name])
                     grid.cell_data[label] = values
                     preference = "cell"
-                path = pictures / f"{_SAFE.sub('_', r)}_{_SAFE.sub('_', name)}_{index:06d}.png"
+                path = _picture_path(pictures, r, name, index)
                 _render_pyvista(pv, sink, path, grid, label, name, values, preference,
                                 f"{r}: {label}\nt = {time:.6g} s (step {step})", planar,
                                 window_size, show_edges)
+                outdir.record_written(out_dir, path)
                 written.append(path)
     return written

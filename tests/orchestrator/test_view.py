@@ -3,6 +3,7 @@ plots against the exact solution; units in the labels; bad requests refused thro
 one line (exit 2) and nothing written; nothing from VTK on stderr."""
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -235,3 +236,25 @@ def test_cli_view_unknown_field_or_step(tmp_path, args, fragment):
     assert r.returncode == 2, r.stderr
     assert r.stderr.count("\n") == 1 and fragment in r.stderr, r.stderr
     assert r.stdout == "" and not (out / "pictures").exists()
+
+
+def test_view_owns_its_pictures_and_never_overwrites_a_users_file(tmp_path):
+    """Pictures of `immerse view` are recorded as immerse's (orchestrator/outdir.py): drawn again
+    freely, removed by `run --replace`; a user's file at a picture's path refuses the request
+    (one line, exit 2) and stays as it was, also through --replace."""
+    from tests.conftest import CASES
+
+    out = tmp_path / "out"
+    assert immerse("run", CASES / "sod", "--out", out).returncode in (0, 1)
+    r = immerse("view", out, "--field", "density")
+    assert r.returncode == 0, r.stderr
+    (mine,) = [Path(p) for p in r.stdout.split()]
+    assert immerse("view", out, "--field", "density").returncode == 0  # its own: drawn again
+    users = mine.with_name(mine.name.replace("density", "pressure"))
+    users.write_bytes(b"my picture")
+    r = immerse("view", out, "--field", "pressure")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "did not write" in r.stderr, r.stderr
+    assert users.read_bytes() == b"my picture"
+    r = immerse("run", CASES / "sod", "--out", out, "--replace")
+    assert r.returncode in (0, 1), r.stderr
+    assert not mine.exists() and users.read_bytes() == b"my picture"
