@@ -181,7 +181,13 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     p.set_defaults(func=cmd_bench)
     args = ap.parse_args(argv)
-    return args.func(args)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:
+        # Ctrl-C before a job runs (checking the case, rendering): nothing was launched; while a job
+        # runs, launch.py handles the signal itself and ends the job in order
+        print("immerse: interrupted (SIGINT)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

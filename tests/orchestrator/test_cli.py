@@ -55,3 +55,28 @@ def test_view_renders_pictures(tmp_path):
     assert len(pngs) == 2 and all(p.stat().st_size > 10_000 for p in pngs)
     r = immerse("view", tmp_path / "nothing")
     assert r.returncode == 2 and "results.h5" in r.stderr
+
+
+def test_ctrl_c_while_checking_is_one_line(tmp_path):
+    """SIGINT before any job runs (here: while the case is checked) gives one line and exit 130, no
+    traceback; nothing is launched or written."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from tests.conftest import REPO
+
+    slow_check = ("import sys, time, orchestrator.case as k, orchestrator.cli as c\n"
+                  "orig = k.load_case\n"
+                  "def slow(*a, **kw):\n    time.sleep(30); return orig(*a, **kw)\n"
+                  "k.load_case = slow\n"
+                  f"sys.exit(c.main(['run', 'cases/sod', '--out', {str(tmp_path / 'out')!r}]))\n")
+    p = subprocess.Popen([sys.executable, "-c", slow_check], cwd=REPO, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, env=dict(os.environ, PYTHONPATH=str(REPO)))
+    time.sleep(3)
+    p.send_signal(signal.SIGINT)
+    out, err = p.communicate(timeout=30)
+    assert p.returncode == 130 and err == "immerse: interrupted (SIGINT)\n" and out == "", err
+    assert not (tmp_path / "out").exists()
