@@ -162,13 +162,11 @@ def riemann(case, out, history, params):
     largest deviation of the pressure from the exact p* over the star region, shock and contact
     positions (in cells), L1 density error, and the positivity values of every output step
     (:func:`positivity`: near-vacuum problems)."""
-    from solvers.ale.exact.riemann import RiemannSolution
+    from orchestrator.exact_profiles import riemann_solution
 
     axis = "xyz".index(params.get("axis", "x"))
     x0 = float(params["x0"])
-    ex = RiemannSolution(left=tuple(params["left"]), right=tuple(params["right"]),
-                         gamma_l=float(params["gamma_left"]), gamma_r=float(params.get("gamma_right", params["gamma_left"])),
-                         p_inf_l=float(params.get("p_inf_left", 0.0)), p_inf_r=float(params.get("p_inf_right", 0.0)))
+    ex = riemann_solution(params)
     t, _, index = _last_step(out, "ale")
     prof = _zone_stations(out, "ale", index, axis)
     x = prof["x"]
@@ -306,11 +304,10 @@ def reflected_shock(case, out, history, params):
     pressure and density between the reflected shock and the wall, the state behind the incident
     shock, the reflected shock position (half-height crossing of the density jump, in cells) and
     the L1 density error on [grid lower, x_wall].  Zones beyond the wall are ignored."""
-    from solvers.ale.exact.reflected_shock import ReflectedShock
+    from orchestrator.exact_profiles import reflected_shock_solution
 
     axis = "xyz".index(params.get("axis", "x"))
-    ex = ReflectedShock(tuple(params["ahead"]), float(params["gamma"]), mach=float(params["mach"]),
-                        p_inf=float(params.get("p_inf", 0.0)))
+    ex = reflected_shock_solution(params)
     x_wall, x0 = float(params["x_wall"]), float(params["x_shock0"])
     t, _, index = _last_step(out, "ale")
     prof = _zone_stations(out, "ale", index, axis)
@@ -353,33 +350,15 @@ def piston(case, out, history, params):
     pressure and density behind the shock (zones between the piston and the exact shock position,
     4 zones excluded at each end), piston position, and the shock position (half-height crossing of
     the pressure jump) in undisturbed zone widths."""
-    from solvers.ale.exact import piston as exact
+    from orchestrator.exact_profiles import piston_solution
 
-    ale = case["ale"]
-    faces = [(f, b["piston"]["velocity"]) for f, b in ale["boundaries"].items()
-             if isinstance(b, dict) and "piston" in b]
-    if len(faces) != 1:
-        raise ValueError(f"piston check: needs exactly one piston face (found {len(faces)})")
-    face, u_p = faces[0]
-    axis = "xyz".index(face[0])
-    lower = face.endswith("lower")
-    region = ale["regions"][0]
-    mat = dict(ale["materials"][region["material"]])
-    eos = mat["eos"]
-    if eos == "tait":
-        ex = exact.tait(u_p, mat["rho0"], mat["bulk_modulus"], mat["exponent"], mat.get("p0", 0.0),
-                        rho0=region["density"])
-    elif eos in ("stiffened_gas", "ideal_gas"):
-        ex = exact.stiffened_gas(u_p, region["density"], region["pressure"], mat["gamma"], mat.get("p_inf", 0.0))
-    else:
-        raise ValueError(f"piston check: eos {eos!r} (needs tait, stiffened_gas or ideal_gas)")
-    g = ale["grid"]
-    x_face = g["lower"][axis] if lower else g["upper"][axis]
+    ex, axis, x_face, sign = piston_solution(case)
+    g = case["ale"]["grid"]
     dx0 = (g["upper"][axis] - g["lower"][axis]) / g["cells"][axis]
     t, _, index = _last_step(out, "ale")
     prof = _zone_stations(out, "ale", index, axis)
     # distance from the piston's initial position, into the domain
-    x = (prof["x"] - x_face) if lower else (x_face - prof["x"])
+    x = sign * (prof["x"] - x_face)
     order = np.argsort(x)
     x, p, rho = x[order], prof["p"][order], prof["rho"][order]
     xp, xs = ex.piston_position(t), ex.shock_position(t)
