@@ -454,19 +454,27 @@ def format_bytes(n: int) -> str:
     return f"{n} B"
 
 
+def _stat_regular(path: Path, key: str, value: Any, allowed: str,
+                  not_found: str = "file not found") -> os.stat_result:
+    """os.stat of a file that must be a regular file (a FIFO, device or directory is refused on
+    ``key`` before anything opens it: opening a FIFO blocks)."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise CaseError(key, value, not_found) from None
+    except OSError as exc:
+        raise CaseError(key, value, f"cannot read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise CaseError(key, value, f"is {_file_kind(st.st_mode)}; {allowed}")
+    return st
+
+
 def _read_regular(path: Path, key: str, value: Any, limit: int, what: str) -> bytes:
     """At most ``limit`` bytes of a regular file, refused (CaseError on ``key``) if it is anything
     else (FIFO, device, directory: checked before opening and on the opened descriptor, opened
     non-blocking so that neither the open nor the check can hang) or larger than ``limit``."""
     allowed = f"must be a regular {what} of at most {format_bytes(limit)}"
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise CaseError(key, value, "file not found") from None
-    except OSError as exc:
-        raise CaseError(key, value, f"cannot read: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise CaseError(key, value, f"is {_file_kind(st.st_mode)}; {allowed}")
+    st = _stat_regular(path, key, value, allowed)
     if st.st_size > limit:
         raise CaseError(key, value, f"is {format_bytes(st.st_size)}; {allowed}")
     try:
@@ -961,14 +969,8 @@ def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> dict:
 
     memory = machine_memory()
     limit = memory // MESH_READ_FACTOR
-    try:
-        st = os.stat(path)
-    except FileNotFoundError:
-        raise CaseError(key, raw, "file not found (paths are relative to the case directory)") from None
-    except OSError as exc:
-        raise CaseError(key, raw, f"cannot read: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(st.st_mode):
-        raise CaseError(key, raw, f"is {_file_kind(st.st_mode)}; must be a regular mesh file")
+    st = _stat_regular(path, key, raw, "must be a regular mesh file",
+                       not_found="file not found (paths are relative to the case directory)")
     if st.st_size > limit:
         raise CaseError(key, raw, f"is {format_bytes(st.st_size)}: reading it takes about "
                                   f"{MESH_READ_FACTOR} times that, this machine has "
