@@ -238,7 +238,15 @@ def _as_unprivileged_user(args, cwd):
     if os.geteuid() == 0:
         if not shutil.which("setpriv"):
             pytest.skip("running as root without setpriv: cannot make a directory unwritable")
-        cmd = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", *cmd]
+        drop = ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups"]
+        # `nobody` must be able to read this checkout and its venv (a clone under a private
+        # directory, e.g. mktemp -d, is not): else this test cannot run here
+        probe = subprocess.run([*drop, sys.executable, "-c", "import orchestrator.cli"], cwd=cwd,
+                               capture_output=True, text=True, timeout=60, env=env)
+        if probe.returncode != 0:
+            pytest.skip("user nobody cannot read this checkout or its venv (a private parent "
+                        "directory), so a directory cannot be made unwritable for the run")
+        cmd = [*drop, *cmd]
     return subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=60, env=env)
 
 
