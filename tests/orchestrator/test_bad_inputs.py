@@ -23,6 +23,7 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import immerse
+from tests.orchestrator.case_texts import STEEL_BAR_HEAD
 from tests.orchestrator.test_case import BAD, BAD_CASES
 
 BEYOND = 4 * len(os.sched_getaffinity(0))  # with the coupler: one process more than 4 a core
@@ -78,20 +79,7 @@ materials.gas = { eos = "ideal_gas", gamma = 1.4 }
 regions = [ { material = "gas", density = 1.0, pressure = 1.0 } ]
 obstacles = [ { region = "x > 0.75", subsamples = 2 } ]
 """
-BAR = """\
-[run]
-dimension = 3
-end_time = 1e-5
-
-[materials.steel]
-model = "linear_elastic"
-density = 8000.0
-youngs_modulus = 200e9
-poisson_ratio = 0.3
-
-[[lagrange.bodies]]
-name = "bar"
-material = "steel"
+BAR = STEEL_BAR_HEAD + """\
 mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = [10, 2, 2] } }
 initial_velocity = [0.0, 0.0, 0.0]
 

@@ -13,6 +13,7 @@ from mpi4py import MPI
 import solvers.expressions as compiler
 from orchestrator import expressions as check
 from orchestrator.case import CaseError, load_case
+from tests.orchestrator.case_texts import STEEL_BAR_HEAD
 
 ALE2D = """\
 [run]
@@ -29,20 +30,7 @@ regions = [
 ]
 """
 OBSTACLE = ALE2D.replace("REGION_MATERIAL", "gas") + 'obstacles = [ { region = "x > 0.83", subsamples = 3 } ]\n'
-BODIES = """\
-[run]
-dimension = 3
-end_time = 1e-5
-
-[materials.steel]
-model = "linear_elastic"
-density = 8000.0
-youngs_modulus = 200e9
-poisson_ratio = 0.3
-
-[[lagrange.bodies]]
-name = "bar"
-material = "steel"
+BODIES = STEEL_BAR_HEAD + """\
 mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.02], cells = [5, 2, 3] } }
 initial_velocity = ["where(x > 0, 1e-3 / x, 0)", 0.0, "-190 * where(z > 0.001, 1, 0.5)"]
 

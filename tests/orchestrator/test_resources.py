@@ -12,6 +12,7 @@ from orchestrator import resources as R
 from orchestrator.case import CaseError, load_case, ranks_for
 from solvers.ale.parallel import _factorisations, _feasible, split_possible
 from solvers.lagrange.mesh import body_mesh_size, box_mesh, quarter_cylinder_mesh
+from tests.orchestrator.case_texts import STEEL_BAR_HEAD
 
 GiB = 1 << 30
 ALE = """\
@@ -24,20 +25,7 @@ grid = { lower = LOWER, upper = UPPER, cells = CELLS }
 materials.gas = { eos = "ideal_gas", gamma = 1.4 }
 regions = [ { material = "gas", density = 1.0, pressure = 1.0 } ]
 """
-BOX = """\
-[run]
-dimension = 3
-end_time = 1e-5
-
-[materials.steel]
-model = "linear_elastic"
-density = 8000.0
-youngs_modulus = 200e9
-poisson_ratio = 0.3
-
-[[lagrange.bodies]]
-name = "bar"
-material = "steel"
+BOX = STEEL_BAR_HEAD + """\
 mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = CELLS } }
 """
 
