@@ -23,26 +23,14 @@ from pathlib import Path
 import pytest
 
 from tests.conftest import immerse
-from tests.orchestrator.case_texts import STEEL_BAR_HEAD
+from tests.orchestrator.case_texts import SOD_2D, STEEL_BAR_HEAD
 from tests.orchestrator.test_case import BAD, BAD_CASES
 
 BEYOND = 4 * len(os.sched_getaffinity(0))  # with the coupler: one process more than 4 a core
 SECONDS = 5.0  # the issue's bound per bad input (measured: 0.4-1.3 s each, 2 at a time, loaded machine)
 
 # ---- minimal valid cases (self-contained: edits of shipped cases would break when they change) ----
-ALE2D = """\
-[run]
-dimension = 2
-end_time = 0.2
-
-[ale]
-grid = { lower = [0.0, 0.0], upper = [1.0, 0.01], cells = [100, 1] }
-materials.gas = { eos = "ideal_gas", gamma = 1.4 }
-regions = [
-  { material = "gas", density = 1.0, pressure = 1.0 },
-  { material = "gas", region = "x > 0.5", density = 0.125, pressure = 0.1 },
-]
-"""
+ALE2D = SOD_2D
 ALE3D = """\
 [run]
 dimension = 3

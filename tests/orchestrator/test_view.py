@@ -14,6 +14,7 @@ from orchestrator.view import ViewError, line_figure, line_profile, one_d_axis, 
 from solvers.ale.exact.riemann import RiemannSolution
 from solvers.lagrange.mesh import box_mesh, quarter_cylinder_mesh
 from tests.conftest import immerse
+from tests.orchestrator.case_texts import SOD_2D
 
 pytest.importorskip("pyvista")
 mpimg = pytest.importorskip("matplotlib.image")
@@ -110,19 +111,7 @@ def test_bad_requests_are_refused_before_drawing(tmp_path, request_kw, fragment)
 
 # ------------------------------------------------------------------------------------------ 1-D
 SOD = dict(left=(1.0, 0.0, 1.0), right=(0.125, 0.0, 0.1), gamma_l=1.4)
-SOD_CASE = """
-[run]
-dimension = 2
-end_time = 0.2
-
-[ale]
-grid = { lower = [0.0, 0.0], upper = [1.0, 0.01], cells = [100, 1] }
-materials.gas = { eos = "ideal_gas", gamma = 1.4 }
-regions = [
-  { material = "gas", density = 1.0, pressure = 1.0 },
-  { material = "gas", region = "x > 0.5", density = 0.125, pressure = 0.1 },
-]
-
+SOD_CASE = SOD_2D + """
 [check]
 kind = "riemann"
 params = { axis = "x", x0 = 0.5, left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1], gamma_left = 1.4 }
