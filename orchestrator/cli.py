@@ -94,14 +94,11 @@ def cmd_run(args) -> int:
         return _fail(str(e))
     # everything is checked before anything is created or launched
     from orchestrator import outdir
-    from orchestrator.fingerprint import case_fingerprint
-    from orchestrator.restart import RestartError, check_restart
+    from orchestrator.restart import RestartError
 
+    out = Path(args.out) if args.out is not None else Path(case["case_dir"]) / "out"
     try:
-        ck = check_restart(args.restart, case) if args.restart is not None else None
-        out = Path(args.out) if args.out is not None else Path(case["case_dir"]) / "out"
-        plan = outdir.plan(out, case, case_fingerprint(case), replace=args.replace, restart=ck)
-        rc = run_job(case, out, ranks, args.restart, plan=plan)
+        rc = run_job(case, out, ranks, args.restart, replace=args.replace)
     except (RestartError, outdir.OutDirError) as e:
         return _fail(str(e))
     if rc == 0:

@@ -175,10 +175,10 @@ class Coupler:
     def _case_identity(self) -> dict:
         """The case's fingerprint and the canonical JSON it hashes (mesh files hashed once)."""
         if getattr(self, "_ident", None) is None:
-            from orchestrator.fingerprint import canonical_json, case_fingerprint, case_identity
+            from orchestrator.fingerprint import canonical_json, case_identity, fingerprint_of
 
-            self._ident = {"fingerprint": case_fingerprint(self.case),
-                           "json": canonical_json(case_identity(self.case))}
+            text = canonical_json(case_identity(self.case))
+            self._ident = {"fingerprint": fingerprint_of(text), "json": text}
         return self._ident
 
     def _load(self, path: Path) -> None:

@@ -72,8 +72,13 @@ def canonical_json(identity: Mapping) -> str:
     return json.dumps(identity, sort_keys=True, separators=(",", ":"), allow_nan=False)
 
 
+def fingerprint_of(canonical: str) -> str:
+    """The fingerprint of a case identity's canonical JSON."""
+    return "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()
+
+
 def case_fingerprint(case: Mapping) -> str:
-    return "sha256:" + hashlib.sha256(canonical_json(case_identity(case)).encode()).hexdigest()
+    return fingerprint_of(canonical_json(case_identity(case)))
 
 
 def first_difference(a: Any, b: Any, path: str = "") -> tuple[str, Any, Any] | None:

@@ -368,20 +368,17 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
 
 
 def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None, *,
-            replace: bool = False, plan: outdir.Plan | None = None) -> int:
-    """Prepare ``out`` (the ownership rules of orchestrator.outdir), run the job with SIGINT/SIGTERM
-    ending it in order, claim the files it wrote; print one line unless it succeeded; return the
-    exit code (0, 1.., 130 on SIGINT, 143 on SIGTERM). OutDirError if ``out`` is refused."""
+            replace: bool = False) -> int:
+    """Check ``restart`` and ``out`` (the ownership rules of orchestrator.outdir) before anything
+    is created, prepare ``out``, run the job with SIGINT/SIGTERM ending it in order, claim the files
+    it wrote; print one line unless it succeeded; return the exit code (0, 1.., 130 on SIGINT, 143
+    on SIGTERM). RestartError or OutDirError (nothing touched) if either is refused."""
+    from orchestrator.fingerprint import case_fingerprint
+    from orchestrator.restart import check_restart
+
     out = Path(out)
-    if plan is None:
-        from orchestrator.fingerprint import case_fingerprint
-
-        ck = None
-        if restart:
-            from orchestrator.restart import check_restart
-
-            ck = check_restart(restart, case)
-        plan = outdir.plan(out, case, case_fingerprint(case), replace=replace, restart=ck)
+    ck = check_restart(restart, case) if restart is not None else None
+    plan = outdir.plan(out, case, case_fingerprint(case), replace=replace, restart=ck)
     started = time.time()
     with stop_on_signals() as stop:
         outdir.prepare(plan, started)
