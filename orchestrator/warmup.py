@@ -177,8 +177,9 @@ def _step_ale(case: dict, comm, steps: int, blocked: bool) -> None:
         s.correct(None, step=n + 1, time=0.0)
         fractions = None
         if blocked and s.mode == "eulerian" and s.mm is None:  # a moving coupled body's fractions
-            fractions = np.zeros(ne)
-            fractions[: max(1, ne // 4)] = 0.5
+            from solvers.ale.coupled import BodyGeometry
+            ids = np.arange(max(1, ne // 4), dtype=np.int64)
+            fractions = BodyGeometry(ids, np.full(ids.size, 0.5))
         s.remap(fractions)
         s.diagnostics()
     s.output()

@@ -134,30 +134,91 @@ class Blocked:
         self.ASV = np.zeros((B.dim, B.nzones))
         self._no_inflow = (np.zeros(0, np.int64), np.zeros((0, B.dim)))
         self._R = np.zeros(B.dim)
+        # coupled bodies (the coupler's BodyGeometry, solvers/ale/coupled.py): exact face apertures
+        # (None: apertures from the fractions by the min model), the cut zones of this block that
+        # carry a body surface (local index, row in the coupler's list) and their surface terms
+        self.A_body = None
+        self.cut = np.zeros(0, np.int64)
+        self.cut_rows = np.zeros(0, np.int64)
+        self.n_cut = 0
+        self.covered = np.zeros(0, np.int64)
+        self.SB = np.zeros(B.nzones)  # body-surface swept volume of the Lagrange step (cut zones)
+        self._sb_zones = np.zeros(0, np.int64)
+        self.nodes = (np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0, bool))
         self.set_fractions(s, self.b_static)
 
     # ---- fractions -----------------------------------------------------------------------------
-    def combined(self, s, fractions) -> np.ndarray:
-        """max(static, coupler) blocked fraction (nzones,); ``fractions`` has one value per zone of
-        the whole grid in output order (x fastest), on every rank."""
+    def combined(self, s, geometry) -> np.ndarray:
+        """max(static, bodies) blocked fraction (nzones,) of the coupler's ``geometry``
+        (solvers/ale/coupled.BodyGeometry: global ids and values of the zones the bodies cover, the
+        same on every rank); also takes the geometry's exact face apertures and cut zones."""
         B = s.block
-        if fractions is None:
+        if geometry is None:
             return self.b_static
-        f = np.asarray(fractions, dtype=np.float64).ravel()
-        ncell = int(np.prod(B.cells))
-        if f.size != ncell:
-            raise ValueError(f"blocked fractions: expected {ncell} values (one per ALE zone), got {f.size}")
-        if not hasattr(self, "_gzones"):  # global output index of this block's output zones
-            ijk = np.stack(np.unravel_index(B.out_zones, B.zdims), axis=1)[:, : B.dim] - GHOST + B.offset
-            stride = np.cumprod(np.concatenate([[1], B.cells[:-1]]))
-            self._gzones = ijk @ stride
-        b = np.zeros(B.nzones)
-        b[B.out_zones] = f[self._gzones]
-        bad = ~(np.isfinite(b) & (b >= 0.0) & (b <= 1.0))
+        from solvers.ale.coupled import GlobalIndex
+
+        gi = GlobalIndex(B)
+        f = np.asarray(geometry.fractions, dtype=np.float64)
+        bad = ~(np.isfinite(f) & (f >= 0.0) & (f <= 1.0))
         if np.any(bad):
-            z = int(np.flatnonzero(bad)[0])
-            raise ValueError(f"blocked fraction {b[z]!r} of ALE zone {B.zone_ijk(z)} is not in [0, 1]")
+            k = int(np.flatnonzero(bad)[0])
+            ijk = tuple(int(v) for v in gi._split(geometry.zones[k:k + 1], gi.cells)[0, : B.dim])
+            raise ValueError(f"blocked fraction {f[k]!r} of ALE zone {ijk} is not in [0, 1]")
+        z, mine = gi.zones(geometry.zones)
+        b = np.zeros(B.nzones)
+        b[z[mine]] = f[mine]
+        self.covered = np.ascontiguousarray(z[mine])  # this block's zones a body covers
+        if geometry.faces is not None:
+            A = np.ones((B.dim, B.nzones))
+            for d, (ids, cov) in enumerate(geometry.faces):
+                fz, fm = gi.faces(d, ids)
+                A[d, fz[fm]] = np.clip(1.0 - np.asarray(cov)[fm], 0.0, 1.0)
+            self.A_body = A
+        else:
+            self.A_body = None
+        cut = np.zeros(0, np.int64) if geometry.cut is None else geometry.cut
+        cz, cm = gi.zones(cut)
+        self.cut = np.ascontiguousarray(cz[cm])
+        self.cut_rows = np.flatnonzero(cm)
+        self.n_cut = int(cut.size)
+        nodes = np.zeros(0, np.int64) if geometry.nodes is None else geometry.nodes
+        self.nodes = gi.nodes(nodes)  # (local index, real here, owned here) of the requested nodes
         return np.maximum(b, self.b_static)
+
+    # ---- coupled bodies: the interface of the Lagrange step --------------------------------------
+    def cut_forces(self, s) -> np.ndarray:
+        """(nc_local, dim) net corner force sum_c f_c of this block's cut zones (time n): with exact
+        apertures sum_c b^A_c = the zone's body-surface area vector a_e (discrete divergence
+        theorem), so this is the fluid's reaction (p + q) a_e (+ hourglass, summing to ~0): the body
+        gets exactly minus it (momentum exact)."""
+        return s.fc[self.cut].sum(axis=1)
+
+    def surface_vectors(self, s) -> np.ndarray:
+        """(nc_local, dim) a_e = sum_c b^A_c of the cut zones from the apertures on the fixed grid
+        (Eulerian: the Lagrange step starts from it): a_e[d] = (h^{dim-1}/h_d) (A_hi,d - A_lo,d)."""
+        B = s.block
+        out = np.empty((self.cut.size, self.dim))
+        vol = float(np.prod(B.h))
+        for d in range(self.dim):
+            out[:, d] = (vol / B.h[d]) * (self.A[d, self.cut + B.zs[d]] - self.A[d, self.cut])
+        return out
+
+    def body_terms(self, s, v_half, v_bar) -> np.ndarray:
+        """The body surface in the cut zones' Lagrange step (after the compatible energy update):
+        internal energy M de = dt_avg R . vbar (the work of the fluid's reaction R on the surface
+        moving at vbar = (v^{n-1/2} + v^{n+1/2})/2 of the body: exactly the work of -R on the body,
+        whose impulse is -dt_avg R), and the surface's swept volume SB = -dt a_e . v^{n+1/2}
+        (volume gradient -a_e of the open region w.r.t. the surface position) for the Lagrangian
+        open volume; ``v_half``, ``v_bar`` (nc_local, dim).  Returns [momentum (dim), energy] that
+        crossed into the fluid (this rank's zones)."""
+        z = self.cut
+        R = self.cut_forces(s)
+        work = np.einsum("ij,ij->i", R, v_bar)
+        M = s.M[z]
+        s.e[z] += np.where(M > 0.0, s.dt_avg * work / np.where(M > 0.0, M, 1.0), 0.0)
+        self.SB[z] = -s.dt * np.einsum("ij,ij->i", self.surface_vectors(s), v_half)
+        self._sb_zones = z
+        return np.concatenate([s.dt_avg * R.sum(axis=0), [s.dt_avg * float(work.sum())]])
 
     def set_fractions(self, s, b) -> None:
         """Open fractions (ghosts filled like zone fields), solid flags, apertures, cut zones and
@@ -176,7 +237,10 @@ class Blocked:
         self.phi = phi
         self.solid = (phi <= 0.0).astype(np.uint8)
         A = np.ones((dim, B.nzones))
-        pv = B.zview(phi)
+        # min-model apertures of the fractions without exact ones; with a coupled body's exact face
+        # apertures, min-model apertures of the static obstacles only (and the smaller of the two)
+        phi_m = phi if self.A_body is None else self._static_phi(s)
+        pv = B.zview(phi_m)
         for d in range(dim):
             av = B.zview(A[d])
             lo = [slice(None)] * 3
@@ -184,6 +248,8 @@ class Blocked:
             lo[d] = slice(0, B.zdims[d] - 1)
             hi[d] = slice(1, B.zdims[d])
             av[tuple(hi)] = np.minimum(pv[tuple(lo)], pv[tuple(hi)])
+        if self.A_body is not None:
+            np.minimum(A, self.A_body, out=A)
         self.A = A
         # zones whose forces need the aperture correction: cut zones and zones with a closed face
         t = (phi < 1.0)
@@ -192,11 +258,23 @@ class Blocked:
             t |= (A[d] < 1.0) | (up < 1.0)
         t &= B.real_zone
         self.touched = np.flatnonzero(t).astype(np.int64)
+        # the reaction of the static obstacles only: a cut zone's is the body's load (coupler)
+        self.touched_static = np.setdiff1d(self.touched, self.cut).astype(np.int64)
         self._wall_nodes(s)
+
+    def _static_phi(self, s) -> np.ndarray:
+        B = s.block
+        ps = np.where(self.b_static >= 1.0 - SOLID_TOL, 0.0, 1.0 - self.b_static)
+        ps[~B.real_zone] = 1.0
+        s.bc.fill_zones([ps])
+        return ps
 
     def _wall_nodes(self, s) -> None:
         B, dim = s.block, self.dim
-        sol = B.zview(self.solid.astype(bool))
+        # immersed walls at rest: the static obstacles' (a coupled body moves: the constraint ties
+        # the nodes of its cut zones instead)
+        solid = self.solid.astype(bool) if self.A_body is None else self._static_phi(s) <= 0.0
+        sol = B.zview(solid)
         lo, hi = B.nreal
         # zones around node (i, j, k): (i - 1 + o0, j - 1 + o1, k - 1 + o2)
         around = {}
@@ -254,7 +332,7 @@ class Blocked:
         _constrain_kernel(s.v, s.v_old, s.m, s.block.owned, self._no_inflow[0], self._no_inflow[1],
                           self.wall_nodes, self.wall_comp, self._wall_vel, s._acc)
         if record:
-            corner_force_sum(s.fc, self.touched, self._R)
+            corner_force_sum(s.fc, self.touched_static, self._R)
             s._acc[: self.dim] += s.dt_avg * self._R
 
     # ---- remap ----------------------------------------------------------------------------------
@@ -270,10 +348,13 @@ class Blocked:
             s._swept(B.X, s.x, s.SV[d], d, lo, hi, B.zs, B.ns)
             s.bc.fill_zones([s.SV[d]], face_dir=d)
             np.multiply(self.A[d], s.SV[d], out=self.ASV[d])
-        bad = lagrangian_open_volumes(self.ASV, self.VE, self.phi, s.V, s.M, s.rho, s.p, s.q, s.de_h,
-                                      s.zr[0], s.zr[1], B.zs)
+        bad = lagrangian_open_volumes(self.ASV, self.SB, self.VE, self.phi, s.V, s.M, s.rho, s.p, s.q,
+                                      s.de_h, s.zr[0], s.zr[1], B.zs)
         if bad >= 0:
             s._check((0.0, bad, BAD_VOLUME), " (Lagrangian grid)")
+        if self._sb_zones.size:  # the body-surface volumes belong to this step only
+            self.SB[self._sb_zones] = 0.0
+            self._sb_zones = np.zeros(0, np.int64)
         _sync(s)
         s._fill_remap_zones()
         order = range(dim) if s.parity == 0 else range(dim - 1, -1, -1)
@@ -289,6 +370,17 @@ class Blocked:
     def _apply_new_fractions(self, s, b_new) -> None:
         """Open fractions of the remapped state: rho = M / (phi_new V).  Collective (ghost fills)."""
         B = s.block
+        if self.A_body is not None:  # a coupled body's exact geometry: small zones merge
+            _sync(s)
+            self.set_fractions(s, b_new)
+            bad = merge_small_zones(self.covered, s.M, s.e, self.phi, self.VE, B.zact,
+                                    B.real_zone.astype(np.uint8), s.v, B.zs, B.ns, PHI_MERGE)
+            if bad >= 0:
+                s._fail(f"ALE zone {B.zone_ijk(bad)} is covered by a coupled body while it holds "
+                        f"{s.M[bad]:.6g} kg of material and has no open neighbour to pass it to, at step "
+                        f"{s.step}, t={s.time:.6g} s")
+            _sync(s)
+            return
         newly = (b_new >= 1.0 - SOLID_TOL) & B.real_zone & (s.M != 0.0)
         if np.any(newly):
             z = int(np.flatnonzero(newly)[0])
@@ -339,8 +431,9 @@ def open_eos(code, par, M, e, de_h, phi, VE, rho, p, c, q, zlo, zhi, zs):
 
 
 @njit(cache=True)
-def lagrangian_open_volumes(ASV, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
-    """V = phi VE + sum_d (ASV_d[z + s_d] - ASV_d[z]) (open Lagrangian volume), rho = M / V and the
+def lagrangian_open_volumes(ASV, SB, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
+    """V = phi VE + SB + sum_d (ASV_d[z + s_d] - ASV_d[z]) (open Lagrangian volume; SB the volume a
+    coupled body's surface sweeps into the zone, negative when it advances), rho = M / V and the
     half-step EOS shift de_h of the zones with material.  Returns the first such zone with V <= 0."""
     dim = ASV.shape[0]
     for i in range(zlo[0], zhi[0]):
@@ -348,7 +441,12 @@ def lagrangian_open_volumes(ASV, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
             for k in range(zlo[2], zhi[2]):
                 z = i * zs[0] + j * zs[1] + k * zs[2]
                 v0 = phi[z] * VE[z]
-                vn = v0
+                vn = v0 + SB[z]
+                if SB[z] < 0.0 and not (vn > 1e-9 * VE[z]):
+                    # a body surface swept past the zone's whole open part within the step (it
+                    # crossed a zone face): its material goes through the open faces (the remap's
+                    # positivity limit) and the small-zone merge; keep a sliver of volume here
+                    vn = 1e-9 * VE[z]
                 for d in range(dim):
                     vn += ASV[d, z + zs[d]] - ASV[d, z]
                 V[z] = vn
@@ -513,3 +611,175 @@ def _flush():
 
 
 _flush()
+
+
+# ------------------------------------------------------------------------------------------------
+# small cut zones of moving bodies: conservative merging after the remap
+# ------------------------------------------------------------------------------------------------
+PHI_MERGE = 0.05
+"""A zone a moving body leaves with an open fraction below this (or a fully covered zone that still
+holds material, or one the remap left with negative mass) shares its content with its most open
+face neighbour: the remap's face fluxes and the body's swept volume agree only to the order of the
+scheme, and a body crossing a zone face within one step sweeps more than the zone holds."""
+
+
+@njit(cache=True)
+def _corners(z, zs, ns, dim, out):
+    i = z // zs[0]
+    r = z - i * zs[0]
+    j = r // zs[1]
+    k = r - j * zs[1]
+    n0 = i * ns[0] + j * ns[1] + k * ns[2]
+    nc = 0
+    for c in range(1 << dim):
+        o0 = c & 1
+        o1 = (c >> 1) & 1
+        o2 = (c >> 2) & 1
+        out[nc] = n0 + o0 * ns[0] + o1 * ns[1] + o2 * ns[2]
+        nc += 1
+    return nc
+
+
+@njit(cache=True)
+def _node_mass(n, M, zact, zs, ns, dim):
+    """The gather's nodal mass (hydro.gather_*: 2^-dim sum of the active zones' masses)."""
+    i = n // ns[0]
+    r = n - i * ns[0]
+    j = r // ns[1]
+    k = r - j * ns[1]
+    s = 0.0
+    for c in range(1 << dim):
+        zi = i - 1 + (c & 1)
+        zj = j - 1 + ((c >> 1) & 1)
+        zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
+        z = zi * zs[0] + zj * zs[1] + zk * zs[2]
+        s += zact[z] * M[z]
+    return s / (1 << dim)
+
+
+@njit(cache=True)
+def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
+    """Merge every candidate zone with material and an open fraction below phi_merge (or negative
+    mass) into its face neighbour with the largest open fraction (the group's mass and internal
+    energy shared in proportion to the open volumes: one density and one specific energy).  Nodal
+    momentum is conserved: a node keeps its velocity when its mass falls and hands the momentum of
+    the lost mass to the nodes of its group that gain mass; the kinetic energy this inelastic
+    exchange removes becomes the group's internal energy (total energy conserved).  Returns -1, or
+    a zone without any open neighbour that still holds material."""
+    dim = v.shape[1]
+    nd = 0
+    donors = np.empty(cand.size, np.int64)
+    targets = np.empty(cand.size, np.int64)
+    for t in range(cand.size):
+        z = cand[t]
+        if not real[z] or M[z] == 0.0 or (phi[z] >= phi_merge and M[z] > 0.0):
+            continue
+        best = -1
+        bphi = 0.0
+        for d in range(dim):
+            for sgn in (-1, 1):
+                nb = z + sgn * zs[d]
+                if zact[nb] > 0.0 and phi[nb] > bphi:
+                    bphi = phi[nb]
+                    best = nb
+        if best < 0:
+            return z
+        donors[nd] = z
+        targets[nd] = best
+        nd += 1
+    if nd == 0:
+        return -1
+    donors = donors[:nd]
+    targets = targets[:nd]
+    # a target that is itself a donor passes its group on to its own target (chains end at a zone
+    # with phi >= phi_merge, or at the first repeat)
+    for it in range(nd):
+        changed = False
+        for a in range(nd):
+            for b in range(nd):
+                if targets[a] == donors[b] and targets[b] != donors[a]:
+                    targets[a] = targets[b]
+                    changed = True
+        if not changed:
+            break
+    ut = np.unique(targets)
+    ng = ut.size
+    gid = np.empty(nd, np.int64)
+    for a in range(nd):
+        gid[a] = np.searchsorted(ut, targets[a])
+    # group members: targets then donors
+    members = np.concatenate((ut, donors))
+    mgroup = np.concatenate((np.arange(ng), gid))
+    # affected nodes and their masses before
+    corners = np.empty(8, np.int64)
+    nodes = np.empty(members.size * (1 << dim), np.int64)
+    ngr = np.empty(members.size * (1 << dim), np.int64)
+    q = 0
+    for a in range(members.size):
+        nc = _corners(members[a], zs, ns, dim, corners)
+        for c in range(nc):
+            nodes[q] = corners[c]
+            ngr[q] = mgroup[a]
+            q += 1
+    order = np.argsort(nodes, kind="mergesort")
+    nodes_s = nodes[order]
+    keep = np.ones(q, np.bool_)
+    for a in range(1, q):
+        if nodes_s[a] == nodes_s[a - 1]:
+            keep[a] = False
+    un = nodes_s[keep]
+    ugr = ngr[order][keep]  # a node belongs to the group of its first listing (targets first)
+    m0 = np.empty(un.size)
+    for a in range(un.size):
+        m0[a] = _node_mass(un[a], M, zact, zs, ns, dim)
+    # zone masses and energies of every group
+    Mg = np.zeros(ng)
+    Eg = np.zeros(ng)
+    Vg = np.zeros(ng)
+    for a in range(members.size):
+        z = members[a]
+        g = mgroup[a]
+        Mg[g] += M[z]
+        Eg[g] += M[z] * e[z]
+        Vg[g] += phi[z] * VE[z]
+    for a in range(members.size):
+        z = members[a]
+        g = mgroup[a]
+        if not (Mg[g] > 0.0):
+            return z
+        M[z] = Mg[g] * (phi[z] * VE[z]) / Vg[g]
+        e[z] = Eg[g] / Mg[g]
+    # nodal momentum
+    m1 = np.empty(un.size)
+    pool = np.zeros((ng, dim))
+    gain = np.zeros(ng)
+    ke0 = np.zeros(ng)
+    for a in range(un.size):
+        m1[a] = _node_mass(un[a], M, zact, zs, ns, dim)
+        g = ugr[a]
+        n = un[a]
+        for d in range(dim):
+            ke0[g] += 0.5 * m0[a] * v[n, d] * v[n, d]
+        if m1[a] <= m0[a]:
+            for d in range(dim):
+                pool[g, d] += (m0[a] - m1[a]) * v[n, d]
+        else:
+            gain[g] += m1[a] - m0[a]
+    ke1 = np.zeros(ng)
+    for a in range(un.size):
+        g = ugr[a]
+        n = un[a]
+        if m1[a] > m0[a] and gain[g] > 0.0:
+            w = (m1[a] - m0[a]) / gain[g]
+            for d in range(dim):
+                v[n, d] = (m0[a] * v[n, d] + w * pool[g, d]) / m1[a]
+        elif m1[a] <= 0.0:
+            for d in range(dim):
+                v[n, d] = 0.0
+        for d in range(dim):
+            ke1[g] += 0.5 * m1[a] * v[n, d] * v[n, d]
+    for a in range(members.size):
+        z = members[a]
+        g = mgroup[a]
+        e[z] += (ke0[g] - ke1[g]) / Mg[g]
+    return -1

@@ -199,6 +199,12 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                         rh = ru
                         eh = eu
                 f, es = face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
+                if solid is not None and abs(f) > M[u]:
+                    # a face sweeping more than the upwind zone holds: a moving body swept that
+                    # zone's open part past the face within the step (its swept volume is body,
+                    # not fluid): all of the zone's material crosses, no more (positivity)
+                    f = M[u] if f > 0.0 else -M[u]
+                    es = eu
                 F[z] = f
                 ES[z] = es
 

@@ -89,7 +89,9 @@ class SolverError(RuntimeError):
 
 
 class AleSolver:
-    def __init__(self, comm, config: dict):
+    def __init__(self, comm, config: dict, bodies=None):
+        """``bodies``: the coupled bodies' initial geometry in the grid (solvers/ale/coupled.py
+        BodyGeometry, the same on every rank), or None (no coupled body)."""
         self.comm = comm
         self.config = config
         self.dim = dim = int(config["dimension"])
@@ -229,11 +231,18 @@ class AleSolver:
 
         # blocked volume fractions: static obstacles of the case now, coupled bodies via remap()
         self._blk = None
-        if config.get("obstacles"):
+        self.coupled = bodies is not None
+        self.i_momentum = np.zeros(dim)  # what crossed the coupled bodies' surfaces (in b_* too)
+        self.i_energy = 0.0
+        if config.get("obstacles") or self.coupled:
             if self.mode != "eulerian":
-                raise ValueError("obstacles (blocked volume fractions) need mode = 'eulerian'")
+                raise ValueError("obstacles and coupled bodies (blocked volume fractions) need mode = 'eulerian'")
+            if self.coupled and self.mm is not None:
+                raise ValueError("coupled bodies with several ALE materials (or void) are not supported yet")
             from solvers.ale.blocked import Blocked
-            self._blk = Blocked(self, config["obstacles"])
+            self._blk = Blocked(self, config.get("obstacles"))
+            if self.coupled:
+                self._blk.set_fractions(self, self._blk.combined(self, bodies))
         self._initialising = True
         self._initial_state(config)
         self._dt_stable = self._forces(midstep=False, advect=self.mode == "eulerian", eos=True)
@@ -563,19 +572,39 @@ class AleSolver:
         B = self.block
         hydro.predict(self.v, self.v_old, self.f, self.m, self.nr[0], self.nr[1], B.ns, self.dt_avg)
 
-    def correct(self, impulse=None, step: int = 0, time: float = 0.0) -> None:
-        """Close the step (see the module docstring); ``impulse`` (nn, dim) in output node order,
-        ``step`` and ``time`` (after the step) name failures."""
+    def interface(self):
+        """The coupled bodies' interface after predict (collective): on rank 0 the predictor velocity
+        v* and the mass of every node the coupler asked for (BodyGeometry.nodes) and the net force
+        sum_c f_c of every cut zone (BodyGeometry.cut), as one buffer [v* (nn, dim), m (nn),
+        R (nc, dim)]; None on the other ranks.  Each value comes from the rank that owns it (zeros
+        elsewhere, summed: the same bits on any number of ranks)."""
+        blk, dim = self._blk, self.dim
+        n, inside, owned = blk.nodes
+        buf = np.zeros(n.size * (dim + 1) + blk.n_cut * dim)
+        buf[: n.size * dim].reshape(-1, dim)[owned] = self.v[n[owned]]
+        buf[n.size * dim: n.size * (dim + 1)][owned] = self.m[n[owned]]
+        buf[n.size * (dim + 1):].reshape(-1, dim)[blk.cut_rows] = blk.cut_forces(self)
+        if self.dec.parallel:
+            out = np.empty_like(buf) if self.dec.rank == 0 else None
+            self.dec.comm.Reduce(buf, out, root=0)
+            return out
+        return buf
+
+    def correct(self, impulse=None, step: int = 0, time: float = 0.0, coupling=None) -> None:
+        """Close the step (see the module docstring); ``step`` and ``time`` (after the step) name
+        failures.  ``coupling`` (coupled bodies, the same on every rank): {"impulse": (nn, dim) on the
+        nodes asked for, "v_half": (nc, dim) v^{n+1/2} and "v_bar": (nc, dim) (v^{n-1/2} + v^{n+1/2})/2
+        of the body surface in every cut zone} (blocked.Blocked.body_terms).  ``impulse``: the
+        same impulse given as {"nodes": global node ids, "impulse": (nn, dim)}."""
         B = self.block
         self.step, self.time = int(step), float(time)
+        if coupling is not None:
+            n, inside, owned = self._blk.nodes
+            self._node_impulse(n, inside, owned, np.asarray(coupling["impulse"]).reshape(-1, self.dim), True)
         if impulse is not None:
-            imp = np.asarray(impulse, dtype=np.float64).reshape(-1, self.dim)
-            if self._gout is not None:
-                imp = imp[self._gout]
-            self.v[B.out_nodes] += imp / self.m[B.out_nodes, None]
-            self.b_momentum += imp[B.owned[B.out_nodes]].sum(axis=0)
-            vb = 0.5 * (self.v[B.out_nodes] + self.v_old[B.out_nodes])
-            self.b_energy += float(np.sum((imp * vb)[B.owned[B.out_nodes]]))
+            from solvers.ale.coupled import GlobalIndex
+            n, inside, owned = GlobalIndex(B).nodes(np.asarray(impulse["nodes"], np.int64))
+            self._node_impulse(n, inside, owned, np.asarray(impulse["impulse"]).reshape(-1, self.dim), False)
         self._constrain(record=True)
         self.bc.fill_nodes_vector(self.v)
         if not np.all(np.isfinite(self.v)):
@@ -596,22 +625,50 @@ class AleSolver:
             # swept volumes
             hydro.energy_update(self.fc, self.v, self.v_old, self.e, self.M, self.zr[0], self.zr[1],
                                 B.zs, B.ns, self.dt_avg)
+            if coupling is not None:
+                rows = self._blk.cut_rows
+                vh = np.asarray(coupling["v_half"]).reshape(-1, self.dim)[rows]
+                vb = np.asarray(coupling["v_bar"]).reshape(-1, self.dim)[rows]
+                crossed = self._blk.body_terms(self, vh, vb)
+                self.b_momentum += crossed[: self.dim]
+                self.b_energy += crossed[self.dim]
+                self.i_momentum += crossed[: self.dim]
+                self.i_energy += crossed[self.dim]
             self._pending_remap = True
         self.first_step = False
         self.dt_prev = self.dt
 
+    def _node_impulse(self, n, inside, owned, imp, interface: bool) -> None:
+        """v += impulse / m on the real nodes of this block listed (every copy of a node, so that the
+        ranks sharing it stay equal); the owned ones' impulse and work enter the balances.  A node
+        without mass takes no impulse (the coupler leaves such nodes out of the constraint)."""
+        idx = n[inside]
+        m = self.m[idx]
+        ok = m > 0.0
+        self.v[idx[ok]] += imp[inside][ok] / m[ok, None]
+        io = imp[owned]
+        vb = 0.5 * (self.v[n[owned]] + self.v_old[n[owned]])
+        dp = io.sum(axis=0)
+        de = float(np.sum(io * vb))
+        self.b_momentum += dp
+        self.b_energy += de
+        if interface:
+            self.i_momentum += dp
+            self.i_energy += de
+
     def remap(self, blocked=None) -> None:
         """Eulerian mode: remap the Lagrangian state back to the fixed grid.
 
-        ``blocked``: per-zone blocked volume fraction in [0, 1] (coupled bodies; (ne,) in output
-        zone order, or None), combined with the case's static obstacles (the larger fraction);
-        the remap then never moves material into the blocked part (solvers/ale/blocked.py).
+        ``blocked``: the coupled bodies' geometry after the step (solvers/ale/coupled.BodyGeometry:
+        ids and blocked fractions of the zones they cover, exact face apertures, cut zones; or None),
+        combined with the case's static obstacles (the larger fraction); the remap then never moves
+        material into the blocked part (solvers/ale/blocked.py).
         """
         if self.mode != "eulerian" or not self._pending_remap:
-            if blocked is not None and self.mode != "eulerian" and np.any(np.asarray(blocked) != 0.0):
+            if blocked is not None and self.mode != "eulerian" and np.any(np.asarray(blocked.fractions) != 0.0):
                 raise ValueError("blocked volume fractions need mode = 'eulerian'")
             return
-        if self._blk is None and blocked is not None and np.any(np.asarray(blocked) != 0.0):
+        if self._blk is None and blocked is not None and np.any(np.asarray(blocked.fractions) != 0.0):
             if self.mm is not None:
                 raise ValueError("blocked volume fractions with several ALE materials are not supported yet")
             from solvers.ale.blocked import Blocked
@@ -750,13 +807,16 @@ class AleSolver:
         B, dim = self.block, self.dim
         hydro.sums(self.M, self.e, B.real_zone, self.m, self.v, B.owned, self._sums)
         s = self._sums
-        bal = (self.b_mass, self.b_energy, self.b_momentum)
+        bal = (self.b_mass, self.b_energy, self.b_momentum, self.i_energy, self.i_momentum)
         if self.dec.parallel:
-            s = self.dec.sum(np.concatenate([s, [self.b_mass, self.b_energy], self.b_momentum]))
-            bal = (float(s[7]), float(s[8]), s[9:9 + dim].copy())
+            s = self.dec.sum(np.concatenate([s, [self.b_mass, self.b_energy], self.b_momentum,
+                                             [self.i_energy], self.i_momentum]))
+            bal = (float(s[7]), float(s[8]), s[9:9 + dim].copy(), float(s[9 + dim]),
+                   s[10 + dim:10 + 2 * dim].copy())
         return {"mass": s[0], "internal_energy": s[1], "kinetic_energy": s[2],
                 "total_energy": s[1] + s[2], "momentum": s[3:3 + dim].copy(), "momentum_gross": s[6],
-                "b_mass": bal[0], "b_energy": bal[1], "b_momentum": bal[2]}
+                "b_mass": bal[0], "b_energy": bal[1], "b_momentum": bal[2],
+                "i_energy": bal[3], "i_momentum": bal[4]}
 
     def diagnostics(self) -> dict[str, float]:
         t = self._totals()
@@ -780,6 +840,10 @@ class AleSolver:
             "mass_balance_rel": float(m_err),
             "momentum_balance_rel": float(p_err),
         })
+        if self.coupled:  # what crossed the coupled bodies' surfaces (part of the balances above)
+            for c, name in enumerate("xyz"[: self.dim]):
+                d[f"interface_momentum_{name}"] = float(t["i_momentum"][c])
+            d["interface_energy"] = float(t["i_energy"])
         if self.mm is not None:  # per material: volume (void included) and mass
             d.update(self.mm.totals(self))
         return d
@@ -908,7 +972,7 @@ class AleSolver:
                 data[k] = dec.gather_box(a, layout, *self._share(nodes))
             else:
                 data[k] = a.reshape(layout + a.shape[1:])
-        bal = np.concatenate([[self.b_mass, self.b_energy], self.b_momentum])
+        bal = np.concatenate([[self.b_mass, self.b_energy], self.b_momentum, [self.i_energy], self.i_momentum])
         rows = bal[None, :]
         if dec.parallel:
             rows = np.empty((dec.size, bal.size)) if dec.rank == 0 else None
@@ -959,8 +1023,12 @@ class AleSolver:
             mine = rows[dec.rank]
         else:  # another rank count: rank 0 carries the boundary terms so far
             mine = rows.sum(axis=0) if dec.rank == 0 else np.zeros(rows.shape[1])
+        dim = self.dim
         self.b_mass, self.b_energy = float(mine[0]), float(mine[1])
-        self.b_momentum = mine[2:].copy()
+        self.b_momentum = mine[2:2 + dim].copy()
+        if mine.size > 2 + dim:  # (checkpoints before the coupling carry no interface terms)
+            self.i_energy = float(mine[2 + dim])
+            self.i_momentum = mine[3 + dim:3 + 2 * dim].copy()
         self.step = int(self.step)
         self.parity = int(self.parity)
         self.first_step = bool(self.first_step)

@@ -1,0 +1,122 @@
+"""What the ALE background exchanges with the coupler for immersed (coupled) bodies, in global ids.
+
+The coupler sees the background grid as a descriptor (lower, upper, cells): zone id
+``i + nx (j + ny k)``, node id ``i + (nx+1) (j + (ny+1) k)``, face id of the faces normal to axis d
+``i + (n0 + [d==0]) (j + (n1 + [d==1]) k)`` (x fastest, the output order).  Everything it sends or
+asks for is a list of ids of the cut region and values for them, identical on every rank of the
+group; each rank picks what lies in its block (:class:`GlobalIndex`).  Values it asks for come back
+as sums over the ranks of (owner's value, zeros elsewhere): ``x + 0 = x`` exactly, so the coupler
+receives the same bits whatever the number of background ranks.
+
+:class:`BodyGeometry` is the state of the bodies in the grid after a step (from the coupler's
+clipping of the body surfaces, orchestrator/coupling/geometry.py): the blocked fraction of every
+zone a body covers, the exact covered fraction of every zone face a body covers (the face
+apertures of solvers/ale/blocked.py; ``None``: apertures from the fractions by the min model), the
+cut zones (those holding a piece of a body surface: one multiplier each, the surface terms of
+blocked.py) and the background nodes whose predictor velocities and masses the next step's
+constraint solve needs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solvers.ale.grid import GHOST
+
+
+@dataclass
+class BodyGeometry:
+    zones: np.ndarray  # (nb,) int64 zone ids with a blocked fraction > 0
+    fractions: np.ndarray  # (nb,) float64 blocked fraction (all bodies together) in [0, 1]
+    faces: tuple | None = None  # per axis d: (face ids (nf,) int64, covered fraction (nf,)) or None
+    cut: np.ndarray | None = None  # (nc,) int64 cut zones (sorted)
+    nodes: np.ndarray | None = None  # (nn,) int64 nodes the next constraint solve needs (sorted)
+
+    def pack(self, dim: int) -> np.ndarray:
+        """One float64 buffer (ids below 2^53 are exact in float64)."""
+        parts = [np.array([float(self.zones.size)]), self.zones.astype(np.float64), self.fractions]
+        faces = self.faces if self.faces is not None else [None] * dim
+        parts.append(np.array([0.0 if self.faces is None else 1.0]))
+        for f in faces:
+            ids, cov = f if f is not None else (np.zeros(0), np.zeros(0))
+            parts += [np.array([float(len(ids))]), np.asarray(ids, np.float64), np.asarray(cov, np.float64)]
+        for a in (self.cut, self.nodes):
+            a = np.zeros(0) if a is None else a
+            parts += [np.array([float(a.size)]), a.astype(np.float64)]
+        return np.concatenate(parts)
+
+    @classmethod
+    def unpack(cls, buf: np.ndarray, dim: int) -> "BodyGeometry":
+        pos = 0
+
+        def take(n):
+            nonlocal pos
+            out = buf[pos:pos + n]
+            pos += n
+            return out
+
+        n = int(take(1)[0])
+        zones = take(n).astype(np.int64)
+        fractions = take(n).copy()
+        has_faces = take(1)[0] == 1.0
+        faces = []
+        for _ in range(dim):
+            k = int(take(1)[0])
+            faces.append((take(k).astype(np.int64), take(k).copy()))
+        cut = take(int(take(1)[0])).astype(np.int64)
+        nodes = take(int(take(1)[0])).astype(np.int64)
+        return cls(zones, fractions, tuple(faces) if has_faces else None, cut, nodes)
+
+
+class GlobalIndex:
+    """Global ids of the coupler -> this rank's padded block indices."""
+
+    def __init__(self, block):
+        B = block
+        self.block = B
+        self.dim = B.dim
+        self.cells = np.asarray(B.cells, np.int64)
+
+    def _split(self, ids, extent):
+        ijk = np.zeros((ids.size, 3), np.int64)
+        r = np.asarray(ids, np.int64)
+        for d in range(self.dim):
+            r, ijk[:, d] = np.divmod(r, extent[d])
+        return ijk
+
+    def zones(self, ids):
+        """(local padded zone index, mask: a real zone of this block) of global zone ids."""
+        B = self.block
+        ijk = self._split(ids, self.cells)
+        loc = ijk[:, : self.dim] - B.offset
+        inside = np.all((loc >= 0) & (loc < B.n), axis=1)
+        pad = np.zeros((ids.size, 3), np.int64)
+        pad[:, : self.dim] = loc + GHOST
+        return pad @ B.zs, inside
+
+    def nodes(self, ids):
+        """(local padded node index, mask: a real node of this block, mask: owned here)."""
+        B = self.block
+        ijk = self._split(ids, self.cells + 1)
+        loc = ijk[:, : self.dim] - B.offset
+        inside = np.all((loc >= 0) & (loc <= B.n), axis=1)
+        pad = np.zeros((ids.size, 3), np.int64)
+        pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
+        n = pad @ B.ns
+        return n, inside, inside & B.owned[n]
+
+    def faces(self, d, ids):
+        """(local zone-shaped index, mask) of global faces normal to axis d: entry z of a face array
+        of direction d is the lower d-face of zone z (the upper box face: the ghost zone's)."""
+        B = self.block
+        ext = self.cells.copy()
+        ext[d] += 1
+        ijk = self._split(ids, ext)
+        loc = ijk[:, : self.dim] - B.offset
+        hi = B.n.copy()
+        hi[d] += 1
+        inside = np.all((loc >= 0) & (loc < hi), axis=1)
+        pad = np.zeros((ids.size, 3), np.int64)
+        pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
+        return pad @ B.zs, inside
