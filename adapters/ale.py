@@ -13,12 +13,34 @@ from adapters.registry import register
 @register
 class AleAdapter(SolverAdapter):
     role = "ale"
+    bodies = None  # coupled runs: the bodies' initial geometry (set by the runtime before setup)
 
     def setup(self) -> None:
         from solvers.ale.solver import AleSolver
 
-        self.solver = AleSolver(self.comm, self.case["ale"])
+        self.solver = AleSolver(self.comm, self.case["ale"], bodies=self.bodies)
         self._mesh_written = False
+
+    # ---- the embedded-mesh coupling (background side; the runtime moves the buffers) --------------
+    def unpack_geometry(self, buf):
+        from solvers.ale.coupled import BodyGeometry
+
+        return BodyGeometry.unpack(buf, self.solver.dim if hasattr(self, "solver") else
+                                   len(self.case["ale"]["grid"]["cells"]))
+
+    def interface(self):
+        """After predict (collective): on rank 0 [v* (nn, dim), m (nn), R (nc, dim)] of the nodes and
+        cut zones of the current geometry (solvers/ale/solver.AleSolver.interface)."""
+        return self.solver.interface()
+
+    def unpack_correction(self, buf):
+        """The coupler's correction: [impulse (nn, dim), v_half (nc, dim), v_bar (nc, dim)]."""
+        blk, dim = self.solver._blk, self.solver.dim
+        nn = blk.nodes[0].size
+        a = nn * dim
+        b = a + blk.n_cut * dim
+        return {"impulse": buf[:a].reshape(nn, dim), "v_half": buf[a:b].reshape(-1, dim),
+                "v_bar": buf[b:].reshape(-1, dim)}
 
     def stable_dt(self) -> float:
         return self.solver.stable_dt()
@@ -27,8 +49,8 @@ class AleAdapter(SolverAdapter):
         self._step, self._time = step, time
         self.solver.predict(dt)
 
-    def correct(self, impulse=None) -> None:
-        self.solver.correct(impulse, step=self._step, time=self._time)
+    def correct(self, coupling=None) -> None:
+        self.solver.correct(None, step=self._step, time=self._time, coupling=coupling)
 
     def remap(self, fractions=None) -> None:
         self.solver.remap(fractions)

@@ -108,5 +108,61 @@ def install_fault_handler(out_dir: Path, role: str, rank: int) -> None:
     sys.excepthook = hook
 
 
+# ---- coupled steps (embedded-mesh coupling): group root <-> coupler, float64 buffers ---------------
+# tags of the messages of a coupled run (README/DESIGN "the coupled step"), in the order they flow
+TAG_SURFACE = 10    # foreground -> coupler, at start-up: its surface (ids, facets, masses, x, v)
+TAG_GEOMETRY = 11   # coupler -> background: the bodies' geometry in the grid (start-up, every remap)
+TAG_VSTAR = 20      # foreground -> coupler, after predict: v* of the surface nodes
+TAG_INTERFACE = 21  # background -> coupler, after predict: v*, m of the nodes asked for, cut-zone forces
+TAG_IMPULSE = 22    # coupler -> foreground: surface impulses
+TAG_STATE = 23      # foreground -> coupler, after correct: x^{n+1}, v^{n+1/2} of the surface nodes
+TAG_CORRECT = 24    # coupler -> background: node impulses, the surface's v^{n+1/2} and mean velocity
+
+
+def wait(req) -> None:
+    """Wait for a request without spinning a core for long: MPI's blocking calls busy-poll, and the
+    ranks share the machine (often oversubscribed)."""
+    import time as _t
+
+    spins = 0
+    while not req.Test():
+        spins += 1
+        if spins > 50:
+            _t.sleep(50e-6)
+
+
+def send(comm, buf, dest: int, tag: int) -> None:
+    comm.Send(np.ascontiguousarray(buf, dtype=np.float64), dest=dest, tag=tag)
+
+
+def recv(comm, source: int, tag: int) -> np.ndarray:
+    """A float64 buffer of any length (probed first), waited for without spinning."""
+    from mpi4py import MPI
+
+    import time as _t
+
+    status = MPI.Status()
+    spins = 0
+    while not comm.Iprobe(source=source, tag=tag, status=status):
+        spins += 1
+        if spins > 50:
+            _t.sleep(50e-6)
+    buf = np.empty(status.Get_count(MPI.DOUBLE))
+    comm.Recv(buf, source=source, tag=tag)
+    return buf
+
+
+def share(comm, buf) -> np.ndarray:
+    """The group root's buffer on every rank of the group (length first, then the data)."""
+    if comm.size == 1:
+        return buf
+    n = np.array([0 if buf is None else len(buf)], dtype=np.int64)
+    comm.Bcast(n, root=0)
+    if comm.rank != 0:
+        buf = np.empty(int(n[0]))
+    comm.Bcast(buf, root=0)
+    return buf
+
+
 def command(cmd: float, dt: float = 0.0, step: int = 0, time: float = 0.0, index: int = -1) -> np.ndarray:
     return np.array([cmd, dt, step, time, index, 0.0], dtype=np.float64)

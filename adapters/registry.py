@@ -10,11 +10,20 @@ import importlib
 _ADAPTERS: dict[str, type] = {}
 # role -> (module that registers it, top-level case.toml table whose presence means "used")
 _MODULES: dict[str, tuple[str, str]] = {}
+# role -> its side in the embedded-mesh coupling: "background" (the fixed grid the bodies move
+# through) or "foreground" (bodies with a surface); absent: not coupled
+_SIDES: dict[str, str] = {}
 
 
-def declare(role: str, module: str, case_table: str) -> None:
+def declare(role: str, module: str, case_table: str, coupling_side: str | None = None) -> None:
     """Make a role known without importing its (heavy) module."""
     _MODULES[role] = (module, case_table)
+    if coupling_side is not None:
+        _SIDES[role] = coupling_side
+
+
+def coupling_side(role: str) -> str | None:
+    return _SIDES.get(role)
 
 
 def register(cls):
@@ -43,5 +52,5 @@ def adapter_class(role: str) -> type:
 
 
 # The solvers this project ships. A new solver adds one line here and an adapter module.
-declare("lagrange", "adapters.lagrange", "lagrange")
-declare("ale", "adapters.ale", "ale")
+declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground")
+declare("ale", "adapters.ale", "ale", coupling_side="background")

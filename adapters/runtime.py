@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from adapters import protocol as P
+from adapters.registry import coupling_side
 
 
 def parse_args(argv=None):
@@ -30,6 +31,32 @@ def restart_file(manifest: Path, role: str) -> Path:
     return Path(manifest).parent / str(rel)
 
 
+def pack_surface(adapter) -> np.ndarray:
+    """A foreground's surface as one float64 buffer (collective: every rank computes it):
+    [ns, nv, nf, node_ids, facets, body, mass, free (ns, dim), x (ns, dim), v (ns, dim)]."""
+    srf = adapter.surface()
+    x = adapter.positions()
+    v = adapter.velocities()
+    ns, dim = x.shape
+    facets = np.asarray(srf["facets"])
+    free = np.asarray(srf.get("free", np.ones((ns, dim))), dtype=np.float64)
+    return np.concatenate([[ns, facets.shape[1], facets.shape[0]], srf["node_ids"], facets.ravel(),
+                           srf["body"], srf["mass"], free.ravel(), x.ravel(), v.ravel()]).astype(np.float64)
+
+
+def unpack_surface(buf: np.ndarray, dim: int) -> dict:
+    ns, nv, nf = (int(a) for a in buf[:3])
+    pos = 3
+    out = {}
+    for name, n, shape, kind in (("node_ids", ns, (ns,), np.int64), ("facets", nf * nv, (nf, nv), np.int64),
+                                 ("body", nf, (nf,), np.int64), ("mass", ns, (ns,), np.float64),
+                                 ("free", ns * dim, (ns, dim), np.float64), ("x", ns * dim, (ns, dim), np.float64),
+                                 ("v", ns * dim, (ns, dim), np.float64)):
+        out[name] = buf[pos:pos + n].astype(kind).reshape(shape)
+        pos += n
+    return out
+
+
 def serve(adapter_cls, argv=None) -> None:
     from orchestrator.case import load_case
 
@@ -42,10 +69,18 @@ def serve(adapter_cls, argv=None) -> None:
 
     case = load_case(args.case)
     adapter = adapter_cls(place.comm, case, out)
+    ic = place.inter[P.COUPLER]
+    side = coupling_side(args.role) if case.get("coupling") else None
+    comm = place.comm
+    if side == "background":  # the bodies' initial geometry in the grid, before the initial state
+        adapter.bodies = adapter.unpack_geometry(P.share(comm, P.recv(ic, 0, P.TAG_GEOMETRY) if rank == 0 else None))
     adapter.setup()
     if args.restart:
         adapter.restart(restart_file(Path(args.restart), args.role))
-    ic = place.inter[P.COUPLER]
+    if side == "foreground":  # the surface (fixed), its positions and velocities now
+        buf = pack_surface(adapter)
+        if rank == 0:
+            P.send(ic, buf, 0, P.TAG_SURFACE)
     names = adapter.diagnostic_names()
     reply = np.zeros(P.REPLY_HEAD + len(names))
 
@@ -66,7 +101,29 @@ def serve(adapter_cls, argv=None) -> None:
     while True:
         ic.Bcast(cmd, root=0)
         c, dt, step, time, index = cmd[0], cmd[1], int(cmd[2]), cmd[3], int(cmd[4])
-        if c == P.CMD_STEP:
+        if c == P.CMD_STEP and side == "foreground":
+            adapter.predict(dt, step, time)
+            v = adapter.interface()["v"]
+            if rank == 0:
+                P.send(ic, v, 0, P.TAG_VSTAR)
+            imp = P.share(comm, P.recv(ic, 0, P.TAG_IMPULSE) if rank == 0 else None)
+            adapter.correct(imp.reshape(v.shape))
+            state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel()])
+            if rank == 0:
+                P.send(ic, state, 0, P.TAG_STATE)
+            adapter.remap(None)
+            answer(bool(cmd[5]))
+        elif c == P.CMD_STEP and side == "background":
+            adapter.predict(dt, step, time)
+            buf = adapter.interface()
+            if rank == 0:
+                P.send(ic, buf, 0, P.TAG_INTERFACE)
+            adapter.correct(adapter.unpack_correction(
+                P.share(comm, P.recv(ic, 0, P.TAG_CORRECT) if rank == 0 else None)))
+            adapter.remap(adapter.unpack_geometry(
+                P.share(comm, P.recv(ic, 0, P.TAG_GEOMETRY) if rank == 0 else None)))
+            answer(bool(cmd[5]))
+        elif c == P.CMD_STEP:
             adapter.predict(dt, step, time)
             adapter.correct(None)
             adapter.remap(None)

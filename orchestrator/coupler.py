@@ -27,6 +27,7 @@ from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
 from orchestrator.restart import check_restart
 
 WAIT_SLICE_S = 50e-6  # sleep slice of the coupler while solver groups compute
+COUPLING = "coupling"  # the coupler's own diagnostics in the history (coupled runs)
 
 
 def process_age_s() -> float | None:
@@ -81,11 +82,17 @@ class Coupler:
         self.max_steps = int(run.get("max_steps", 10_000_000))
         self.diag_every = int(run.get("diagnostics_every", 1))
         self.logf = open(out / "log.txt", "a")
+        self.coupling = None
+        if case.get("coupling"):
+            self._start_coupling()
         self.names = {r: self.inter[r].recv(source=0, tag=6) for r in self.roles}
         self.reply = {r: np.zeros(P.REPLY_HEAD + len(self.names[r])) for r in self.roles}
         self.history_t: list[float] = []
         self.history_step: list[int] = []
         self.history: dict[str, list[np.ndarray]] = {r: [] for r in self.roles}
+        if self.coupling is not None:  # the coupler's own diagnostics, recorded like a solver's
+            self.names[COUPLING] = self.coupling.diagnostic_names() + ["momentum_balance_rel", "interface_work"]
+            self.history[COUPLING] = []
         self.t = 0.0
         self.step = 0
         self.out_index = 0  # number of the next output step's files (not a time: see _next_multiple)
@@ -95,6 +102,49 @@ class Coupler:
         self._record()
         if restart:
             self._load(Path(restart))
+
+    # ---- the embedded-mesh coupling ----------------------------------------------------------------
+    def _start_coupling(self) -> None:
+        """The foreground's surface, the bodies' initial geometry to the background (before either
+        group's start-up finishes: the background's initial state leaves the bodies' volume empty)."""
+        from adapters.registry import coupling_side
+        from adapters.runtime import unpack_surface
+        from orchestrator.coupling.embedded import EmbeddedCoupling
+
+        sides = {coupling_side(r): r for r in self.roles}
+        self.fg, self.bg = sides["foreground"], sides["background"]
+        dim = int(self.case["run"]["dimension"])
+        surface = unpack_surface(P.recv(self.inter[self.fg], 0, P.TAG_SURFACE), dim)
+        self.coupling = EmbeddedCoupling(self.case, surface)
+        P.send(self.inter[self.bg], self.coupling.geometry().pack(dim), 0, P.TAG_GEOMETRY)
+        self.dt_prev = 0.0
+
+    def _coupled_step(self, dt: float) -> None:
+        """The coupler's part of a coupled step (orchestrator/coupling/embedded.py, hook order)."""
+        c, fg, bg = self.coupling, self.inter[self.fg], self.inter[self.bg]
+        dt_avg = 0.5 * dt if self.dt_prev == 0.0 else 0.5 * (self.dt_prev + dt)
+        vstar = P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim)
+        background = P.recv(bg, 0, P.TAG_INTERFACE)
+        P.send(fg, c.solve(dt, dt_avg, vstar, background), 0, P.TAG_IMPULSE)
+        state = P.recv(fg, 0, P.TAG_STATE).reshape(2, -1, c.dim)
+        P.send(bg, c.background_correction(state[0], state[1]), 0, P.TAG_CORRECT)
+        P.send(bg, c.geometry().pack(c.dim), 0, P.TAG_GEOMETRY)
+        self.dt_prev = dt
+
+    def _coupling_record(self) -> np.ndarray:
+        """The coupler's diagnostics row: the exchange totals, and the coupled balances: momentum
+        the interface gave the fluid plus what it gave the bodies (zero up to round-off: every
+        impulse is paired), and the interface work (energy the coupling added to fluid + bodies:
+        the stabilisation's dissipation, negative)."""
+        c = self.coupling
+        row = np.array(c.diagnostics())
+        names = self.names[self.bg]
+        bgrow = self.reply[self.bg][P.REPLY_HEAD:]
+        p_fluid = np.array([bgrow[names.index(f"interface_momentum_{a}")] for a in "xyz"[: c.dim]])
+        scale = max(np.linalg.norm(p_fluid), np.linalg.norm(c.momentum_f), 1e-300)
+        bal = np.linalg.norm(p_fluid + c.momentum_f) / scale
+        work = bgrow[names.index("interface_energy")] + c.work_f
+        return np.concatenate([row, [bal, work]])
 
     # ---- messaging -----------------------------------------------------------------------------
     def log(self, msg: str) -> None:
@@ -131,6 +181,8 @@ class Coupler:
         self.history_step.append(self.step)
         for r in self.roles:
             self.history[r].append(self.reply[r][P.REPLY_HEAD:].copy())
+        if self.coupling is not None:
+            self.history[COUPLING].append(self._coupling_record())
 
     # ---- output and checkpoints ----------------------------------------------------------------
     def write_output(self) -> None:
@@ -167,6 +219,11 @@ class Coupler:
                 h.attrs[f"file_{r}"] = f"step_{self.step:08d}/{r}.h5"
                 h.attrs[f"ranks_{r}"] = self.inter[r].Get_remote_size()
                 h.create_dataset(f"history/{r}", data=np.array(self.history[r]))
+            if self.coupling is not None:
+                h.attrs["dt_prev"] = self.dt_prev
+                h.create_dataset(f"history/{COUPLING}", data=np.array(self.history[COUPLING]))
+                for k, a in self.coupling.state_arrays().items():
+                    h.create_dataset(f"coupling/{k}", data=a)
             h.create_dataset("history/t", data=np.array(self.history_t))
             h.create_dataset("history/step", data=np.array(self.history_step))
         os.replace(tmp, path)
@@ -195,6 +252,10 @@ class Coupler:
             self.history_step = [int(s) for s in h["history/step"][...]]
             for r in self.roles:
                 self.history[r] = list(h[f"history/{r}"][...])
+            if self.coupling is not None:
+                self.dt_prev = float(h.attrs["dt_prev"])
+                self.history[COUPLING] = list(h[f"history/{COUPLING}"][...])
+                self.coupling.load_state({k: h[f"coupling/{k}"][...] for k in h["coupling"]})
         self.log(f"restarted from {path.name}: step {self.step}, t = {self.t:.6e} s")
 
     # ---- the time loop ---------------------------------------------------------------------------
@@ -248,6 +309,8 @@ class Coupler:
             self.step += 1
             diag = done or self.step % self.diag_every == 0
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
+            if self.coupling is not None:
+                self._coupled_step(dt)
             self._receive_all()
             self.t = t_new
             if not clipped:  # dt statistics of the steps the stability limit set
@@ -277,7 +340,7 @@ class Coupler:
     # ---- summary -------------------------------------------------------------------------------
     def diagnostics_history(self) -> dict[str, np.ndarray]:
         hist = {"time": np.array(self.history_t), "step": np.array(self.history_step)}
-        for r in self.roles:
+        for r in self.history:
             arr = np.array(self.history[r])
             for j, n in enumerate(self.names[r]):
                 hist[f"{r}.{n}"] = arr[:, j]
@@ -291,7 +354,7 @@ class Coupler:
             for k, a in hist.items():
                 h.create_dataset(k, data=a)
         os.replace(self.out / "diagnostics.h5.tmp", self.out / "diagnostics.h5")
-        conservation = conservation_residuals(hist, self.roles)
+        conservation = conservation_residuals(hist, list(self.history))
         final = {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")}
         s = {
             "case": self.case["name"],

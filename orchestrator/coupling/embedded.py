@@ -1,0 +1,154 @@
+"""The coupler's share of a coupled step of the embedded-mesh method (DESIGN.md "The adapter
+contract", "The constraint solve"): bodies of a foreground solver immersed in the background grid.
+
+Per step n -> n+1, the coupler holds the geometry of the bodies at x^n (pieces, operators) and
+(messages in adapters/protocol.py, hook order):
+
+1. after both groups' ``predict``: the foreground's predictor velocities v*_f of its surface nodes
+   and the background's v*_b, masses m_b of the nodes the geometry named, and the net corner force
+   R_e = sum_c f_c of every cut zone (the fluid's reaction on the body surface in it: with exact
+   face apertures sum_c b^A_c = a_e, the surface's area vector, so R_e = (p + q)_e a_e);
+2. :meth:`EmbeddedCoupling.solve`: the fluid's load on the body -R_e, spread over the surface
+   nodes by B^f_eA / A_e (consistent: a uniform traction over Gamma_e), enters v*_f as the impulse
+   dt_avg F (the background got +R_e through its own corner forces: equal and opposite); then the
+   variant's constraint solve (multiplier / penalty / nitsche, orchestrator/coupling/variants.py)
+   on the loaded predictor velocities gives impulses -dt B^bT lambda to the background nodes and
+   +dt B^fT lambda to the surface nodes;
+3. the foreground corrects and returns x^{n+1}, v^{n+1/2} of its surface nodes;
+   :meth:`EmbeddedCoupling.background_correction`: the background's node impulses and, per cut zone,
+   the surface velocity v^{n+1/2}_e and the mean (v^{n-1/2} + v^{n+1/2})_e / 2 (B^f-weighted means):
+   the background adds the work of R on the surface and the volume the surface sweeps
+   (solvers/ale/blocked.py ``body_terms``);
+4. :meth:`EmbeddedCoupling.geometry` at x^{n+1}: clipped pieces, exact blocked fractions and face
+   coverages, operators of the next step; the background's remap takes the fractions.
+
+Everything here is in the coupler's canonical orders (sorted global ids), so results do not depend
+on how many ranks either group runs on.  Foreground nodes whose velocity a boundary condition
+prescribes (any component) count as infinitely heavy in the solve (the condition overrides any
+impulse on them: the constraint must be met by the other side).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from orchestrator.coupling import variants
+from orchestrator.coupling.geometry import blocked_fractions, clip_surface, face_coverage
+from orchestrator.coupling.grid import Grid
+from orchestrator.coupling.operators import Operators
+
+
+@dataclass
+class StepRecord:
+    """What a step exchanged (the coupler's diagnostics)."""
+
+    momentum_f: np.ndarray  # impulse on the foreground (load + constraint)
+    work_f: float  # its work on the surface nodes' mean velocity
+    iterations: int = 0
+    residual: float = 0.0
+    dissipation: float = 0.0
+
+
+class EmbeddedCoupling:
+    def __init__(self, case: dict, surface: dict):
+        self.grid = Grid.from_ale(case["ale"])
+        self.dim = self.grid.dim
+        self.method = variants.make(case["coupling"])
+        self.state = self.method.new_state()
+        self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
+        self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
+        self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
+        self.mass = np.asarray(surface["mass"], dtype=np.float64)
+        free = np.asarray(surface["free"]).reshape(-1, self.dim)
+        # a node with any prescribed component is immovable for the solve (see the module docstring)
+        self.m_solve = np.where(np.all(free > 0.0, axis=1), self.mass, np.inf)
+        self.x = np.asarray(surface["x"], dtype=np.float64).reshape(-1, self.dim).copy()
+        self.v = np.asarray(surface["v"], dtype=np.float64).reshape(-1, self.dim).copy()
+        self.ns = self.x.shape[0]
+        self.ops = None
+        self.load_f = np.zeros_like(self.x)
+        self.imp_f = np.zeros_like(self.x)
+        self.last = StepRecord(np.zeros(self.dim), 0.0)
+        # accumulated over the run (coupler diagnostics)
+        self.momentum_f = np.zeros(self.dim)
+        self.work_f = 0.0
+        self.dissipation = 0.0
+
+    # ---- geometry --------------------------------------------------------------------------------
+    def geometry(self):
+        """Pieces, fractions, face coverages and operators at the current surface positions; returns
+        the background's solvers.ale.coupled.BodyGeometry."""
+        from solvers.ale.coupled import BodyGeometry
+
+        pieces = clip_surface(self.grid, self.x, self.facets, self.body)
+        zones, frac = blocked_fractions(self.grid, pieces, self.n_bodies)
+        total = np.minimum(frac.sum(axis=1), 1.0)  # (bodies do not overlap: a sum of disjoint parts)
+        faces = []
+        for d in range(self.dim):
+            ids, cov = face_coverage(self.grid, pieces, self.n_bodies, d)
+            faces.append((ids, np.minimum(cov.sum(axis=1), 1.0)))
+        self.ops = Operators.build(self.grid, pieces, self.facets, self.ns)
+        self.pieces = pieces
+        return BodyGeometry(zones, total, tuple(faces), self.ops.zones, self.ops.bnodes)
+
+    # ---- the step ----------------------------------------------------------------------------------
+    def solve(self, dt: float, dt_avg: float, vstar_f: np.ndarray, background: np.ndarray) -> np.ndarray:
+        """Steps 1-2 of the module docstring: returns the foreground's surface impulses (ns, dim);
+        keeps the background's for :meth:`background_correction`."""
+        ops, dim = self.ops, self.dim
+        nb, nc = ops.bnodes.size, ops.zones.size
+        v_b = background[: nb * dim].reshape(nb, dim)
+        m_b = background[nb * dim: nb * (dim + 1)]
+        R = background[nb * (dim + 1):].reshape(nc, dim)
+        # the fluid's load on the body: -R_e over Gamma_e, consistent nodal forces B^f_eA / A_e
+        area = np.where(ops.area > 0.0, ops.area, 1.0)
+        F = -(ops.Bf.T @ (R / area[:, None]))
+        load = dt_avg * F
+        fixed = ~np.isfinite(self.m_solve)
+        v_f = vstar_f + np.where(fixed[:, None], 0.0, load / self.mass[:, None])
+        res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state)
+        self.imp_b = res.impulse_b
+        imp = load + res.impulse_f
+        self.imp_f = imp
+        diag = res.diagnostics
+        self.last = StepRecord(imp.sum(axis=0), 0.0, int(diag.get("iterations", 0)),
+                               float(diag.get("residual", 0.0)), float(diag.get("interface_dissipation", 0.0)))
+        return imp
+
+    def background_correction(self, x_new: np.ndarray, v_new: np.ndarray) -> np.ndarray:
+        """Step 3: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean velocity_e (nc, dim)] for
+        the background; advances the surface state and the diagnostics."""
+        ops = self.ops
+        vbar = 0.5 * (self.v + v_new)
+        area = np.where(ops.area > 0.0, ops.area, 1.0)[:, None]
+        v_half_e = (ops.Bf @ v_new) / area
+        v_bar_e = (ops.Bf @ vbar) / area
+        work = float(np.sum(self.imp_f * vbar))
+        self.last.work_f = work
+        self.momentum_f += self.last.momentum_f
+        self.work_f += work
+        self.dissipation += self.last.dissipation
+        self.x = np.asarray(x_new, dtype=np.float64).reshape(-1, self.dim).copy()
+        self.v = np.asarray(v_new, dtype=np.float64).reshape(-1, self.dim).copy()
+        return np.concatenate([self.imp_b.ravel(), v_half_e.ravel(), v_bar_e.ravel()])
+
+    # ---- diagnostics and checkpoints ---------------------------------------------------------------
+    DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work")
+
+    def diagnostic_names(self) -> list[str]:
+        return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
+
+    def diagnostics(self) -> list[float]:
+        return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
+                                        self.work_f]
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}
+        out.update({"momentum_f": self.momentum_f, "sums": np.array([self.work_f, self.dissipation])})
+        return out
+
+    def load_state(self, arrays: dict) -> None:
+        self.state.load_state({k[len("method_"):]: v for k, v in arrays.items() if k.startswith("method_")})
+        self.momentum_f = np.array(arrays["momentum_f"], dtype=np.float64)
+        self.work_f, self.dissipation = (float(a) for a in arrays["sums"])
