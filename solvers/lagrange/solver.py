@@ -303,6 +303,8 @@ class LagrangeSolver:
             "body": self.body_of_cell[facet_cell],
             "mass": self._gather_surface(self.mass),
         }
+        for arr in self._surface.values():  # handed out by reference on every call: not to be edited
+            arr.flags.writeable = False
 
     def _gather_surface(self, a: np.ndarray) -> np.ndarray:
         """(ns, ...) values of the surface nodes on every rank, from the copies their owners hold:
