@@ -36,11 +36,25 @@ class LagrangeAdapter(SolverAdapter):
         self._step, self._time = step, time
         self.solver.predict(dt)
 
+    # ---- the embedded-mesh coupling (collective hooks; every rank returns the same arrays) --------
+    def surface(self) -> dict[str, np.ndarray]:
+        """The bodies' exterior surface, fixed for the run: node_ids (ns,), facets (nf, 2|4) indices
+        into node_ids (outward), body (nf,), mass (ns,) full lumped nodal masses."""
+        return self.solver.surface()
+
     def interface(self) -> dict[str, np.ndarray]:
-        return {}
+        """After predict: {"v": (ns, dim) predictor velocities v* of the surface nodes}."""
+        return {"v": self.solver.surface_state("v")}
+
+    def positions(self) -> np.ndarray:
+        """(ns, dim) current positions of the surface nodes: x^{n+1} after correct (x^0 before the
+        first step)."""
+        return self.solver.surface_state("x")
 
     def correct(self, impulse=None) -> None:
-        self.solver.correct(impulse, step=self._step, time=self._time)
+        """impulse: (ns, dim) coupling impulse on the surface nodes (surface() order, the same array on
+        every rank), or None when uncoupled."""
+        self.solver.correct(surface_impulse=impulse, step=self._step, time=self._time)
 
     def diagnostic_names(self) -> list[str]:
         return list(self.solver.diagnostics())

@@ -10,9 +10,14 @@ forces) and W_ext (reactions and coupling impulses). The stress-power internal e
 is reported beside it as an independent check.
 
 Runs on the ranks of `comm` with an element partition; forces and masses on shared nodes are summed.
+
+The embedded-mesh coupling sees the bodies through their exterior surface (`surface()`): the surface
+nodes' positions and velocities gathered in one canonical order on every rank (`surface_state`), and
+an impulse on those nodes that `correct(surface_impulse=...)` applies to every rank's copies.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import h5py
@@ -23,10 +28,23 @@ from solvers.lagrange import kernels, materials, nodal
 from solvers.lagrange.boundary import BoundaryConditions
 from solvers.lagrange.mesh import body_mesh, cell_volumes, concatenate
 from solvers.lagrange.partition import partition
+from solvers.lagrange.surface import exterior_facets
 
 
 class SolverError(RuntimeError):
-    """A physical failure (inverted element, NaN) with the element, step and time named."""
+    """A physical failure (inverted element, NaN) with the body, element or node, step and time named."""
+
+
+@dataclass
+class _SurfaceMaps:
+    """How this rank's nodes map onto the canonical surface node list (built once by surface())."""
+    held_local: np.ndarray   # local index of every surface node this rank holds (owned or not)
+    held_pos: np.ndarray     # its position in the canonical list
+    sent_local: np.ndarray   # local index of the surface nodes this rank owns: the copies it sends
+    recv_pos: np.ndarray     # canonical position of each row of the Allgatherv'd buffer
+    counts: np.ndarray       # rows sent by each rank
+    displs: np.ndarray       # first row of each rank in the gathered buffer
+    impulse: np.ndarray      # (nn_local, dim) impulse buffer: zero off the surface, rows held_local set
 
 
 def _material_table(case: dict):
@@ -55,12 +73,22 @@ class LagrangeSolver:
         self.q_quad = float(opts.get("bulk_viscosity_quadratic", 1.5))
 
         bodies = case["lagrange"]["bodies"]
-        mesh, body_of_cell = concatenate([body_mesh(b, dim) for b in bodies])
+        meshes = [body_mesh(b, dim) for b in bodies]
+        mesh, body_of_cell = concatenate(meshes)
         self.global_points = mesh.points.astype(np.float64)
         self.global_cells = mesh.cells.astype(np.int64)
         self.cell_type = mesh.cell_type
         self.n_nodes_global = len(mesh.points)
         self.n_cells_global = len(mesh.cells)
+        # bodies are concatenated without node merging: each owns a contiguous range of cells and of
+        # nodes (used to name the body and its own element/node number in failure messages)
+        self.body_names = [str(b.get("name", f"#{i}")) for i, b in enumerate(bodies)]
+        self.body_of_cell = body_of_cell
+        self._body_first_cell = np.cumsum([0] + [m.num_cells for m in meshes])
+        self._body_first_node = np.cumsum([0] + [m.num_points for m in meshes])
+        self.body_of_node = np.repeat(np.arange(len(bodies)), [m.num_points for m in meshes])
+        self._surface = None
+        self._surf = None
 
         part = partition(self.global_points, self.global_cells, comm.size, comm.rank)
         self.part = part
@@ -166,9 +194,11 @@ class LagrangeSolver:
         )
         if bad >= 0:
             gid = int(self.part.cells[bad])
+            b = int(self.body_of_cell[gid])
             raise SolverError(
                 f"inverted or invalid element {gid} at step {self.step}, t={self.time:.6g} s "
-                f"(volume or stress not finite/positive)"
+                f"(body {self.body_names[b]!r}, its element {gid - int(self._body_first_cell[b])}; "
+                f"volume or stress not finite/positive)"
             )
         self.sum_shared(self.f)
         return self._min(dt_min)
@@ -188,7 +218,17 @@ class LagrangeSolver:
         self.dt_avg = 0.5 * dt if self.first_step else 0.5 * (self.dt_prev + dt)
         nodal.predict_velocity(self.v, self.v_old, self.f, self.inv_mass, self.dt_avg)
 
-    def correct(self, impulse: np.ndarray | None = None, step: int = 0, time: float = 0.0) -> None:
+    def correct(self, impulse: np.ndarray | None = None, step: int = 0, time: float = 0.0,
+                surface_impulse: np.ndarray | None = None) -> None:
+        """Close the step n -> n+1 (`step`, `time` are those after it). impulse: (nn_local, dim) on
+        this rank's nodes, the same value on every copy of a shared node; or surface_impulse:
+        (ns, dim) on the surface nodes in surface()'s order, the same array on every rank. Either is
+        added as v += impulse / m (m the full nodal mass) on every copy, and enters W_ext, the
+        impulse and the angular impulse once per node (owned)."""
+        if surface_impulse is not None:
+            if impulse is not None:
+                raise ValueError("correct: give impulse or surface_impulse, not both")
+            impulse = self._surface_impulse_local(surface_impulse)
         if impulse is not None:
             self.v += impulse * self.inv_mass[:, None]
         np.copyto(self.v_free, self.v)
@@ -198,7 +238,9 @@ class LagrangeSolver:
             impulse if impulse is not None else self._no_impulse, self.dt, self.dt_avg, self._sums)
         if bad >= 0:
             node = int(self.part.nodes[bad])
-            raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s")
+            b = int(self.body_of_node[node])
+            raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s "
+                              f"(body {self.body_names[b]!r}, its node {node - int(self._body_first_node[b])})")
         # exact discrete work, impulse and torque of this step (shared nodes counted once)
         tot = self._allsum(self._sums)
         self.w_int += tot[0]
@@ -210,6 +252,99 @@ class LagrangeSolver:
         self.first_step = False
         self.dt_prev = self.dt
         self._dt_stable = self._forces(self.dt)
+
+    # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
+    def surface(self) -> dict[str, np.ndarray]:
+        """The bodies' exterior surface, the same on every rank; collective on its first call, then
+        cached (the reference mesh and the lumped masses never change in a Lagrangian solver).
+
+        node_ids (ns,): sorted global ids of the surface nodes; facets (nf, 2|4): outward facets
+        (surface.exterior_facets, canonical order) as indices into node_ids; body (nf,): the body whose
+        cell each facet bounds (case order); mass (ns,): full lumped nodal masses (summed over ranks).
+        """
+        if self._surface is None:
+            self._build_surface()
+        return self._surface
+
+    def _build_surface(self) -> None:
+        facets_g, facet_cell = exterior_facets(self.global_cells, self.cell_type, self.n_nodes_global,
+                                               self.global_points)
+        node_ids = np.unique(facets_g)
+        ns = len(node_ids)
+        p = self.part
+        held_local = np.flatnonzero(np.isin(p.nodes, node_ids, assume_unique=True))
+        held_pos = np.searchsorted(node_ids, p.nodes[held_local])
+        # every surface node is sent by exactly one rank, the lowest holding it (partition.owned), so
+        # the gathered values do not depend on which copies other ranks hold
+        sent = p.owned[held_local]
+        sent_local, sent_pos = held_local[sent], held_pos[sent]
+        counts = np.array([len(sent_local)], dtype=np.int64)
+        if self.comm.size == 1:
+            recv_pos = sent_pos
+        else:
+            from mpi4py import MPI
+
+            counts = np.zeros(self.comm.size, dtype=np.int64)
+            self.comm.Allgather(np.array([len(sent_local)], dtype=np.int64), counts)
+            recv_pos = np.empty(int(counts.sum()), dtype=np.int64)
+            displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+            self.comm.Allgatherv(np.ascontiguousarray(sent_pos, dtype=np.int64),
+                                 [recv_pos, counts, displs, MPI.INT64_T])
+        if not np.array_equal(np.sort(recv_pos), np.arange(ns)):  # a partition without one owner per node
+            raise RuntimeError("surface: the ranks do not send every surface node exactly once")
+        self._surf = _SurfaceMaps(
+            held_local=held_local, held_pos=held_pos, sent_local=sent_local, recv_pos=recv_pos,
+            counts=counts, displs=np.concatenate([[0], np.cumsum(counts)[:-1]]),
+            impulse=np.zeros((len(self.x), self.dim)),
+        )
+        self._surface = {
+            "node_ids": node_ids,
+            "facets": np.searchsorted(node_ids, facets_g),
+            "body": self.body_of_cell[facet_cell],
+            "mass": self._gather_surface(self.mass),
+        }
+        for arr in self._surface.values():  # handed out by reference on every call: not to be edited
+            arr.flags.writeable = False
+
+    def _gather_surface(self, a: np.ndarray) -> np.ndarray:
+        """(ns, ...) values of the surface nodes on every rank, from the copies their owners hold:
+        one Allgatherv of the surface rows (numpy buffers), then a scatter into canonical order."""
+        m = self._surf
+        send = np.ascontiguousarray(a[m.sent_local], dtype=np.float64)
+        if self.comm.size == 1:
+            recv = send
+        else:
+            from mpi4py import MPI
+
+            width = int(np.prod(a.shape[1:], dtype=np.int64))
+            recv = np.empty((len(m.recv_pos),) + a.shape[1:])
+            self.comm.Allgatherv(send, [recv, m.counts * width, m.displs * width, MPI.DOUBLE])
+        out = np.empty_like(recv)
+        out[m.recv_pos] = recv
+        return out
+
+    def surface_state(self, which: str) -> np.ndarray:
+        """(ns, dim) positions (which="x") or velocities ("v") of the surface nodes in surface()'s
+        order, the same array on every rank (collective). After predict "v" is v*; after correct "x"
+        is x^{n+1} and "v" is v^{n+1/2}."""
+        if which not in ("x", "v"):
+            raise ValueError(f"surface_state: which must be 'x' or 'v', got {which!r}")
+        self.surface()
+        return self._gather_surface(self.x if which == "x" else self.v)
+
+    def _surface_impulse_local(self, imp: np.ndarray) -> np.ndarray:
+        """The (ns, dim) surface impulse as an (nn_local, dim) array on this rank's nodes: every copy
+        of a surface node gets that node's full impulse (each copy is updated with the full nodal
+        mass; the balances count the owned copy only). Writes only the surface rows of a buffer that
+        is zero elsewhere."""
+        self.surface()
+        imp = np.asarray(imp, dtype=np.float64)
+        ns = len(self._surface["node_ids"])
+        if imp.shape != (ns, self.dim):
+            raise ValueError(f"surface impulse must have shape ({ns}, {self.dim}), got {imp.shape}")
+        m = self._surf
+        m.impulse[m.held_local] = imp[m.held_pos]
+        return m.impulse
 
     # ---- diagnostics -----------------------------------------------------------------------------
     def _cross(self, a, b):
