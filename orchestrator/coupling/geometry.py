@@ -551,6 +551,55 @@ def _scan_rows(body, oth, pos, s, m, F, X, snap):
     return zb[:nz], zo[:nz], zi[:nz], zv[:nz], fb[:nf], fo[:nf], fk[:nf], fv[:nf]
 
 
+@njit(cache=True)
+def _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv):
+    """The quadrature points in sorted piece order, with the foreground shape functions of the
+    parent facet's nv nodes (3-D: part 0 holds nodes (0, 1, 2), part 1 nodes (0, 2, 3)) and the
+    background ones: tensor products of the 1-D hats of the zone's local coordinates
+    ``xi_d = (x_d - X_i) / (X_{i+1} - X_i)`` (clipped against round-off); corner c has offset
+    (c & 1, c >> 1 & 1, c >> 2 & 1)."""
+    D = qx.shape[1]
+    nq = 0
+    for p in range(order.size):
+        nq += pqn[order[p]]
+    out_x = np.empty((nq, D))
+    out_w = np.empty(nq)
+    out_p = np.empty(nq, np.int64)
+    out_f = np.zeros((nq, nv))
+    nc = 1 << D
+    out_b = np.empty((nq, nc))
+    xi = np.empty(D)
+    k = 0
+    for p in range(order.size):
+        o = order[p]
+        for j in range(pq0[o], pq0[o] + pqn[o]):
+            for d in range(D):
+                out_x[k, d] = qx[j, d]
+                i = zijk[p, d]
+                t = (qx[j, d] - planes[d, i]) / (planes[d, i + 1] - planes[d, i])
+                xi[d] = min(max(t, 0.0), 1.0)
+            out_w[k] = qw[j]
+            out_p[k] = p
+            if D == 3:
+                out_f[k, 0] = ql[j, 0]
+                if part[o] == 0:
+                    out_f[k, 1] = ql[j, 1]
+                    out_f[k, 2] = ql[j, 2]
+                else:
+                    out_f[k, 2] = ql[j, 1]
+                    out_f[k, 3] = ql[j, 2]
+            else:
+                out_f[k, 0] = ql[j, 0]
+                out_f[k, 1] = ql[j, 1]
+            for c in range(nc):
+                v = 1.0
+                for d in range(D):
+                    v *= xi[d] if (c >> d) & 1 else 1.0 - xi[d]
+                out_b[k, c] = v
+            k += 1
+    return out_x, out_w, out_p, out_f, out_b
+
+
 # ------------------------------------------------------------------------------ public API
 def snap_to_planes(grid: Grid, x) -> np.ndarray:
     """Copy of node positions x (nn, dim) with coordinates within ``_SNAP_ULPS`` ulps (of the grid's
@@ -623,36 +672,11 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
     facet = e_facet[pe]
     part = e_part[pe]
     order = np.lexsort((part, facet, body[facet], pz))
-    counts = pqn[order]
-    qstart = np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64) if counts.size else counts
-    qidx = np.repeat(pq0[order] - qstart, counts) + np.arange(int(counts.sum()))
-    qpiece = np.repeat(np.arange(order.size, dtype=np.int64), counts)
     zone = pz[order]
-    lam = ql[qidx]
-    nv = facets.shape[1]
-    qf = np.zeros((qidx.size, nv))
-    if dim == 3:   # part 0 holds nodes (0, 1, 2), part 1 nodes (0, 2, 3)
-        qpart = part[order][qpiece]
-        qf[:, 0] = lam[:, 0]
-        qf[:, 1] = np.where(qpart == 0, lam[:, 1], 0.0)
-        qf[:, 2] = np.where(qpart == 0, lam[:, 2], lam[:, 1])
-        qf[:, 3] = np.where(qpart == 0, 0.0, lam[:, 2])
-    else:
-        qf[:] = lam[:, :2]
-    qp = qx[qidx]
-    # background shape functions: tensor product of the 1-D hat functions of the zone's local
-    # coordinates xi_d = (x_d - X_i) / (X_{i+1} - X_i) (clipped against round-off)
-    zijk = grid.zone_ijk(zone)[qpiece] if qpiece.size else np.zeros((0, dim), np.int64)
-    corners = np.arange(2 ** dim)
-    qb = np.ones((qidx.size, 2 ** dim))
-    for d in range(dim):
-        X = grid.planes(d)
-        i = zijk[:, d]
-        xi = np.clip((qp[:, d] - X[i]) / (X[i + 1] - X[i]), 0.0, 1.0)
-        bit = (corners >> d) & 1
-        qb *= np.where(bit[None, :] == 1, xi[:, None], 1.0 - xi[:, None])
+    qp, qw, qpiece, qf, qb = _gather_points(order, pq0, pqn, qx, qw, ql, part,
+                                            grid.zone_ijk(zone).reshape(-1, dim), planes, facets.shape[1])
     return Pieces(zone=zone, body=body[facet[order]], facet=facet[order], area=pa[order],
-                  normal=enormal[pe[order]], centroid=pc[order], qp=qp, qw=qw[qidx], qpiece=qpiece,
+                  normal=enormal[pe[order]], centroid=pc[order], qp=qp, qw=qw, qpiece=qpiece,
                   qf=qf, qb=qb)
 
 
