@@ -1,0 +1,815 @@
+"""Interface geometry of the embedded-mesh coupling: Lagrangian body surfaces clipped against the
+zones of the fixed Cartesian background grid (DESIGN.md, "The constraint solve").
+
+Surfaces
+--------
+A body is a closed surface of facets: 2-D segments ``(a, b)`` oriented so that the outward normal is
+``(yb - ya, -(xb - xa)) / L`` (the body's counter-clockwise boundary), 3-D quads ``(a, b, c, d)`` with
+outward normal along ``(b - a) x (d - a)``.  A quad is split along its diagonal 0-2 into the triangles
+``(0, 1, 2)`` and ``(0, 2, 3)`` (its *parts*); that triangulated surface is what is clipped, integrated
+and enclosed, so a warped quad is treated consistently everywhere (the volumes of the references
+are those of the triangulated surface).
+
+Pieces
+------
+A *piece* is the part of one segment / triangle inside one zone: a sub-segment or a convex polygon,
+planar, so it has one normal (a quad gives up to two pieces per zone, one per part, both carrying
+the quad's facet index).  Each element is split slab by slab (along x, then each slab piece along
+y, then along z) at the grid planes strictly inside its range, so it only visits the zones its
+bounding box covers and the work is linear in the number of facets for facets of bounded size;
+every piece has a positive extent across each plane it was cut at (no zero-area slivers from a
+facet that merely touches a plane).
+
+*Facets on grid planes.*  A facet whose vertices all lie on a grid plane normal to d belongs to the
+zone on its outward side (normal component > 0: the zone above the plane), at the grid boundary to
+the inner zone.  Why this rule keeps everything exact: it is the limit of the body dilated outward
+by epsilon -> 0, whose surface lies strictly inside the outward zone, and the volume fractions and
+face coverages of the dilated body tend to those of the body.  Positions are compared with the
+canonical grid planes of grid.py; node coordinates within ``_SNAP_ULPS`` ulps (of the grid's
+coordinate scale) of a plane are first moved onto it, so a body face meshed at ``x = 0.3`` lies on
+the plane whichever way the mesh generator rounded it (the volume changes by O(eps)).
+
+Quadrature (degrees of exactness)
+---------------------------------
+Restricted to a planar piece, the background bilinear (2-D) / trilinear (3-D) shape functions are
+polynomials of degree 2 / 3 in the piece's coordinates, the foreground P1 functions of degree 1.
+2-D: 2-point Gauss on each sub-segment, exact to degree 3 (background x foreground products).
+3-D: each clipped polygon is fan-triangulated from its first vertex and each triangle gets the
+6-point degree-4 rule (Strang & Fix / Dunavant, all weights positive, points inside), exact for
+background x foreground products (degree 4); background x background products (degree 6 in 3-D,
+4 in 2-D) are NOT integrated exactly.
+
+Volume fractions and face coverages (exact, from the closed clipped surface)
+---------------------------------------------------------------------------
+For a zone Z = [x_lo, x_hi] x Y and a body Omega, the divergence theorem applied to the field
+``(x - x_lo) e_x`` (divergence 1) on Omega ∩ Z gives
+
+    V(Omega ∩ Z) = ∫_{Γ∩Z} (x - x_lo) n_x dΓ + h_x A_{hi}                               (1)
+
+(the part of ∂(Omega ∩ Z) on the zone's boundary contributes only through its upper x face, where
+``x - x_lo = h_x`` and ``n_x = 1``; on the lower face ``x - x_lo = 0``, on the others ``n_x = 0``),
+``A_hi`` the area of the upper x face covered by Omega.  The field ``e_x`` (divergence 0) on the part
+of Omega in the column beyond that face gives
+
+    A_{hi} = Σ_{zones Z' of the row beyond Z} ∫_{Γ∩Z'} n_x dΓ                              (2)
+
+(the column is bounded by planes parallel to x, and the body lies inside the grid), a suffix sum
+along the row.  Both integrals are exact on planar pieces: ``∫ n_x = n_x a`` and
+``∫ (x - x_lo) n_x = (c_x - x_lo) n_x a`` with the piece's area a and centroid c.  Zones of a row
+between two cut zones are not cut, so they are entirely inside or outside: fraction 1 where the
+coverage of their upper face (2) is the full face, else 0.  The same suffix sum along axis d gives
+the coverage of every face normal to d (``face_coverage``).  A facet lying on the grid boundary
+plane (assigned to the inner zone) counts as lying just outside the grid in these sums (position
+-1 or n along d), which makes the coverage of the boundary faces exact too; it contributes nothing
+to (1) either way (``x - x_lo = 0`` or it moves ``h_x a`` from the integral to ``A_hi``).
+Summation order: the pieces of a row are summed in an order of their geometric values (not of the
+facet numbering), so fractions and coverages are bitwise independent of the order of the facets.
+Fractions within ``_SNAP`` (64 eps) of 0 or 1 are set to 0 or 1 (round-off of the sums, which are
+exact in exact arithmetic); only positive fractions are returned.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from orchestrator.coupling.grid import Grid
+
+
+class GeometryError(ValueError):
+    pass
+
+
+_SNAP_ULPS = 8
+_SNAP = 64 * np.finfo(np.float64).eps
+
+# 2-point Gauss on [0, 1]: exact to degree 3.
+_GAUSS2_T = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])
+# 6-point degree-4 triangle rule (two orbits (a, a, 1-2a)); weights normalised to sum 1.  Digits from
+# solving the moment equations of degree <= 4 in 50-digit arithmetic (test_geometry checks the moments).
+_W1, _A1 = 0.22338158967801146569, 0.44594849091596488631
+_W2, _A2 = 0.10995174365532186763, 0.09157621350977074345
+_TRI_BARY = np.array([[_A1, _A1, 1 - 2 * _A1], [_A1, 1 - 2 * _A1, _A1], [1 - 2 * _A1, _A1, _A1],
+                      [_A2, _A2, 1 - 2 * _A2], [_A2, 1 - 2 * _A2, _A2], [1 - 2 * _A2, _A2, _A2]])
+_TRI_W = np.array([_W1, _W1, _W1, _W2, _W2, _W2])
+
+# Exterior faces of positively oriented cells, right-handed outward (the meshio/VTK node order).
+_QUAD_EDGES = np.array([[0, 1], [1, 2], [2, 3], [3, 0]], dtype=np.int64)
+_HEX_FACES = np.array([[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]],
+                      dtype=np.int64)
+_QUAD_FLIP = np.array([0, 3, 2, 1], dtype=np.int64)
+_HEX_FLIP = np.array([0, 3, 2, 1, 4, 7, 6, 5], dtype=np.int64)
+
+
+@dataclass
+class Pieces:
+    """The body surfaces clipped against the zones; piece arrays sorted by (zone, body, facet, part)
+    (part: the triangle of a 3-D quad, 0 = (0,1,2), 1 = (0,2,3)); quadrature points grouped by piece
+    in piece order."""
+
+    zone: np.ndarray      # (np,) int64 global zone id
+    body: np.ndarray      # (np,) int64 body of the parent facet
+    facet: np.ndarray     # (np,) int64 parent facet (row of the facets array given)
+    area: np.ndarray      # (np,) length (2-D) / area (3-D)
+    normal: np.ndarray    # (np, dim) unit outward normal of the body (into the fluid)
+    centroid: np.ndarray  # (np, dim)
+    qp: np.ndarray        # (nq, dim) quadrature points
+    qw: np.ndarray        # (nq,) weights; a piece's weights sum to its area
+    qpiece: np.ndarray    # (nq,) int64 piece of each point (non-decreasing)
+    qf: np.ndarray        # (nq, nv) foreground P1 shape functions of the parent facet's nodes
+    qb: np.ndarray        # (nq, 2**dim) background shape functions of the piece's zone corners
+
+    @property
+    def dim(self) -> int:
+        return int(self.normal.shape[1])
+
+    @property
+    def qstart(self) -> np.ndarray:
+        """(np + 1,) offsets: the points of piece p are ``qstart[p]:qstart[p+1]``."""
+        return np.searchsorted(self.qpiece, np.arange(self.zone.size + 1)).astype(np.int64)
+
+
+# ----------------------------------------------------------------------------------- kernels
+@njit(cache=True)
+def _locate(X, v):
+    """Index i of the slab with X[i] <= v < X[i+1] (n if v >= X[n], 0 if v < X[0])."""
+    n = X.size - 1
+    i = int(np.floor((v - X[0]) / (X[n] - X[0]) * n))
+    if i < 0:
+        i = 0
+    if i > n:
+        i = n
+    while i > 0 and X[i] > v:
+        i -= 1
+    while i < n and X[i + 1] <= v:
+        i += 1
+    return i
+
+
+@njit(cache=True)
+def _axis_range(poly, nv, d, X, nd):
+    """Zones [i0, i1] along d that a polygon covers with positive extent.  A polygon at constant
+    coordinate (perpendicular to d) lies in one zone: on a grid plane the one on its outward side
+    (normal component nd), at the grid boundary the inner one."""
+    n = X.size - 1
+    mn = poly[0, d]
+    mx = mn
+    for v in range(1, nv):
+        if poly[v, d] < mn:
+            mn = poly[v, d]
+        if poly[v, d] > mx:
+            mx = poly[v, d]
+    if mn == mx:
+        k = _locate(X, mn)
+        z = k
+        if X[k] == mn and nd < 0.0:
+            z = k - 1
+        z = min(max(z, 0), n - 1)
+        return z, z
+    i0 = min(_locate(X, mn), n - 1)
+    i1 = _locate(X, mx)
+    if i1 > 0 and X[i1] >= mx:
+        i1 -= 1
+    return i0, min(max(i1, i0), n - 1)
+
+
+@njit(cache=True)
+def _cut_polygon(src, ns, d, X, lo, hi):
+    """Sutherland-Hodgman against the plane x_d = X, both sides at once; cut vertices get x_d = X
+    exactly (so the next slab's range starts on the plane) and interpolate every other column."""
+    nlo = 0
+    nhi = 0
+    na = src.shape[1]
+    for e in range(ns):
+        f = e + 1 if e + 1 < ns else 0
+        sp = src[e, d] - X
+        sq = src[f, d] - X
+        if sp <= 0.0:
+            lo[nlo, :] = src[e, :]
+            nlo += 1
+        if sp >= 0.0:
+            hi[nhi, :] = src[e, :]
+            nhi += 1
+        if (sp < 0.0 and sq > 0.0) or (sp > 0.0 and sq < 0.0):
+            t = sp / (sp - sq)
+            for a in range(na):
+                r = src[e, a] + t * (src[f, a] - src[e, a])
+                lo[nlo, a] = r
+                hi[nhi, a] = r
+            lo[nlo, d] = X
+            hi[nhi, d] = X
+            nlo += 1
+            nhi += 1
+        if nlo > lo.shape[0] - 2 or nhi > hi.shape[0] - 2:
+            raise ValueError("clipped polygon exceeds its buffer")
+    return nlo, nhi
+
+
+@njit(cache=True)
+def _cut_segment(src, d, X, lo, hi):
+    """Split a segment (2 rows) at the plane x_d = X strictly inside its range, keeping its direction."""
+    sp = src[0, d] - X
+    sq = src[1, d] - X
+    t = sp / (sp - sq)
+    first_below = sp < 0.0
+    # lo: (p, r) if p is below the plane else (r, q); hi: the other half
+    r_lo = 1 if first_below else 0
+    r_hi = 0 if first_below else 1
+    for a in range(src.shape[1]):
+        r = src[0, a] + t * (src[1, a] - src[0, a])
+        lo[r_lo, a] = r
+        hi[r_hi, a] = r
+        lo[1 - r_lo, a] = src[1 - r_lo, a]
+        hi[1 - r_hi, a] = src[1 - r_hi, a]
+    lo[r_lo, d] = X
+    hi[r_hi, d] = X
+    return 2, 2
+
+
+@njit(cache=True)
+def _grow1(a, n):
+    out = np.empty(n, a.dtype)
+    out[: a.size] = a
+    return out
+
+
+@njit(cache=True)
+def _grow2(a, n):
+    out = np.empty((n, a.shape[1]), a.dtype)
+    out[: a.shape[0], :] = a
+    return out
+
+
+@njit(cache=True)
+def _clip_kernel(xs, elems, planes, cells, gauss_t, tri_bary, tri_w):
+    """Clip every element (2-D segment / 3-D triangle) against the zones.
+
+    Returns per piece (in element order): zone id, element, area, centroid (np, D), first point and
+    number of points; per point: position (nq, D), weight, foreground barycentrics (nq, 3); per
+    element: unit normal (ne, D).
+    """
+    D = xs.shape[1]
+    ne = elems.shape[0]
+    nvert = D                      # vertices of an element
+    ncol = D + (3 if D == 3 else 1)  # position + foreground coordinates carried through the cuts
+    minv = 3 if D == 3 else 2
+    MAXV = 32
+    buf = np.empty((3, 3, MAXV, ncol))   # per level: remainder, piece, scratch
+    icur = np.zeros(3, np.int64)
+    iend = np.zeros(3, np.int64)
+    idx = np.zeros(3, np.int64)
+    nrem = np.zeros(3, np.int64)
+    npc = np.zeros(3, np.int64)
+
+    cap = 4 * ne + 16
+    qcap = (24 if D == 3 else 2) * cap
+    pz = np.empty(cap, np.int64)
+    pe = np.empty(cap, np.int64)
+    pa = np.empty(cap)
+    pc = np.empty((cap, D))
+    pq0 = np.empty(cap, np.int64)
+    pqn = np.empty(cap, np.int64)
+    qx = np.empty((qcap, D))
+    qw = np.empty(qcap)
+    ql = np.empty((qcap, 3))
+    normals = np.zeros((ne, D))
+    npieces = 0
+    nq = 0
+    nrm = np.zeros(D)
+    cen = np.zeros(D)
+
+    for el in range(ne):
+        # unit normal of the element (right-handed, outward)
+        if D == 3:
+            a = xs[elems[el, 0]]
+            b = xs[elems[el, 1]]
+            c = xs[elems[el, 2]]
+            e1x, e1y, e1z = b[0] - a[0], b[1] - a[1], b[2] - a[2]
+            e2x, e2y, e2z = c[0] - a[0], c[1] - a[1], c[2] - a[2]
+            nrm[0] = e1y * e2z - e1z * e2y
+            nrm[1] = e1z * e2x - e1x * e2z
+            nrm[2] = e1x * e2y - e1y * e2x
+        else:
+            a = xs[elems[el, 0]]
+            b = xs[elems[el, 1]]
+            nrm[0] = b[1] - a[1]
+            nrm[1] = -(b[0] - a[0])
+        nn = 0.0
+        for k in range(D):
+            nn += nrm[k] * nrm[k]
+        nn = np.sqrt(nn)
+        if nn == 0.0:
+            continue                  # degenerate element: no area
+        for k in range(D):
+            nrm[k] /= nn
+            normals[el, k] = nrm[k]
+        # level 0 remainder: the element with its foreground coordinates
+        for v in range(nvert):
+            for k in range(D):
+                buf[0, 0, v, k] = xs[elems[el, v], k]
+            for k in range(D, ncol):
+                buf[0, 0, v, k] = 0.0
+            if D == 3:
+                buf[0, 0, v, D + v] = 1.0
+            else:
+                buf[0, 0, v, D] = float(v)      # segment parameter t
+        nrem[0] = nvert
+        i0, i1 = _axis_range(buf[0, 0], nvert, 0, planes[0, : cells[0] + 1], nrm[0])
+        icur[0] = i0
+        iend[0] = i1
+        lvl = 0
+        while lvl >= 0:
+            if icur[lvl] > iend[lvl]:
+                lvl -= 1
+                continue
+            i = icur[lvl]
+            icur[lvl] += 1
+            idx[lvl] = i
+            X = planes[lvl, : cells[lvl] + 1]
+            if i < iend[lvl]:
+                # split off the slab below plane i+1; the rest stays the remainder
+                if D == 3:
+                    nlo, nhi = _cut_polygon(buf[lvl, 0], nrem[lvl], lvl, X[i + 1], buf[lvl, 1], buf[lvl, 2])
+                else:
+                    nlo, nhi = _cut_segment(buf[lvl, 0], lvl, X[i + 1], buf[lvl, 1], buf[lvl, 2])
+                buf[lvl, 0, :nhi, :] = buf[lvl, 2, :nhi, :]
+                nrem[lvl] = nhi
+                npc[lvl] = nlo
+            else:
+                buf[lvl, 1, : nrem[lvl], :] = buf[lvl, 0, : nrem[lvl], :]
+                npc[lvl] = nrem[lvl]
+            if npc[lvl] < minv:
+                continue
+            if lvl < D - 1:
+                nxt = lvl + 1
+                buf[nxt, 0, : npc[lvl], :] = buf[lvl, 1, : npc[lvl], :]
+                nrem[nxt] = npc[lvl]
+                j0, j1 = _axis_range(buf[nxt, 0], nrem[nxt], nxt, planes[nxt, : cells[nxt] + 1], nrm[nxt])
+                icur[nxt] = j0
+                iend[nxt] = j1
+                lvl = nxt
+                continue
+            # a piece: buf[lvl, 1, :npc] in zone idx
+            P = buf[lvl, 1]
+            m = npc[lvl]
+            if npieces == pz.size:
+                cap2 = 2 * pz.size
+                pz = _grow1(pz, cap2)
+                pe = _grow1(pe, cap2)
+                pa = _grow1(pa, cap2)
+                pc = _grow2(pc, cap2)
+                pq0 = _grow1(pq0, cap2)
+                pqn = _grow1(pqn, cap2)
+            need = nq + (6 * (m - 2) if D == 3 else 2)
+            if need > qw.size:
+                qcap2 = max(2 * qw.size, need)
+                qx = _grow2(qx, qcap2)
+                qw = _grow1(qw, qcap2)
+                ql = _grow2(ql, qcap2)
+            q0 = nq
+            area = 0.0
+            for k in range(D):
+                cen[k] = 0.0
+            if D == 3:
+                # fan from vertex 0; each positive triangle gets the degree-4 rule.  Points are
+                # P0 + b1 e1 + b2 e2, so a coordinate constant on the piece is reproduced exactly.
+                for f in range(1, m - 1):
+                    e1x = P[f, 0] - P[0, 0]
+                    e1y = P[f, 1] - P[0, 1]
+                    e1z = P[f, 2] - P[0, 2]
+                    e2x = P[f + 1, 0] - P[0, 0]
+                    e2y = P[f + 1, 1] - P[0, 1]
+                    e2z = P[f + 1, 2] - P[0, 2]
+                    at = 0.5 * (nrm[0] * (e1y * e2z - e1z * e2y) + nrm[1] * (e1z * e2x - e1x * e2z)
+                                + nrm[2] * (e1x * e2y - e1y * e2x))
+                    if not at > 0.0:
+                        continue        # round-off sliver of a (numerically) non-convex polygon
+                    area += at
+                    cen[0] += at * (e1x + e2x) / 3.0
+                    cen[1] += at * (e1y + e2y) / 3.0
+                    cen[2] += at * (e1z + e2z) / 3.0
+                    for g in range(tri_w.size):
+                        b1 = tri_bary[g, 1]
+                        b2 = tri_bary[g, 2]
+                        b0 = tri_bary[g, 0]
+                        qx[nq, 0] = P[0, 0] + b1 * e1x + b2 * e2x
+                        qx[nq, 1] = P[0, 1] + b1 * e1y + b2 * e2y
+                        qx[nq, 2] = P[0, 2] + b1 * e1z + b2 * e2z
+                        for k in range(3):
+                            ql[nq, k] = b0 * P[0, 3 + k] + b1 * P[f, 3 + k] + b2 * P[f + 1, 3 + k]
+                        qw[nq] = tri_w[g] * at
+                        nq += 1
+                if not area > 0.0:
+                    nq = q0
+                    continue
+                for k in range(3):
+                    cen[k] = P[0, k] + cen[k] / area
+            else:
+                dx = P[1, 0] - P[0, 0]
+                dy = P[1, 1] - P[0, 1]
+                area = np.sqrt(dx * dx + dy * dy)
+                if not area > 0.0:
+                    continue
+                cen[0] = P[0, 0] + 0.5 * dx
+                cen[1] = P[0, 1] + 0.5 * dy
+                for g in range(gauss_t.size):
+                    s = gauss_t[g]
+                    qx[nq, 0] = P[0, 0] + s * dx
+                    qx[nq, 1] = P[0, 1] + s * dy
+                    t = P[0, 2] + s * (P[1, 2] - P[0, 2])
+                    ql[nq, 0] = 1.0 - t
+                    ql[nq, 1] = t
+                    ql[nq, 2] = 0.0
+                    qw[nq] = 0.5 * area
+                    nq += 1
+            zid = idx[D - 1]
+            for k in range(D - 2, -1, -1):
+                zid = zid * cells[k] + idx[k]
+            pz[npieces] = zid
+            pe[npieces] = el
+            pa[npieces] = area
+            for k in range(D):
+                pc[npieces, k] = cen[k]
+            pq0[npieces] = q0
+            pqn[npieces] = nq - q0
+            npieces += 1
+    return (pz[:npieces], pe[:npieces], pa[:npieces], pc[:npieces], pq0[:npieces], pqn[:npieces],
+            qx[:nq], qw[:nq], ql[:nq], normals)
+
+
+@njit(cache=True)
+def _same_row(oth, a, b):
+    for j in range(oth.shape[1]):
+        if oth[a, j] != oth[b, j]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def _scan_rows(body, oth, pos, s, m, F, X, snap):
+    """Suffix sums (2) along the rows of one axis and the fractions (1) / face coverages they give.
+
+    Input sorted by (body, row coordinates ``oth``, position along the axis); ``s = n_d a``,
+    ``m = (c_d - X[pos]) n_d a`` per piece, F the row's face area.  Returns zone rows
+    (body, oth, index, fraction) and face rows (body, oth, plane index, covered fraction), only
+    positive values.
+    """
+    n = X.size - 1
+    npc = body.size
+    no = oth.shape[1]
+    cap = 4 * npc + 16
+    zb = np.empty(cap, np.int64)
+    zo = np.empty((cap, no), np.int64)
+    zi = np.empty(cap, np.int64)
+    zv = np.empty(cap)
+    fb = np.empty(cap, np.int64)
+    fo = np.empty((cap, no), np.int64)
+    fk = np.empty(cap, np.int64)
+    fv = np.empty(cap)
+    nz = 0
+    nf = 0
+    gp = np.empty(npc, np.int64)
+    gs = np.empty(npc)
+    gm = np.empty(npc)
+    r0 = 0
+    while r0 < npc:
+        r1 = r0 + 1
+        while r1 < npc and body[r1] == body[r0] and _same_row(oth, r0, r1):
+            r1 += 1
+        ng = 0
+        for p in range(r0, r1):
+            if ng > 0 and gp[ng - 1] == pos[p]:
+                gs[ng - 1] += s[p]
+                gm[ng - 1] += m[p]
+            else:
+                gp[ng] = pos[p]
+                gs[ng] = s[p]
+                gm[ng] = m[p]
+                ng += 1
+        Fr = F[r0]
+        # worst case output of this row: every zone and face between its first and last position
+        extra = 2 * (gp[ng - 1] - gp[0] + 3)
+        if nz + extra > zv.size or nf + extra > fv.size:
+            c2 = 2 * zv.size + extra
+            zb = _grow1(zb, c2)
+            zo = _grow2(zo, c2)
+            zi = _grow1(zi, c2)
+            zv = _grow1(zv, c2)
+            fb = _grow1(fb, c2)
+            fo = _grow2(fo, c2)
+            fk = _grow1(fk, c2)
+            fv = _grow1(fv, c2)
+        R = 0.0            # covered area of the face above the current position (2)
+        for g in range(ng - 1, -1, -1):
+            p = gp[g]
+            if (g == ng - 1 or gp[g + 1] > p + 1) and p + 1 <= n:
+                v = R / Fr
+                v = 0.0 if v < snap else (1.0 if v > 1.0 - snap else v)
+                if v > 0.0:
+                    fb[nf] = body[r0]
+                    fo[nf] = oth[r0]
+                    fk[nf] = p + 1
+                    fv[nf] = v
+                    nf += 1
+            if 0 <= p < n:
+                w = X[p + 1] - X[p]
+                v = (gm[g] + w * R) / (w * Fr)          # (1)
+                v = 0.0 if v < snap else (1.0 if v > 1.0 - snap else v)
+                if v > 0.0:
+                    zb[nz] = body[r0]
+                    zo[nz] = oth[r0]
+                    zi[nz] = p
+                    zv[nz] = v
+                    nz += 1
+            R += gs[g]
+            if p >= 0:
+                v = R / Fr
+                v = 0.0 if v < snap else (1.0 if v > 1.0 - snap else v)
+                if v > 0.0:
+                    fb[nf] = body[r0]
+                    fo[nf] = oth[r0]
+                    fk[nf] = p
+                    fv[nf] = v
+                    nf += 1
+            # zones strictly between the previous position and this one are not cut: inside or out
+            if g > 0 and R > 0.5 * Fr:
+                for i in range(gp[g - 1] + 1, p):
+                    zb[nz] = body[r0]
+                    zo[nz] = oth[r0]
+                    zi[nz] = i
+                    zv[nz] = 1.0
+                    nz += 1
+                for k in range(gp[g - 1] + 2, p):
+                    fb[nf] = body[r0]
+                    fo[nf] = oth[r0]
+                    fk[nf] = k
+                    fv[nf] = 1.0
+                    nf += 1
+        r0 = r1
+    return zb[:nz], zo[:nz], zi[:nz], zv[:nz], fb[:nf], fo[:nf], fk[:nf], fv[:nf]
+
+
+@njit(cache=True)
+def _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv):
+    """The quadrature points in sorted piece order, with the foreground shape functions of the
+    parent facet's nv nodes (3-D: part 0 holds nodes (0, 1, 2), part 1 nodes (0, 2, 3)) and the
+    background ones: tensor products of the 1-D hats of the zone's local coordinates
+    ``xi_d = (x_d - X_i) / (X_{i+1} - X_i)`` (clipped against round-off); corner c has offset
+    (c & 1, c >> 1 & 1, c >> 2 & 1)."""
+    D = qx.shape[1]
+    nq = 0
+    for p in range(order.size):
+        nq += pqn[order[p]]
+    out_x = np.empty((nq, D))
+    out_w = np.empty(nq)
+    out_p = np.empty(nq, np.int64)
+    out_f = np.zeros((nq, nv))
+    nc = 1 << D
+    out_b = np.empty((nq, nc))
+    xi = np.empty(D)
+    k = 0
+    for p in range(order.size):
+        o = order[p]
+        for j in range(pq0[o], pq0[o] + pqn[o]):
+            for d in range(D):
+                out_x[k, d] = qx[j, d]
+                i = zijk[p, d]
+                t = (qx[j, d] - planes[d, i]) / (planes[d, i + 1] - planes[d, i])
+                xi[d] = min(max(t, 0.0), 1.0)
+            out_w[k] = qw[j]
+            out_p[k] = p
+            if D == 3:
+                out_f[k, 0] = ql[j, 0]
+                if part[o] == 0:
+                    out_f[k, 1] = ql[j, 1]
+                    out_f[k, 2] = ql[j, 2]
+                else:
+                    out_f[k, 2] = ql[j, 1]
+                    out_f[k, 3] = ql[j, 2]
+            else:
+                out_f[k, 0] = ql[j, 0]
+                out_f[k, 1] = ql[j, 1]
+            for c in range(nc):
+                v = 1.0
+                for d in range(D):
+                    v *= xi[d] if (c >> d) & 1 else 1.0 - xi[d]
+                out_b[k, c] = v
+            k += 1
+    return out_x, out_w, out_p, out_f, out_b
+
+
+# ------------------------------------------------------------------------------ public API
+def snap_to_planes(grid: Grid, x) -> np.ndarray:
+    """Copy of node positions x (nn, dim) with coordinates within ``_SNAP_ULPS`` ulps (of the grid's
+    coordinate scale) of a canonical grid plane moved onto it."""
+    xs = np.array(x, dtype=np.float64)
+    eps = np.finfo(np.float64).eps
+    for d in range(grid.dim):
+        X = grid.planes(d)
+        n = int(grid.cells[d])
+        k = np.clip(np.rint((xs[:, d] - grid.lower[d]) / (grid.upper[d] - grid.lower[d]) * n), 0, n)
+        k = k.astype(np.int64)
+        tol = _SNAP_ULPS * eps * max(abs(grid.lower[d]), abs(grid.upper[d]))
+        near = np.abs(xs[:, d] - X[k]) <= tol
+        xs[near, d] = X[k[near]]
+    return xs
+
+
+def _check_inputs(grid: Grid, x, facets, body):
+    dim = grid.dim
+    x = np.asarray(x, dtype=np.float64)
+    facets = np.asarray(facets, dtype=np.int64)
+    nv = 2 if dim == 2 else 4
+    if x.ndim != 2 or x.shape[1] != dim:
+        raise GeometryError(f"node positions must have shape (nn, {dim}) for a {dim}-D grid, got {x.shape}")
+    if facets.ndim != 2 or facets.shape[1] != nv:
+        raise GeometryError(f"facets must have shape (nf, {nv}) in {dim}-D, got {facets.shape}")
+    if facets.size and (facets.min() < 0 or facets.max() >= x.shape[0]):
+        raise GeometryError(f"facet node indices must lie in [0, {x.shape[0]}), got "
+                            f"[{facets.min()}, {facets.max()}]")
+    if body is None:
+        body = np.zeros(facets.shape[0], dtype=np.int64)
+    body = np.asarray(body, dtype=np.int64).reshape(-1)
+    if body.size != facets.shape[0] or (body.size and body.min() < 0):
+        raise GeometryError(f"body must give a non-negative body index per facet ({facets.shape[0]}), "
+                            f"got {body.size} values")
+    if not np.all(np.isfinite(x[facets])):
+        raise GeometryError("facet node positions must be finite")
+    return x, facets, body
+
+
+def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
+    """The body surfaces (facets into node positions x; body index per facet, default 0) clipped
+    against the zones of the grid; see the module docstring for the rules and the quadrature."""
+    dim = grid.dim
+    x, facets, body = _check_inputs(grid, x, facets, body)
+    xs = snap_to_planes(grid, x)
+    used = np.zeros(x.shape[0], dtype=bool)
+    used[facets.reshape(-1)] = True
+    outside = used & np.any((xs < grid.lower) | (xs > grid.upper), axis=1)
+    if outside.any():
+        bad = np.any(outside[facets], axis=1)
+        b = int(body[bad].min())
+        nodes = facets[bad & (body == b)].reshape(-1)
+        node = int(nodes[outside[nodes]].min())
+        raise GeometryError(f"body {b} is not inside the grid box [{grid.lower.tolist()}, "
+                            f"{grid.upper.tolist()}]: node {node} at {x[node].tolist()}")
+    if dim == 3:   # the quads' two triangles along the diagonal 0-2
+        elems = np.concatenate([facets[:, [0, 1, 2]], facets[:, [0, 2, 3]]])
+        e_facet = np.concatenate([np.arange(facets.shape[0])] * 2)
+        e_part = np.repeat(np.arange(2), facets.shape[0])
+    else:
+        elems, e_facet, e_part = facets, np.arange(facets.shape[0]), np.zeros(facets.shape[0], np.int64)
+    nmax = int(grid.cells.max())
+    planes = np.zeros((dim, nmax + 1))
+    for d in range(dim):
+        planes[d, : grid.cells[d] + 1] = grid.planes(d)
+    pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = _clip_kernel(
+        np.ascontiguousarray(xs), np.ascontiguousarray(elems), planes, grid.cells.astype(np.int64),
+        _GAUSS2_T, _TRI_BARY, _TRI_W)
+    facet = e_facet[pe]
+    part = e_part[pe]
+    order = np.lexsort((part, facet, body[facet], pz))
+    zone = pz[order]
+    qp, qw, qpiece, qf, qb = _gather_points(order, pq0, pqn, qx, qw, ql, part,
+                                            grid.zone_ijk(zone).reshape(-1, dim), planes, facets.shape[1])
+    return Pieces(zone=zone, body=body[facet[order]], facet=facet[order], area=pa[order],
+                  normal=enormal[pe[order]], centroid=pc[order], qp=qp, qw=qw, qpiece=qpiece,
+                  qf=qf, qb=qb)
+
+
+def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
+    """Run the suffix sums along axis d: (zone rows, face rows) of ``_scan_rows``, ids composed."""
+    dim = grid.dim
+    if pieces.body.size and pieces.body.max() >= n_bodies:
+        raise GeometryError(f"pieces name body {int(pieces.body.max())} but n_bodies = {n_bodies}")
+    X = grid.planes(d)
+    n = int(grid.cells[d])
+    ijk = grid.zone_ijk(pieces.zone).reshape(-1, dim)
+    nd = pieces.normal[:, d]
+    cd = pieces.centroid[:, d]
+    pos = ijk[:, d].copy()
+    # facets on the grid boundary plane count as just outside the grid (module docstring)
+    pos[(pos == 0) & (nd < 0.0) & (cd == X[0])] = -1
+    pos[(pos == n - 1) & (nd > 0.0) & (cd == X[n])] = n
+    s = nd * pieces.area
+    inside = (pos >= 0) & (pos < n)
+    m = np.zeros_like(s)
+    m[inside] = (cd[inside] - X[pos[inside]]) * s[inside]
+    others = [e for e in range(dim) if e != d]
+    oth = ijk[:, others]
+    F = np.ones_like(s)
+    for j, e in enumerate(others):
+        Xe = grid.planes(e)
+        F *= Xe[oth[:, j] + 1] - Xe[oth[:, j]]
+    # canonical summation order: by row and position, then by the pieces' geometric values (not by
+    # facet number), so the sums are bitwise independent of the facet order
+    keys = ([pieces.normal[:, k] for k in range(dim)] + [pieces.area]
+            + [pieces.centroid[:, k] for k in range(dim)] + [pos] + [oth[:, j] for j in range(dim - 2, -1, -1)]
+            + [pieces.body])
+    order = np.lexsort(keys)
+    zb, zo, zi, zv, fb, fo, fk, fv = _scan_rows(
+        pieces.body[order], np.ascontiguousarray(oth[order]), pos[order], s[order], m[order], F[order],
+        X, _SNAP)
+    zijk = np.empty((zi.size, dim), np.int64)
+    zijk[:, d] = zi
+    zijk[:, others] = zo
+    fijk = np.empty((fk.size, dim), np.int64)
+    fijk[:, d] = fk
+    fijk[:, others] = fo
+    return (grid.zone_ids(zijk), zb, zv), (grid.face_ids(d, fijk), fb, fv)
+
+
+def _by_id(ids, bodies, values, n_bodies):
+    u, inv = np.unique(ids, return_inverse=True)
+    out = np.zeros((u.size, n_bodies))
+    out[inv.reshape(-1), bodies] = values
+    return u.astype(np.int64), out
+
+
+def blocked_fractions(grid: Grid, pieces: Pieces, n_bodies: int):
+    """``(zone_ids (nz,), fractions (nz, n_bodies))``: the exact volume fraction of every zone covered
+    by each body (1) -- cut zones and fully covered ones, only zones with a positive fraction,
+    sorted by zone id."""
+    (ids, b, v), _ = _row_coverage(grid, pieces, n_bodies, 0)
+    return _by_id(ids, b, v, n_bodies)
+
+
+def face_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
+    """``(face_ids (nf,), covered (nf, n_bodies))``: the exact covered fraction of every face normal to
+    axis d (grid.face_ids) that a body covers at least partly (2), sorted by face id."""
+    if not 0 <= d < grid.dim:
+        raise GeometryError(f"axis d must be in [0, {grid.dim}), got {d}")
+    _, (ids, b, v) = _row_coverage(grid, pieces, n_bodies, d)
+    return _by_id(ids, b, v, n_bodies)
+
+
+def closed_surface_from_cells(points, cells, cell_type: str) -> np.ndarray:
+    """Exterior facets of a quad (2-D: segments (nf, 2)) or hexahedron (3-D: quads (nf, 4)) mesh,
+    oriented with the outward normal of clip_surface's convention; inverted cells are mirrored
+    first.  Facets in the order of their cells and local faces."""
+    points = np.asarray(points, dtype=np.float64)
+    cells = np.asarray(cells, dtype=np.int64)
+    if cell_type == "quad":
+        local, flip = _QUAD_EDGES, _QUAD_FLIP
+        x = points[cells]
+        signed = 0.5 * np.sum(x[:, :, 0] * np.roll(x[:, :, 1], -1, axis=1)
+                              - np.roll(x[:, :, 0], -1, axis=1) * x[:, :, 1], axis=1)   # shoelace
+    elif cell_type == "hexahedron":
+        local, flip = _HEX_FACES, _HEX_FLIP
+        f = points[cells[:, local]]                                   # (ne, 6, 4, 3)
+        s = 0.5 * np.cross(f[:, :, 2] - f[:, :, 0], f[:, :, 3] - f[:, :, 1])
+        signed = np.sum(np.einsum("efk,efk->ef", f.mean(axis=2), s), axis=1) / 3.0   # div theorem
+    else:
+        raise GeometryError(f"cell_type must be 'quad' or 'hexahedron', got {cell_type!r}")
+    if cells.ndim != 2 or cells.shape[1] != flip.size:
+        raise GeometryError(f"{cell_type} cells must have shape (ne, {flip.size}), got {cells.shape}")
+    cells = np.where((signed < 0)[:, None], cells[:, flip], cells)
+    faces = cells[:, local].reshape(-1, local.shape[1])
+    _, inv, counts = np.unique(np.sort(faces, axis=1), axis=0, return_inverse=True, return_counts=True)
+    return faces[counts[inv.reshape(-1)] == 1]
+
+
+# ------------------------------------------------------------------------------- cost probe
+def cube_sphere_surface(n: int, radius: float = 1.0, centre=(0.0, 0.0, 0.0)):
+    """A closed sphere-like quad surface: the 6 n^2 boundary quads of an n^3 hex cube projected
+    radially onto the sphere (outward).  Returns (points (nn, 3), quads (6 n^2, 4))."""
+    t = np.linspace(-1.0, 1.0, n + 1)
+    g = np.stack(np.meshgrid(t, t, t, indexing="ij"), axis=-1).reshape(-1, 3)
+    ids = np.arange((n + 1) ** 3).reshape(n + 1, n + 1, n + 1)
+    c = ids[:-1, :-1, :-1].reshape(-1)
+    sx, sy, sz = (n + 1) ** 2, n + 1, 1
+    cells = np.stack([c, c + sx, c + sx + sy, c + sy, c + sz, c + sx + sz, c + sx + sy + sz, c + sy + sz], 1)
+    quads = closed_surface_from_cells(g, cells, "hexahedron")
+    used = np.unique(quads)
+    remap = np.full(g.shape[0], -1, np.int64)
+    remap[used] = np.arange(used.size)
+    p = g[used]
+    p = np.asarray(centre, dtype=np.float64) + radius * p / np.linalg.norm(p, axis=1)[:, None]
+    return p, remap[quads]
+
+
+def geometry_cost(n_facets: int) -> dict:
+    """Wall times of the interface geometry for a sphere-like closed surface of about ``n_facets``
+    quads on a grid whose zones are about the facets' size (for ``immerse bench coupling``; the
+    kernels are compiled by a small warm-up call first, not timed)."""
+    m = max(1, int(round(np.sqrt(n_facets / 6.0))))
+    x, quads = cube_sphere_surface(m, radius=1.0)
+    cells = max(2, int(round(1.5 * m)))          # zone width ~ the facets' arc length (pi/2 / m)
+    grid = Grid([-1.25] * 3, [1.25] * 3, [cells] * 3)
+    xw, qw_ = cube_sphere_surface(2)
+    warm = clip_surface(Grid([-2.0] * 3, [2.0] * 3, [3] * 3), xw, qw_)
+    blocked_fractions(Grid([-2.0] * 3, [2.0] * 3, [3] * 3), warm, 1)
+    t0 = time.perf_counter()
+    pieces = clip_surface(grid, x, quads)
+    t1 = time.perf_counter()
+    zones, _ = blocked_fractions(grid, pieces, 1)
+    t2 = time.perf_counter()
+    for d in range(3):
+        face_coverage(grid, pieces, 1, d)
+    t3 = time.perf_counter()
+    return {"n_facets": int(quads.shape[0]), "cells": [cells] * 3, "n_pieces": int(pieces.zone.size),
+            "n_points": int(pieces.qw.size), "n_blocked_zones": int(zones.size),
+            "clip_s": t1 - t0, "fractions_s": t2 - t1, "faces_s": t3 - t2}
