@@ -114,25 +114,29 @@ def _canonical(m) -> sp.csr_matrix:
     return m
 
 
-def assemble(ops: Operators, m_b, m_f, dt: float, condition: str = "tied", alpha: float = ALPHA,
-             beta: float = BETA) -> System:
-    """The system matrix H of one step.
+@dataclass(frozen=True)
+class MaterialOperators:
+    """B^b and Bf restricted to the material: rows = zones with a material background node."""
+
+    rows: np.ndarray  # (n,) rows of ops in use
+    Bb: sp.csr_matrix  # (n, nb) void columns dropped, rows rescaled to sum to A_e
+    Bf: sp.csr_matrix  # (n, ns)
+    inv_mb: np.ndarray  # (nb,) 1/m_b, 0 for void nodes
+    inv_mf: np.ndarray  # (ns,) 1/m_f, 0 for surface nodes off the interface
+    ref: np.ndarray  # (n,) first material column of each row of Bb (Galilean RHS reference)
+
+
+def material_operators(ops: Operators, m_b, m_f) -> MaterialOperators:
+    """The operators of the material nodes.
 
     m_b (nb,) lumped background masses on ops.bnodes; m_f (ns,) lumped surface-node masses.
-    A background node with m_b = 0 (no material: void) is left out of the constraint -- its column is
-    dropped -- because it has no momentum to exchange (M^-1 is undefined there and its velocity is
-    not a material velocity); the zone's remaining weights are rescaled to sum to A_e again, so that
-    the impulses stay equal and opposite (momentum conserved) and a uniform motion still gives a
-    zero relative velocity.  A zone with no material node at all is left out (λ_e = 0): a surface
-    in void has nothing to be tied to.  1/α = 0 (alpha=inf) and β = 0 give the unstabilised H."""
-    if condition not in CONDITIONS:
-        raise ValueError(f"condition = {condition!r}: must be one of {', '.join(CONDITIONS)}")
-    if not (dt > 0.0 and np.isfinite(dt)):
-        raise ValueError(f"dt = {dt!r}: must be a finite number > 0")
-    if not alpha > 0.0:
-        raise ValueError(f"alpha = {alpha!r}: must be > 0 (inf for no I/alpha term)")
-    if not (beta >= 0.0 and np.isfinite(beta)):
-        raise ValueError(f"beta = {beta!r}: must be a finite number >= 0")
+    A background node with m_b = 0 (no material: void) is left out of the constraint -- its column
+    is dropped -- because it has no momentum to exchange (M^-1 is undefined there and its velocity
+    is not a material velocity).  The zone's remaining weights are rescaled to sum to A_e again, so
+    that the impulses stay equal and opposite (momentum conserved) and a uniform motion still gives
+    a zero relative velocity; each rescaled weight stays <= A_e, so a zone whose material nodes carry
+    little weight does not blow up.  A zone with no material node at all is left out (λ_e = 0): a
+    surface in void has nothing to be tied to."""
     m_b = np.asarray(m_b, dtype=float)
     m_f = np.asarray(m_f, dtype=float)
     if m_b.shape != ops.bnodes.shape:
@@ -157,10 +161,30 @@ def assemble(ops: Operators, m_b, m_f, dt: float, condition: str = "tied", alpha
     Bb_k = _canonical(ops.Bb @ kept)
     row_sum = np.asarray(Bb_k.sum(axis=1)).ravel()
     rows = np.flatnonzero(row_sum > 0.0)
-    area = ops.area[rows]
-    Bb = _canonical(sp.diags(area / row_sum[rows]) @ Bb_k[rows])
+    Bb = _canonical(sp.diags(ops.area[rows] / row_sum[rows]) @ Bb_k[rows])
     Bf = _canonical(ops.Bf[rows])
-    normal = ops.normal[rows]
+    ref = Bb.indices[Bb.indptr[:-1]]  # every row has a material node
+    return MaterialOperators(rows=rows, Bb=Bb, Bf=Bf, inv_mb=inv_mb, inv_mf=inv_mf, ref=ref)
+
+
+def assemble(ops: Operators, m_b, m_f, dt: float, condition: str = "tied", alpha: float = ALPHA,
+             beta: float = BETA) -> System:
+    """The system matrix H of one step.
+
+    m_b (nb,) lumped background masses on ops.bnodes; m_f (ns,) lumped surface-node masses.
+    Void background nodes are left out (`material_operators`).  1/α = 0 (alpha=inf) and β = 0 give
+    the unstabilised H."""
+    if condition not in CONDITIONS:
+        raise ValueError(f"condition = {condition!r}: must be one of {', '.join(CONDITIONS)}")
+    if not (dt > 0.0 and np.isfinite(dt)):
+        raise ValueError(f"dt = {dt!r}: must be a finite number > 0")
+    if not alpha > 0.0:
+        raise ValueError(f"alpha = {alpha!r}: must be > 0 (inf for no I/alpha term)")
+    if not (beta >= 0.0 and np.isfinite(beta)):
+        raise ValueError(f"beta = {beta!r}: must be a finite number >= 0")
+    mat = material_operators(ops, m_b, m_f)
+    rows, Bb, Bf, normal, area = mat.rows, mat.Bb, mat.Bf, ops.normal[mat.rows], ops.area[mat.rows]
+    inv_mb, inv_mf = mat.inv_mb, mat.inv_mf
 
     Hu = _canonical(dt * (Bb @ sp.diags(inv_mb) @ Bb.T + Bf @ sp.diags(inv_mf) @ Bf.T))
     # s_e: zone e's unstabilised diagonal rescaled from its cut area A_e to a full cut's A_full
@@ -172,9 +196,8 @@ def assemble(ops: Operators, m_b, m_f, dt: float, condition: str = "tied", alpha
 
     Cinv = _canonical(sp.diags(scale / alpha) + jump_matrix(ops.pairs, rows, scale, beta))
     H = _canonical(Hu + Cinv)
-    ref = Bb.indices[Bb.indptr[:-1]]  # first material node of each row (every row has one)
     return System(condition=condition, dt=float(dt), rows=rows, H=H, Cinv=Cinv, scale=scale, Bb=Bb, Bf=Bf,
-                  ref=ref, normal=normal)
+                  ref=mat.ref, normal=normal)
 
 
 def jump_matrix(pairs: np.ndarray, rows: np.ndarray, scale: np.ndarray, beta: float) -> sp.csr_matrix:
@@ -197,8 +220,8 @@ def jump_matrix(pairs: np.ndarray, rows: np.ndarray, scale: np.ndarray, beta: fl
     return _canonical(sp.coo_matrix((np.concatenate([w, w, -w, -w]), (r, c)), shape=(n, n)))
 
 
-def relative_velocity(system: System, v_b, v_f) -> np.ndarray:
-    """g* = B^b v_b - Bf v_f per zone of the system, (n, dim).
+def relative_velocity(system, v_b, v_f) -> np.ndarray:
+    """g* = B^b v_b - Bf v_f per zone of a `System` or `MaterialOperators` (fields Bb, Bf, ref), (n, dim).
 
     Computed as Σ_A B^b_eA (v_A - v_ref) - Σ_A Bf_eA (v_A - v_ref) with v_ref the velocity of the
     zone's first material background node: the same value (both rows sum to A_e, so the v_ref terms
