@@ -310,10 +310,10 @@ def solve_system(ops: Operators, system: System, v_b, v_f, warm=None, rtol: floa
     if slip:
         g = (g * system.normal).sum(axis=1, keepdims=True)
     x0 = np.zeros_like(g)
-    if warm is not None:
+    if warm is not None and np.size(warm[0]):
         wz, wl = np.asarray(warm[0], np.int64), np.asarray(warm[1], dtype=float)
         wl = wl.reshape(wz.size, -1)
-        if wz.size and wl.shape[1] == g.shape[1]:
+        if wl.shape[1] == g.shape[1]:
             zones = ops.zones[system.rows]
             pos = np.minimum(np.searchsorted(wz, zones), wz.size - 1)
             hit = wz[pos] == zones

@@ -211,3 +211,16 @@ def cut_tilted_plane(grid: Grid, z0: float, slope: float, spacing, offset=(0.0, 
                 rows.append((int(grid.zone_id(idx)), body, f, (a1 - a0) * (b1 - b0) * scale, normal, mid,
                              qp, qw, qf))
     return _assemble(grid, rows), facets, len(node_xy)
+
+
+def two_masses(M1: float, M2: float):
+    """One unit zone cut through its middle by one facet spanning it: B^b = 1/4 on each corner,
+    B^f = 1/2 on each facet node.  Masses M1/4 per corner and M2/2 per facet node make every node
+    of a side receive the same Δv: two point masses M1, M2 tied by one zone of area 1.
+    Returns (ops, m_b, m_f)."""
+    from orchestrator.coupling.operators import Operators
+
+    g = Grid.make([0.0, 0.0], [1.0, 1.0], [1, 1])
+    ops = Operators.build(g, *cut_polyline(g, np.array([[0.0, 0.5], [1.0, 0.5]]), closed=False))
+    assert np.allclose(ops.Bb.toarray(), 0.25) and np.allclose(ops.Bf.toarray(), 0.5)
+    return ops, np.full(4, M1 / 4), np.full(2, M2 / 2)

@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from orchestrator.coupling import solve as S
 from orchestrator.coupling.conditioning import HS, conditioning_sweep, straight_cut
 from orchestrator.coupling.operators import Operators
-from tests.orchestrator.coupling.stand_ins import Grid, circle_nodes, cut_polyline
+from tests.orchestrator.coupling.stand_ins import Grid, circle_nodes, cut_polyline, two_masses
 
 
 def _ops(dim, h, seed):
@@ -31,16 +31,6 @@ def _random_state(ops, seed, void_fraction=0.0):
     return m_b, m_f, rng.normal(size=(nb, d)), rng.normal(size=(ns, d))
 
 
-def _two_masses(M1, M2):
-    """One unit zone cut through its middle by one facet spanning it: B^b = 1/4 on each corner,
-    B^f = 1/2 on each facet node.  Masses M1/4 per corner and M2/2 per facet node make every node
-    of a side receive the same Δv: two point masses tied by one zone."""
-    g = Grid.make([0.0, 0.0], [1.0, 1.0], [1, 1])
-    ops = Operators.build(g, *cut_polyline(g, np.array([[0.0, 0.5], [1.0, 0.5]]), closed=False))
-    assert np.allclose(ops.Bb.toarray(), 0.25) and np.allclose(ops.Bf.toarray(), 0.5)
-    return ops, np.full(4, M1 / 4), np.full(2, M2 / 2)
-
-
 def _apply(v, imp, m):
     out = v.copy()
     ok = m > 0
@@ -53,7 +43,7 @@ def test_two_masses_tied_by_one_zone_end_perfectly_inelastic():
     """α -> ∞: both bodies leave with the momentum-weighted mean velocity (a perfectly inelastic tie)."""
     M1, M2, dt = 3.0, 5.0, 0.01
     v1, v2 = np.array([2.0, -1.0]), np.array([-0.5, 4.0])
-    ops, m_b, m_f = _two_masses(M1, M2)
+    ops, m_b, m_f = two_masses(M1, M2)
     vmean = (M1 * v1 + M2 * v2) / (M1 + M2)
     for alpha in (np.inf, 1e14):
         sol = S.solve(ops, m_b, m_f, np.tile(v1, (4, 1)), np.tile(v2, (2, 1)), dt, alpha=alpha)
@@ -70,7 +60,7 @@ def test_two_masses_keep_the_fraction_one_over_one_plus_alpha_of_their_relative_
     momentum is conserved exactly for any α."""
     M1, M2, dt = 3.0, 5.0, 0.01
     v1, v2 = np.array([2.0, -1.0]), np.array([-0.5, 4.0])
-    ops, m_b, m_f = _two_masses(M1, M2)
+    ops, m_b, m_f = two_masses(M1, M2)
     sol = S.solve(ops, m_b, m_f, np.tile(v1, (4, 1)), np.tile(v2, (2, 1)), dt, alpha=alpha)
     vb = _apply(np.tile(v1, (4, 1)), sol.impulse_b, m_b)
     vf = _apply(np.tile(v2, (2, 1)), sol.impulse_f, m_f)
@@ -264,7 +254,7 @@ def test_same_inputs_give_bitwise_the_same_multipliers():
 
 
 def test_a_zone_without_material_nodes_has_no_multiplier():
-    ops, m_b, m_f = _two_masses(3.0, 5.0)
+    ops, m_b, m_f = two_masses(3.0, 5.0)
     sol = S.solve(ops, np.zeros(4), m_f, np.ones((4, 2)), np.zeros((2, 2)), 1e-3)
     assert np.all(sol.lam == 0.0) and np.all(sol.impulse_f == 0.0)
     with pytest.raises(ValueError, match="surface node 1 has mass 0.0"):
