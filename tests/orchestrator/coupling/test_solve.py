@@ -270,3 +270,16 @@ def test_condition_number_dense_and_lanczos_agree_with_known_spectra():
     H = sp.diags(ev[perm]).tocsr()
     assert S.condition_number(H) == pytest.approx(80.0, rel=1e-8)  # eigsh branch (n > 2000)
     assert S.condition_number(sp.diags(ev[:100]).tocsr()) == pytest.approx(ev[99] / 0.5, rel=1e-12)
+
+
+def test_alpha_and_beta_are_dimensionless_a_change_of_units_changes_nothing():
+    """Masses x c and Δt x c' scale every term of H by c'/c (s_e included), so cond(H) and the
+    velocity change are unit-free: α and β need no units."""
+    ops = _ops(2, 1 / 16, 20)
+    m_b, m_f, v_b, v_f = _random_state(ops, 21)
+    base = S.assemble(ops, m_b, m_f, 1e-3)
+    scaled = S.assemble(ops, 7.8e3 * m_b, 7.8e3 * m_f, 3e-6)
+    assert S.condition_number(scaled.H) == pytest.approx(S.condition_number(base.H), rel=1e-10)  # measured 1e-15
+    dv = S.solve(ops, m_b, m_f, v_b, v_f, 1e-3, rtol=1e-13).impulse_f / m_f[:, None]
+    dv2 = S.solve(ops, 7.8e3 * m_b, 7.8e3 * m_f, v_b, v_f, 3e-6, rtol=1e-13).impulse_f / (7.8e3 * m_f[:, None])
+    assert np.abs(dv2 - dv).max() < 1e-10 * np.abs(dv).max()  # measured 6e-16
