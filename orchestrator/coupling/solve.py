@@ -151,13 +151,15 @@ def material_operators(ops: Operators, m_b, m_f) -> MaterialOperators:
     if m_f.shape != (ops.Bf.shape[1],):
         raise ValueError(f"m_f has shape {m_f.shape}; one mass per surface node ({ops.Bf.shape[1]},) expected")
     if not (np.all(np.isfinite(m_b)) and np.all(m_b >= 0.0)):
-        raise ValueError(f"background mass {float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])!r}: masses must be finite and >= 0")
+        bad_b = float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])
+        raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
     touched_f = np.zeros(m_f.size, bool)
     touched_f[ops.Bf.indices] = True
     bad = touched_f & ~(m_f > 0.0)
     if bad.any() or not np.all(np.isfinite(m_f)):
         i = int(np.flatnonzero(bad | ~np.isfinite(m_f))[0])
-        raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface needs a mass > 0")
+        raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
+                         f"needs a mass > 0")
 
     inv_mb = np.zeros_like(m_b)
     inv_mb[m_b > 0.0] = 1.0 / m_b[m_b > 0.0]
