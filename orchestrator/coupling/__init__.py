@@ -5,6 +5,8 @@ solve"), one module per job:
 * ``geometry``  -- the interface geometry: body surfaces clipped against the zones (pieces with their
   quadrature), exact blocked volume fractions and face coverages;
 * ``operators`` -- the coupling operators B^b, B^f built on the pieces;
-* ``solve``     -- the multiplier solve ``H lambda = B v*`` and the impulses;
-* ``variants``  -- the constraint variants compared with the multiplier method (penalty, Nitsche).
+* ``solve``     -- the stabilised multiplier solve ``H lambda = B v*`` and the impulses;
+* ``variants``  -- the coupling methods by name (multiplier, penalty, Nitsche);
+* ``embedded``  -- the coupler's share of a coupled step (exchange, load, solve, geometry);
+* ``conditioning`` -- the condition number sweep of H (tests and the coupling bench).
 """
