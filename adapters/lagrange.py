@@ -51,6 +51,11 @@ class LagrangeAdapter(SolverAdapter):
         first step)."""
         return self.solver.surface_state("x")
 
+    def velocities(self) -> np.ndarray:
+        """(ns, dim) velocities of the surface nodes: v^{n+1/2} after correct (the initial velocity
+        before the first step)."""
+        return self.solver.surface_state("v")
+
     def correct(self, impulse=None) -> None:
         """impulse: (ns, dim) coupling impulse on the surface nodes (surface() order, the same array on
         every rank), or None when uncoupled."""

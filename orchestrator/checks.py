@@ -420,3 +420,39 @@ def advected_shape(case, out, history, params):
         if k.endswith("_balance_rel"):
             vals[k.split(".", 1)[1]] = float(np.max(np.abs(a)))
     return vals
+
+
+@register_check("embedded_piston")
+def embedded_piston(case, out, history, params):
+    """A free body (the Lagrangian solver's) immersed in a 1-D flow along `axis` (a piston between
+    two gases): at the last output, the body's centre (mean node position) and velocity (mean node
+    velocity) along the axis, and the pressure of the gas on each side (mean over the zones between
+    `gap` and `span` from the body's faces, cut zones excluded), against `centre`, `velocity` and
+    `pressure` (the exact solution's, given in the case)."""
+    from orchestrator import output
+
+    axis = "xyz".index(params.get("axis", "x"))
+    t, _, index = _last_step(out, "lagrange")
+    points, pd, _ = output.read_step(out, "lagrange", index)
+    x = points[:, axis]
+    lo, hi = float(x.min()), float(x.max())
+    _, _, aindex = _last_step(out, "ale")
+    prof = _zone_stations(out, "ale", aindex, axis)
+    g = case["ale"]["grid"]
+    h = (g["upper"][axis] - g["lower"][axis]) / g["cells"][axis]
+    gap, span = float(params.get("gap", 3.0)) * h, float(params.get("span", 0.05))
+    xs, p = prof["x"], prof["p"]
+    left = (xs < lo - gap) & (xs > lo - span)
+    right = (xs > hi + gap) & (xs < hi + span)
+    vals = {
+        "centre": float(x.mean()),
+        "velocity": float(pd["velocity"][:, axis].mean()),
+        "p_left": float(p[left].mean()) if left.any() else float("nan"),
+        "p_right": float(p[right].mean()) if right.any() else float("nan"),
+        "thickness": hi - lo,
+    }
+    for key, a in history.items():
+        if key.endswith("_balance_rel"):
+            name = key.split(".", 1)[1]
+            vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
+    return vals

@@ -24,8 +24,11 @@ Per step n -> n+1, the coupler holds the geometry of the bodies at x^n (pieces, 
 
 Everything here is in the coupler's canonical orders (sorted global ids), so results do not depend
 on how many ranks either group runs on.  Foreground nodes whose velocity a boundary condition
-prescribes (any component) count as infinitely heavy in the solve (the condition overrides any
-impulse on them: the constraint must be met by the other side).
+prescribes (all components: clamped) count as infinitely heavy in the solve (the condition overrides
+any impulse on them: the constraint must be met by the other side); a node with only some components
+prescribed (a symmetry plane) counts as free, which is exact when the constraint acts across the
+prescribed direction (a slip surface normal to the plane) and otherwise leaves the part of the
+constraint along the prescribed direction to the background alone, one step late.
 """
 from __future__ import annotations
 
@@ -61,8 +64,10 @@ class EmbeddedCoupling:
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
         self.mass = np.asarray(surface["mass"], dtype=np.float64)
         free = np.asarray(surface["free"]).reshape(-1, self.dim)
-        # a node with any prescribed component is immovable for the solve (see the module docstring)
-        self.m_solve = np.where(np.all(free > 0.0, axis=1), self.mass, np.inf)
+        # a node whose every velocity component is prescribed (clamped) is immovable for the solve;
+        # one with some components prescribed (a symmetry plane) counts as free: its condition then
+        # takes the impulse's component along the plane's normal (see the module docstring)
+        self.m_solve = np.where(np.any(free > 0.0, axis=1), self.mass, np.inf)
         self.x = np.asarray(surface["x"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.v = np.asarray(surface["v"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.ns = self.x.shape[0]
@@ -90,7 +95,9 @@ class EmbeddedCoupling:
             faces.append((ids, np.minimum(cov.sum(axis=1), 1.0)))
         self.ops = Operators.build(self.grid, pieces, self.facets, self.ns)
         self.pieces = pieces
-        return BodyGeometry(zones, total, tuple(faces), self.ops.zones, self.ops.bnodes)
+        area = np.where(self.ops.area > 0.0, self.ops.area, 1.0)[:, None]
+        velocity = (self.ops.Bf @ self.v) / area  # the surface's mean velocity per cut zone
+        return BodyGeometry(zones, total, tuple(faces), self.ops.zones, self.ops.bnodes, velocity)
 
     # ---- the step ----------------------------------------------------------------------------------
     def solve(self, dt: float, dt_avg: float, vstar_f: np.ndarray, background: np.ndarray) -> np.ndarray:

@@ -155,11 +155,12 @@ def material_operators(ops: Operators, m_b, m_f) -> MaterialOperators:
         raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
     touched_f = np.zeros(m_f.size, bool)
     touched_f[ops.Bf.indices] = True
+    # m_f = +inf: a node whose velocity a boundary condition prescribes (immovable for the solve)
     bad = touched_f & ~(m_f > 0.0)
-    if bad.any() or not np.all(np.isfinite(m_f)):
-        i = int(np.flatnonzero(bad | ~np.isfinite(m_f))[0])
+    if bad.any() or np.any(np.isnan(m_f)):
+        i = int(np.flatnonzero(bad | np.isnan(m_f))[0])
         raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
-                         f"needs a mass > 0")
+                         f"needs a mass > 0 (inf: immovable)")
 
     inv_mb = np.zeros_like(m_b)
     inv_mb[m_b > 0.0] = 1.0 / m_b[m_b > 0.0]

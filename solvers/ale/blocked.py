@@ -142,6 +142,8 @@ class Blocked:
         self.cut_rows = np.zeros(0, np.int64)
         self.n_cut = 0
         self.covered = np.zeros(0, np.int64)
+        self.SF = np.zeros(B.nzones)  # a_e . (surface velocity) of the cut zones (their q)
+        self._cut_velocity = np.zeros((0, B.dim))
         self.SB = np.zeros(B.nzones)  # body-surface swept volume of the Lagrange step (cut zones)
         self._sb_zones = np.zeros(0, np.int64)
         self.nodes = (np.zeros(0, np.int64), np.zeros(0, bool), np.zeros(0, bool))
@@ -181,6 +183,8 @@ class Blocked:
         self.cut = np.ascontiguousarray(cz[cm])
         self.cut_rows = np.flatnonzero(cm)
         self.n_cut = int(cut.size)
+        vel = geometry.velocity if geometry.velocity is not None else np.zeros((cut.size, B.dim))
+        self._cut_velocity = np.asarray(vel).reshape(-1, B.dim)[cm]
         nodes = np.zeros(0, np.int64) if geometry.nodes is None else geometry.nodes
         self.nodes = gi.nodes(nodes)  # (local index, real here, owned here) of the requested nodes
         return np.maximum(b, self.b_static)
@@ -260,6 +264,9 @@ class Blocked:
         self.touched = np.flatnonzero(t).astype(np.int64)
         # the reaction of the static obstacles only: a cut zone's is the body's load (coupler)
         self.touched_static = np.setdiff1d(self.touched, self.cut).astype(np.int64)
+        self.SF[:] = 0.0
+        if self.cut.size:
+            self.SF[self.cut] = np.einsum("ij,ij->i", self.surface_vectors(s), self._cut_velocity)
         self._wall_nodes(s)
 
     def _static_phi(self, s) -> np.ndarray:
@@ -323,7 +330,8 @@ class Blocked:
         returns their stable step."""
         B = s.block
         k = apertures_3d if self.dim == 3 else apertures_2d
-        return float(k(s.x, s.v, s.fc, s.M, s.rho, s.p, s.c, s.q, self.phi, self.A, self.solid, self.touched,
+        return float(k(s.x, s.v, s.fc, s.M, s.rho, s.p, s.c, s.q, self.phi, self.A, self.SF, self.solid,
+                       self.touched,
                        B.zs, B.ns, s.q_lin, s.q_quad, s.q_kind, s.qgrad))
 
     def constrain(self, s, record: bool) -> None:
@@ -466,13 +474,15 @@ def _aperture(A, z, zs, d, o):
 
 
 @njit(cache=True)
-def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin, q_quad, qkind, grad):
+def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_lin, q_quad, qkind, grad):
     """Aperture correction of the zones listed (after hydro.zone_pass_2d at the fixed grid):
     div v = sum v . b^A / (phi V), new q of the solver's kind (qkind; monotonic: from the strain
     rates ``grad`` of hydro.mono_gradients_2d, a solid neighbour as a wall ghost, hydro._mono_q),
     f_c = (p + q) b^A_c + phi f_hg,c, written as
     f_c + ((p + q_new) b^A_c - (p + q_old) b_c) + (phi - 1) (f_c - (p + q_old) b_c) so that a corner
-    with an open face and an unchanged q keeps its bits.  Returns the zones' stable step."""
+    with an open face and an unchanged q keeps its bits.  SF: the flux a_e . v_surface of a coupled
+    body's surface in the zone (the open volume's rate of change has -SF: a retreating surface is
+    no compression), 0 elsewhere.  Returns the zones' stable step."""
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
     b = np.empty((4, 2))
@@ -502,7 +512,7 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin,
             bA[a, 1] = b[a, 1] * _aperture(A, z, zs, 1, oy)
             w[a] = ve[a, 0] * bA[a, 0] + ve[a, 1] * bA[a, 1]
         ph = phi[z]
-        divv = _t4(w[0], w[1], w[2], w[3]) / (ph * vol)
+        divv = (_t4(w[0], w[1], w[2], w[3]) - SF[z]) / (ph * vol)
         emax = 0.0
         for a in range(4):
             an = (a + 1) % 4
@@ -533,7 +543,7 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin,
 
 
 @njit(cache=True)
-def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin, q_quad, qkind, grad):
+def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_lin, q_quad, qkind, grad):
     """3D version of :func:`apertures_2d` (hydro.zone_pass_3d geometry)."""
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -567,7 +577,7 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, solid, zones, zs, ns, q_lin,
                 bA[a, d] = b[a, d] * _aperture(A, z, zs, d, oo[a, d])
             w[a] = ve[a, 0] * bA[a, 0] + ve[a, 1] * bA[a, 1] + ve[a, 2] * bA[a, 2]
         ph = phi[z]
-        divv = _t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) / (ph * vol)
+        divv = (_t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) - SF[z]) / (ph * vol)
         lc = vol / amax
         cz = c[z]
         qz, qq = zone_q(qkind, grad, z, zs, 3, rho[z], cz, lc, divv, q_lin, q_quad, solid)

@@ -14,7 +14,8 @@ zone a body covers, the exact covered fraction of every zone face a body covers 
 apertures of solvers/ale/blocked.py; ``None``: apertures from the fractions by the min model), the
 cut zones (those holding a piece of a body surface: one multiplier each, the surface terms of
 blocked.py) and the background nodes whose predictor velocities and masses the next step's
-constraint solve needs.
+constraint solve needs, and the surface's velocity in every cut zone (the artificial viscosity of a
+cut zone sees the open volume's rate of change, surface included).
 """
 from __future__ import annotations
 
@@ -32,6 +33,7 @@ class BodyGeometry:
     faces: tuple | None = None  # per axis d: (face ids (nf,) int64, covered fraction (nf,)) or None
     cut: np.ndarray | None = None  # (nc,) int64 cut zones (sorted)
     nodes: np.ndarray | None = None  # (nn,) int64 nodes the next constraint solve needs (sorted)
+    velocity: np.ndarray | None = None  # (nc, dim) the surface's mean velocity in each cut zone
 
     def pack(self, dim: int) -> np.ndarray:
         """One float64 buffer (ids below 2^53 are exact in float64)."""
@@ -41,9 +43,9 @@ class BodyGeometry:
         for f in faces:
             ids, cov = f if f is not None else (np.zeros(0), np.zeros(0))
             parts += [np.array([float(len(ids))]), np.asarray(ids, np.float64), np.asarray(cov, np.float64)]
-        for a in (self.cut, self.nodes):
+        for a in (self.cut, self.nodes, self.velocity):
             a = np.zeros(0) if a is None else a
-            parts += [np.array([float(a.size)]), a.astype(np.float64)]
+            parts += [np.array([float(a.size)]), a.astype(np.float64).ravel()]
         return np.concatenate(parts)
 
     @classmethod
@@ -66,7 +68,8 @@ class BodyGeometry:
             faces.append((take(k).astype(np.int64), take(k).copy()))
         cut = take(int(take(1)[0])).astype(np.int64)
         nodes = take(int(take(1)[0])).astype(np.int64)
-        return cls(zones, fractions, tuple(faces) if has_faces else None, cut, nodes)
+        velocity = take(int(take(1)[0])).reshape(-1, dim).copy()
+        return cls(zones, fractions, tuple(faces) if has_faces else None, cut, nodes, velocity)
 
 
 class GlobalIndex:

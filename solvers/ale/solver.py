@@ -598,14 +598,17 @@ class AleSolver:
         same impulse given as {"nodes": global node ids, "impulse": (nn, dim)}."""
         B = self.block
         self.step, self.time = int(step), float(time)
+        applied = []
         if coupling is not None:
             n, inside, owned = self._blk.nodes
-            self._node_impulse(n, inside, owned, np.asarray(coupling["impulse"]).reshape(-1, self.dim), True)
+            applied.append(self._node_impulse(n, inside, owned, np.asarray(coupling["impulse"]).reshape(-1, self.dim)) + (True,))
         if impulse is not None:
             from solvers.ale.coupled import GlobalIndex
             n, inside, owned = GlobalIndex(B).nodes(np.asarray(impulse["nodes"], np.int64))
-            self._node_impulse(n, inside, owned, np.asarray(impulse["impulse"]).reshape(-1, self.dim), False)
+            applied.append(self._node_impulse(n, inside, owned, np.asarray(impulse["impulse"]).reshape(-1, self.dim)) + (False,))
         self._constrain(record=True)
+        for nodes, imp, interface in applied:  # (their work on the final mean velocity: see _node_impulse)
+            self._impulse_balance(nodes, imp, interface)
         self.bc.fill_nodes_vector(self.v)
         if not np.all(np.isfinite(self.v)):
             n = int(np.flatnonzero(~np.all(np.isfinite(self.v), axis=1))[0])
@@ -638,18 +641,24 @@ class AleSolver:
         self.first_step = False
         self.dt_prev = self.dt
 
-    def _node_impulse(self, n, inside, owned, imp, interface: bool) -> None:
+    def _node_impulse(self, n, inside, owned, imp):
         """v += impulse / m on the real nodes of this block listed (every copy of a node, so that the
-        ranks sharing it stay equal); the owned ones' impulse and work enter the balances.  A node
-        without mass takes no impulse (the coupler leaves such nodes out of the constraint)."""
+        ranks sharing it stay equal).  A node without mass takes no impulse (the coupler leaves such
+        nodes out of the constraint).  Returns (owned nodes, their impulses) for the balances."""
         idx = n[inside]
         m = self.m[idx]
         ok = m > 0.0
         self.v[idx[ok]] += imp[inside][ok] / m[ok, None]
-        io = imp[owned]
-        vb = 0.5 * (self.v[n[owned]] + self.v_old[n[owned]])
-        dp = io.sum(axis=0)
-        de = float(np.sum(io * vb))
+        return n[owned], imp[owned]
+
+    def _impulse_balance(self, nodes, imp, interface: bool) -> None:
+        """An impulse's momentum and its work on the mean velocity (v^{n-1/2} + v^{n+1/2})/2, with
+        v^{n+1/2} the final one (after the boundary constraints): only then do the force, impulse and
+        constraint work add up to the exact kinetic energy change when an impulse and a constraint
+        act on the same component."""
+        vb = 0.5 * (self.v[nodes] + self.v_old[nodes])
+        dp = imp.sum(axis=0)
+        de = float(np.sum(imp * vb))
         self.b_momentum += dp
         self.b_energy += de
         if interface:

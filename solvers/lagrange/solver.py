@@ -302,9 +302,18 @@ class LagrangeSolver:
             "facets": np.searchsorted(node_ids, facets_g),
             "body": self.body_of_cell[facet_cell],
             "mass": self._gather_surface(self.mass),
+            # 0 where a boundary condition prescribes the velocity component (the coupler's solve
+            # must not count on moving it), 1 elsewhere
+            "free": self._gather_surface(self._free_components()),
         }
         for arr in self._surface.values():  # handed out by reference on every call: not to be edited
             arr.flags.writeable = False
+
+    def _free_components(self) -> np.ndarray:
+        free = np.ones((len(self.X), self.dim))
+        for nodes, c, _ in self.bcs.prescribed:
+            free[nodes, c] = 0.0
+        return free
 
     def _gather_surface(self, a: np.ndarray) -> np.ndarray:
         """(ns, ...) values of the surface nodes on every rank, from the copies their owners hold:
