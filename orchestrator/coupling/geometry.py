@@ -62,7 +62,7 @@ the coverage of every face normal to d (``face_coverage``).  A facet lying on th
 plane (assigned to the inner zone) counts as lying just outside the grid in these sums (position
 -1 or n along d), which makes the coverage of the boundary faces exact too; it contributes nothing
 to (1) either way (``x - x_lo = 0`` or it moves ``h_x a`` from the integral to ``A_hi``).
-Summation order: the pieces of a row are summed in an order of their geometric values (not of the
+Summation order: the pieces of a zone are summed in the order of their terms' values (not of the
 facet numbering), so fractions and coverages are bitwise independent of the order of the facets.
 Fractions within ``_SNAP`` (64 eps) of 0 or 1 are set to 0 or 1 (round-off of the sums, which are
 exact in exact arithmetic); only positive fractions are returned.
@@ -704,12 +704,15 @@ def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
     for j, e in enumerate(others):
         Xe = grid.planes(e)
         F *= Xe[oth[:, j] + 1] - Xe[oth[:, j]]
-    # canonical summation order: by row and position, then by the pieces' geometric values (not by
-    # facet number), so the sums are bitwise independent of the facet order
-    keys = ([pieces.normal[:, k] for k in range(dim)] + [pieces.area]
-            + [pieces.centroid[:, k] for k in range(dim)] + [pos] + [oth[:, j] for j in range(dim - 2, -1, -1)]
-            + [pieces.body])
-    order = np.lexsort(keys)
+    # canonical summation order: by body, row and position, then by the summed values themselves
+    # (s, m): pieces tied in both contribute identical terms, so the sums do not depend on the
+    # facet numbering, bitwise
+    row = np.zeros_like(pos)
+    for j in range(dim - 2, -1, -1):
+        row = row * grid.cells[others[j]] + oth[:, j]
+    n_rows = int(np.prod(grid.cells)) // n
+    key = (pieces.body * n_rows + row) * (n + 2) + (pos + 1)
+    order = np.lexsort((m, s, key))
     zb, zo, zi, zv, fb, fo, fk, fv = _scan_rows(
         pieces.body[order], np.ascontiguousarray(oth[order]), pos[order], s[order], m[order], F[order],
         X, _SNAP)
