@@ -794,6 +794,17 @@ def cube_sphere_surface(n: int, radius: float = 1.0, centre=(0.0, 0.0, 0.0)):
     return p, remap[quads]
 
 
+def warm_kernels() -> None:
+    """Compile (or load from the cache) every kernel of this module: one tiny 2-D and 3-D body (for
+    an install-time warm-up such as orchestrator/warmup.py)."""
+    for dim, (x, f) in ((2, (np.array([[0.2, 0.2], [0.8, 0.3], [0.5, 0.7]]), np.array([[0, 1], [1, 2], [2, 0]]))),
+                        (3, cube_sphere_surface(1, 0.5))):
+        grid = Grid([-1.0] * dim, [1.0] * dim, [3] * dim)
+        pieces = clip_surface(grid, x, f)
+        blocked_fractions(grid, pieces, 1)
+        face_coverage(grid, pieces, 1, 1)
+
+
 def geometry_cost(n_facets: int) -> dict:
     """Wall times of the interface geometry for a sphere-like closed surface of about ``n_facets``
     quads on a grid whose zones are about the facets' size (for ``immerse bench coupling``; the
@@ -802,9 +813,7 @@ def geometry_cost(n_facets: int) -> dict:
     x, quads = cube_sphere_surface(m, radius=1.0)
     cells = max(2, int(round(1.5 * m)))          # zone width ~ the facets' arc length (pi/2 / m)
     grid = Grid([-1.25] * 3, [1.25] * 3, [cells] * 3)
-    xw, qw_ = cube_sphere_surface(2)
-    warm = clip_surface(Grid([-2.0] * 3, [2.0] * 3, [3] * 3), xw, qw_)
-    blocked_fractions(Grid([-2.0] * 3, [2.0] * 3, [3] * 3), warm, 1)
+    warm_kernels()
     t0 = time.perf_counter()
     pieces = clip_surface(grid, x, quads)
     t1 = time.perf_counter()
