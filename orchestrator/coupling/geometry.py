@@ -62,7 +62,7 @@ the coverage of every face normal to d (``face_coverage``).  A facet lying on th
 plane (assigned to the inner zone) counts as lying just outside the grid in these sums (position
 -1 or n along d), which makes the coverage of the boundary faces exact too; it contributes nothing
 to (1) either way (``x - x_lo = 0`` or it moves ``h_x a`` from the integral to ``A_hi``).
-Summation order: the pieces of a row are summed in an order of their geometric values (not of the
+Summation order: the pieces of a zone are summed in the order of their terms' values (not of the
 facet numbering), so fractions and coverages are bitwise independent of the order of the facets.
 Fractions within ``_SNAP`` (64 eps) of 0 or 1 are set to 0 or 1 (round-off of the sums, which are
 exact in exact arithmetic); only positive fractions are returned.
@@ -704,12 +704,15 @@ def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
     for j, e in enumerate(others):
         Xe = grid.planes(e)
         F *= Xe[oth[:, j] + 1] - Xe[oth[:, j]]
-    # canonical summation order: by row and position, then by the pieces' geometric values (not by
-    # facet number), so the sums are bitwise independent of the facet order
-    keys = ([pieces.normal[:, k] for k in range(dim)] + [pieces.area]
-            + [pieces.centroid[:, k] for k in range(dim)] + [pos] + [oth[:, j] for j in range(dim - 2, -1, -1)]
-            + [pieces.body])
-    order = np.lexsort(keys)
+    # canonical summation order: by body, row and position, then by the summed values themselves
+    # (s, m): pieces tied in both contribute identical terms, so the sums do not depend on the
+    # facet numbering, bitwise
+    row = np.zeros_like(pos)
+    for j in range(dim - 2, -1, -1):
+        row = row * grid.cells[others[j]] + oth[:, j]
+    n_rows = int(np.prod(grid.cells)) // n
+    key = (pieces.body * n_rows + row) * (n + 2) + (pos + 1)
+    order = np.lexsort((m, s, key))
     zb, zo, zi, zv, fb, fo, fk, fv = _scan_rows(
         pieces.body[order], np.ascontiguousarray(oth[order]), pos[order], s[order], m[order], F[order],
         X, _SNAP)
@@ -791,6 +794,17 @@ def cube_sphere_surface(n: int, radius: float = 1.0, centre=(0.0, 0.0, 0.0)):
     return p, remap[quads]
 
 
+def warm_kernels() -> None:
+    """Compile (or load from the cache) every kernel of this module: one tiny 2-D and 3-D body (for
+    an install-time warm-up such as orchestrator/warmup.py)."""
+    for dim, (x, f) in ((2, (np.array([[0.2, 0.2], [0.8, 0.3], [0.5, 0.7]]), np.array([[0, 1], [1, 2], [2, 0]]))),
+                        (3, cube_sphere_surface(1, 0.5))):
+        grid = Grid([-1.0] * dim, [1.0] * dim, [3] * dim)
+        pieces = clip_surface(grid, x, f)
+        blocked_fractions(grid, pieces, 1)
+        face_coverage(grid, pieces, 1, 1)
+
+
 def geometry_cost(n_facets: int) -> dict:
     """Wall times of the interface geometry for a sphere-like closed surface of about ``n_facets``
     quads on a grid whose zones are about the facets' size (for ``immerse bench coupling``; the
@@ -799,9 +813,7 @@ def geometry_cost(n_facets: int) -> dict:
     x, quads = cube_sphere_surface(m, radius=1.0)
     cells = max(2, int(round(1.5 * m)))          # zone width ~ the facets' arc length (pi/2 / m)
     grid = Grid([-1.25] * 3, [1.25] * 3, [cells] * 3)
-    xw, qw_ = cube_sphere_surface(2)
-    warm = clip_surface(Grid([-2.0] * 3, [2.0] * 3, [3] * 3), xw, qw_)
-    blocked_fractions(Grid([-2.0] * 3, [2.0] * 3, [3] * 3), warm, 1)
+    warm_kernels()
     t0 = time.perf_counter()
     pieces = clip_surface(grid, x, quads)
     t1 = time.perf_counter()

@@ -268,7 +268,16 @@ def test_plate_clamped_at_the_wall_2d():
     assert np.array_equal(cy[:, 0], np.ones(9))
     fx, cx = face_coverage(g, pieces, 1, 0)
     assert set(map(tuple, g.face_ijk(0, fx).tolist())) == {(i, j) for i in (3, 4, 5, 6) for j in (0, 1)}
+    assert np.array_equal(cx[:, 0], np.ones(8))
     check_discrete_divergence(g, pieces, 1)
+    # the same plate meshed with rounded coordinates (0.1 * 3 = 0.30000000000000004, 0.1 * 6 =
+    # 0.6000000000000001, 0.1 * 2 = 0.2): snapped onto the grid lines, so the same zones, exactly 1
+    x2 = np.array([[0.1 * 3, 0.0], [0.1 * 6, 0.0], [0.1 * 6, 0.1 * 2], [0.1 * 3, 0.1 * 2]])
+    assert x2[0, 0] != 0.3
+    p2 = clip_surface(g, x2, segs)
+    assert np.array_equal(p2.zone, pieces.zone) and np.array_equal(p2.centroid, pieces.centroid)
+    z2, f2 = blocked_fractions(g, p2, 1)
+    assert np.array_equal(z2, zones) and np.array_equal(f2, frac)
 
 
 # -------------------------------------------------------------------------------- 3-D bodies
