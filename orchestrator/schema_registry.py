@@ -24,16 +24,22 @@ failure wins:
    top-level keys.  Then every float must be finite (case.py).
 2. ``normalise(raw, case) -> value | None``: after ``[run]``; ``raw`` is the file's table
    (already schema-valid, a private copy) or ``None`` when the file has none; ``case`` holds the
-   normalised ``name``, ``case_dir``, ``run`` and the tables of lower order.  The returned value
+   normalised ``name``, ``case_dir``, ``run``, ``check`` (``ranks`` still empty) and the tables
+   of lower order.  The returned value
    becomes ``case[name]``; ``None`` leaves the table out of the case.  A table registered with
    ``default=True`` (the Lagrangian solver's) gets ``raw = {}`` when the file has no table of any
    solver role at all.
-3. ``check(case, data)``: cross-field rules, for the tables present in the normalised case, after
-   those of ``[run]``; ``data`` is the raw file (for reporting values as written).  Raise
+3. ``check(case, data)``: cross-field rules, for the tables present in the normalised case (every
+   table normalised by then), after those of ``[run]``; ``data`` is the raw file (for reporting values as written).  Raise
    :class:`orchestrator.schema_rules.CaseError` (helpers there).  Then ``[ranks]`` (the roles of
    the tables now known) and the ``[check]`` kind.
 4. ``check_files(case, data)``: the slow part (reading data files such as meshes), last, once
    every table passed its checks.
+
+A fragment module imports only light modules (schema_parts, schema_rules, this one; never
+orchestrator.case or orchestrator.case_schema, which build the schema from the registry).  A new
+table, e.g. ``[coupling]``: a module ``orchestrator/schema_coupling.py`` ending in
+``register_table("coupling", COUPLING, normalise, check, order=60)``, and its name in FRAGMENTS.
 """
 from __future__ import annotations
 
