@@ -234,6 +234,7 @@ def loaded() -> int:
 
 
 def _import_solvers() -> None:
+    import solvers.elements  # noqa: F401  (the element geometry both solvers compile in)
     import solvers.ale.solver  # noqa: F401  (and their kernel modules)
     import solvers.ale.blocked  # noqa: F401
     import solvers.ale.mixed  # noqa: F401

@@ -86,7 +86,8 @@ from solvers.ale.grid import GHOST
 from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
 from solvers.ale.remap import set_positions
-from solvers.lagrange.kernels import hex_bvectors, quad_bvectors
+from solvers import elements as _elements
+from solvers.elements import hex_bvectors, quad_bvectors
 
 SOLID_TOL = 1e-12
 """A zone with blocked fraction b >= 1 - SOLID_TOL is fully blocked (open fraction exactly 0)."""
@@ -612,12 +613,11 @@ def corner_force_sum(fc, zones, out):
 
 
 def _flush():
-    import solvers.lagrange.kernels as _k
     from solvers.ale import hydro as _h
     from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([open_eos, lagrangian_open_volumes, _aperture, apertures_2d, apertures_3d, corner_force_sum],
-                      [_eos.__file__, _k.__file__, _h.__file__], "blocked.deps.sha256")
+                      [_eos.__file__, _elements.__file__, _h.__file__], "blocked.deps.sha256")
 
 
 _flush()

@@ -3,9 +3,10 @@
 Discretisation (one zone z with corners c, lumped nodal masses m_n, zone mass M_z)
 ----------------------------------------------------------------------------------
 * Geometry: ``b_c = dV/dx_c`` of the trilinear hexahedron / bilinear quadrilateral
-  (``hex_bvectors`` / ``quad_bvectors`` of the FE solver) and the exact zone volume, in 3D
-  ``V = 1/3 sum_c (x_c - x_0) . b_c`` summed per component and then permutation-invariantly
-  (:func:`hex_volume_sym`) so that boxes give the same bits whichever axis is which.
+  (``hex_bvectors`` / ``quad_bvectors`` of solvers/elements.py, shared with the FE solver) and
+  the exact zone volume, in 3D ``V = 1/3 sum_c (x_c - x_0) . b_c`` summed per component and
+  then permutation-invariantly (:func:`hex_volume_sym`) so that boxes give the same bits whichever
+  axis is which.
 * Corner force (force ON node c from zone z)::
 
       f_zc = (p + q) b_c + f_hg,c
@@ -84,7 +85,8 @@ import numpy as np
 from numba import njit
 
 from solvers.ale import eos as _eos
-from solvers.lagrange.kernels import QUAD_HG, hex_bvectors, quad_bvectors
+from solvers import elements as _elements
+from solvers.elements import QUAD_HG, hex_bvectors, quad_bvectors
 
 # zone-pass flags
 ENERGY = 1     # compatible energy update from the stored corner forces (real zones only)
@@ -721,13 +723,12 @@ def energy_from_pressure_array(code, par, rho, p, out):
 
 
 def _flush():
-    import solvers.lagrange.kernels as _k
     from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([zone_pass_3d, zone_pass_2d, mono_gradients_3d, mono_gradients_2d, gather_3d,
                        gather_2d, predict, move, ghost_force_work, sums, energy_from_pressure_array, energy_update,
                        lagrangian_volumes, _t4, _t8, zones_around_node_3d, zones_around_node_2d, _mono_q, zone_q],
-                      [_eos.__file__, _k.__file__], "hydro.deps.sha256")
+                      [_eos.__file__, _elements.__file__], "hydro.deps.sha256")
 
 
 

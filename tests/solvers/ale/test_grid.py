@@ -4,7 +4,7 @@ import pytest
 
 from solvers.ale.boundary import Boundaries
 from solvers.ale.grid import (GHOST, Z_IMAGE, Z_INACTIVE, Z_OPEN, Z_REAL, Block, GridError)
-from solvers.lagrange.kernels import hex_bvectors, quad_bvectors
+from solvers.elements import hex_bvectors, quad_bvectors
 
 FACES3 = {"x_lower": "wall", "x_upper": "outflow", "y_lower": "periodic", "y_upper": "periodic",
           "z_lower": {"inflow": {"density": 1.0, "velocity": [1.0, 2.0, 3.0], "pressure": 1.0}},

@@ -14,7 +14,7 @@ import pytest
 from tests.solvers.ale.ale_helpers import advance, periodic, run, sedov_config, uniform_config
 from solvers.ale import hydro
 from solvers.ale.solver import AleSolver, SolverError
-from solvers.lagrange.kernels import hex_bvectors
+from solvers.elements import hex_bvectors, quad_bvectors
 
 HEX = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0],
                 [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], dtype=np.float64)
@@ -176,7 +176,7 @@ def _fe_hourglass(xe, ve, rho, c, hg):
     with and without the coefficient (no stress: dt = 0 and zero stress; the bulk viscosity is the
     same in both), for a linear elastic material of nu = 0 and E = rho c^2 (dilatational speed c)
     and the mass rho V, so that the element's rho and c are the zone's."""
-    from solvers.lagrange.kernels import element_forces, quad_bvectors, reference_gradients
+    from solvers.lagrange.kernels import element_forces, reference_gradients
     from solvers.lagrange.materials import material_params
 
     dim = xe.shape[1]
@@ -204,8 +204,6 @@ def test_hourglass_force_is_the_fe_kernels_on_a_distorted_zone(dim, hourglass):
     distorted zone with random corner velocities (hourglass modes and the rest), to round-off
     (measured <= 2.1e-15 of the largest hourglass force; asserted 1e-13). The coefficient is the
     case's, or the documented default 0.05 (README, solvers/ale/solver.py): twice it fails."""
-    from solvers.lagrange.kernels import quad_bvectors
-
     cfg = uniform_config(dim, 3, [0.0] * dim, periodic(dim), mode="lagrangian", density=1.3, pressure=0.7)
     if hourglass is not None:
         cfg["hourglass"] = hourglass

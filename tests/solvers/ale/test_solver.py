@@ -5,7 +5,7 @@ import pytest
 from tests.solvers.ale.ale_helpers import advance, sod_config, uniform_config
 from solvers.ale import solver as ale_solver
 from solvers.ale.solver import AleSolver
-from solvers.lagrange.kernels import hex_bvectors, quad_bvectors
+from solvers.elements import hex_bvectors, quad_bvectors
 
 
 @pytest.mark.parametrize("mode", ["eulerian", "lagrangian"])

@@ -8,13 +8,12 @@ updates for affine velocity fields.
 import numpy as np
 import pytest
 
-from solvers.lagrange.kernels import (HEX_HG, QUAD_HG, element_forces, hex_bvectors,
-                                      quad_bvectors, reference_gradients)
+from solvers.elements import HEX_HG, QUAD_HG
+from solvers.lagrange.kernels import element_forces, reference_gradients
 from solvers.lagrange.materials import material_params
-
-HEX_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
-                   [-1, -1, 1], [1, -1, 1], [1, 1, 1], [-1, 1, 1]], dtype=float)
-QUAD_XI = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
+# the independent geometry references (the element geometry itself: tests/solvers/test_elements.py)
+from tests.solvers.test_elements import (HEX_XI, QUAD_XI, complex_step_b, distorted_element,
+                                         gauss_volume)
 
 RHO, E, NU = 7800.0, 200e9, 0.3
 G = E / (2 * (1 + NU))
@@ -23,43 +22,6 @@ LAM = K - 2 * G / 3
 
 
 # ----------------------------------------------------------------------------- helpers
-
-def gauss_volume(xe):
-    """Exact volume (area) of a trilinear hex (bilinear quad) by 2-point Gauss."""
-    dim = xe.shape[1]
-    xi = HEX_XI if dim == 3 else QUAD_XI
-    g = 1.0 / np.sqrt(3.0)
-    pts = np.array(np.meshgrid(*([[-g, g]] * dim), indexing="ij")).reshape(dim, -1).T
-    vol = 0.0
-    for p in pts:
-        dN = np.empty((len(xi), dim))
-        for k in range(dim):
-            t = xi[:, k] / 2 ** dim
-            for m in range(dim):
-                if m != k:
-                    t = t * (1 + xi[:, m] * p[m])
-            dN[:, k] = t
-        vol = vol + np.linalg.det(xe.T @ dN)
-    return vol
-
-
-def complex_step_b(xe):
-    """dV/dx_I by complex-step differentiation of the exact volume."""
-    out = np.empty(xe.shape)
-    h = 1e-30
-    for i in range(xe.shape[0]):
-        for k in range(xe.shape[1]):
-            xc = xe.astype(complex)
-            xc[i, k] += 1j * h
-            out[i, k] = gauss_volume(xc).imag / h
-    return out
-
-
-def distorted_element(dim, seed, amp=0.2):
-    rng = np.random.default_rng(seed)
-    xi = HEX_XI if dim == 3 else QUAD_XI
-    return 0.5 * (xi + 1.0) + rng.uniform(-amp, amp, xi.shape)
-
 
 def box_mesh(n, dim, amp=0.0, seed=0, h=1.0):
     """Structured n^dim mesh of side n*h, nodes perturbed by +-amp*h."""
@@ -129,39 +91,6 @@ def single(dim):
 
 
 # ----------------------------------------------------------------------------- geometry
-
-@pytest.mark.parametrize("seed", range(5))
-def test_hex_b_identities(seed):
-    xe = distorted_element(3, seed)
-    b = np.empty((8, 3))
-    vol, _ = hex_bvectors(xe, b)
-    vref = gauss_volume(xe)
-    assert vref > 0
-    assert abs(vol - vref) <= 1e-12 * vref
-    B = b / vol
-    assert np.abs(B.sum(0)).max() <= 1e-12
-    assert np.abs(xe.T @ B - np.eye(3)).max() <= 1e-12
-    # V = (1/3) sum x_I . B_I V
-    assert abs(np.sum(xe * B) * vol / 3 - vref) <= 1e-12 * vref
-    # B_I = (1/V) dV/dx_I (exact derivative of the exact trilinear volume)
-    assert np.abs(b - complex_step_b(xe)).max() <= 1e-12 * np.abs(b).max()
-
-
-@pytest.mark.parametrize("seed", range(5))
-def test_quad_b_identities(seed):
-    xe = distorted_element(2, seed)
-    b = np.empty((4, 2))
-    area, dmax = quad_bvectors(xe, b)
-    aref = gauss_volume(xe)
-    assert abs(area - aref) <= 1e-12 * aref
-    B = b / area
-    assert np.abs(B.sum(0)).max() <= 1e-12
-    assert np.abs(xe.T @ B - np.eye(2)).max() <= 1e-12
-    assert abs(np.sum(xe * B) * area / 2 - aref) <= 1e-12 * aref
-    assert np.abs(b - complex_step_b(xe)).max() <= 1e-12 * np.abs(b).max()
-    assert dmax == pytest.approx(max(np.linalg.norm(xe[2] - xe[0]), np.linalg.norm(xe[3] - xe[1])),
-                                 rel=1e-15)
-
 
 def test_reference_gradients_mesh():
     X, conn, _ = box_mesh(2, 3, amp=0.15, seed=3)

@@ -1,0 +1,255 @@
+"""The ALE background's table of case.toml, ``[ale]`` (compressible flow on a fixed grid): schema
+fragment, normaliser and cross-field checks, registered in :mod:`orchestrator.schema_registry`.
+
+Normalised layout (``case["ale"]``, present when the file has the table)::
+
+    {dimension, mode, grid: {lower, upper, cells}, boundaries: {face: "wall" | "outflow" |
+     "periodic" | {"inflow": {density, pressure, velocity}} | {"piston": {velocity}}} (every face
+     of the dimension, "wall" unless given), materials: {name: {eos, ...}}, regions: [{material,
+     [region], [density, pressure | specific_internal_energy], velocity}], energy_sources: [{energy,
+     at}], obstacles: [{region, subsamples}], [fraction_samples], [hourglass], [viscosity]}
+
+Numbers are floats; the solver's own defaults (viscosity, hourglass, fraction samples) are left to
+the solver unless given.
+"""
+from __future__ import annotations
+
+from solvers.expressions import BOOL
+
+from .schema_parts import BOX, NAME_PATTERN, integer, number, table, variants, vector
+from .schema_registry import register_table
+from .schema_rules import CaseError, check_expression, check_extent, check_length, format_key, to_float
+
+
+# ---- schema --------------------------------------------------------------------------------------
+EOS_KEYS = {
+    "ideal_gas": ("eos", "gamma"),
+    "stiffened_gas": ("eos", "gamma", "p_inf"),
+    "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0"),
+    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+    "void": ("eos",),   # empty space: volume only (several materials per zone)
+}
+EOS_REQUIRED = {
+    "ideal_gas": ("eos", "gamma"),
+    "stiffened_gas": ("eos", "gamma", "p_inf"),
+    "tait": ("eos", "rho0", "bulk_modulus", "exponent"),
+    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+    "void": ("eos",),
+}
+FLUID = {
+    "type": "object",
+    "properties": {
+        "eos": {"type": "string", "enum": list(EOS_KEYS)},
+        "gamma": number("dimensionless", exclusiveMinimum=1),
+        "p_inf": number("Pa", minimum=0),
+        "rho0": number("kg/m^3", exclusiveMinimum=0),
+        "bulk_modulus": number("Pa", exclusiveMinimum=0),
+        "exponent": number("dimensionless", minimum=1),
+        "p0": number("Pa"),
+        "A": number("Pa"),
+        "B": number("Pa"),
+        "R1": number("dimensionless", exclusiveMinimum=0),
+        "R2": number("dimensionless", exclusiveMinimum=0),
+        "omega": number("dimensionless", exclusiveMinimum=0),
+    },
+    "additionalProperties": False,
+    "required": ["eos"],
+    "allOf": variants("eos", EOS_KEYS, EOS_REQUIRED),
+}
+INFLOW = table(
+    {"inflow": table({"density": number("kg/m^3", exclusiveMinimum=0), "velocity": vector("m/s"),
+                      "pressure": number("Pa")}, required=("density", "velocity", "pressure"))},
+    required=("inflow",),
+)
+PISTON = table({"piston": table({"velocity": number("m/s")}, required=("velocity",))}, required=("piston",))
+ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "periodic"]}, INFLOW, PISTON],
+            "x-allowed": "must be \"wall\", \"outflow\", \"periodic\", { inflow = { density, velocity, pressure } }"
+                         " or { piston = { velocity } }"}
+ALE_FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
+ALE_REGION = {
+    "type": "object",
+    "properties": {
+        "material": {"type": "string", "minLength": 1},
+        "region": {"type": "string", "minLength": 1},
+        "density": number("kg/m^3", exclusiveMinimum=0),
+        "pressure": number("Pa"),
+        "specific_internal_energy": number("J/kg"),
+        "velocity": vector("m/s"),
+    },
+    "additionalProperties": False,
+    "required": ["material"],
+    # a void region has no state at all (checked against the material below)
+    "oneOf": [{"required": ["density", "pressure"]}, {"required": ["density", "specific_internal_energy"]},
+              {"not": {"anyOf": [{"required": ["density"]}, {"required": ["pressure"]},
+                                 {"required": ["specific_internal_energy"]}]}}],
+    "x-allowed": "needs material, density and exactly one of pressure, specific_internal_energy "
+                 "(a void material: none of them)",
+}
+ALE = table(
+    {
+        "mode": {"type": "string", "enum": ["eulerian", "lagrangian"]},
+        "grid": BOX,
+        "hourglass": number("dimensionless", minimum=0, maximum=0.125),
+        "viscosity": table({"kind": {"type": "string", "enum": ["scalar", "monotonic"]},
+                            "linear": number("dimensionless", minimum=0),
+                            "quadratic": number("dimensionless", minimum=0)}),
+        "boundaries": table({f: ALE_FACE for f in ALE_FACES}),
+        "materials": {
+            "type": "object",
+            "minProperties": 1,
+            "propertyNames": {"pattern": NAME_PATTERN},
+            "additionalProperties": FLUID,
+        },
+        "regions": {"type": "array", "minItems": 1, "items": ALE_REGION},
+        # several materials: region expressions sampled at k^dim points per zone (volume fractions)
+        "fraction_samples": integer(minimum=1, maximum=64),
+        "energy_sources": {"type": "array", "items": table(
+            {"energy": number("J", exclusiveMinimum=0), "at": vector("m")}, required=("energy", "at"))},
+        # static obstacles: blocked where the region holds (fraction of k^dim sub-points per zone)
+        "obstacles": {"type": "array", "items": table(
+            {"region": {"type": "string", "minLength": 1}, "subsamples": integer(minimum=1, maximum=64)},
+            required=("region",))},
+    },
+    required=("grid", "materials", "regions"),
+)
+
+
+# ---- normalise and check -------------------------------------------------------------------------
+def _normalise(a: dict, dim: int) -> dict:
+    """The [ale] table with numbers as floats; solver defaults (viscosity, hourglass) left to the
+    solver unless given."""
+    grid = a["grid"]
+    out = {
+        "dimension": dim,
+        "mode": a.get("mode", "eulerian"),
+        "grid": {"lower": [to_float(v) for v in grid["lower"]],
+                 "upper": [to_float(v) for v in grid["upper"]],
+                 "cells": [int(v) for v in grid["cells"]]},
+        "boundaries": {},
+        "materials": {n: {k: (v if k == "eos" else to_float(v)) for k, v in m.items()}
+                      for n, m in a["materials"].items()},
+        "regions": [],
+        "energy_sources": [{"energy": to_float(e["energy"]), "at": [to_float(v) for v in e["at"]]}
+                           for e in a.get("energy_sources", [])],
+        "obstacles": [{"region": o["region"], "subsamples": int(o.get("subsamples", 1))}
+                      for o in a.get("obstacles", [])],
+    }
+    if "fraction_samples" in a:
+        out["fraction_samples"] = int(a["fraction_samples"])
+    if "hourglass" in a:
+        out["hourglass"] = to_float(a["hourglass"])
+    if "viscosity" in a:
+        out["viscosity"] = {k: (v if k == "kind" else to_float(v)) for k, v in a["viscosity"].items()}
+    faces = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")[: 2 * dim]
+    for f in faces:
+        face = a.get("boundaries", {}).get(f, "wall")
+        if isinstance(face, dict) and "piston" in face:
+            face = {"piston": {"velocity": to_float(face["piston"]["velocity"])}}
+        elif isinstance(face, dict):
+            inflow = face["inflow"]
+            face = {"inflow": {"density": to_float(inflow["density"]),
+                               "pressure": to_float(inflow["pressure"]),
+                               "velocity": [to_float(v) for v in inflow["velocity"]]}}
+        out["boundaries"][f] = face
+    for r in a["regions"]:
+        reg = {k: (v if k in ("material", "region") else to_float(v))
+               for k, v in r.items() if k != "velocity"}
+        reg["velocity"] = [to_float(v) for v in r.get("velocity", [0.0] * dim)]
+        out["regions"].append(reg)
+    return out
+
+
+def _check(ale: dict, raw: dict, dim: int) -> None:
+    """Cross-field rules of [ale]: vector lengths, grid extent, periodic pairs, material references,
+    region and obstacle expressions (obstacles in Eulerian mode only)."""
+    for k in ("lower", "upper", "cells"):
+        check_length(format_key(["ale", "grid", k]), raw["grid"][k], dim)
+    for j, (lo, hi) in enumerate(zip(ale["grid"]["lower"], ale["grid"]["upper"])):
+        if not hi > lo:
+            raise CaseError("ale.grid.upper", raw["grid"]["upper"],
+                            f"must be > lower component-wise (component {j})")
+    check_extent("ale.grid", ale["grid"], raw["grid"])
+    axes = ("x", "y", "z")[:dim]
+    raw_faces = raw.get("boundaries", {})
+    for f in raw_faces:
+        if f[0] not in axes:
+            raise CaseError(format_key(["ale", "boundaries", f]), raw_faces[f],
+                            f"dimension mismatch: no {f[0]} faces in a {dim}D case")
+    for a in axes:
+        lo, hi = ale["boundaries"][f"{a}_lower"], ale["boundaries"][f"{a}_upper"]
+        if (lo == "periodic") != (hi == "periodic"):
+            raise CaseError(format_key(["ale", "boundaries", f"{a}_lower" if lo == "periodic" else f"{a}_upper"]),
+                            "periodic", f"periodic must be set on both {a}_lower and {a}_upper")
+        for f in (f"{a}_lower", f"{a}_upper"):
+            face = ale["boundaries"][f]
+            if isinstance(face, dict) and "piston" in face:
+                if ale["mode"] != "lagrangian":
+                    raise CaseError(format_key(["ale", "boundaries", f, "piston"]), raw_faces[f]["piston"],
+                                    "piston faces need ale.mode = \"lagrangian\" (the face nodes move with the piston)")
+            elif isinstance(face, dict):
+                check_length(format_key(["ale", "boundaries", f, "inflow", "velocity"]),
+                             raw_faces[f]["inflow"]["velocity"], dim)
+    for i, (reg, r) in enumerate(zip(ale["regions"], raw["regions"])):
+        base = ["ale", "regions", i]
+        if reg["material"] not in ale["materials"]:
+            raise CaseError(format_key(base + ["material"]), reg["material"],
+                            "undefined material; defined in [ale.materials]: " + ", ".join(ale["materials"]))
+        void = ale["materials"][reg["material"]]["eos"] == "void"
+        if void and "density" in r:
+            raise CaseError(format_key(base + ["density"]), r["density"],
+                            f"material {reg['material']!r} is void: a void region has no density, "
+                            "pressure or specific_internal_energy")
+        if not void and "density" not in r:
+            raise CaseError(format_key(base), r, "needs material, density and exactly one of pressure, "
+                            "specific_internal_energy (a void material: none of them)")
+        if "velocity" in r:
+            check_length(format_key(base + ["velocity"]), r["velocity"], dim)
+        if "region" in r:
+            check_expression(format_key(base + ["region"]), r["region"], dim, BOOL)
+    _check_mixed(ale, raw)
+    lo, hi = ale["grid"]["lower"], ale["grid"]["upper"]
+    for i, e in enumerate(raw.get("energy_sources", [])):
+        check_length(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
+        if not all(a <= float(x) <= b for a, x, b in zip(lo, e["at"], hi)):
+            raise CaseError(format_key(["ale", "energy_sources", i, "at"]), e["at"],
+                            f"must lie in the grid, from ale.grid.lower = {raw['grid']['lower']} to "
+                            f"ale.grid.upper = {raw['grid']['upper']} (m)")
+    for i, o in enumerate(raw.get("obstacles", [])):
+        check_expression(format_key(["ale", "obstacles", i, "region"]), o["region"], dim, BOOL)
+        if ale["mode"] != "eulerian":
+            raise CaseError(format_key(["ale", "obstacles"]), raw["obstacles"],
+                            "obstacles need ale.mode = \"eulerian\" (the remap keeps material out of them)")
+
+
+def _check_mixed(ale: dict, raw: dict) -> None:
+    """Several materials per zone (or void): Eulerian mode, no obstacles or inflow faces yet."""
+    used = list(dict.fromkeys(r["material"] for r in ale["regions"]))
+    voids = [m for m in used if ale["materials"][m]["eos"] == "void"]
+    if len(used) == 1 and not voids:
+        return
+    if len(voids) == len(used):
+        raise CaseError("ale.regions", [r["material"] for r in raw["regions"]],
+                        "void only: at least one region needs a material with an equation of state")
+    what = "several materials" if len(used) > 1 else "a void material"
+    if ale["mode"] != "eulerian":
+        raise CaseError("ale.mode", raw.get("mode"), f"{what} in ale.regions need mode = \"eulerian\"")
+    if raw.get("obstacles"):
+        raise CaseError("ale.obstacles", raw["obstacles"], f"not supported yet with {what} in ale.regions")
+    for f, face in ale["boundaries"].items():
+        if isinstance(face, dict) and "inflow" in face:
+            raise CaseError(format_key(["ale", "boundaries", f]), raw["boundaries"][f],
+                            f"inflow faces are not supported yet with {what} in ale.regions")
+
+
+def normalise(raw: dict | None, case: dict) -> dict | None:
+    """The registry's hook: [ale] as given, or absent."""
+    return None if raw is None else _normalise(raw, case["run"]["dimension"])
+
+
+def check(case: dict, data: dict) -> None:
+    """The registry's hook."""
+    _check(case["ale"], data["ale"], case["run"]["dimension"])
+
+
+# ---- registration (after [materials] 20, [lagrange] 30; before [[boundaries]] 50) -----------------
+register_table("ale", ALE, normalise, check, order=40)

@@ -1,0 +1,382 @@
+"""The Lagrangian solver's tables of case.toml: ``[materials]``, ``[lagrange]`` (its bodies) and
+``[[boundaries]]`` (their boundary conditions); schema fragments, normalisers and cross-field
+checks, registered in :mod:`orchestrator.schema_registry`.
+
+Normalised layout::
+
+    "materials": {name: {model, density, youngs_modulus, poisson_ratio, [johnson_cook keys]}}
+    "lagrange": {hourglass, bulk_viscosity_linear, bulk_viscosity_quadratic,
+                 "bodies": [{name, material, mesh, size, initial_velocity, initial_temperature}]}
+    "boundaries": [ {type, ...} ]
+
+``materials`` and ``boundaries`` are always present (empty without bodies); ``lagrange`` when the
+file has the table, or no solver table at all (the Lagrangian solver is the default).  Every body
+has ``size = {"elements": int, "nodes": int}`` (Python ints, computed without building the mesh,
+or counted after reading a mesh file).  ``mesh`` is exactly one of
+``{"box": {lower, upper, cells}}``, ``{"quarter_cylinder": {radius, length, radial_cells,
+axial_cells}}`` or ``{"file": Path}`` (resolved, absolute); ``initial_velocity`` holds
+``dimension`` items, each a float or an expression string in the coordinates (``x, y`` in 2D,
+``x, y, z`` in 3D).
+"""
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+
+from solvers.expressions import BOOL, NUM
+from solvers.lagrange.mesh import body_mesh_size
+
+from .schema_parts import BOX, NAME_PATTERN, integer, name, number, table, variants, vector
+from .schema_registry import register_table
+from .schema_rules import (MISSING, CaseError, check_expression, check_extent, check_length,
+                           check_path_inside, expression_names, fmt_num, format_bytes, format_key,
+                           num_or_expression, stat_regular, to_float)
+
+MATERIAL_MODELS = ("linear_elastic", "neo_hookean", "johnson_cook")
+BOUNDARY_TYPES = ("fixed", "velocity", "symmetry", "rigid_wall")
+
+LAGRANGE_DEFAULTS = {
+    "hourglass": 0.1,
+    "bulk_viscosity_linear": 0.06,
+    "bulk_viscosity_quadratic": 1.5,
+}
+DEFAULT_ROOM_TEMPERATURE = 293.15
+"""Initial temperature (K) of bodies whose material has no ``room_temperature``."""
+
+MESH_READ_FACTOR = 7
+"""Reading a mesh file takes at least this many times its size in memory (tracemalloc peak of
+read_mesh on 50^3 hexahedra, `immerse bench memory`: Gmsh 2.2 ASCII 7.5x, binary 14x, VTU binary 53x;
+Gmsh 4 ASCII 8.2x, VTU ASCII 9.3x): a file bigger than memory / 7 cannot be read here."""
+
+
+# ---- schema ---------------------------------------------------------------------------------------
+_ELASTIC_KEYS = ("model", "density", "youngs_modulus", "poisson_ratio")
+_JC_EXTRA = (
+    "yield_stress", "hardening_modulus", "hardening_exponent", "strain_rate_coefficient",
+    "reference_strain_rate", "thermal_exponent", "melt_temperature", "room_temperature",
+    "specific_heat", "taylor_quinney",
+)
+MODEL_KEYS = {
+    "linear_elastic": _ELASTIC_KEYS,
+    "neo_hookean": _ELASTIC_KEYS,
+    "johnson_cook": _ELASTIC_KEYS + _JC_EXTRA,
+}
+
+MATERIAL = {
+    "type": "object",
+    "properties": {
+        "model": {"type": "string", "enum": list(MATERIAL_MODELS)},
+        "density": number("kg/m^3", exclusiveMinimum=0),
+        "youngs_modulus": number("Pa", exclusiveMinimum=0),
+        "poisson_ratio": number("dimensionless", exclusiveMinimum=-1, exclusiveMaximum=0.5),
+        "yield_stress": number("Pa", minimum=0),
+        "hardening_modulus": number("Pa", minimum=0),
+        "hardening_exponent": number("dimensionless", exclusiveMinimum=0),
+        "strain_rate_coefficient": number("dimensionless", minimum=0),
+        "reference_strain_rate": number("1/s", exclusiveMinimum=0),
+        "thermal_exponent": number("dimensionless", exclusiveMinimum=0),
+        "melt_temperature": number("K", exclusiveMinimum=0),
+        "room_temperature": number("K", exclusiveMinimum=0),
+        "specific_heat": number("J/(kg K)", exclusiveMinimum=0),
+        "taylor_quinney": number("dimensionless", minimum=0, maximum=1),
+    },
+    "additionalProperties": False,
+    "required": ["model", "density", "youngs_modulus", "poisson_ratio"],
+    "allOf": variants("model", MODEL_KEYS),
+}
+MATERIALS = {
+    "type": "object",
+    "minProperties": 1,
+    "propertyNames": {"pattern": NAME_PATTERN},
+    "additionalProperties": MATERIAL,
+    "x-allowed": "at least one material table, e.g. [materials.steel]",
+}
+
+QUARTER_CYLINDER = table(
+    {
+        "radius": number("m", exclusiveMinimum=0),
+        "length": number("m", exclusiveMinimum=0),
+        "radial_cells": integer(None, minimum=2),  # butterfly grid needs >= 2
+        "axial_cells": integer(None, minimum=1),
+    },
+    required=("radius", "length", "radial_cells", "axial_cells"),
+)
+MESH = table(
+    {
+        "box": BOX,
+        "quarter_cylinder": QUARTER_CYLINDER,
+        "file": {"type": "string", "minLength": 1},
+    },
+    minProperties=1,
+    maxProperties=1,
+)
+MESH["x-allowed"] = "must have exactly one of: box, quarter_cylinder, file"
+
+BODY = table(
+    {
+        "name": name(),
+        "material": {"type": "string", "minLength": 1},
+        "mesh": MESH,
+        "initial_velocity": vector("m/s", {"type": ["number", "string"]}),
+        "initial_temperature": number("K", exclusiveMinimum=0),
+    },
+    required=("name", "material", "mesh"),
+)
+
+LAGRANGE = table(
+    {
+        # FB viscous hourglass damping is itself explicit: stable for coefficient <= 1/8 at dt = h/c
+        "hourglass": number("dimensionless", minimum=0, maximum=0.125),
+        "bulk_viscosity_linear": number("dimensionless", minimum=0),
+        "bulk_viscosity_quadratic": number("dimensionless", minimum=0),
+        "bodies": {"type": "array", "items": BODY},
+    },
+)
+
+BOUNDARY_KEYS = {
+    "fixed": ("type", "region"),
+    "velocity": ("type", "region", "velocity"),
+    "symmetry": ("type", "axis", "at"),
+    "rigid_wall": ("type", "point", "normal"),
+}
+BOUNDARY = {
+    "type": "object",
+    "properties": {
+        "type": {"type": "string", "enum": list(BOUNDARY_TYPES)},
+        "region": {"type": "string", "minLength": 1},
+        "velocity": table(
+            {c: number("m/s") for c in ("x", "y", "z")},
+            minProperties=1,
+        ),
+        "axis": {"type": "string", "enum": ["x", "y", "z"]},
+        "at": number("m"),
+        "point": vector("m"),
+        "normal": vector(None),
+    },
+    "additionalProperties": False,
+    "required": ["type"],
+    "allOf": variants("type", BOUNDARY_KEYS),
+}
+BOUNDARIES = {"type": "array", "items": BOUNDARY}
+
+
+# ---- [materials] ----------------------------------------------------------------------------------
+def normalise_materials(raw: dict | None, case: dict) -> dict:
+    return {name: {k: (v if k == "model" else to_float(v)) for k, v in m.items()}
+            for name, m in (raw or {}).items()}
+
+
+def check_materials(case: dict, data: dict) -> None:
+    """Wave speeds that are floats; Johnson-Cook: melt above room temperature."""
+    for name, m in case["materials"].items():
+        _check_wave_speed(name, m, data["materials"][name])
+        if m["model"] == "johnson_cook" and not m["melt_temperature"] > m["room_temperature"]:
+            raw = data["materials"][name]
+            raise CaseError(format_key(["materials", name, "melt_temperature"]),
+                            raw["melt_temperature"],
+                            f"must be > room_temperature = {fmt_num(raw['room_temperature'])} (K)")
+
+
+def _check_wave_speed(name: str, m: dict, raw: dict) -> None:
+    """The elastic wave speed sqrt(M / rho), M the P-wave modulus, sets the time step: it must be a
+    finite number (a huge modulus over a tiny density overflows it: dt = 0, a run that never ends)."""
+    nu = m["poisson_ratio"]
+    with_modulus = m["youngs_modulus"] * (1.0 - nu) / ((1.0 + nu) * (1.0 - 2.0 * nu))
+    c2 = with_modulus / m["density"]
+    if not (math.isfinite(c2) and c2 > 0.0):
+        raise CaseError(format_key(["materials", name, "youngs_modulus"]), raw["youngs_modulus"],
+                        f"gives an elastic wave speed that is not a finite number with density = "
+                        f"{fmt_num(m['density'])} kg/m^3; allowed: moduli and densities whose "
+                        "ratio is a float")
+
+
+# ---- [lagrange] -----------------------------------------------------------------------------------
+def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
+    if raw is None:
+        return None
+    dim = case["run"]["dimension"]
+    bodies = []
+    for b in raw.get("bodies", []):
+        mesh_in = b["mesh"]
+        if "box" in mesh_in:
+            box = mesh_in["box"]
+            mesh = {"box": {"lower": [to_float(v) for v in box["lower"]],
+                            "upper": [to_float(v) for v in box["upper"]],
+                            "cells": [int(v) for v in box["cells"]]}}
+        elif "quarter_cylinder" in mesh_in:
+            q = mesh_in["quarter_cylinder"]
+            mesh = {"quarter_cylinder": {"radius": to_float(q["radius"]), "length": to_float(q["length"]),
+                                         "radial_cells": int(q["radial_cells"]),
+                                         "axial_cells": int(q["axial_cells"])}}
+        else:
+            mesh = {"file": (case["case_dir"] / mesh_in["file"]).resolve()}
+        mat = case["materials"].get(b["material"], {})
+        t0 = b.get("initial_temperature", mat.get("room_temperature", DEFAULT_ROOM_TEMPERATURE))
+        size = body_mesh_size({"mesh": mesh})  # None for a file: counted when it is read
+        bodies.append({
+            "name": b["name"],
+            "material": b["material"],
+            "mesh": mesh,
+            "size": None if size is None else {"elements": size[0], "nodes": size[1]},
+            "initial_velocity": ([num_or_expression(v) for v in b["initial_velocity"]]
+                                 if "initial_velocity" in b else [0.0] * dim),
+            "initial_temperature": to_float(t0),
+        })
+    lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
+    lagrange["bodies"] = bodies
+    return lagrange
+
+
+def check_lagrange(case: dict, data: dict) -> None:
+    """At least one body and a material table; unique body names, defined materials, vector
+    lengths, box extents, 3-D-only meshes, velocity expressions, initial temperature below melt."""
+    dim = case["run"]["dimension"]
+    bodies = case["lagrange"]["bodies"]
+    raw_bodies = data.get("lagrange", {}).get("bodies", [])
+    if not bodies:
+        raise CaseError("lagrange.bodies", data.get("lagrange", {}).get("bodies", MISSING),
+                        "at least one body is required ([[lagrange.bodies]]), or a background [ale]")
+    if not case["materials"]:
+        raise CaseError("materials", MISSING, "required key missing: the bodies' materials, e.g. [materials.steel]")
+    seen: dict[str, int] = {}
+    for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
+        base = ["lagrange", "bodies", i]
+        if body["name"] in seen:
+            raise CaseError(format_key(base + ["name"]), body["name"],
+                            f"duplicate body name (also lagrange.bodies[{seen[body['name']]}].name)")
+        seen[body["name"]] = i
+        if body["material"] not in case["materials"]:
+            defined = ", ".join(case["materials"]) or "(none)"
+            raise CaseError(format_key(base + ["material"]), body["material"],
+                            f"undefined material; defined: {defined}")
+        mesh = raw["mesh"]
+        if "box" in mesh:
+            box = mesh["box"]
+            for k in ("lower", "upper", "cells"):
+                check_length(format_key(base + ["mesh", "box", k]), box[k], dim)
+            for j, (lo, hi) in enumerate(zip(box["lower"], box["upper"])):
+                if not hi > lo:
+                    raise CaseError(format_key(base + ["mesh", "box", "upper"]), box["upper"],
+                                    f"must be > lower component-wise (component {j}: "
+                                    f"{fmt_num(hi)} <= {fmt_num(lo)})")
+            check_extent(format_key(base + ["mesh", "box"]), body["mesh"]["box"], box)
+        elif "quarter_cylinder" in mesh:
+            if dim != 3:
+                raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
+                                mesh["quarter_cylinder"],
+                                f"quarter_cylinder meshes are 3D only (run.dimension = {dim})")
+        if "initial_velocity" in raw:
+            v = raw["initial_velocity"]
+            check_length(format_key(base + ["initial_velocity"]), v, dim)
+            for j, item in enumerate(v):
+                if isinstance(item, str):
+                    check_expression(format_key(base + ["initial_velocity", j]), item, dim, NUM)
+        mat = case["materials"][body["material"]]
+        if mat["model"] == "johnson_cook" and "initial_temperature" in raw:
+            if not body["initial_temperature"] < mat["melt_temperature"]:
+                raise CaseError(format_key(base + ["initial_temperature"]),
+                                raw["initial_temperature"],
+                                f"must be < melt_temperature = {fmt_num(mat['melt_temperature'])}"
+                                f" of material {body['material']!r} (K)")
+
+
+def check_mesh_files(case: dict, data: dict) -> None:
+    """Every mesh path is checked to lie inside the case directory before any file is read."""
+    dim = case["run"]["dimension"]
+    raw_bodies = data.get("lagrange", {}).get("bodies", [])
+    files = [(format_key(["lagrange", "bodies", i, "mesh", "file"]), raw_bodies[i]["mesh"]["file"], body)
+             for i, body in enumerate(case["lagrange"]["bodies"]) if "file" in body["mesh"]]
+    for key, raw, body in files:
+        check_path_inside(key, raw, body["mesh"]["file"], case["case_dir"])
+    for key, raw, body in files:
+        body["size"] = _check_mesh_file(key, raw, body["mesh"]["file"], dim)
+
+
+_CELL_TYPE = {2: "quad", 3: "hexahedron"}
+
+
+def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> dict:
+    """Read and check a body's mesh file; its ``{"elements", "nodes"}`` counts."""
+    from orchestrator.resources import machine_memory  # (resources imports orchestrator.case)
+
+    memory = machine_memory()
+    limit = memory // MESH_READ_FACTOR
+    st = stat_regular(path, key, raw, "must be a regular mesh file",
+                      not_found="file not found (paths are relative to the case directory)")
+    if st.st_size > limit:
+        raise CaseError(key, raw, f"is {format_bytes(st.st_size)}: reading it takes about "
+                                  f"{MESH_READ_FACTOR} times that, this machine has "
+                                  f"{format_bytes(memory)}; allowed: mesh files up to "
+                                  f"{format_bytes(limit)} here")
+    if not os.access(path, os.R_OK):
+        raise CaseError(key, raw, "file is not readable (permission denied)")
+    from solvers.lagrange.mesh import MeshError, read_mesh  # lazy: heavy imports
+
+    expected = _CELL_TYPE[dim]
+
+    try:
+        mesh = read_mesh(path, dim)
+    except MeshError as exc:
+        raise CaseError(key, raw, f"must be a readable {expected} mesh ({exc})") from None
+    except Exception as exc:  # noqa: BLE001 - any reader failure is a bad input file
+        raise CaseError(key, raw, f"must be a readable {expected} mesh "
+                                  f"({type(exc).__name__}: {exc})") from None
+    if getattr(mesh, "cell_type", expected) != expected or len(mesh.cells) == 0:
+        raise CaseError(key, raw, f"must be a readable {expected} mesh (no {expected} cells "
+                                  f"for a {dim}D case)")
+    return {"elements": int(len(mesh.cells)), "nodes": int(len(mesh.points))}
+
+
+# ---- [[boundaries]] -------------------------------------------------------------------------------
+def normalise_boundaries(raw: list | None, case: dict) -> list:
+    boundaries = []
+    for bc in raw or []:
+        out = {"type": bc["type"]}
+        for k, v in bc.items():
+            if k == "type" or k == "region" or k == "axis":
+                out[k] = v
+            elif k == "velocity":
+                out[k] = {c: to_float(x) for c, x in v.items()}
+            elif k == "at":
+                out[k] = to_float(v)
+            elif k in ("point", "normal"):
+                out[k] = [to_float(x) for x in v]
+        boundaries.append(out)
+    return boundaries
+
+
+def check_boundaries(case: dict, data: dict) -> None:
+    """Region expressions, components and axes of the case's dimension, wall normals."""
+    dim = case["run"]["dimension"]
+    comps = expression_names(dim)
+    for i, (bc, raw) in enumerate(zip(case["boundaries"], data.get("boundaries", []))):
+        base = ["boundaries", i]
+        if "region" in raw:
+            check_expression(format_key(base + ["region"]), raw["region"], dim, BOOL)
+        if "velocity" in raw:
+            for c in raw["velocity"]:
+                if c not in comps:
+                    raise CaseError(format_key(base + ["velocity", c]), raw["velocity"][c],
+                                    f"dimension mismatch: no {c} component in a {dim}D case; "
+                                    f"allowed: {', '.join(comps)}")
+        if "axis" in raw and raw["axis"] not in comps:
+            raise CaseError(format_key(base + ["axis"]), raw["axis"],
+                            f"dimension mismatch: must be one of {', '.join(comps)} in a "
+                            f"{dim}D case")
+        for k in ("point", "normal"):
+            if k in raw:
+                check_length(format_key(base + [k]), raw[k], dim)
+        if "normal" in raw:  # its length squared is taken: it must neither vanish nor overflow
+            n2 = math.fsum(float(c) * float(c) for c in raw["normal"])
+            if not (n2 > 0.0 and math.isfinite(n2)):
+                raise CaseError(format_key(base + ["normal"]), raw["normal"],
+                                "must be a non-zero vector whose squared length is a finite "
+                                "float (e.g. a unit vector)")
+
+
+# ---- registration (places: after [run], [ranks]; [ale] is 40) ----------------------------------------
+register_table("materials", MATERIALS, normalise_materials, check_materials, order=20)
+register_table("lagrange", LAGRANGE, normalise_lagrange, check_lagrange, order=30,
+               check_files=check_mesh_files, default=True)
+register_table("boundaries", BOUNDARIES, normalise_boundaries, check_boundaries, order=50)

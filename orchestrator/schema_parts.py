@@ -1,0 +1,89 @@
+"""Building blocks of the case schema (JSON Schema, Draft 2020-12) that every table fragment uses.
+
+The core tables are assembled in :mod:`orchestrator.case_schema`, the solvers' tables in their
+fragment modules (:mod:`orchestrator.schema_registry`).  Non-standard annotation keywords (ignored
+by the validator, used by :mod:`orchestrator.case` to word messages):
+
+``x-unit``     unit shown after the allowed range, e.g. ``must be > 0 (kg/m^3)``;
+``x-allowed``  replaces the generated "allowed" text for errors on that node;
+``x-when``     for per-variant key sets (``if``/``then``): names the variant in messages.
+"""
+from __future__ import annotations
+
+__all__ = ["SCHEMA_URI", "NAME_PATTERN", "NAME_TEXT", "number", "integer", "vector", "table",
+           "variants", "name", "BOX"]
+
+SCHEMA_URI = "https://json-schema.org/draft/2020-12/schema"
+
+NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_-]*$"
+NAME_TEXT = "must start with a letter or '_' and contain only letters, digits, '_' and '-'"
+
+
+def number(unit: str | None = None, **bounds) -> dict:
+    s: dict = {"type": "number", **bounds}
+    if unit:
+        s["x-unit"] = unit
+    return s
+
+
+def integer(unit: str | None = None, **bounds) -> dict:
+    s: dict = {"type": "integer", **bounds}
+    if unit:
+        s["x-unit"] = unit
+    return s
+
+
+def vector(unit: str | None, items: dict | None = None) -> dict:
+    """A 2- or 3-vector (its length against run.dimension is a cross-field check)."""
+    s: dict = {
+        "type": "array",
+        "items": items if items is not None else {"type": "number"},
+        "minItems": 2,
+        "maxItems": 3,
+    }
+    if unit:
+        s["x-unit"] = unit
+    return s
+
+
+def table(properties: dict, required: tuple[str, ...] = (), **extra) -> dict:
+    """A table with a fixed key set: any other key is an error ("unknown key; allowed: ...")."""
+    s = {"type": "object", "properties": properties, "additionalProperties": False}
+    if required:
+        s["required"] = list(required)
+    s.update(extra)
+    return s
+
+
+def variants(selector: str, allowed: dict, required: dict | None = None) -> list:
+    """`allOf` entries giving each value of `selector` its own key set: only `allowed[value]` keys
+    may appear and `required[value]` (default: all of them) must."""
+    required = required or allowed
+    return [
+        {
+            "if": {"properties": {selector: {"const": value}}, "required": [selector]},
+            "then": {
+                "properties": {k: True for k in keys},
+                "additionalProperties": False,
+                "required": list(required[value]),
+                "x-when": f"{selector} = {value!r}",
+            },
+        }
+        for value, keys in allowed.items()
+    ]
+
+
+def name() -> dict:
+    """A name the user gives (body, material): a TOML bare key."""
+    return {"type": "string", "minLength": 1, "pattern": NAME_PATTERN, "x-allowed": NAME_TEXT}
+
+
+BOX = table(
+    {
+        "lower": vector("m"),
+        "upper": vector("m"),
+        "cells": vector(None, {"type": "integer", "minimum": 1}),
+    },
+    required=("lower", "upper", "cells"),
+)
+"""An axis-aligned box cut into cells: a body's mesh, the background grid."""
