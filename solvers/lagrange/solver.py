@@ -150,6 +150,7 @@ class LagrangeSolver:
         self.w_int = 0.0
         self.w_ext = 0.0
         self.impulse = np.zeros(dim)
+        self.impulse_gross = np.zeros(1)
         self.ang_impulse = np.zeros(3 if dim == 3 else 1)
         self.ke0 = None
         self.p0 = None
@@ -242,11 +243,15 @@ class LagrangeSolver:
             raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s "
                               f"(body {self.body_names[b]!r}, its node {node - int(self._body_first_node[b])})")
         # exact discrete work, impulse and torque of this step (shared nodes counted once)
-        tot = self._allsum(self._sums)
+        # the gross size of the impulses (scale of the momentum balance: a clamped body's coupling
+        # impulses and reactions cancel, its momentum stays 0)
+        gross = 0.0 if impulse is None else float(np.abs(impulse[self.part.owned]).sum())
+        tot = self._allsum(np.concatenate([self._sums, [gross]]))
         self.w_int += tot[0]
         self.w_ext += tot[1]
         self.impulse += tot[2:2 + self.dim]
         self.ang_impulse += tot[5:8] if self.dim == 3 else tot[7:8]
+        self.impulse_gross += tot[-1]
 
         self.step, self.time = step, time
         self.first_step = False
@@ -382,9 +387,13 @@ class LagrangeSolver:
         mass = float(self._allsum(self.mass[self.part.owned].sum()))
         scale_e = max(abs(self.ke0), abs(ke), abs(self.w_int), abs(self.w_ext), 1e-300)
         e_err = (ke + self.w_int - self.w_ext - self.ke0) / scale_e
-        p_scale = max(np.linalg.norm(self.p0), np.linalg.norm(p), np.linalg.norm(self.impulse), 1e-300)
+        p_scale = max(np.linalg.norm(self.p0), np.linalg.norm(p), np.linalg.norm(self.impulse),
+                      float(self.impulse_gross[0]), 1e-300)
         p_err = np.linalg.norm(p - self.p0 - self.impulse) / p_scale
-        l_scale = max(np.linalg.norm(self.l0), np.linalg.norm(ang), np.linalg.norm(self.ang_impulse), 1e-300)
+        # (angular: the gross impulse times the body's size)
+        size = float(np.ptp(self.global_points, axis=0).max())
+        l_scale = max(np.linalg.norm(self.l0), np.linalg.norm(ang), np.linalg.norm(self.ang_impulse),
+                      float(self.impulse_gross[0]) * size, 1e-300)
         l_err = np.linalg.norm(ang - self.l0 - self.ang_impulse) / l_scale
         d = {
             "mass": mass,
@@ -440,7 +449,7 @@ class LagrangeSolver:
     STATE_NODES = ("x", "v", "f")
     STATE_CELLS = ("sig", "eps_p", "temp", "e_int", "q")
     STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0")
-    STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0")
+    STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0", "impulse_gross")
 
     def checkpoint(self, path: Path) -> None:
         nodes = {k: self.gather_nodes(getattr(self, k)) for k in self.STATE_NODES}
@@ -467,6 +476,7 @@ class LagrangeSolver:
             for k in self.STATE_SCALARS:
                 setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
             for k in self.STATE_VECTORS:
-                setattr(self, k, h[k][...])
+                if k in h:  # (impulse_gross: not in checkpoints before the coupling)
+                    setattr(self, k, h[k][...])
         self.first_step = bool(self.first_step)
         self.step = int(self.step)
