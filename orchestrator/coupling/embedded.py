@@ -32,6 +32,7 @@ constraint along the prescribed direction to the background alone, one step late
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -51,6 +52,44 @@ class StepRecord:
     iterations: int = 0
     residual: float = 0.0
     dissipation: float = 0.0
+
+
+def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
+    """B^b restricted to the corners of each cut zone that lie behind its piece of surface (on the
+    body's side: (x_A - c_e) . n_e <= 0, c_e the pieces' area-weighted centroid), each row rescaled
+    to sum to A_e again (the impulses stay equal and opposite).
+
+    Why: the background is a cut-cell fluid (solvers/ale/blocked.py): the volume of a cut zone's
+    fluid is bounded by its open faces and the body surface, whose motion enters it directly (the
+    swept volume SB), so the kinematic condition on the fluid's volume holds without any constraint,
+    and the nodes in front of the surface move with the pressure of the open faces.  The corners
+    behind the surface carry the cut zone's fluid mass but see no normal pressure force (their faces
+    are covered): the constraint ties them to the body.  With the full B^b the interpolated wall
+    velocity would extrapolate them from the fluid side (a node behind a retreating surface ran at
+    twice the body's speed) and their stale velocity would enter the flow when the surface uncovers
+    them.  A zone whose corners all lie in front keeps its full row."""
+    import scipy.sparse as sp
+
+    if ops.zones.size == 0:
+        return ops
+    dim = grid.dim
+    row = np.searchsorted(ops.zones, pieces.zone)
+    w = pieces.area
+    cen = np.stack([np.bincount(row, weights=w * pieces.centroid[:, d], minlength=ops.zones.size)
+                    for d in range(dim)], axis=1) / np.where(ops.area > 0.0, ops.area, 1.0)[:, None]
+    Bb = ops.Bb.tocoo()
+    xn = grid.lower + grid.node_ijk(ops.bnodes[Bb.col]) * grid.h
+    side = np.einsum("ij,ij->i", xn - cen[Bb.row], ops.normal[Bb.row])
+    behind = side <= 0.0
+    has = np.bincount(Bb.row, weights=behind.astype(float), minlength=ops.zones.size) > 0
+    keep = behind | ~has[Bb.row]
+    data = np.where(keep, Bb.data, 0.0)
+    sums = np.bincount(Bb.row, weights=data, minlength=ops.zones.size)
+    scale = np.divide(ops.area, sums, out=np.ones_like(sums), where=sums > 0.0)
+    new = sp.csr_matrix((data * scale[Bb.row], (Bb.row, Bb.col)), shape=Bb.shape)
+    new.eliminate_zeros()
+    new.sort_indices()
+    return dataclasses.replace(ops, Bb=new)
 
 
 class EmbeddedCoupling:
@@ -93,7 +132,7 @@ class EmbeddedCoupling:
         for d in range(self.dim):
             ids, cov = face_coverage(self.grid, pieces, self.n_bodies, d)
             faces.append((ids, np.minimum(cov.sum(axis=1), 1.0)))
-        self.ops = Operators.build(self.grid, pieces, self.facets, self.ns)
+        self.ops = behind_surface(Operators.build(self.grid, pieces, self.facets, self.ns), self.grid, pieces)
         self.pieces = pieces
         area = np.where(self.ops.area > 0.0, self.ops.area, 1.0)[:, None]
         velocity = (self.ops.Bf @ self.v) / area  # the surface's mean velocity per cut zone

@@ -92,6 +92,11 @@ from solvers.elements import hex_bvectors, quad_bvectors
 SOLID_TOL = 1e-12
 """A zone with blocked fraction b >= 1 - SOLID_TOL is fully blocked (open fraction exactly 0)."""
 
+PHI_Q = 0.5
+"""The artificial viscosity of a cut zone takes its divergence over at least this fraction of the
+zone's volume: the flux mismatch of a small zone's faces would be amplified by 1/phi (a small zone
+shares its state with its neighbour after each remap: PHI_MERGE)."""
+
 
 # ------------------------------------------------------------------------------------------------
 # fractions
@@ -451,18 +456,24 @@ def lagrangian_open_volumes(ASV, SB, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, z
                 z = i * zs[0] + j * zs[1] + k * zs[2]
                 v0 = phi[z] * VE[z]
                 vn = v0 + SB[z]
-                if SB[z] < 0.0 and not (vn > 1e-9 * VE[z]):
-                    # a body surface swept past the zone's whole open part within the step (it
-                    # crossed a zone face): its material goes through the open faces (the remap's
-                    # positivity limit) and the small-zone merge; keep a sliver of volume here
-                    vn = 1e-9 * VE[z]
                 for d in range(dim):
                     vn += ASV[d, z + zs[d]] - ASV[d, z]
+                swept = SB[z] != 0.0 and not (vn > 1e-9 * VE[z])
+                if swept:
+                    # a body surface and the zone's open faces swept past its whole open part
+                    # within the step (the surface crossed a zone face, or the zone is small): its
+                    # material goes through the open faces (the remap's positivity limit) and the
+                    # small-zone merge; keep a sliver of volume here
+                    vn = 1e-9 * VE[z]
                 V[z] = vn
                 if M[z] > 0.0:
                     if not (vn > 0.0):
                         return z
-                    de_h[z] = -(p[z] + q[z]) * (vn - v0) / (2.0 * M[z])
+                    # the half-step EOS shift of the step's p dV; none for a zone a body surface
+                    # swept or changed by more than half its volume (a small cut zone: its state
+                    # merges with its neighbour's after the remap, the linear shift means nothing)
+                    big = SB[z] != 0.0 and abs(vn - v0) > 0.5 * v0
+                    de_h[z] = 0.0 if (swept or big) else -(p[z] + q[z]) * (vn - v0) / (2.0 * M[z])
                     rho[z] = M[z] / vn
                 else:
                     rho[z] = 0.0
@@ -513,7 +524,7 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
             bA[a, 1] = b[a, 1] * _aperture(A, z, zs, 1, oy)
             w[a] = ve[a, 0] * bA[a, 0] + ve[a, 1] * bA[a, 1]
         ph = phi[z]
-        divv = (_t4(w[0], w[1], w[2], w[3]) - SF[z]) / (ph * vol)
+        divv = (_t4(w[0], w[1], w[2], w[3]) - SF[z]) / (max(ph, PHI_Q) * vol)
         emax = 0.0
         for a in range(4):
             an = (a + 1) % 4
@@ -578,7 +589,7 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
                 bA[a, d] = b[a, d] * _aperture(A, z, zs, d, oo[a, d])
             w[a] = ve[a, 0] * bA[a, 0] + ve[a, 1] * bA[a, 1] + ve[a, 2] * bA[a, 2]
         ph = phi[z]
-        divv = (_t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) - SF[z]) / (ph * vol)
+        divv = (_t8(w[0], w[1], w[2], w[3], w[4], w[5], w[6], w[7]) - SF[z]) / (max(ph, PHI_Q) * vol)
         lc = vol / amax
         cz = c[z]
         qz, qq = zone_q(qkind, grad, z, zs, 3, rho[z], cz, lc, divv, q_lin, q_quad, solid)
@@ -626,11 +637,14 @@ _flush()
 # ------------------------------------------------------------------------------------------------
 # small cut zones of moving bodies: conservative merging after the remap
 # ------------------------------------------------------------------------------------------------
-PHI_MERGE = 0.05
-"""A zone a moving body leaves with an open fraction below this (or a fully covered zone that still
+PHI_MERGE = 0.5
+"""A zone a coupled body cuts to an open fraction below this (or a fully covered zone that still
 holds material, or one the remap left with negative mass) shares its content with its most open
-face neighbour: the remap's face fluxes and the body's swept volume agree only to the order of the
-scheme, and a body crossing a zone face within one step sweeps more than the zone holds."""
+face neighbour after every remap (one density and specific energy for both): a small cut zone's
+state would otherwise follow its explicit Lagrange step with a time step set by full zones (its
+volume changes by O(1) of itself per step), the remap's face fluxes and the body's swept volume
+agree only to the order of the scheme, and a body crossing a zone face within one step sweeps more
+than the zone holds."""
 
 
 @njit(cache=True)
@@ -775,6 +789,19 @@ def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
                 pool[g, d] += (m0[a] - m1[a]) * v[n, d]
         else:
             gain[g] += m1[a] - m0[a]
+    # a group none of whose nodes gains mass (its zones' mass moved between nodes of other groups)
+    # hands its pool to its nodes in proportion to their mass: momentum is never dropped
+    mass1 = np.zeros(ng)
+    for a in range(un.size):
+        if m1[a] > 0.0:
+            mass1[ugr[a]] += m1[a]
+    for a in range(un.size):
+        g = ugr[a]
+        n = un[a]
+        if gain[g] <= 0.0 and mass1[g] > 0.0 and m1[a] > 0.0:
+            for d in range(dim):
+                v[n, d] = (m0[a] * v[n, d] - (m0[a] - m1[a]) * v[n, d] * (m1[a] <= m0[a])
+                           + m1[a] / mass1[g] * pool[g, d]) / m1[a]
     ke1 = np.zeros(ng)
     for a in range(un.size):
         g = ugr[a]
