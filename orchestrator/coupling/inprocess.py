@@ -1,4 +1,4 @@
-"""A coupled run in one process (tests): the ALE background and the Lagrangian bodies on
+"""A coupled run in one process (tests, benchmarks, the kernel warm-up): the ALE background and the Lagrangian bodies on
 MPI.COMM_SELF, driven through the same hooks and in the same order as adapters/runtime.py and the
 coupler's _coupled_step, without launching a job."""
 from __future__ import annotations
