@@ -148,6 +148,11 @@ class Blocked:
         self.cut_rows = np.zeros(0, np.int64)
         self.n_cut = 0
         self.covered = np.zeros(0, np.int64)
+        self.covered_all = np.zeros(0, np.int64)
+        # zones a small zone may merge into: real zones and images of the neighbours' (not the
+        # ghosts of physical boundaries)
+        from solvers.ale.grid import Z_IMAGE, Z_REAL
+        self._usable = ((B.zkind == Z_REAL) | (B.zkind == Z_IMAGE)).astype(np.uint8)
         self.SF = np.zeros(B.nzones)  # a_e . (surface velocity) of the cut zones (their q)
         self._cut_velocity = np.zeros((0, B.dim))
         self.SB = np.zeros(B.nzones)  # body-surface swept volume of the Lagrange step (cut zones)
@@ -176,6 +181,10 @@ class Blocked:
         b = np.zeros(B.nzones)
         b[z[mine]] = f[mine]
         self.covered = np.ascontiguousarray(z[mine])  # this block's zones a body covers
+        # ... and those of the first ghost layer (the small-zone merge: every group that touches an
+        # owned node or zone has its donors there, their targets within the second layer)
+        zg, held = gi.zones(geometry.zones, ghosts=1)
+        self.covered_all = np.ascontiguousarray(zg[held])
         if geometry.faces is not None:
             A = np.ones((B.dim, B.nzones))
             for d, (ids, cov) in enumerate(geometry.faces):
@@ -387,8 +396,15 @@ class Blocked:
         if self.A_body is not None:  # a coupled body's exact geometry: small zones merge
             _sync(s)
             self.set_fractions(s, b_new)
-            bad = merge_small_zones(self.covered, s.M, s.e, self.phi, self.VE, B.zact,
-                                    B.real_zone.astype(np.uint8), s.v, B.zs, B.ns, PHI_MERGE)
+            gdims = np.ones(3, np.int64)
+            gdims[: B.dim] = B.cells
+            goff = np.zeros(3, np.int64)
+            goff[: B.dim] = B.offset - GHOST
+            if not hasattr(self, "_VE_uniform"):  # (the ghost layers' VE are placeholders; the
+                # grid is uniform: every rank uses the same volume for a group's zones)
+                self._VE_uniform = np.full(B.nzones, float(np.prod(B.h)))
+            bad = merge_small_zones(self.covered_all, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable,
+                                    s.v, s.m, B.zs, B.ns, PHI_MERGE, gdims, goff)
             if bad >= 0:
                 s._fail(f"ALE zone {B.zone_ijk(bad)} is covered by a coupled body while it holds "
                         f"{s.M[bad]:.6g} kg of material and has no open neighbour to pass it to, at step "
@@ -682,28 +698,47 @@ def _node_mass(n, M, zact, zs, ns, dim):
 
 
 @njit(cache=True)
-def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
+def _gid(z, zs, gdims, goff):
+    """Global zone id (x fastest) of padded zone z: the same number on every rank that holds it."""
+    i = z // zs[0]
+    r = z - i * zs[0]
+    j = r // zs[1]
+    k = r - j * zs[1]
+    return (i + goff[0]) + gdims[0] * ((j + goff[1]) + gdims[1] * (k + goff[2]))
+
+
+@njit(cache=True)
+def merge_small_zones(cand, M, e, phi, VE, zact, usable, v, m, zs, ns, phi_merge, gdims, goff):
     """Merge every candidate zone with material and an open fraction below phi_merge (or negative
     mass) into its face neighbour with the largest open fraction (the group's mass and internal
     energy shared in proportion to the open volumes: one density and one specific energy).  Nodal
     momentum is conserved: a node keeps its velocity when its mass falls and hands the momentum of
     the lost mass to the nodes of its group that gain mass; the kinetic energy this inelastic
-    exchange removes becomes the group's internal energy (total energy conserved).  Returns -1, or
-    a zone without any open neighbour that still holds material."""
+    exchange removes becomes the group's internal energy (total energy conserved).
+
+    Parallel runs: ``cand`` holds the candidates of this rank's padded block, ghosts (images of the
+    neighbours' zones, ``usable``) included, so every rank sees the whole of every group that
+    touches its real zones and nodes and computes it alike: groups, their order and the group a
+    node belongs to (the one with the lowest target) follow global ids (``gdims``: zones per axis;
+    ``goff``: global index of padded index 0 per axis), not the block's layout.  Values written to
+    ghosts are refilled by the next halo exchange.  Returns -1, or a zone that holds material and
+    has no open neighbour."""
     dim = v.shape[1]
     nd = 0
     donors = np.empty(cand.size, np.int64)
     targets = np.empty(cand.size, np.int64)
     for t in range(cand.size):
         z = cand[t]
-        if not real[z] or M[z] == 0.0 or (phi[z] >= phi_merge and M[z] > 0.0):
+        if not usable[z] or M[z] == 0.0 or (phi[z] >= phi_merge and M[z] > 0.0):
             continue
         best = -1
         bphi = 0.0
         for d in range(dim):
             for sgn in (-1, 1):
                 nb = z + sgn * zs[d]
-                if zact[nb] > 0.0 and phi[nb] > bphi:
+                if nb < 0 or nb >= M.shape[0]:
+                    continue
+                if usable[nb] and phi[nb] > bphi:
                     bphi = phi[nb]
                     best = nb
         if best < 0:
@@ -715,8 +750,13 @@ def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
         return -1
     donors = donors[:nd]
     targets = targets[:nd]
-    # a target that is itself a donor passes its group on to its own target (chains end at a zone
-    # with phi >= phi_merge, or at the first repeat)
+    gd = np.empty(nd, np.int64)
+    for a in range(nd):
+        gd[a] = _gid(donors[a], zs, gdims, goff)
+    o = np.argsort(gd, kind="mergesort")
+    donors = donors[o]
+    targets = targets[o]
+    # a target that is itself a donor passes its group on to its own target
     for it in range(nd):
         changed = False
         for a in range(nd):
@@ -726,15 +766,29 @@ def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
                     changed = True
         if not changed:
             break
-    ut = np.unique(targets)
-    ng = ut.size
-    gid = np.empty(nd, np.int64)
+    gt = np.empty(nd, np.int64)
     for a in range(nd):
-        gid[a] = np.searchsorted(ut, targets[a])
-    # group members: targets then donors
+        gt[a] = _gid(targets[a], zs, gdims, goff)
+    ot = np.argsort(gt, kind="mergesort")
+    ng = 0
+    ut = np.empty(nd, np.int64)
+    ugt = np.empty(nd, np.int64)
+    for a in range(nd):
+        t = targets[ot[a]]
+        if ng == 0 or ut[ng - 1] != t:
+            ut[ng] = t
+            ugt[ng] = gt[ot[a]]
+            ng += 1
+    ut = ut[:ng]
+    gid_of = np.empty(nd, np.int64)
+    for a in range(nd):
+        for g in range(ng):
+            if ut[g] == targets[a]:
+                gid_of[a] = g
+                break
     members = np.concatenate((ut, donors))
-    mgroup = np.concatenate((np.arange(ng), gid))
-    # affected nodes and their masses before
+    mgroup = np.concatenate((np.arange(ng), gid_of))
+    # affected nodes; a node belongs to the group with the lowest target id among its zones' groups
     corners = np.empty(8, np.int64)
     nodes = np.empty(members.size * (1 << dim), np.int64)
     ngr = np.empty(members.size * (1 << dim), np.int64)
@@ -747,15 +801,28 @@ def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
             q += 1
     order = np.argsort(nodes, kind="mergesort")
     nodes_s = nodes[order]
-    keep = np.ones(q, np.bool_)
-    for a in range(1, q):
-        if nodes_s[a] == nodes_s[a - 1]:
-            keep[a] = False
-    un = nodes_s[keep]
-    ugr = ngr[order][keep]  # a node belongs to the group of its first listing (targets first)
-    m0 = np.empty(un.size)
-    for a in range(un.size):
-        m0[a] = _node_mass(un[a], M, zact, zs, ns, dim)
+    ngr_s = ngr[order]
+    un = np.empty(q, np.int64)
+    ugr = np.empty(q, np.int64)
+    nu = 0
+    for a in range(q):
+        if nu > 0 and un[nu - 1] == nodes_s[a]:
+            if ngr_s[a] < ugr[nu - 1]:  # groups are numbered in target-id order
+                ugr[nu - 1] = ngr_s[a]
+        else:
+            un[nu] = nodes_s[a]
+            ugr[nu] = ngr_s[a]
+            nu += 1
+    un = un[:nu]
+    ugr = ugr[:nu]
+    # the nodes' masses before (the remap's, ghosts filled) and their change: 2^-dim of the change
+    # of every member zone around them (only members change)
+    m0 = np.empty(nu)
+    for a in range(nu):
+        m0[a] = m[un[a]]
+    Mold = np.empty(members.size)
+    for a in range(members.size):
+        Mold[a] = M[members[a]]
     # zone masses and energies of every group
     Mg = np.zeros(ng)
     Eg = np.zeros(ng)
@@ -774,12 +841,18 @@ def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
         M[z] = Mg[g] * (phi[z] * VE[z]) / Vg[g]
         e[z] = Eg[g] / Mg[g]
     # nodal momentum
-    m1 = np.empty(un.size)
+    m1 = m0.copy()
+    for a in range(members.size):
+        z = members[a]
+        dmz = zact[z] * (M[z] - Mold[a]) / (1 << dim)
+        nc = _corners(z, zs, ns, dim, corners)
+        for c in range(nc):
+            m1[np.searchsorted(un, corners[c])] += dmz
     pool = np.zeros((ng, dim))
     gain = np.zeros(ng)
+    mass1 = np.zeros(ng)
     ke0 = np.zeros(ng)
-    for a in range(un.size):
-        m1[a] = _node_mass(un[a], M, zact, zs, ns, dim)
+    for a in range(nu):
         g = ugr[a]
         n = un[a]
         for d in range(dim):
@@ -789,28 +862,22 @@ def merge_small_zones(cand, M, e, phi, VE, zact, real, v, zs, ns, phi_merge):
                 pool[g, d] += (m0[a] - m1[a]) * v[n, d]
         else:
             gain[g] += m1[a] - m0[a]
-    # a group none of whose nodes gains mass (its zones' mass moved between nodes of other groups)
-    # hands its pool to its nodes in proportion to their mass: momentum is never dropped
-    mass1 = np.zeros(ng)
-    for a in range(un.size):
         if m1[a] > 0.0:
-            mass1[ugr[a]] += m1[a]
-    for a in range(un.size):
-        g = ugr[a]
-        n = un[a]
-        if gain[g] <= 0.0 and mass1[g] > 0.0 and m1[a] > 0.0:
-            for d in range(dim):
-                v[n, d] = (m0[a] * v[n, d] - (m0[a] - m1[a]) * v[n, d] * (m1[a] <= m0[a])
-                           + m1[a] / mass1[g] * pool[g, d]) / m1[a]
+            mass1[g] += m1[a]
     ke1 = np.zeros(ng)
-    for a in range(un.size):
+    for a in range(nu):
         g = ugr[a]
         n = un[a]
-        if m1[a] > m0[a] and gain[g] > 0.0:
-            w = (m1[a] - m0[a]) / gain[g]
+        if gain[g] > 0.0:
+            if m1[a] > m0[a]:
+                w = (m1[a] - m0[a]) / gain[g]
+                for d in range(dim):
+                    v[n, d] = (m0[a] * v[n, d] + w * pool[g, d]) / m1[a]
+        elif m1[a] > 0.0 and mass1[g] > 0.0:
+            # no node of the group gains mass: its pool goes to its nodes by mass (never dropped)
             for d in range(dim):
-                v[n, d] = (m0[a] * v[n, d] + w * pool[g, d]) / m1[a]
-        elif m1[a] <= 0.0:
+                v[n, d] += pool[g, d] / mass1[g]
+        if not (m1[a] > 0.0):
             for d in range(dim):
                 v[n, d] = 0.0
         for d in range(dim):

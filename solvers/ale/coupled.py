@@ -88,14 +88,16 @@ class GlobalIndex:
             r, ijk[:, d] = np.divmod(r, extent[d])
         return ijk
 
-    def zones(self, ids):
-        """(local padded zone index, mask: a real zone of this block) of global zone ids."""
+    def zones(self, ids, ghosts: int = 0):
+        """(local padded zone index, mask: a real zone of this block -- or, with ``ghosts`` = k,
+        a zone of the first k ghost layers too) of global zone ids."""
         B = self.block
         ijk = self._split(ids, self.cells)
         loc = ijk[:, : self.dim] - B.offset
-        inside = np.all((loc >= 0) & (loc < B.n), axis=1)
+        g = int(ghosts)
+        inside = np.all((loc >= -g) & (loc < B.n + g), axis=1)
         pad = np.zeros((ids.size, 3), np.int64)
-        pad[:, : self.dim] = loc + GHOST
+        pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
         return pad @ B.zs, inside
 
     def nodes(self, ids):
