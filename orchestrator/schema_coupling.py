@@ -16,7 +16,18 @@ from orchestrator.coupling import variants
 from .schema_registry import register_table
 from .schema_rules import MISSING, CaseError, format_key
 
-COUPLING = variants.schema()
+def _schema() -> dict:
+    """The variants' branches (variants.schema()) under a closed table of all their keys: a key of
+    another variant gets the variant's own message, an unknown key the schema's."""
+    s = variants.schema()
+    props = {}
+    for branch in s["allOf"]:
+        props.update(branch["then"]["properties"])
+    props["method"] = s["properties"]["method"]
+    return {**s, "properties": props, "additionalProperties": False}
+
+
+COUPLING = _schema()
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:

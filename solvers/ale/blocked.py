@@ -403,8 +403,7 @@ class Blocked:
             if not hasattr(self, "_VE_uniform"):  # (the ghost layers' VE are placeholders; the
                 # grid is uniform: every rank uses the same volume for a group's zones)
                 self._VE_uniform = np.full(B.nzones, float(np.prod(B.h)))
-            bad = merge_small_zones(self.covered_all, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable,
-                                    s.v, s.m, B.zs, B.ns, PHI_MERGE, gdims, goff)
+            bad = self._merge(s, gdims, goff)
             if bad >= 0:
                 s._fail(f"ALE zone {B.zone_ijk(bad)} is covered by a coupled body while it holds "
                         f"{s.M[bad]:.6g} kg of material and has no open neighbour to pass it to, at step "
@@ -423,8 +422,52 @@ class Blocked:
         _sync(s)
         self.set_fractions(s, b_new)
 
+    def _merge(self, s, gdims, goff) -> int:
+        """The small-zone merge (merge_groups, merge_velocities) with the groups' node sums over
+        the ranks: every group that touches an owned node or zone is seen whole by the ranks that
+        hold it, and each node is counted by its owner only, then summed by group (target id)."""
+        B = s.block
+        owned = B.owned.astype(np.uint8)
+        bad, ugt, un, ugr, m0, m1, members, mgroup, Mg, part = merge_groups(
+            self.covered_all, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable, s.v, s.m,
+            owned, B.zs, B.ns, PHI_MERGE, gdims, goff)
+        dec = s.dec
+        if dec.parallel:  # (collective: every rank takes part in both sums, with or without groups)
+            part = _sum_by_key(dec.comm, ugt, part)
+        ke1 = merge_velocities(un, ugr, m0, m1, s.v, part, owned) if bad < 0 else np.zeros(ugt.size)
+        if dec.parallel:
+            ke1 = _sum_by_key(dec.comm, ugt, ke1[:, None])[:, 0]
+        if dec.parallel:  # the owners' node velocities to the other ranks' copies (the shared plane
+            s.bc.fill_nodes_vector(s.v)  # of a cut and the ghosts) before anything reads them
+        if bad >= 0 or ugt.size == 0:
+            return int(bad)
+        dim = B.dim
+        s.e[members] += (part[mgroup, dim + 2] - ke1[mgroup]) / Mg[mgroup]
+        return -1
+
     def blocked_fraction(self) -> np.ndarray:
         return 1.0 - self.phi
+
+
+def _sum_by_key(comm, keys, values) -> np.ndarray:
+    """values (n, k) of this rank's keys (n,) summed with the rows of the same key on every rank
+    (float64 buffers: counts, then the rows; summed in rank order)."""
+    from mpi4py import MPI
+
+    k = values.shape[1]
+    rows = np.hstack([keys[:, None].astype(np.float64), values]).ravel()
+    counts = np.zeros(comm.size, dtype=np.int64)
+    comm.Allgather(np.array([rows.size], dtype=np.int64), counts)
+    allrows = np.empty(int(counts.sum()))
+    comm.Allgatherv(rows, [allrows, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
+    allrows = allrows.reshape(-1, k + 1)
+    out = np.zeros_like(values)
+    if keys.size and allrows.size:
+        key = allrows[:, 0].astype(np.int64)
+        pos = np.searchsorted(keys, key)
+        hit = (pos < keys.size) & (keys[np.minimum(pos, keys.size - 1)] == key)
+        np.add.at(out, pos[hit], allrows[hit, 1:])  # (in rank order)
+    return out
 
 
 def _sync(s) -> None:
@@ -708,7 +751,44 @@ def _gid(z, zs, gdims, goff):
 
 
 @njit(cache=True)
-def merge_small_zones(cand, M, e, phi, VE, zact, usable, v, m, zs, ns, phi_merge, gdims, goff):
+def _no_merge(status, dim):
+    z = np.zeros(0, np.int64)
+    f = np.zeros(0)
+    return status, z, z, z, f, f, z, z, f, np.zeros((0, dim + 3))
+
+
+@njit(cache=True)
+def merge_velocities(un, ugr, m0, m1, v, tot, owned):
+    """The nodes' new velocities from their group's totals ``tot`` (over all ranks: [pool, gain, mass
+    after, kinetic energy before]): a node that gains mass takes its share of the momentum the others
+    released with theirs; when no node of a group gains (its zones' mass moved between nodes of
+    other groups) the pool goes to its nodes by mass; a node left without mass stops.  Returns the
+    groups' kinetic energy after, over the nodes this rank owns."""
+    dim = v.shape[1]
+    ke1 = np.zeros(tot.shape[0])
+    for a in range(un.size):
+        g = ugr[a]
+        n = un[a]
+        gain = tot[g, dim]
+        if gain > 0.0:
+            if m1[a] > m0[a]:
+                w = (m1[a] - m0[a]) / gain
+                for d in range(dim):
+                    v[n, d] = (m0[a] * v[n, d] + w * tot[g, d]) / m1[a]
+        elif m1[a] > 0.0 and tot[g, dim + 1] > 0.0:
+            for d in range(dim):
+                v[n, d] += tot[g, d] / tot[g, dim + 1]
+        if not (m1[a] > 0.0):
+            for d in range(dim):
+                v[n, d] = 0.0
+        if owned[n]:
+            for d in range(dim):
+                ke1[g] += 0.5 * m1[a] * v[n, d] * v[n, d]
+    return ke1
+
+
+@njit(cache=True)
+def merge_groups(cand, M, e, phi, VE, zact, usable, v, m, owned, zs, ns, phi_merge, gdims, goff):
     """Merge every candidate zone with material and an open fraction below phi_merge (or negative
     mass) into its face neighbour with the largest open fraction (the group's mass and internal
     energy shared in proportion to the open volumes: one density and one specific energy).  Nodal
@@ -742,12 +822,12 @@ def merge_small_zones(cand, M, e, phi, VE, zact, usable, v, m, zs, ns, phi_merge
                     bphi = phi[nb]
                     best = nb
         if best < 0:
-            return z
+            return _no_merge(z, dim)
         donors[nd] = z
         targets[nd] = best
         nd += 1
     if nd == 0:
-        return -1
+        return _no_merge(-1, dim)
     donors = donors[:nd]
     targets = targets[:nd]
     gd = np.empty(nd, np.int64)
@@ -780,6 +860,7 @@ def merge_small_zones(cand, M, e, phi, VE, zact, usable, v, m, zs, ns, phi_merge
             ugt[ng] = gt[ot[a]]
             ng += 1
     ut = ut[:ng]
+    ugt = ugt[:ng]
     gid_of = np.empty(nd, np.int64)
     for a in range(nd):
         for g in range(ng):
@@ -837,10 +918,10 @@ def merge_small_zones(cand, M, e, phi, VE, zact, usable, v, m, zs, ns, phi_merge
         z = members[a]
         g = mgroup[a]
         if not (Mg[g] > 0.0):
-            return z
+            return _no_merge(z, dim)
         M[z] = Mg[g] * (phi[z] * VE[z]) / Vg[g]
         e[z] = Eg[g] / Mg[g]
-    # nodal momentum
+    # nodal momentum: each node's mass change, and the group sums over the nodes this rank owns
     m1 = m0.copy()
     for a in range(members.size):
         z = members[a]
@@ -848,42 +929,19 @@ def merge_small_zones(cand, M, e, phi, VE, zact, usable, v, m, zs, ns, phi_merge
         nc = _corners(z, zs, ns, dim, corners)
         for c in range(nc):
             m1[np.searchsorted(un, corners[c])] += dmz
-    pool = np.zeros((ng, dim))
-    gain = np.zeros(ng)
-    mass1 = np.zeros(ng)
-    ke0 = np.zeros(ng)
+    part = np.zeros((ng, dim + 3))  # [pool (dim), gain, mass after, kinetic energy before]
     for a in range(nu):
+        if not owned[un[a]]:
+            continue
         g = ugr[a]
         n = un[a]
         for d in range(dim):
-            ke0[g] += 0.5 * m0[a] * v[n, d] * v[n, d]
+            part[g, dim + 2] += 0.5 * m0[a] * v[n, d] * v[n, d]
         if m1[a] <= m0[a]:
             for d in range(dim):
-                pool[g, d] += (m0[a] - m1[a]) * v[n, d]
+                part[g, d] += (m0[a] - m1[a]) * v[n, d]
         else:
-            gain[g] += m1[a] - m0[a]
+            part[g, dim] += m1[a] - m0[a]
         if m1[a] > 0.0:
-            mass1[g] += m1[a]
-    ke1 = np.zeros(ng)
-    for a in range(nu):
-        g = ugr[a]
-        n = un[a]
-        if gain[g] > 0.0:
-            if m1[a] > m0[a]:
-                w = (m1[a] - m0[a]) / gain[g]
-                for d in range(dim):
-                    v[n, d] = (m0[a] * v[n, d] + w * pool[g, d]) / m1[a]
-        elif m1[a] > 0.0 and mass1[g] > 0.0:
-            # no node of the group gains mass: its pool goes to its nodes by mass (never dropped)
-            for d in range(dim):
-                v[n, d] += pool[g, d] / mass1[g]
-        if not (m1[a] > 0.0):
-            for d in range(dim):
-                v[n, d] = 0.0
-        for d in range(dim):
-            ke1[g] += 0.5 * m1[a] * v[n, d] * v[n, d]
-    for a in range(members.size):
-        z = members[a]
-        g = mgroup[a]
-        e[z] += (ke0[g] - ke1[g]) / Mg[g]
-    return -1
+            part[g, dim + 1] += m1[a]
+    return -1, ugt, un, ugr, m0, m1, members, mgroup, Mg, part
