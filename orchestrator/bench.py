@@ -715,5 +715,7 @@ def bench_output(out: Path, quick: bool = False) -> Path:
     return out
 
 
+from orchestrator import bench_coupling  # noqa: E402,F401  (registers "coupling"; its own module)
+
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
     _worker(int(sys.argv[2]), sys.argv[3])
