@@ -11,6 +11,7 @@ import sys
 import time
 
 import h5py
+import pytest
 
 from tests.conftest import CASES, REPO
 
@@ -38,7 +39,7 @@ def _kill_rank_mid_run(case, out, role, rank, ranks):
     from the kill to the job's end)."""
     env = dict(os.environ, PYTHONPATH=str(REPO))
     proc = subprocess.Popen([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out),
-                             "--ranks", ranks], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                             "--ranks", *ranks.split()], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             text=True, env=env)
     try:
         deadline = time.time() + 120
@@ -131,3 +132,19 @@ def test_ale_physical_failure_names_zone_step_time(tmp_path, run_immerse):
     assert "ale rank 0" in r.stderr, r.stderr
     assert "ALE zone (" in r.stderr and "invalid thermodynamic state" in r.stderr, r.stderr
     assert "step" in r.stderr and "t=" in r.stderr and "rho=" in r.stderr
+
+
+@pytest.mark.parametrize("role", ["ale", "lagrange"])
+def test_sigkill_of_a_rank_of_a_coupled_run(tmp_path, role):
+    """A coupled run (the embedded piston, 2 background + 2 body ranks): SIGKILL of rank 1 of either
+    group ends the job within 30 s, non-zero, naming the role and rank (the coupler waiting for a
+    message from that group included); the completed output steps of both groups stay readable."""
+    case = _ale_case(tmp_path, "embedded_piston_sod", **{"end_time = 0.2": "end_time = 50.0",
+                                                         "output_interval = 0.05": "output_interval = 0.005"})
+    out = tmp_path / "out"
+    rc, stderr, elapsed = _kill_rank_mid_run(case, out, role, 1, "ale=2 lagrange=2")
+    assert rc != 0 and elapsed < 30
+    assert f"{role} rank 1" in stderr, stderr
+    with h5py.File(out / "results.h5", "r") as h:
+        for r in ("ale", "lagrange"):
+            assert len(h[f"{r}/times"][...]) >= 3
