@@ -8,7 +8,7 @@ STAMP  := $(VENV)/.installed
 # sources (or under NUMBA_CACHE_DIR): compile them here, once, and again whenever a solver changes.
 # The stamp lives with the cache, so deleting the cache (__pycache__) re-warms too.
 WARM   := $(or $(NUMBA_CACHE_DIR),solvers/__pycache__)/.immerse-kernels-warm
-KERNEL_SOURCES := $(shell find solvers -name '*.py') orchestrator/warmup.py
+KERNEL_SOURCES := $(shell find solvers orchestrator/coupling -name '*.py') orchestrator/warmup.py
 # One thread per MPI rank so ranks do not oversubscribe the cores.
 export NUMBA_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
@@ -30,9 +30,12 @@ $(WARM): $(STAMP) $(KERNEL_SOURCES)
 
 venv: $(STAMP) $(WARM)
 
+# the main job: an elastic plate in a shock tube, the body coupled to the gas (about 10 s), then its
+# pictures: every field at the end, the pressure with the plate over it at every output step
 demo: venv
-	$(VENV)/bin/immerse run cases/taylor_bar --out cases/taylor_bar/out --replace
-	$(VENV)/bin/immerse view cases/taylor_bar/out
+	$(VENV)/bin/immerse run cases/plate_in_shock_2d --out cases/plate_in_shock_2d/out --replace
+	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out
+	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out --field pressure --step all
 
 test: test-serial test-mpi
 

@@ -18,6 +18,8 @@ VTK's log and warning output are switched off (captured into the error if render
 
 from __future__ import annotations
 
+import dataclasses
+
 import ctypes.util
 import json
 import os
@@ -173,6 +175,7 @@ class LineProfile:
     exact_x: np.ndarray | None = None
     exact_values: np.ndarray | None = None
     exact_label: str | None = None
+    bodies: list = dataclasses.field(default_factory=list)  # [(role, lo, hi)] along the axis
 
     @property
     def xlabel(self) -> str:
@@ -249,6 +252,8 @@ def line_figure(prof: LineProfile, size: tuple[int, int] = (1024, 768)):
                 zorder=3)
     ax.plot(prof.x, prof.values, color="tab:blue", marker="o", markersize=2.5, linewidth=0.8,
             label=f"{prof.role} ({len(prof.x)} stations)", zorder=2)
+    for k, (role, lo, hi) in enumerate(prof.bodies):  # coupled bodies in the background
+        ax.axvspan(lo, hi, color="tab:grey", alpha=0.35, zorder=1, label=f"{role} body" if k == 0 else None)
     ax.set_xlabel(prof.xlabel)
     ax.set_ylabel(prof.ylabel)
     ax.set_title(f"{prof.role}: {prof.label}, t = {prof.time:.6g} s (step {prof.step})")
@@ -285,8 +290,8 @@ def _grid(pv, points: np.ndarray, cells: np.ndarray, cell_type: str):
 
 
 def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, preference: str,
-                    title: str, planar: bool, window_size, show_edges):
-    lo, hi = float(np.min(values)), float(np.max(values))
+                    title: str, planar: bool, window_size, show_edges, overlays=()):
+    lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
     if not hi > lo:  # constant field: give the colour map a finite range
         pad = max(abs(lo), 1.0) * 1e-6
         lo, hi = lo - pad, hi + pad
@@ -304,6 +309,9 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
                                           "title_font_size": font, "label_font_size": font,
                                           "position_x": 0.2, "position_y": 0.07, "width": 0.6,
                                           "height": 0.05})
+        for body in overlays:  # coupled bodies over the background (solid grey, their element edges)
+            plotter.add_mesh(body, color="lightgrey", show_edges=True, edge_color="black",
+                             show_scalar_bar=False)
         # tick labels below the bar, the title above it: they overlapped on the same side
         plotter.scalar_bar.SetTextPositionToPrecedeScalarBar()
         plotter.add_text(title, position="upper_left", font_size=font, color="black")
@@ -322,6 +330,26 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
         raise RuntimeError(f"rendering {path.name} failed: {e}; VTK said: {sink.GetOutput().strip()}") from e
     finally:
         plotter.close()
+
+
+def _is_background(role: str) -> bool:
+    from adapters.registry import coupling_side
+
+    return coupling_side(role) == "background"
+
+
+def _foreground_roles(found: dict) -> list[str]:
+    """Roles with bodies in the output, when the output also has a background (a coupled run)."""
+    from adapters.registry import coupling_side
+
+    if not any(coupling_side(r) == "background" for r in found):
+        return []
+    return [r for r in found if coupling_side(r) == "foreground"]
+
+
+def _extent(out_dir: Path, role: str, index: int, axis: int) -> tuple[float, float]:
+    x = read_step(out_dir, role, index)[0][:, axis]
+    return float(x.min()), float(x.max())
 
 
 def _picture_path(pictures: Path, role: str, name: str, index: int) -> Path:
@@ -380,6 +408,7 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
     written: list[Path] = []
     pv = sink = None
     case = None
+    bodies = _foreground_roles(found)  # coupled bodies: drawn in the background's pictures
     for r, chosen, names in plan:
         cells, cell_type = read_mesh_file(out_dir, r)
         first_points = read_step(out_dir, r, min(s[2] for s in found[r]["steps"]))[0]
@@ -392,7 +421,10 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
             if axis is not None:
                 for name in names:
                     path = _picture_path(pictures, r, name, index)
-                    fig = line_figure(line_profile(out_dir, r, name, index, axis, case or None), window_size)
+                    prof = line_profile(out_dir, r, name, index, axis, case or None)
+                    if _is_background(r):
+                        prof.bodies = [(b, *_extent(out_dir, b, index, axis)) for b in bodies]
+                    fig = line_figure(prof, window_size)
                     fig.savefig(path)
                     outdir.record_written(out_dir, path)
                     written.append(path)
@@ -401,6 +433,11 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                 pv, sink = _quiet_vtk()
             points, point_data, cell_data = read_step(out_dir, r, index)
             grid = _grid(pv, points, cells, cell_type)
+            overlays = []
+            if _is_background(r):  # the bodies at the same output step, drawn over the gas
+                for b in bodies:
+                    bcells, btype = read_mesh_file(out_dir, b)
+                    overlays.append(_grid(pv, read_step(out_dir, b, index)[0], bcells, btype))
             for name in names:
                 if name in point_data:
                     label, values = scalar_field(name, point_data[name])
@@ -408,12 +445,16 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                     preference = "point"
                 else:
                     label, values = scalar_field(name, cell_data[name])
+                    if overlays and "blocked_fraction" in cell_data and name != "blocked_fraction":
+                        # zones a body fills hold no gas: left out of the colours (drawn under the body)
+                        values = np.where(cell_data["blocked_fraction"] >= 1.0 - 1e-12, np.nan, values)
                     grid.cell_data[label] = values
                     preference = "cell"
                 path = _picture_path(pictures, r, name, index)
+                title = f"{r}: {label}" + (f" with {', '.join(bodies)} bodies (grey)" if overlays else "")
                 _render_pyvista(pv, sink, path, grid, label, name, values, preference,
-                                f"{r}: {label}\nt = {time:.6g} s (step {step})", planar,
-                                window_size, show_edges)
+                                f"{title}\nt = {time:.6g} s (step {step})", planar,
+                                window_size, show_edges, overlays)
                 outdir.record_written(out_dir, path)
                 written.append(path)
     return written

@@ -391,15 +391,21 @@ def deposit(e, m, dK, zlo, zhi, zs, ns, dim, M):
                     continue
                 n0 = i * ns[0] + j * ns[1] + k * ns[2]
                 if dim == 3:
-                    s = 0.125 * _t8(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
-                                    dK[n0 + o1 + o2] / m[n0 + o1 + o2], dK[n0 + o2] / m[n0 + o2],
-                                    dK[n0 + o4] / m[n0 + o4], dK[n0 + o1 + o4] / m[n0 + o1 + o4],
-                                    dK[n0 + o1 + o2 + o4] / m[n0 + o1 + o2 + o4],
-                                    dK[n0 + o2 + o4] / m[n0 + o2 + o4])
+                    s = 0.125 * _t8(_per_mass(dK, m, n0), _per_mass(dK, m, n0 + o1),
+                                    _per_mass(dK, m, n0 + o1 + o2), _per_mass(dK, m, n0 + o2),
+                                    _per_mass(dK, m, n0 + o4), _per_mass(dK, m, n0 + o1 + o4),
+                                    _per_mass(dK, m, n0 + o1 + o2 + o4), _per_mass(dK, m, n0 + o2 + o4))
                 else:
-                    s = 0.25 * _t4(dK[n0] / m[n0], dK[n0 + o1] / m[n0 + o1],
-                                   dK[n0 + o1 + o2] / m[n0 + o1 + o2], dK[n0 + o2] / m[n0 + o2])
+                    s = 0.25 * _t4(_per_mass(dK, m, n0), _per_mass(dK, m, n0 + o1),
+                                   _per_mass(dK, m, n0 + o1 + o2), _per_mass(dK, m, n0 + o2))
                 e[z] += s
+
+
+@njit(cache=True, inline="always")
+def _per_mass(dK, m, n):
+    """dK / m of a node; a node without mass has no defect (a zone with a round-off of material
+    next to a coupled body's covered zones can have one)."""
+    return dK[n] / m[n] if m[n] > 0.0 else 0.0
 
 
 @njit(cache=True)
