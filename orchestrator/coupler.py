@@ -125,11 +125,23 @@ class Coupler:
         dt_avg = 0.5 * dt if self.dt_prev == 0.0 else 0.5 * (self.dt_prev + dt)
         vstar = P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim)
         background = P.recv(bg, 0, P.TAG_INTERFACE)
-        P.send(fg, c.solve(dt, dt_avg, vstar, background), 0, P.TAG_IMPULSE)
+        impulse = c.solve(dt, dt_avg, vstar, background)
+        if dt > self.FAR_BEYOND * c.stable_limit:
+            raise RuntimeError(
+                f"coupling method {c.method.NAME!r} is unstable at step {self.step}, t = {self.t:.6g} s: the "
+                f"step {dt:.6g} s is more than {self.FAR_BEYOND:g} times its explicit stable-step limit "
+                f"{c.stable_limit:.6g} s (a stiffer spring needs a smaller step: lower its stiffness, or "
+                f"run.dt_scale)")
+        P.send(fg, impulse, 0, P.TAG_IMPULSE)
         state = P.recv(fg, 0, P.TAG_STATE).reshape(2, -1, c.dim)
         P.send(bg, c.background_correction(state[0], state[1]), 0, P.TAG_CORRECT)
         P.send(bg, c.geometry().pack(c.dim), 0, P.TAG_GEOMETRY)
         self.dt_prev = dt
+        if self.step == 1 or (dt > c.stable_limit and not getattr(self, "_warned_limit", False)):
+            if np.isfinite(c.stable_limit):
+                self.log(f"coupling {c.method.NAME}: its explicit stable-step limit is {c.stable_limit:.6g} s; "
+                         f"step {self.step} used {dt:.6g} s" + (" (beyond it: unstable)" if dt > c.stable_limit else ""))
+                self._warned_limit = dt > c.stable_limit
 
     def _coupling_record(self) -> np.ndarray:
         """The coupler's diagnostics row: the exchange totals, and the coupled balances: momentum
@@ -144,7 +156,40 @@ class Coupler:
         scale = max(np.linalg.norm(p_fluid), np.linalg.norm(c.momentum_f), 1e-300)
         bal = np.linalg.norm(p_fluid + c.momentum_f) / scale
         work = bgrow[names.index("interface_energy")] + c.work_f
+        self._check_coupling_energy(work)
         return np.concatenate([row, [bal, work]])
+
+    FAR_BEYOND = 2.0
+    """A step this many times a coupling method's own explicit stable-step limit blows up within a
+    few steps: the run stops before it (closer to the limit the energy check below catches it)."""
+
+    UNSTABLE_WORK = 0.01
+    """A coupling that has given fluid and bodies more than this share of their energy at the start
+    is unstable (a penalty spring stiffer than its explicit step allows): the run stops, naming the
+    method's stable-step limit and the step used."""
+
+    def _check_coupling_energy(self, work: float) -> None:
+        energy = self._coupled_energy()
+        if not hasattr(self, "_energy0"):
+            self._energy0 = max(abs(energy), 1e-300)
+        if work > self.UNSTABLE_WORK * self._energy0:
+            c = self.coupling
+            limit = c.stable_limit
+            lim = f"{limit:.6g} s" if np.isfinite(limit) else "none (it never limits the step)"
+            raise RuntimeError(
+                f"coupling method {c.method.NAME!r} is unstable at step {self.step}, t = {self.t:.6g} s: "
+                f"the interface gave fluid and bodies {work:.6g} J, more than {self.UNSTABLE_WORK:.0%} of "
+                f"their initial energy {self._energy0:.6g} J; its explicit stable-step limit is {lim}, the "
+                f"step used {self.dt_prev:.6g} s")
+
+    def _coupled_energy(self) -> float:
+        """Total energy of the background plus the bodies' kinetic energy, from their last replies."""
+        total = 0.0
+        for r, name in ((self.bg, "total_energy"), (self.fg, "kinetic_energy")):
+            names = self.names[r]
+            if name in names:
+                total += float(self.reply[r][P.REPLY_HEAD + names.index(name)])
+        return total
 
     # ---- messaging -----------------------------------------------------------------------------
     def log(self, msg: str) -> None:

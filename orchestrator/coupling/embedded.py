@@ -92,12 +92,33 @@ def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
     return dataclasses.replace(ops, Bb=new)
 
 
+def background_modulus(ale: dict) -> float:
+    """The largest rho c^2 (Pa) of the background's initial states (regions with a pressure): the
+    modulus K of the Nitsche stiffness gamma K / h, an upper bound over the gas the bodies meet."""
+    from solvers.ale import eos as E
+
+    best = 0.0
+    for r in ale.get("regions", []):
+        if "density" not in r or "pressure" not in r:
+            continue
+        props = dict(ale["materials"][r["material"]])
+        code, par = E.eos_params(props.pop("eos"), props)
+        rho, p = float(r["density"]), float(r["pressure"])
+        e = float(E.energy_from_pressure(code, par, rho, p))
+        _, c, ok = E.state(code, par, rho, e)
+        if ok:
+            best = max(best, rho * float(c) ** 2)
+    return best
+
+
 class EmbeddedCoupling:
     def __init__(self, case: dict, surface: dict):
         self.grid = Grid.from_ale(case["ale"])
         self.dim = self.grid.dim
         self.method = variants.make(case["coupling"])
         self.state = self.method.new_state()
+        self.modulus = background_modulus(case["ale"])
+        self.stable_limit = np.inf  # the variant's own explicit step limit, smallest over the run
         self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
         self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
@@ -153,7 +174,8 @@ class EmbeddedCoupling:
         load = dt_avg * F
         fixed = ~np.isfinite(self.m_solve)
         v_f = vstar_f + np.where(fixed[:, None], 0.0, load / self.mass[:, None])
-        res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state)
+        self.stable_limit = min(self.stable_limit, self.method.stable_dt(ops, m_b, self.m_solve, self.modulus))
+        res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus)
         self.imp_b = res.impulse_b
         imp = load + res.impulse_f
         self.imp_f = imp
@@ -180,14 +202,14 @@ class EmbeddedCoupling:
         return np.concatenate([self.imp_b.ravel(), v_half_e.ravel(), v_bar_e.ravel()])
 
     # ---- diagnostics and checkpoints ---------------------------------------------------------------
-    DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work")
+    DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work", "stable_dt_limit")
 
     def diagnostic_names(self) -> list[str]:
         return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
 
     def diagnostics(self) -> list[float]:
         return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
-                                        self.work_f]
+                                        self.work_f, float(min(self.stable_limit, 1e300))]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}

@@ -171,6 +171,22 @@ def _toml_path_fifo(case, root):  # `immerse check x.toml` on a FIFO given by it
     os.mkfifo(case / "named.toml")
 
 
+COUPLED = SOD_2D + """\
+[materials.block]
+model = "linear_elastic"
+density = 1.0
+youngs_modulus = 10.0
+poisson_ratio = 0.0
+[[lagrange.bodies]]
+name = "block"
+material = "block"
+mesh = { box = { lower = [0.45, 0.0], upper = [0.55, 0.01], cells = [2, 1] } }
+[coupling]
+method = "multiplier"
+condition = "slip"
+"""
+
+
 BAD_INPUTS = [
     # -- numbers that are not finite (every float of the schema) --
     Bad("end_time_nan", "run.end_time = nan", "must be a finite number", edit(ALE2D, "end_time = 0.2", "end_time = nan")),
@@ -218,6 +234,24 @@ BAD_INPUTS = [
         edit(ALE2D, '{ material = "gas", density = 1.0, pressure = 1.0 }',
              '{ material = "gas", region = "x < 0.25", density = 1.0, pressure = 1.0 }')),
     Bad("obstacles_block_every_zone", "ale.obstacles", "block every zone", edit(OBSTACLE, 'region = "x > 0.75"', 'region = "x > -1"')),
+    # -- the coupling of immersed bodies ([coupling]) --
+    Bad("coupling_unknown_method", "coupling.method = 'magic'", "'multiplier'",
+        edit(COUPLED, 'method = "multiplier"', 'method = "magic"')),
+    Bad("coupling_alpha_zero", "coupling.alpha = 0", "> 0", edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nalpha = 0.0')),
+    Bad("coupling_alpha_negative", "coupling.alpha = -1", "> 0", edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nalpha = -1.0')),
+    Bad("coupling_condition_glued", "coupling.condition = 'glued'", "'slip'",
+        edit(COUPLED, 'condition = "slip"', 'condition = "glued"')),
+    Bad("coupling_penalty_without_stiffness", "coupling.stiffness", "required",
+        edit(COUPLED, 'method = "multiplier"', 'method = "penalty"')),
+    Bad("coupling_key_of_another_method", "coupling.stiffness = 1000000000.0", "unknown key for method = 'multiplier'",
+        edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nstiffness = 1e9')),
+    Bad("coupling_body_outside_grid", "lagrange.bodies[0].mesh.box", "inside the background grid",
+        edit(COUPLED, "upper = [0.55, 0.01]", "upper = [1.55, 0.01]")),
+    Bad("coupling_without_background", "ale", "needs the background grid",
+        STEEL_BAR_HEAD + 'mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = [10, 1, 1] } }\n'
+        + '[coupling]\nmethod = "multiplier"\n'),
+    Bad("coupling_lagrangian_background", "ale.mode = 'lagrangian'", "'eulerian'",
+        edit(COUPLED, "[ale]", '[ale]\nmode = "lagrangian"')),
     # -- files that are not regular, too big, or not text --
     Bad("case_toml_fifo", "case.toml", "FIFO", make=_fifo),
     Bad("case_toml_dev_zero", "case.toml", "character device", make=_dev_zero),
