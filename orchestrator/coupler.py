@@ -135,7 +135,13 @@ class Coupler:
         P.send(fg, impulse, 0, P.TAG_IMPULSE)
         state = P.recv(fg, 0, P.TAG_STATE).reshape(2, -1, c.dim)
         P.send(bg, c.background_correction(state[0], state[1]), 0, P.TAG_CORRECT)
-        P.send(bg, c.geometry().pack(c.dim), 0, P.TAG_GEOMETRY)
+        from orchestrator.coupling.geometry import GeometryError
+
+        try:
+            geometry = c.geometry()
+        except GeometryError as e:  # a body left the background grid: say when
+            raise RuntimeError(f"{e} at step {self.step}, t = {self.t + dt:.6g} s") from None
+        P.send(bg, geometry.pack(c.dim), 0, P.TAG_GEOMETRY)
         self.dt_prev = dt
         if self.step == 1 or (dt > c.stable_limit and not getattr(self, "_warned_limit", False)):
             if np.isfinite(c.stable_limit):

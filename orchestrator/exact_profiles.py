@@ -70,17 +70,24 @@ def _riemann(case: dict, params: dict, t: float) -> ExactProfile:
 
 def piston_solution(case: dict):
     """(exact PistonShock, axis, x of the piston face at t = 0, +1 if the piston drives along +axis
-    else -1) of a case with one `{ piston = { velocity } }` face."""
+    else -1) of a case with one `{ piston = { velocity } }` face, or of a piston given in the check's
+    params (`piston_velocity`, `x_face`, `axis`; driving along +axis): a body immersed in the grid."""
     from solvers.ale.exact import piston as exact
 
     ale = case["ale"]
-    faces = [(f, b["piston"]["velocity"]) for f, b in ale["boundaries"].items()
-             if isinstance(b, dict) and "piston" in b]
-    if len(faces) != 1:
-        raise ValueError(f"piston: needs exactly one piston face (found {len(faces)})")
-    face, u_p = faces[0]
-    axis = "xyz".index(face[0])
-    lower = face.endswith("lower")
+    params = (case.get("check") or {}).get("params", {})
+    if "piston_velocity" in params:
+        u_p = float(params["piston_velocity"])
+        axis = "xyz".index(params.get("axis", "x"))
+        lower = True
+    else:
+        faces = [(f, b["piston"]["velocity"]) for f, b in ale["boundaries"].items()
+                 if isinstance(b, dict) and "piston" in b]
+        if len(faces) != 1:
+            raise ValueError(f"piston: needs exactly one piston face (found {len(faces)})")
+        face, u_p = faces[0]
+        axis = "xyz".index(face[0])
+        lower = face.endswith("lower")
     region = ale["regions"][0]
     mat = dict(ale["materials"][region["material"]])
     if mat["eos"] == "tait":
@@ -91,7 +98,7 @@ def piston_solution(case: dict):
     else:
         raise ValueError(f"piston: eos {mat['eos']!r} (needs tait, stiffened_gas or ideal_gas)")
     g = ale["grid"]
-    x_face = g["lower"][axis] if lower else g["upper"][axis]
+    x_face = params.get("x_face", g["lower"][axis] if lower else g["upper"][axis])
     return ex, axis, float(x_face), 1.0 if lower else -1.0
 
 

@@ -23,12 +23,9 @@ Per step n -> n+1, the coupler holds the geometry of the bodies at x^n (pieces, 
    coverages, operators of the next step; the background's remap takes the fractions.
 
 Everything here is in the coupler's canonical orders (sorted global ids), so results do not depend
-on how many ranks either group runs on.  Foreground nodes whose velocity a boundary condition
-prescribes (all components: clamped) count as infinitely heavy in the solve (the condition overrides
-any impulse on them: the constraint must be met by the other side); a node with only some components
-prescribed (a symmetry plane) counts as free, which is exact when the constraint acts across the
-prescribed direction (a slip surface normal to the plane) and otherwise leaves the part of the
-constraint along the prescribed direction to the background alone, one step late.
+on how many ranks either group runs on.  Foreground velocity components a boundary condition
+prescribes count as infinitely heavy in the solve (the condition overrides any impulse on them: the
+constraint must be met by the other side; see ``_solve_masses``).
 """
 from __future__ import annotations
 
@@ -124,10 +121,8 @@ class EmbeddedCoupling:
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
         self.mass = np.asarray(surface["mass"], dtype=np.float64)
         free = np.asarray(surface["free"]).reshape(-1, self.dim)
-        # a node whose every velocity component is prescribed (clamped) is immovable for the solve;
-        # one with some components prescribed (a symmetry plane) counts as free: its condition then
-        # takes the impulse's component along the plane's normal (see the module docstring)
-        self.m_solve = np.where(np.any(free > 0.0, axis=1), self.mass, np.inf)
+        self.free = (free > 0.0).astype(np.float64)
+        self.m_solve = self.mass.copy()
         self.x = np.asarray(surface["x"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.v = np.asarray(surface["v"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.ns = self.x.shape[0]
@@ -172,8 +167,8 @@ class EmbeddedCoupling:
         area = np.where(ops.area > 0.0, ops.area, 1.0)
         F = -(ops.Bf.T @ (R / area[:, None]))
         load = dt_avg * F
-        fixed = ~np.isfinite(self.m_solve)
-        v_f = vstar_f + np.where(fixed[:, None], 0.0, load / self.mass[:, None])
+        self.m_solve = self._solve_masses(ops)
+        v_f = vstar_f + load * self.free / self.mass[:, None]
         self.stable_limit = min(self.stable_limit, self.method.stable_dt(ops, m_b, self.m_solve, self.modulus))
         res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus)
         self.imp_b = res.impulse_b
@@ -183,6 +178,25 @@ class EmbeddedCoupling:
         self.last = StepRecord(imp.sum(axis=0), 0.0, int(diag.get("iterations", 0)),
                                float(diag.get("residual", 0.0)), float(diag.get("interface_dissipation", 0.0)))
         return imp
+
+    def _solve_masses(self, ops) -> np.ndarray:
+        """The surface nodes' masses as the solve sees them, with the components a boundary condition
+        prescribes taken out (the condition undoes any impulse on them): `tied` -- a node with any
+        prescribed component is immovable (inf); `slip` -- the constraint acts along the cut zones'
+        normals n_e: the node's inverse mass along them, sum_c w_c free_c / m with w_c the
+        B^f-weighted mean of n_ec^2 over its zones (exact for axis-aligned normals), inf when none
+        of those components is free."""
+        free = self.free
+        if np.all(free > 0.0):
+            return self.mass
+        if self.method.condition != "slip":
+            return np.where(np.all(free > 0.0, axis=1), self.mass, np.inf)
+        Bf = ops.Bf.tocsc()
+        wsum = np.asarray(Bf.sum(axis=0)).ravel()
+        w = (Bf.T @ (ops.normal ** 2)) / np.where(wsum > 0.0, wsum, 1.0)[:, None]
+        inv = np.einsum("ij,ij->i", w, free) / self.mass
+        inv[wsum == 0.0] = 1.0 / self.mass[wsum == 0.0]
+        return np.divide(1.0, inv, out=np.full_like(inv, np.inf), where=inv > 1e-12 / self.mass)
 
     def background_correction(self, x_new: np.ndarray, v_new: np.ndarray) -> np.ndarray:
         """Step 3: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean velocity_e (nc, dim)] for

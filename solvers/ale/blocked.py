@@ -751,6 +751,23 @@ def _gid(z, zs, gdims, goff):
 
 
 @njit(cache=True)
+def _inside(n, ns, zs, nzones, dim):
+    """Node n's 2^dim zones all lie in the padded block (zone dims from the strides and size)."""
+    i = n // ns[0]
+    r = n - i * ns[0]
+    j = r // ns[1]
+    k = r - j * ns[1]
+    n0 = nzones // zs[0]
+    n1 = zs[0] // zs[1]
+    n2 = zs[1]
+    if i < 1 or i > n0 - 1 or j < 1 or j > n1 - 1:
+        return False
+    if dim == 3 and (k < 1 or k > n2 - 1):
+        return False
+    return True
+
+
+@njit(cache=True)
 def _no_merge(status, dim):
     z = np.zeros(0, np.int64)
     f = np.zeros(0)
@@ -771,7 +788,7 @@ def merge_velocities(un, ugr, m0, m1, v, tot, owned):
         n = un[a]
         gain = tot[g, dim]
         if gain > 0.0:
-            if m1[a] > m0[a]:
+            if m1[a] > m0[a] and m1[a] > 0.0:
                 w = (m1[a] - m0[a]) / gain
                 for d in range(dim):
                     v[n, d] = (m0[a] * v[n, d] + w * tot[g, d]) / m1[a]
@@ -900,7 +917,9 @@ def merge_groups(cand, M, e, phi, VE, zact, usable, v, m, owned, zs, ns, phi_mer
     # of every member zone around them (only members change)
     m0 = np.empty(nu)
     for a in range(nu):
-        m0[a] = m[un[a]]
+        # the gather's nodal mass (what the diagnostics and the next step use) where all the node's
+        # zones lie in the padded block; the remap's nodal mass at its edge (ghost nodes: refilled)
+        m0[a] = _node_mass(un[a], M, zact, zs, ns, dim) if _inside(un[a], ns, zs, M.shape[0], dim) else m[un[a]]
     Mold = np.empty(members.size)
     for a in range(members.size):
         Mold[a] = M[members[a]]
@@ -937,9 +956,11 @@ def merge_groups(cand, M, e, phi, VE, zact, usable, v, m, owned, zs, ns, phi_mer
         n = un[a]
         for d in range(dim):
             part[g, dim + 2] += 0.5 * m0[a] * v[n, d] * v[n, d]
-        if m1[a] <= m0[a]:
+        if m1[a] <= m0[a] or not (m1[a] > 0.0):
+            # (a node that gains only up to zero mass -- a negative zone mass filled -- can hold no
+            # momentum: its own goes to the pool)
             for d in range(dim):
-                part[g, d] += (m0[a] - m1[a]) * v[n, d]
+                part[g, d] += (m0[a] - m1[a]) * v[n, d] if m1[a] <= m0[a] else m0[a] * v[n, d]
         else:
             part[g, dim] += m1[a] - m0[a]
         if m1[a] > 0.0:

@@ -199,12 +199,17 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                         rh = ru
                         eh = eu
                 f, es = face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
-                if solid is not None and abs(f) > M[u]:
+                if solid is not None:
                     # a face sweeping more than the upwind zone holds: a moving body swept that
                     # zone's open part past the face within the step (its swept volume is body,
-                    # not fluid): all of the zone's material crosses, no more (positivity)
-                    f = M[u] if f > 0.0 else -M[u]
-                    es = eu
+                    # not fluid): the zone's material crosses, no more (positivity), shared with
+                    # its other face in proportion to the volumes when both carry material out
+                    so = SV[u] if sv > 0.0 else SV[z + s]
+                    out = -so if sv > 0.0 else so
+                    cap = M[u] if not (out > 0.0) else M[u] * abs(sv) / (abs(sv) + out)
+                    if abs(f) > cap:
+                        f = cap if f > 0.0 else -cap
+                        es = eu
                 F[z] = f
                 ES[z] = es
 
@@ -228,6 +233,9 @@ def sweep_zones(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                 if solid is not None and not (mn > 0.0):
                     V[z] = vn
                     if not (M[z] == 0.0 and fl == 0.0 and fh == 0.0):
+                        if mn != 0.0:  # (energy conserved: a zone a moving body empties may go
+                            # slightly negative; its neighbour takes it over after the remap)
+                            e[z] = (M[z] * e[z] + fl * ES[z] - fh * ES[z + s]) / mn
                         M[z] = mn
                         rho[z] = 0.0
                     continue
@@ -387,8 +395,8 @@ def deposit(e, m, dK, zlo, zhi, zs, ns, dim, M):
         for j in range(zlo[1], zhi[1]):
             for k in range(zlo[2], zhi[2]):
                 z = i * zs[0] + j * zs[1] + k * zs[2]
-                if M is not None and not (M[z] > 0.0):
-                    continue
+                if M is not None and M[z] == 0.0:  # (a zone of negative mass takes its negative
+                    continue  # share: the shares of a node's zones sum to its defect exactly)
                 n0 = i * ns[0] + j * ns[1] + k * ns[2]
                 if dim == 3:
                     s = 0.125 * _t8(_per_mass(dK, m, n0), _per_mass(dK, m, n0 + o1),

@@ -182,8 +182,8 @@ def test_moving_piston_restart_is_bitwise(tmp_path):
 
 def test_plate_in_shock_2d_runs_with_coupled_balances(tmp_path):
     """`make demo`'s scene: the plate bends downstream (its tip moves +x) and the coupled balances
-    hold: mass to round-off, the coupling's impulses paired (measured 4e-16); the gas's energy
-    balance 1.2e-9 (measured; see the open items of the coupling), the plate's to round-off."""
+    hold to round-off (measured: mass 1.3e-13, momentum 4.6e-14, energy 4.5e-14; the coupling's
+    impulses paired to 4e-16)."""
     import numpy as np
 
     from orchestrator import output
@@ -192,7 +192,7 @@ def test_plate_in_shock_2d_runs_with_coupled_balances(tmp_path):
     s = run(CASES / "plate_in_shock_2d", out)
     assert s["final"]["coupling.momentum_balance_rel"] < 1e-13
     c = s["conservation"]
-    assert c["mass_rel"] < 1e-12 and c["momentum_rel"] < 1e-12 and c["energy_rel"] < 1e-8, c
+    assert c["mass_rel"] < 1e-12 and c["momentum_rel"] < 1e-12 and c["energy_rel"] < 1e-12, c
     (t0, _, i0), (t1, _, i1) = output.read_steps(out, "lagrange")[0], output.read_steps(out, "lagrange")[-1]
     x0, x1 = output.read_step(out, "lagrange", i0)[0], output.read_step(out, "lagrange", i1)[0]
     tip = np.argmax(x0[:, 1])
@@ -208,20 +208,23 @@ def _penalty_case(tmp_path, stiffness, end_time=0.05):
     return case
 
 
-@pytest.mark.parametrize("stiffness, limit_s", [(1e3, 3.17e-4), (1e7, 6.5e-6)])
-def test_penalty_beyond_its_stable_step_is_stopped_naming_the_limit(tmp_path, stiffness, limit_s):
+@pytest.mark.parametrize("stiffness, step_1", [(1e3, False), (1e7, True)])
+def test_penalty_beyond_its_stable_step_is_stopped_naming_the_limit(tmp_path, stiffness, step_1):
     """A penalty spring whose explicit limit lies below the solvers' step: stopped, non-zero exit, the
     message naming the method, its limit and the step used; far beyond (k = 1e7 Pa/m: limit 6.5e-6 s
-    against a 5.9e-4 s step) before the first step completes, just beyond (k = 1e3: 3.2e-4 s against
-    3.7e-4 s) when the interface has given more than 1 % of the energy (measured at step 41)."""
+    against a 5.9e-4 s step) at the first step, just beyond (k = 1e3: about 2.5e-4 s against 3.5e-4 s)
+    when the interface has given more than 1 % of the energy (measured at step 47)."""
     import re
 
     r = immerse("run", _penalty_case(tmp_path, stiffness), "--out", tmp_path / "out")
     assert r.returncode != 0
     line = [ln for ln in r.stderr.splitlines() if ln.startswith("immerse: run failed")][0]
     assert "coupling method 'penalty' is unstable" in line, line
-    m = re.search(r"stable-step limit (?:is )?([0-9.e+-]+) s", line)
-    assert m and float(m.group(1)) == pytest.approx(limit_s, rel=0.05), line
+    limit = float(re.search(r"stable-step limit (?:is )?([0-9.e+-]+) s", line).group(1))
+    used = float(re.search(r"step (?:used )?([0-9.e+-]+) s is more|step used ([0-9.e+-]+) s", line).group(
+        1 if step_1 else 2))
+    assert limit < used, line
+    assert ("at step 1," in line) == step_1, line
 
 
 def test_penalty_below_its_stable_step_runs(tmp_path):
@@ -233,3 +236,38 @@ def test_penalty_below_its_stable_step_runs(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert s["final"]["coupling.stable_dt_limit"] > 5 * s["dt"]["max"]  # measured 6.7x
     assert s["final"]["coupling.momentum_balance_rel"] < 1e-13
+
+
+def _piston_variant(tmp_path, name, up=None, cells_y=None):
+    case = tmp_path / name
+    shutil.copytree(CASES / "piston_into_gas", case, ignore=shutil.ignore_patterns("out"))
+    p = case / "case.toml"
+    text = p.read_text()
+    if up is not None:  # up = 0.5: shock speed 1.520656, p* 1.760328, rho* 1.489881
+        text = (text.replace("initial_velocity = [1.0, 0.0]", "initial_velocity = [0.5, 0.0]")
+                .replace("velocity = { x = 1.0 }", "velocity = { x = 0.5 }")
+                .replace("piston_velocity = 1.0", "piston_velocity = 0.5")
+                .replace("reference = 2.926650", "reference = 1.760328")
+                .replace("reference = 2.079156", "reference = 1.489881"))
+    if cells_y is not None:  # a channel of cells_y zones across, the piston filling it
+        h = 0.0025 * cells_y
+        text = (text.replace("upper = [1.0, 0.005], cells = [400, 2]", f"upper = [1.0, {h!r}], cells = [400, {cells_y}]")
+                .replace("upper = [0.05, 0.005], cells = [4, 2]", f"upper = [0.05, {h!r}], cells = [4, {cells_y}]")
+                .replace("at = 0.005", f"at = {h!r}"))
+    p.write_text(text)
+    return case
+
+
+@pytest.mark.parametrize("name, up, cells_y", [("slow_piston", 0.5, None), ("channel", None, 8)])
+def test_piston_into_gas_variants(tmp_path, name, up, cells_y):
+    """The driven piston at up = 0.5 (the column), and at up = 1 in a channel 8 zones wide: each within
+    the case's tolerances of its exact shock state."""
+    s = run(_piston_variant(tmp_path, name, up, cells_y), tmp_path / "out")
+    assert_check_passed(s)
+    coupled_balances(s)
+
+
+def test_piston_into_gas(tmp_path):
+    s = run(CASES / "piston_into_gas", tmp_path / "out")
+    assert_check_passed(s)
+    coupled_balances(s)
