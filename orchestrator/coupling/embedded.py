@@ -51,6 +51,29 @@ class StepRecord:
     dissipation: float = 0.0
 
 
+def facing_the_grid(grid: Grid, pieces):
+    """The pieces that face gas: a body face lying on the grid's boundary and facing out of it (a
+    plate's base on the floor, an end on a periodic or open face) borders no gas -- it counts for the
+    fractions, but a multiplier there would tie the gas nodes at its edge to the body."""
+    on = np.zeros(pieces.zone.size, bool)
+    for d in range(grid.dim):
+        tol = 1e-9 * grid.h[d]
+        c, n = pieces.centroid[:, d], pieces.normal[:, d]
+        on |= (np.abs(c - grid.lower[d]) <= tol) & (n < -0.5)
+        on |= (np.abs(c - grid.upper[d]) <= tol) & (n > 0.5)
+    if not on.any():
+        return pieces
+    keep = np.flatnonzero(~on)
+    qkeep = np.isin(pieces.qpiece, keep)
+    remap = np.full(pieces.zone.size, -1, np.int64)
+    remap[keep] = np.arange(keep.size)
+    return dataclasses.replace(
+        pieces, zone=pieces.zone[keep], body=pieces.body[keep], facet=pieces.facet[keep],
+        area=pieces.area[keep], normal=pieces.normal[keep], centroid=pieces.centroid[keep],
+        qp=pieces.qp[qkeep], qw=pieces.qw[qkeep], qpiece=remap[pieces.qpiece[qkeep]],
+        qf=pieces.qf[qkeep], qb=pieces.qb[qkeep])
+
+
 def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
     """B^b restricted to the corners of each cut zone that lie behind its piece of surface (on the
     body's side: (x_A - c_e) . n_e <= 0, c_e the pieces' area-weighted centroid), each row rescaled
@@ -148,7 +171,8 @@ class EmbeddedCoupling:
         for d in range(self.dim):
             ids, cov = face_coverage(self.grid, pieces, self.n_bodies, d)
             faces.append((ids, np.minimum(cov.sum(axis=1), 1.0)))
-        self.ops = behind_surface(Operators.build(self.grid, pieces, self.facets, self.ns), self.grid, pieces)
+        inner = facing_the_grid(self.grid, pieces)
+        self.ops = behind_surface(Operators.build(self.grid, inner, self.facets, self.ns), self.grid, inner)
         self.pieces = pieces
         area = np.where(self.ops.area > 0.0, self.ops.area, 1.0)[:, None]
         velocity = (self.ops.Bf @ self.v) / area  # the surface's mean velocity per cut zone

@@ -279,6 +279,8 @@ class Blocked:
         self.touched = np.flatnonzero(t).astype(np.int64)
         # the reaction of the static obstacles only: a cut zone's is the body's load (coupler)
         self.touched_static = np.setdiff1d(self.touched, self.cut).astype(np.int64)
+        self.is_cut = np.zeros(B.nzones, np.uint8)  # a coupled body's cut zones (small-zone rules)
+        self.is_cut[self.cut] = 1
         self.SF[:] = 0.0
         if self.cut.size:
             self.SF[self.cut] = np.einsum("ij,ij->i", self.surface_vectors(s), self._cut_velocity)
@@ -371,8 +373,8 @@ class Blocked:
             s._swept(B.X, s.x, s.SV[d], d, lo, hi, B.zs, B.ns)
             s.bc.fill_zones([s.SV[d]], face_dir=d)
             np.multiply(self.A[d], s.SV[d], out=self.ASV[d])
-        bad = lagrangian_open_volumes(self.ASV, self.SB, self.VE, self.phi, s.V, s.M, s.rho, s.p, s.q,
-                                      s.de_h, s.zr[0], s.zr[1], B.zs)
+        bad = lagrangian_open_volumes(self.ASV, self.SB, self.is_cut, self.VE, self.phi, s.V, s.M, s.rho, s.p,
+                                      s.q, s.de_h, s.zr[0], s.zr[1], B.zs)
         if bad >= 0:
             s._check((0.0, bad, BAD_VOLUME), " (Lagrangian grid)")
         if self._sb_zones.size:  # the body-surface volumes belong to this step only
@@ -504,10 +506,13 @@ def open_eos(code, par, M, e, de_h, phi, VE, rho, p, c, q, zlo, zhi, zs):
 
 
 @njit(cache=True)
-def lagrangian_open_volumes(ASV, SB, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
+def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
     """V = phi VE + SB + sum_d (ASV_d[z + s_d] - ASV_d[z]) (open Lagrangian volume; SB the volume a
     coupled body's surface sweeps into the zone, negative when it advances), rho = M / V and the
-    half-step EOS shift de_h of the zones with material.  Returns the first such zone with V <= 0."""
+    half-step EOS shift de_h of the zones with material.  A coupled body's cut zone (CUT) whose open
+    part the body surface and its faces sweep away within the step keeps a sliver of volume (its
+    material leaves through the positivity-limited fluxes and the small-zone merge) and no EOS shift.
+    Returns the first other zone with V <= 0."""
     dim = ASV.shape[0]
     for i in range(zlo[0], zhi[0]):
         for j in range(zlo[1], zhi[1]):
@@ -517,7 +522,7 @@ def lagrangian_open_volumes(ASV, SB, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, z
                 vn = v0 + SB[z]
                 for d in range(dim):
                     vn += ASV[d, z + zs[d]] - ASV[d, z]
-                swept = SB[z] != 0.0 and not (vn > 1e-9 * VE[z])
+                swept = CUT[z] != 0 and not (vn > 1e-9 * VE[z])
                 if swept:
                     # a body surface and the zone's open faces swept past its whole open part
                     # within the step (the surface crossed a zone face, or the zone is small): its
@@ -531,7 +536,7 @@ def lagrangian_open_volumes(ASV, SB, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, z
                     # the half-step EOS shift of the step's p dV; none for a zone a body surface
                     # swept or changed by more than half its volume (a small cut zone: its state
                     # merges with its neighbour's after the remap, the linear shift means nothing)
-                    big = SB[z] != 0.0 and abs(vn - v0) > 0.5 * v0
+                    big = CUT[z] != 0 and abs(vn - v0) > 0.5 * v0
                     de_h[z] = 0.0 if (swept or big) else -(p[z] + q[z]) * (vn - v0) / (2.0 * M[z])
                     rho[z] = M[z] / vn
                 else:
