@@ -458,3 +458,34 @@ def embedded_piston(case, out, history, params):
             name = key.split(".", 1)[1]
             vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
     return vals
+
+
+@register_check("coupled_balances")
+def coupled_balances(case, out, history, params):
+    """A coupled run's bookkeeping: the largest |balance| of every solver and of the coupling over
+    the run (`<role>.<Q>_balance_rel` -> metric `<Q>_balance_rel`, the largest over the roles), the
+    interface work relative to the initial energy of gas + bodies (`interface_work_rel`), and the gas
+    mass left in zones a body fills at the last output (`covered_gas_mass`, kg)."""
+    from orchestrator import output
+
+    vals: dict = {}
+    for key, a in history.items():
+        if key.endswith("_balance_rel") and len(a):
+            name = key.split(".", 1)[1]
+            vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
+    e0 = 0.0
+    for key in ("ale.total_energy", "lagrange.kinetic_energy", "lagrange.stress_power_energy"):
+        if key in history and len(history[key]):
+            e0 += float(history[key][0])
+    if "coupling.interface_work" in history and e0 > 0.0:
+        vals["interface_work_rel"] = float(np.max(np.abs(history["coupling.interface_work"]))) / e0
+    _, _, index = _last_step(out, "ale")
+    cells, _ = output.read_mesh_file(out, "ale")
+    points, _, cd = output.read_step(out, "ale", index)
+    if "blocked_fraction" in cd:
+        g = case["ale"]["grid"]
+        zone_volume = float(np.prod((np.array(g["upper"]) - np.array(g["lower"])) / np.array(g["cells"])))
+        full = cd["blocked_fraction"] >= 1.0 - 1e-12
+        # (density there is 0 when the zone holds nothing: the check's reference is exactly 0)
+        vals["covered_gas_mass"] = float(np.sum(cd["density"][full]) * zone_volume)
+    return vals

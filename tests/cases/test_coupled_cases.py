@@ -271,3 +271,12 @@ def test_piston_into_gas(tmp_path):
     s = run(CASES / "piston_into_gas", tmp_path / "out")
     assert_check_passed(s)
     coupled_balances(s)
+
+
+def test_closed_box_body(tmp_path):
+    """A block thrown through a closed gas box: the case's own check (gas mass, energy and momentum
+    balances, no gas in the zones the block fills, the interface work small) and the coupling's
+    impulses paired."""
+    s = run(CASES / "closed_box_body", tmp_path / "out")
+    assert_check_passed(s)
+    coupled_balances(s)

@@ -455,10 +455,34 @@ def test_embedded_piston(tmp_path):
     assert failed(r) == ["p_left", "p_right"], failed(r)
 
 
+# ---- coupled_balances ----------------------------------------------------------------------------
+def test_coupled_balances(tmp_path):
+    """The bookkeeping of a coupled run: balances from the history, gas left in zones a body fills
+    from the output (a zone filled by the body with density 0.1 left in it fails)."""
+    case = load_case(CASES / "closed_box_body")
+    g = case["ale"]["grid"]
+    nx, ny = g["cells"]
+    pts, cells = structured(np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, 0.6, ny + 1))
+    bf = np.zeros(nx * ny)
+    bf[:10] = 1.0
+    rho = np.where(bf >= 1.0, 0.0, 1.2)
+    hist = history("ale")
+    hist.update({"coupling.interface_work": np.full(5, 1e-6), "ale.total_energy": np.full(5, 1.0)})
+    good = write(tmp_path / "good", "ale", cells, [(4e-3, pts, {"velocity": np.zeros_like(pts)},
+                                                    {"density": rho, "blocked_fraction": bf})])
+    r = checks.run_check(case, good, hist)
+    assert r["passed"], r
+    rho[3] = 0.1
+    bad = write(tmp_path / "bad", "ale", cells, [(4e-3, pts, {"velocity": np.zeros_like(pts)},
+                                                  {"density": rho, "blocked_fraction": bf})])
+    r = checks.run_check(case, bad, hist)
+    assert failed(r) == ["covered_gas_mass"], failed(r)
+
+
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
-              "advected_shape", "embedded_piston"}
+              "advected_shape", "embedded_piston", "coupled_balances"}
     assert set(checks.CHECKS) == tested
 
 
