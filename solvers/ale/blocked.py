@@ -434,11 +434,13 @@ class Blocked:
             self.covered_all, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable, s.v, s.m,
             owned, B.zs, B.ns, PHI_MERGE, gdims, goff)
         dec = s.dec
-        if dec.parallel:  # (collective: every rank takes part in both sums, with or without groups)
-            part = _sum_by_key(dec.comm, ugt, part)
-        ke1 = merge_velocities(un, ugr, m0, m1, s.v, part, owned) if bad < 0 else np.zeros(ugt.size)
-        if dec.parallel:
-            ke1 = _sum_by_key(dec.comm, ugt, ke1[:, None])[:, 0]
+        comm = dec.comm if dec.parallel else None
+        nid = self._node_gid(B, un)
+        mine = owned[un].astype(bool)
+        # (collective: every rank takes part in both sums, with or without groups)
+        part = _group_sums(comm, ugt, ugt[ugr[mine]], nid[mine], part[mine])
+        ke1 = merge_velocities(un, ugr, m0, m1, s.v, part, owned) if bad < 0 else np.zeros(un.size)
+        ke1 = _group_sums(comm, ugt, ugt[ugr[mine]], nid[mine], ke1[mine][:, None])[:, 0]
         if dec.parallel:  # the owners' node velocities to the other ranks' copies (the shared plane
             s.bc.fill_nodes_vector(s.v)  # of a cut and the ghosts) before anything reads them
         if bad >= 0 or ugt.size == 0:
@@ -447,28 +449,49 @@ class Blocked:
         s.e[members] += (part[mgroup, dim + 2] - ke1[mgroup]) / Mg[mgroup]
         return -1
 
+    @staticmethod
+    def _node_gid(B, nodes) -> np.ndarray:
+        """Global node ids (x fastest) of padded node indices."""
+        dim = B.dim
+        i, r = np.divmod(nodes, B.ns[0])
+        j, k = np.divmod(r, B.ns[1])
+        ijk = np.stack([i, j, k], axis=1)[:, :dim] - GHOST + B.offset
+        stride = np.cumprod(np.concatenate([[1], B.cells[:-1] + 1]))
+        return ijk @ stride
+
     def blocked_fraction(self) -> np.ndarray:
         return 1.0 - self.phi
 
 
-def _sum_by_key(comm, keys, values) -> np.ndarray:
-    """values (n, k) of this rank's keys (n,) summed with the rows of the same key on every rank
-    (float64 buffers: counts, then the rows; summed in rank order)."""
-    from mpi4py import MPI
+def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
+    """Per group (keys: this rank's sorted group ids) the sum of the rows (one per owned node: its
+    group id, global node id, values) of every rank, added in the order of (group id, node id): the
+    same numbers in the same order whatever the ranks (float64 buffers; comm None: one rank)."""
+    k = rows.shape[1]
+    mine = np.hstack([row_key[:, None].astype(np.float64), row_node[:, None].astype(np.float64), rows])
+    if comm is not None:
+        from mpi4py import MPI
 
-    k = values.shape[1]
-    rows = np.hstack([keys[:, None].astype(np.float64), values]).ravel()
-    counts = np.zeros(comm.size, dtype=np.int64)
-    comm.Allgather(np.array([rows.size], dtype=np.int64), counts)
-    allrows = np.empty(int(counts.sum()))
-    comm.Allgatherv(rows, [allrows, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
-    allrows = allrows.reshape(-1, k + 1)
-    out = np.zeros_like(values)
-    if keys.size and allrows.size:
-        key = allrows[:, 0].astype(np.int64)
-        pos = np.searchsorted(keys, key)
-        hit = (pos < keys.size) & (keys[np.minimum(pos, keys.size - 1)] == key)
-        np.add.at(out, pos[hit], allrows[hit, 1:])  # (in rank order)
+        counts = np.zeros(comm.size, dtype=np.int64)
+        comm.Allgather(np.array([mine.size], dtype=np.int64), counts)
+        allrows = np.empty(int(counts.sum()))
+        comm.Allgatherv(mine.ravel(), [allrows, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
+        mine = allrows.reshape(-1, k + 2)
+    order = np.lexsort((mine[:, 1], mine[:, 0]))
+    return _ordered_sums(keys.astype(np.int64), mine[order, 0].astype(np.int64), mine[order, 2:].copy())
+
+
+@njit(cache=True)
+def _ordered_sums(keys, row_key, rows):
+    """out[g] = sum of the rows whose key is keys[g], added in row order (rows sorted by key)."""
+    out = np.zeros((keys.size, rows.shape[1]))
+    g = 0
+    for r in range(row_key.size):
+        while g < keys.size and keys[g] < row_key[r]:
+            g += 1
+        if g < keys.size and keys[g] == row_key[r]:
+            for c in range(rows.shape[1]):
+                out[g, c] += rows[r, c]
     return out
 
 
@@ -776,7 +799,7 @@ def _inside(n, ns, zs, nzones, dim):
 def _no_merge(status, dim):
     z = np.zeros(0, np.int64)
     f = np.zeros(0)
-    return status, z, z, z, f, f, z, z, f, np.zeros((0, dim + 3))
+    return status, z, z, z, f, f, z, z, f, np.zeros((0, dim + 4))
 
 
 @njit(cache=True)
@@ -787,25 +810,34 @@ def merge_velocities(un, ugr, m0, m1, v, tot, owned):
     other groups) the pool goes to its nodes by mass; a node left without mass stops.  Returns the
     groups' kinetic energy after, over the nodes this rank owns."""
     dim = v.shape[1]
-    ke1 = np.zeros(tot.shape[0])
+    ke1 = np.zeros(un.size)  # per node (owned ones), summed by group like merge_groups' rows
+    ng = tot.shape[0]
+    # the released mass moves at its mean velocity u = pool / released into the nodes that gain it;
+    # what the gains do not take (a node's change may come from a neighbouring group's zones: gains
+    # and releases of one group need not balance) goes to all of the group's nodes by mass
+    u = np.zeros((ng, dim))
+    rest = np.zeros((ng, dim))
+    for g in range(ng):
+        rel, gain = tot[g, dim + 3], tot[g, dim]
+        for d in range(dim):
+            u[g, d] = tot[g, d] / rel if rel > 0.0 else 0.0
+            rest[g, d] = tot[g, d] - (gain * u[g, d] if rel > 0.0 else 0.0)
     for a in range(un.size):
         g = ugr[a]
         n = un[a]
-        gain = tot[g, dim]
-        if gain > 0.0:
-            if m1[a] > m0[a] and m1[a] > 0.0:
-                w = (m1[a] - m0[a]) / gain
-                for d in range(dim):
-                    v[n, d] = (m0[a] * v[n, d] + w * tot[g, d]) / m1[a]
-        elif m1[a] > 0.0 and tot[g, dim + 1] > 0.0:
+        if m1[a] > m0[a] and m1[a] > 0.0:  # (u = 0 when nothing was released: diluted)
+            m_own = m0[a] if m0[a] > 0.0 else 0.0  # (see merge_groups: negative masses)
             for d in range(dim):
-                v[n, d] += tot[g, d] / tot[g, dim + 1]
+                v[n, d] = (m_own * v[n, d] + (m1[a] - m_own) * u[g, d]) / m1[a]
+        if m1[a] > 0.0 and tot[g, dim + 1] > 0.0:
+            for d in range(dim):
+                v[n, d] += rest[g, d] / tot[g, dim + 1]
         if not (m1[a] > 0.0):
             for d in range(dim):
                 v[n, d] = 0.0
         if owned[n]:
             for d in range(dim):
-                ke1[g] += 0.5 * m1[a] * v[n, d] * v[n, d]
+                ke1[a] += 0.5 * m1[a] * v[n, d] * v[n, d]
     return ke1
 
 
@@ -953,21 +985,32 @@ def merge_groups(cand, M, e, phi, VE, zact, usable, v, m, owned, zs, ns, phi_mer
         nc = _corners(z, zs, ns, dim, corners)
         for c in range(nc):
             m1[np.searchsorted(un, corners[c])] += dmz
-    part = np.zeros((ng, dim + 3))  # [pool (dim), gain, mass after, kinetic energy before]
+    # per owned node: [pool (dim), gain, mass after, kinetic energy before, mass released]; summed
+    # by group in a canonical order (Blocked._merge), so any number of ranks gives the same bits
+    part = np.zeros((nu, dim + 4))
     for a in range(nu):
         if not owned[un[a]]:
             continue
         g = ugr[a]
         n = un[a]
         for d in range(dim):
-            part[g, dim + 2] += 0.5 * m0[a] * v[n, d] * v[n, d]
+            part[a, dim + 2] += 0.5 * m0[a] * v[n, d] * v[n, d]
         if m1[a] <= m0[a] or not (m1[a] > 0.0):
             # (a node that gains only up to zero mass -- a negative zone mass filled -- can hold no
             # momentum: its own goes to the pool)
+            c = (m0[a] - m1[a]) if m1[a] <= m0[a] else m0[a]
             for d in range(dim):
-                part[g, d] += (m0[a] - m1[a]) * v[n, d] if m1[a] <= m0[a] else m0[a] * v[n, d]
+                part[a, d] += c * v[n, d]
+            part[a, dim + 3] += c
+        elif m0[a] < 0.0:
+            # a node of negative mass (round-off of a zone a body empties) that ends with some: its
+            # momentum goes to the pool and it gains all of its new mass from it (bounded velocity)
+            for d in range(dim):
+                part[a, d] += m0[a] * v[n, d]
+            part[a, dim + 3] += m0[a]
+            part[a, dim] += m1[a]
         else:
-            part[g, dim] += m1[a] - m0[a]
+            part[a, dim] += m1[a] - m0[a]
         if m1[a] > 0.0:
-            part[g, dim + 1] += m1[a]
+            part[a, dim + 1] += m1[a]
     return -1, ugt, un, ugr, m0, m1, members, mgroup, Mg, part

@@ -83,3 +83,41 @@ def test_uniform_flow_along_a_spanning_plate_stays_uniform(tmp_path, half_thickn
     v = a.v[a.block.out_nodes]
     gas = a.m[a.block.out_nodes] > 0.0
     assert np.abs(v[gas] - [u, 0.0]).max() < 1e-12 * u
+
+
+def test_ten_thousand_steps_at_the_uncoupled_step_with_slivers(tmp_path):
+    """The multiplier method at the solvers' own explicit step (dt_scale 0.9 of the smaller of the
+    gas's and the plate's limits, never reduced by the coupling) for 10^4 steps, with the plate's
+    faces 1e-7 zone widths inside zones (open fractions 1e-7 there) and a pressure pulse ringing in
+    the walled box: no failure, the gas's energy stays within 1 % (measured -1.5e-3: what the
+    interface and the small-zone merges dissipate), its balances at round-off (measured 5e-15 and
+    3e-14), the step never below half its first value (measured 0.89)."""
+    h = 1.0 / 20
+    eps = 1e-7 * h
+    # plate faces at y = 0.5 -+ (h - eps): 1e-7 of zones 9 and 10 open next to each face
+    case = plate_case(tmp_path, 0.0, 0.3, h - eps, 0.0, "slip", walls=True)
+    text = (tmp_path / "case.toml").read_text()
+    text = text.replace("cells = [40, 40]", "cells = [20, 20]").replace(
+        'regions = [ { material = "gas", density = 1.0, pressure = 1.0, velocity = [0.0, 0.0] } ]',
+        'regions = [ { material = "gas", density = 1.0, pressure = 1.0 },\n'
+        '  { material = "gas", region = "(x - 0.2)**2 + (y - 0.2)**2 < 0.01", density = 1.0, pressure = 3.0 } ]')
+    (tmp_path / "case.toml").write_text(text)
+    case = load_case(tmp_path)
+    r = InProcess(case)
+    from orchestrator.coupling.geometry import blocked_fractions
+
+    _, frac = blocked_fractions(r.coupling.grid, r.coupling.pieces, 1)
+    assert (1.0 - frac[(frac > 0.0) & (frac < 1.0)]).min() < 1e-6  # slivers exist
+    e0 = r.ale.diagnostics()["total_energy"]
+    dts = []
+    for _ in range(10_000):
+        limit = min(r.lag.stable_dt(), r.ale.stable_dt())
+        dts.append(limit)
+        r.advance(0.9 * limit)
+    d = r.ale.diagnostics()
+    print(f"10^4 steps: energy {d['total_energy'] / e0 - 1:.3e} rel, balances {d['mass_balance_rel']:.1e} "
+          f"{d['energy_balance_rel']:.1e}, smallest step / first {min(dts) / dts[0]:.3f}")
+    assert abs(d["mass_balance_rel"]) < 1e-12 and abs(d["energy_balance_rel"]) < 1e-12, d
+    assert abs(d["total_energy"] / e0 - 1.0) < 1e-2, d["total_energy"] / e0
+    # the step is the solvers' own: never below half its first value (a pulse, no collapse)
+    assert min(dts) > 0.5 * dts[0], (min(dts), dts[0])
