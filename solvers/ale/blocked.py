@@ -278,9 +278,9 @@ class Blocked:
         t &= B.real_zone
         self.touched = np.flatnonzero(t).astype(np.int64)
         # the reaction of the static obstacles only: a cut zone's is the body's load (coupler)
-        self.touched_static = np.setdiff1d(self.touched, self.cut).astype(np.int64)
         self.is_cut = np.zeros(B.nzones, np.uint8)  # a coupled body's cut zones (small-zone rules)
         self.is_cut[self.cut] = 1
+        self.touched_static = np.ascontiguousarray(self.touched[self.is_cut[self.touched] == 0])
         self.SF[:] = 0.0
         if self.cut.size:
             self.SF[self.cut] = np.einsum("ij,ij->i", self.surface_vectors(s), self._cut_velocity)
