@@ -7,7 +7,8 @@ with its defaults filled in, e.g. ``{method: "multiplier", condition: "tied" | "
 
 Cross-field rules: a coupled case needs the background (``[ale]``, Eulerian mode: the bodies move
 through the fixed grid) and bodies (``[[lagrange.bodies]]``); every body made from a box or a
-quarter cylinder lies inside the grid's box (a mesh file's nodes are checked when the run starts).
+quarter cylinder lies inside the grid's box (a mesh file's nodes are checked when the run starts);
+one gas material in the background (several materials or void beside coupled bodies: not yet).
 """
 from __future__ import annotations
 
@@ -56,6 +57,12 @@ def check(case: dict, data: dict) -> None:
     bodies = case.get("lagrange", {}).get("bodies", [])
     if not bodies:
         raise CaseError("lagrange.bodies", MISSING, "a [coupling] case needs at least one body ([[lagrange.bodies]])")
+    from solvers.ale.points import several_materials
+
+    if several_materials(case["ale"]):
+        raise CaseError("ale.regions", data["ale"]["regions"],
+                        "one gas material with [coupling] (several materials or void beside coupled "
+                        "bodies are not supported yet)")
     mode = case["ale"].get("mode", "eulerian")
     if mode != "eulerian":
         raise CaseError("ale.mode", data["ale"].get("mode", mode),
