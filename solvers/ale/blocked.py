@@ -734,12 +734,18 @@ agree only to the order of the scheme, and a body crossing a zone face within on
 than the zone holds."""
 
 
+@njit(cache=True, inline="always")
+def _split(n, strides):
+    """(i, j, k) of the flat padded index n (zone or node strides)."""
+    i = n // strides[0]
+    r = n - i * strides[0]
+    j = r // strides[1]
+    return i, j, r - j * strides[1]
+
+
 @njit(cache=True)
 def _corners(z, zs, ns, dim, out):
-    i = z // zs[0]
-    r = z - i * zs[0]
-    j = r // zs[1]
-    k = r - j * zs[1]
+    i, j, k = _split(z, zs)
     n0 = i * ns[0] + j * ns[1] + k * ns[2]
     nc = 0
     for c in range(1 << dim):
@@ -754,10 +760,7 @@ def _corners(z, zs, ns, dim, out):
 @njit(cache=True)
 def _node_mass(n, M, zact, zs, ns, dim):
     """The gather's nodal mass (hydro.gather_*: 2^-dim sum of the active zones' masses)."""
-    i = n // ns[0]
-    r = n - i * ns[0]
-    j = r // ns[1]
-    k = r - j * ns[1]
+    i, j, k = _split(n, ns)
     s = 0.0
     for c in range(1 << dim):
         zi = i - 1 + (c & 1)
@@ -771,20 +774,14 @@ def _node_mass(n, M, zact, zs, ns, dim):
 @njit(cache=True)
 def _gid(z, zs, gdims, goff):
     """Global zone id (x fastest) of padded zone z: the same number on every rank that holds it."""
-    i = z // zs[0]
-    r = z - i * zs[0]
-    j = r // zs[1]
-    k = r - j * zs[1]
+    i, j, k = _split(z, zs)
     return (i + goff[0]) + gdims[0] * ((j + goff[1]) + gdims[1] * (k + goff[2]))
 
 
 @njit(cache=True)
 def _inside(n, ns, zs, nzones, dim):
     """Node n's 2^dim zones all lie in the padded block (zone dims from the strides and size)."""
-    i = n // ns[0]
-    r = n - i * ns[0]
-    j = r // ns[1]
-    k = r - j * ns[1]
+    i, j, k = _split(n, ns)
     n0 = nzones // zs[0]
     n1 = zs[0] // zs[1]
     n2 = zs[1]
