@@ -271,6 +271,7 @@ def _import_solvers() -> None:
     import solvers.ale.mixed  # noqa: F401
     import solvers.lagrange.solver  # noqa: F401
     import orchestrator.coupling.geometry  # noqa: F401  (the coupler's interface geometry)
+    import orchestrator.coupling.matrix_free  # noqa: F401  (its multiplier solve)
 
 
 def warm(log=print) -> dict:

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from orchestrator.coupling import variants
-from orchestrator.coupling.geometry import blocked_fractions, clip_surface, face_coverage
+from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
 from orchestrator.coupling.operators import Operators
 
@@ -93,22 +93,26 @@ def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
     if ops.zones.size == 0:
         return ops
     dim = grid.dim
+    nz, nc = ops.zones.size, 2**dim
     row = np.searchsorted(ops.zones, pieces.zone)
     w = pieces.area
-    cen = np.stack([np.bincount(row, weights=w * pieces.centroid[:, d], minlength=ops.zones.size)
+    cen = np.stack([np.bincount(row, weights=w * pieces.centroid[:, d], minlength=nz)
                     for d in range(dim)], axis=1) / np.where(ops.area > 0.0, ops.area, 1.0)[:, None]
-    Bb = ops.Bb.tocoo()
-    xn = grid.lower + grid.node_ijk(ops.bnodes[Bb.col]) * grid.h
-    side = np.einsum("ij,ij->i", xn - cen[Bb.row], ops.normal[Bb.row])
+    # (Operators.build gives every row all 2^dim corners, in ascending node order)
+    data = ops.Bb.data.reshape(nz, nc)
+    xn = grid.lower + grid.node_ijk(ops.bnodes[ops.Bb.indices]).reshape(nz, nc, dim) * grid.h
+    side = np.einsum("ecj,ej->ec", xn - cen[:, None, :], ops.normal)
     behind = side <= 0.0
-    has = np.bincount(Bb.row, weights=behind.astype(float), minlength=ops.zones.size) > 0
-    keep = behind | ~has[Bb.row]
-    data = np.where(keep, Bb.data, 0.0)
-    sums = np.bincount(Bb.row, weights=data, minlength=ops.zones.size)
+    keep = behind | ~behind.any(axis=1)[:, None]
+    data = np.where(keep, data, 0.0)
+    sums = data.sum(axis=1)
     scale = np.divide(ops.area, sums, out=np.ones_like(sums), where=sums > 0.0)
-    new = sp.csr_matrix((data * scale[Bb.row], (Bb.row, Bb.col)), shape=Bb.shape)
-    new.eliminate_zeros()
-    new.sort_indices()
+    data = data * scale[:, None]
+    # the kept entries, in row order (a CSR with no stored zeros)
+    nk = np.count_nonzero(data, axis=1)
+    nzm = data != 0.0
+    new = sp.csr_matrix((data[nzm], ops.Bb.indices.reshape(nz, nc)[nzm],
+                         np.concatenate([[0], np.cumsum(nk)]).astype(np.int64)), shape=ops.Bb.shape)
     return dataclasses.replace(ops, Bb=new)
 
 
@@ -165,18 +169,17 @@ class EmbeddedCoupling:
         from solvers.ale.coupled import BodyGeometry
 
         pieces = clip_surface(self.grid, self.x, self.facets, self.body)
-        zones, frac = blocked_fractions(self.grid, pieces, self.n_bodies)
-        total = np.minimum(frac.sum(axis=1), 1.0)  # (bodies do not overlap: a sum of disjoint parts)
-        faces = []
-        for d in range(self.dim):
-            ids, cov = face_coverage(self.grid, pieces, self.n_bodies, d)
-            faces.append((ids, np.minimum(cov.sum(axis=1), 1.0)))
+        cov = coverage(self.grid, pieces, self.n_bodies)
+        # (bodies do not overlap: sums of disjoint parts)
+        total = np.minimum(cov.fractions.sum(axis=1), 1.0)
+        faces = tuple((ids, np.minimum(c.sum(axis=1), 1.0)) for ids, c in cov.faces)
         inner = facing_the_grid(self.grid, pieces)
         self.ops = behind_surface(Operators.build(self.grid, inner, self.facets, self.ns), self.grid, inner)
         self.pieces = pieces
         area = np.where(self.ops.area > 0.0, self.ops.area, 1.0)[:, None]
         velocity = (self.ops.Bf @ self.v) / area  # the surface's mean velocity per cut zone
-        return BodyGeometry(zones, total, tuple(faces), self.ops.zones, self.ops.bnodes, velocity)
+        return BodyGeometry(cov.zones, total, faces, self.ops.zones, self.ops.bnodes, velocity, cov.run_start,
+                            cov.run_length)
 
     # ---- the step ----------------------------------------------------------------------------------
     def solve(self, dt: float, dt_avg: float, vstar_f: np.ndarray, background: np.ndarray) -> np.ndarray:

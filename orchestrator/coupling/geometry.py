@@ -452,9 +452,12 @@ def _scan_rows(body, oth, pos, s, m, F, X, snap):
     """Suffix sums (2) along the rows of one axis and the fractions (1) / face coverages they give.
 
     Input sorted by (body, row coordinates ``oth``, position along the axis); ``s = n_d a``,
-    ``m = (c_d - X[pos]) n_d a`` per piece, F the row's face area.  Returns zone rows
-    (body, oth, index, fraction) and face rows (body, oth, plane index, covered fraction), only
-    positive values.
+    ``m = (c_d - X[pos]) n_d a`` per piece, F the row's face area.  Returns the zone rows of the cut
+    positions (body, oth, index, fraction), the face rows next to them (body, oth, plane index,
+    covered fraction), only positive values, and the *runs* of uncut zones inside a body (body, oth,
+    first index, end index): every zone of a run is covered whole, and so is every face between two
+    zones of a run -- neither is listed one by one (their number grows with the body's volume, the
+    rest with its surface).
     """
     n = X.size - 1
     npc = body.size
@@ -468,8 +471,13 @@ def _scan_rows(body, oth, pos, s, m, F, X, snap):
     fo = np.empty((cap, no), np.int64)
     fk = np.empty(cap, np.int64)
     fv = np.empty(cap)
+    rb = np.empty(cap, np.int64)
+    ro = np.empty((cap, no), np.int64)
+    r_0 = np.empty(cap, np.int64)
+    r_1 = np.empty(cap, np.int64)
     nz = 0
     nf = 0
+    nr = 0
     gp = np.empty(npc, np.int64)
     gs = np.empty(npc)
     gm = np.empty(npc)
@@ -489,10 +497,14 @@ def _scan_rows(body, oth, pos, s, m, F, X, snap):
                 gm[ng] = m[p]
                 ng += 1
         Fr = F[r0]
-        # worst case output of this row: every zone and face between its first and last position
-        extra = 2 * (gp[ng - 1] - gp[0] + 3)
-        if nz + extra > zv.size or nf + extra > fv.size:
+        # worst case output of this row: two zones and two faces per position, one run between two
+        extra = 2 * ng + 4
+        if nz + extra > zv.size or nf + extra > fv.size or nr + extra > rb.size:
             c2 = 2 * zv.size + extra
+            rb = _grow1(rb, c2)
+            ro = _grow2(ro, c2)
+            r_0 = _grow1(r_0, c2)
+            r_1 = _grow1(r_1, c2)
             zb = _grow1(zb, c2)
             zo = _grow2(zo, c2)
             zi = _grow1(zi, c2)
@@ -534,21 +546,15 @@ def _scan_rows(body, oth, pos, s, m, F, X, snap):
                     fv[nf] = v
                     nf += 1
             # zones strictly between the previous position and this one are not cut: inside or out
-            if g > 0 and R > 0.5 * Fr:
-                for i in range(gp[g - 1] + 1, p):
-                    zb[nz] = body[r0]
-                    zo[nz] = oth[r0]
-                    zi[nz] = i
-                    zv[nz] = 1.0
-                    nz += 1
-                for k in range(gp[g - 1] + 2, p):
-                    fb[nf] = body[r0]
-                    fo[nf] = oth[r0]
-                    fk[nf] = k
-                    fv[nf] = 1.0
-                    nf += 1
+            if g > 0 and R > 0.5 * Fr and p > gp[g - 1] + 1:
+                rb[nr] = body[r0]
+                ro[nr] = oth[r0]
+                r_0[nr] = gp[g - 1] + 1
+                r_1[nr] = p
+                nr += 1
         r0 = r1
-    return zb[:nz], zo[:nz], zi[:nz], zv[:nz], fb[:nf], fo[:nf], fk[:nf], fv[:nf]
+    return (zb[:nz], zo[:nz], zi[:nz], zv[:nz], fb[:nf], fo[:nf], fk[:nf], fv[:nf],
+            rb[:nr], ro[:nr], r_0[:nr], r_1[:nr])
 
 
 @njit(cache=True)
@@ -681,7 +687,8 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
 
 
 def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
-    """Run the suffix sums along axis d: (zone rows, face rows) of ``_scan_rows``, ids composed."""
+    """Run the suffix sums along axis d: the zone rows, face rows and runs of ``_scan_rows``, as
+    (ids, body, value) for zones and faces and (body, ijk of the first zone, length) for runs."""
     dim = grid.dim
     if pieces.body.size and pieces.body.max() >= n_bodies:
         raise GeometryError(f"pieces name body {int(pieces.body.max())} but n_bodies = {n_bodies}")
@@ -713,16 +720,18 @@ def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
     n_rows = int(np.prod(grid.cells)) // n
     key = (pieces.body * n_rows + row) * (n + 2) + (pos + 1)
     order = np.lexsort((m, s, key))
-    zb, zo, zi, zv, fb, fo, fk, fv = _scan_rows(
+    zb, zo, zi, zv, fb, fo, fk, fv, rb, ro, r0, r1 = _scan_rows(
         pieces.body[order], np.ascontiguousarray(oth[order]), pos[order], s[order], m[order], F[order],
         X, _SNAP)
-    zijk = np.empty((zi.size, dim), np.int64)
-    zijk[:, d] = zi
-    zijk[:, others] = zo
-    fijk = np.empty((fk.size, dim), np.int64)
-    fijk[:, d] = fk
-    fijk[:, others] = fo
-    return (grid.zone_ids(zijk), zb, zv), (grid.face_ids(d, fijk), fb, fv)
+
+    def ijk_of(along, rest):
+        out = np.empty((along.size, dim), np.int64)
+        out[:, d] = along
+        out[:, others] = rest
+        return out
+
+    return ((grid.zone_ids(ijk_of(zi, zo)), zb, zv), (grid.face_ids(d, ijk_of(fk, fo)), fb, fv),
+            (rb, ijk_of(r0, ro), r1 - r0))
 
 
 def _by_id(ids, bodies, values, n_bodies):
@@ -732,21 +741,72 @@ def _by_id(ids, bodies, values, n_bodies):
     return u.astype(np.int64), out
 
 
+def _expand_runs(first, length, d):
+    """ijk (n, dim) of every zone of the runs (first zone ijk, length along axis d)."""
+    total = int(length.sum())
+    which = np.repeat(np.arange(length.size), length)
+    step = np.arange(total) - np.repeat(np.cumsum(length) - length, length)
+    ijk = first[which].copy()
+    ijk[:, d] += step
+    return which, ijk
+
+
+@dataclass
+class Coverage:
+    """The bodies in the grid (``coverage``), listed by what the surface touches: the exact blocked
+    fraction of every zone a surface piece lies in (sorted ids, (nz, n_bodies)); the zones covered
+    whole between them as runs along x, each a range of consecutive zone ids
+    ``[run_start, run_start + run_length)`` of body ``run_body`` (ids x fastest); per axis d the exact
+    covered fraction of the faces next to a cut zone (sorted ids, (nf, n_bodies)) -- every other face
+    a body covers lies between two zones of runs and is covered whole."""
+
+    zones: np.ndarray
+    fractions: np.ndarray
+    run_start: np.ndarray
+    run_length: np.ndarray
+    run_body: np.ndarray
+    faces: tuple
+
+
+def coverage(grid: Grid, pieces: Pieces, n_bodies: int) -> Coverage:
+    """Blocked fractions and face coverages of the clipped bodies (1), (2) with the interior as runs:
+    one scan of the pieces per axis, work linear in the number of pieces."""
+    dim = grid.dim
+    faces = []
+    for d in range(dim):
+        (zid, zb, zv), (fid, fb, fv), runs = _row_coverage(grid, pieces, n_bodies, d)
+        faces.append(_by_id(fid, fb, fv, n_bodies))
+        if d == 0:
+            zones, frac = _by_id(zid, zb, zv, n_bodies)
+            rb, first, length = runs
+    start = grid.zone_ids(first) if length.size else np.zeros(0, np.int64)
+    o = np.argsort(start, kind="stable")
+    return Coverage(zones, frac, start[o].astype(np.int64), length[o].astype(np.int64), rb[o], tuple(faces))
+
+
 def blocked_fractions(grid: Grid, pieces: Pieces, n_bodies: int):
     """``(zone_ids (nz,), fractions (nz, n_bodies))``: the exact volume fraction of every zone covered
     by each body (1) -- cut zones and fully covered ones, only zones with a positive fraction,
-    sorted by zone id."""
-    (ids, b, v), _ = _row_coverage(grid, pieces, n_bodies, 0)
-    return _by_id(ids, b, v, n_bodies)
+    sorted by zone id (every zone listed: for tests and tools; the coupled step uses ``coverage``)."""
+    (ids, b, v), _, (rb, first, length) = _row_coverage(grid, pieces, n_bodies, 0)
+    which, ijk = _expand_runs(first, length, 0)
+    return _by_id(np.concatenate([ids, grid.zone_ids(ijk).reshape(-1)]), np.concatenate([b, rb[which]]),
+                  np.concatenate([v, np.ones(which.size)]), n_bodies)
 
 
 def face_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
     """``(face_ids (nf,), covered (nf, n_bodies))``: the exact covered fraction of every face normal to
-    axis d (grid.face_ids) that a body covers at least partly (2), sorted by face id."""
+    axis d (grid.face_ids) that a body covers at least partly (2), sorted by face id (every face
+    listed, the runs' inner faces too)."""
     if not 0 <= d < grid.dim:
         raise GeometryError(f"axis d must be in [0, {grid.dim}), got {d}")
-    _, (ids, b, v) = _row_coverage(grid, pieces, n_bodies, d)
-    return _by_id(ids, b, v, n_bodies)
+    _, (ids, b, v), (rb, first, length) = _row_coverage(grid, pieces, n_bodies, d)
+    inner = np.maximum(length - 1, 0)  # faces k of the run with k - 1 and k both in it
+    first = first.copy()
+    first[:, d] += 1
+    which, ijk = _expand_runs(first, inner, d)
+    return _by_id(np.concatenate([ids, grid.face_ids(d, ijk).reshape(-1)]), np.concatenate([b, rb[which]]),
+                  np.concatenate([v, np.ones(which.size)]), n_bodies)
 
 
 def closed_surface_from_cells(points, cells, cell_type: str) -> np.ndarray:

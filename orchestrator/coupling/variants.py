@@ -20,6 +20,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from orchestrator.coupling import matrix_free
 from orchestrator.coupling import solve as S
 from orchestrator.coupling.operators import Operators
 
@@ -214,8 +215,9 @@ class Multiplier(CouplingMethod):
         return math.inf
 
     def step(self, ops, v_b, m_b, v_f, m_f, dt, state, modulus=None) -> StepResult:
-        sol = S.solve(ops, m_b, m_f, v_b, v_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
-                      beta=float(self.cfg["beta"]), warm=(state.zones, state.lam))
+        # (matrix_free: the same solve as S.solve, H applied instead of assembled -- the step's hot path)
+        sol = matrix_free.solve(ops, m_b, m_f, v_b, v_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
+                                beta=float(self.cfg["beta"]), warm=(state.zones, state.lam))
         lam = sol.lam.reshape(ops.n_zones, -1)
         state.load_state({"zones": ops.zones, "lam": lam, "gap": np.zeros((ops.n_zones, lam.shape[1]))})
         return StepResult(sol.impulse_b, sol.impulse_f,

@@ -147,8 +147,18 @@ class Blocked:
         self.cut = np.zeros(0, np.int64)
         self.cut_rows = np.zeros(0, np.int64)
         self.n_cut = 0
-        self.covered = np.zeros(0, np.int64)
-        self.covered_all = np.zeros(0, np.int64)
+        self.b_bodies = np.zeros(B.nzones)  # the bodies' fractions, ghost layers included
+        # entries of the face arrays that are faces of this block (entry z of direction d: the lower
+        # d-face of zone z; the upper block face is a ghost zone's entry) and the zones a small zone
+        # of this block's groups may lie in (real zones and the first ghost layer)
+        pad = np.indices(B.zdims).reshape(3, -1)
+        self._face_entries = np.zeros((B.dim, B.nzones), bool)
+        for d in range(B.dim):
+            ok = np.ones(B.nzones, bool)
+            for e in range(B.dim):
+                ok &= (pad[e] >= GHOST) & (pad[e] < GHOST + B.n[e] + (1 if e == d else 0))
+            self._face_entries[d] = ok
+        self._layer1 = np.all([(pad[e] >= GHOST - 1) & (pad[e] < GHOST + B.n[e] + 1) for e in range(B.dim)], axis=0)
         # zones a small zone may merge into: real zones and images of the neighbours' (not the
         # ghosts of physical boundaries)
         from solvers.ale.grid import Z_IMAGE, Z_REAL
@@ -163,12 +173,14 @@ class Blocked:
     # ---- fractions -----------------------------------------------------------------------------
     def combined(self, s, geometry) -> np.ndarray:
         """max(static, bodies) blocked fraction (nzones,) of the coupler's ``geometry``
-        (solvers/ale/coupled.BodyGeometry: global ids and values of the zones the bodies cover, the
-        same on every rank); also takes the geometry's exact face apertures and cut zones."""
+        (solvers/ale/coupled.BodyGeometry: global ids and values of the zones the bodies cut, runs
+        of the zones they cover whole, the same on every rank); also takes the geometry's exact face
+        apertures and cut zones.  Work: the listed zones and faces, the runs' zones of this block,
+        and one pass over the block's faces (no per-zone list of the bodies' interior)."""
         B = s.block
         if geometry is None:
             return self.b_static
-        from solvers.ale.coupled import GlobalIndex
+        from solvers.ale.coupled import GlobalIndex, close_inner_faces
 
         gi = GlobalIndex(B)
         f = np.asarray(geometry.fractions, dtype=np.float64)
@@ -177,32 +189,41 @@ class Blocked:
             k = int(np.flatnonzero(bad)[0])
             ijk = tuple(int(v) for v in gi._split(geometry.zones[k:k + 1], gi.cells)[0, : B.dim])
             raise ValueError(f"blocked fraction {f[k]!r} of ALE zone {ijk} is not in [0, 1]")
-        z, mine = gi.zones(geometry.zones)
-        b = np.zeros(B.nzones)
-        b[z[mine]] = f[mine]
-        self.covered = np.ascontiguousarray(z[mine])  # this block's zones a body covers
-        # ... and those of the first ghost layer (the small-zone merge: every group that touches an
-        # owned node or zone has its donors there, their targets within the second layer)
-        zg, held = gi.zones(geometry.zones, ghosts=1)
-        self.covered_all = np.ascontiguousarray(zg[held])
+        # the bodies' fractions on the padded block, ghost layers included (the small-zone merge sees
+        # the groups of the first ghost layer; the faces of the block's edge see both zones)
+        b = gi.runs(geometry.run_start, geometry.run_length)
+        z, held = gi.zones(geometry.zones, ghosts=GHOST)
+        b[z[held]] = f[held]
+        self.b_bodies = b
         if geometry.faces is not None:
             A = np.ones((B.dim, B.nzones))
+            close_inner_faces(b, np.asarray(B.zs, np.int64), B.dim, A)
             for d, (ids, cov) in enumerate(geometry.faces):
                 fz, fm = gi.faces(d, ids)
                 A[d, fz[fm]] = np.clip(1.0 - np.asarray(cov)[fm], 0.0, 1.0)
+            A[~self._face_entries] = 1.0  # (the ghost zones' own faces: not this block's)
             self.A_body = A
         else:
             self.A_body = None
         cut = np.zeros(0, np.int64) if geometry.cut is None else geometry.cut
         cz, cm = gi.zones(cut)
         self.cut = np.ascontiguousarray(cz[cm])
+        # the real zones the lists name (partly covered, cut, either side of a listed face): the
+        # only ones besides the wholly covered where a body changes a fraction or an aperture
+        named = [z[held], self.cut]
+        if geometry.faces is not None:
+            for d, (ids, _) in enumerate(geometry.faces):
+                fz, fm = gi.faces(d, ids)
+                named += [fz[fm], fz[fm] - B.zs[d]]
+        c = np.unique(np.concatenate(named))
+        self._body_cand = c[B.real_zone[c]]
         self.cut_rows = np.flatnonzero(cm)
         self.n_cut = int(cut.size)
         vel = geometry.velocity if geometry.velocity is not None else np.zeros((cut.size, B.dim))
         self._cut_velocity = np.asarray(vel).reshape(-1, B.dim)[cm]
         nodes = np.zeros(0, np.int64) if geometry.nodes is None else geometry.nodes
         self.nodes = gi.nodes(nodes)  # (local index, real here, owned here) of the requested nodes
-        return np.maximum(b, self.b_static)
+        return np.maximum(np.where(B.real_zone, b, 0.0), self.b_static)
 
     # ---- coupled bodies: the interface of the Lagrange step --------------------------------------
     def cut_forces(self, s) -> np.ndarray:
@@ -255,36 +276,65 @@ class Blocked:
         self.b = np.where(B.real_zone, b, 0.0)  # (checkpointed: the rest follows from it)
         self.phi = phi
         self.solid = (phi <= 0.0).astype(np.uint8)
-        A = np.ones((dim, B.nzones))
-        # min-model apertures of the fractions without exact ones; with a coupled body's exact face
-        # apertures, min-model apertures of the static obstacles only (and the smaller of the two)
-        phi_m = phi if self.A_body is None else self._static_phi(s)
-        pv = B.zview(phi_m)
-        for d in range(dim):
+        if self.A_body is None:
+            # min-model apertures of the fractions
+            self.A = self._min_apertures(s, phi)
+            self.touched = self._touched(s, phi < 1.0, self.A)
+            self.is_cut = np.zeros(B.nzones, np.uint8)
+            self.is_cut[self.cut] = 1
+            self.SF[:] = 0.0
+            self._wall_nodes(s)
+        else:
+            # a coupled body's exact face apertures with the static obstacles' min-model ones (the
+            # smaller of the two); what depends on the static obstacles alone is computed once
+            if not hasattr(self, "_A_static"):
+                ps = self._static_phi(s)
+                self._A_static = self._min_apertures(s, ps)
+                self._touched_static_all = self._touched(s, ps < 1.0, self._A_static)
+                self._wall_nodes(s)
+                self.is_cut = np.zeros(B.nzones, np.uint8)
+                self._prev_cut = np.zeros(0, np.int64)
+            self.A = np.minimum(self._A_static, self.A_body)
+            # zones whose forces need the aperture correction near the bodies: among the zones
+            # the coupler lists (cut, partly covered, next to a listed face), those with phi < 1
+            # or a closed face (a zone a body covers whole has no material and needs none)
+            c = self._body_cand
+            near = phi[c] < 1.0
+            for d in range(dim):
+                near |= (self.A[d, c] < 1.0) | (self.A[d, c + B.zs[d]] < 1.0)
+            self.touched = np.union1d(self._touched_static_all, c[near]).astype(np.int64)
+            self.is_cut[self._prev_cut] = 0  # (the previous step's cut zones: the flags are sparse)
+            self.is_cut[self.cut] = 1
+            self.SF[self._prev_cut] = 0.0
+            self._prev_cut = self.cut
+        # the reaction of the static obstacles only: a cut zone's is the body's load (coupler)
+        self.touched_static = np.ascontiguousarray(self.touched[self.is_cut[self.touched] == 0])
+        if self.cut.size:
+            self.SF[self.cut] = np.einsum("ij,ij->i", self.surface_vectors(s), self._cut_velocity)
+
+    def _min_apertures(self, s, phi) -> np.ndarray:
+        """Min-model face apertures: a face is as open as the less open of its two zones."""
+        B = s.block
+        A = np.ones((self.dim, B.nzones))
+        pv = B.zview(phi)
+        for d in range(self.dim):
             av = B.zview(A[d])
             lo = [slice(None)] * 3
             hi = [slice(None)] * 3
             lo[d] = slice(0, B.zdims[d] - 1)
             hi[d] = slice(1, B.zdims[d])
             av[tuple(hi)] = np.minimum(pv[tuple(lo)], pv[tuple(hi)])
-        if self.A_body is not None:
-            np.minimum(A, self.A_body, out=A)
-        self.A = A
-        # zones whose forces need the aperture correction: cut zones and zones with a closed face
-        t = (phi < 1.0)
-        for d in range(dim):
+        return A
+
+    def _touched(self, s, partial, A) -> np.ndarray:
+        """Real zones that are partly blocked or have a closed face (the aperture correction's)."""
+        B = s.block
+        t = partial.copy()
+        for d in range(self.dim):
             up = np.roll(A[d], -int(B.zs[d]))
             t |= (A[d] < 1.0) | (up < 1.0)
         t &= B.real_zone
-        self.touched = np.flatnonzero(t).astype(np.int64)
-        # the reaction of the static obstacles only: a cut zone's is the body's load (coupler)
-        self.is_cut = np.zeros(B.nzones, np.uint8)  # a coupled body's cut zones (small-zone rules)
-        self.is_cut[self.cut] = 1
-        self.touched_static = np.ascontiguousarray(self.touched[self.is_cut[self.touched] == 0])
-        self.SF[:] = 0.0
-        if self.cut.size:
-            self.SF[self.cut] = np.einsum("ij,ij->i", self.surface_vectors(s), self._cut_velocity)
-        self._wall_nodes(s)
+        return np.flatnonzero(t).astype(np.int64)
 
     def _static_phi(self, s) -> np.ndarray:
         B = s.block
@@ -430,8 +480,11 @@ class Blocked:
         hold it, and each node is counted by its owner only, then summed by group (target id)."""
         B = s.block
         owned = B.owned.astype(np.uint8)
+        # candidates: zones of the first ghost layer or inside that a body covers and that hold
+        # material (the cut zones, and any a body has just covered)
+        cand = np.flatnonzero((self.b_bodies > 0.0) & (s.M != 0.0) & self._layer1)
         bad, ugt, un, ugr, m0, m1, members, mgroup, Mg, part = merge_groups(
-            self.covered_all, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable, s.v, s.m,
+            cand, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable, s.v, s.m,
             owned, B.zs, B.ns, PHI_MERGE, gdims, goff)
         dec = s.dec
         comm = dec.comm if dec.parallel else None

@@ -22,18 +22,28 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from solvers.ale.grid import GHOST
 
 
 @dataclass
 class BodyGeometry:
-    zones: np.ndarray  # (nb,) int64 zone ids with a blocked fraction > 0
+    zones: np.ndarray  # (nb,) int64 zone ids with a blocked fraction > 0 (besides the runs)
     fractions: np.ndarray  # (nb,) float64 blocked fraction (all bodies together) in [0, 1]
     faces: tuple | None = None  # per axis d: (face ids (nf,) int64, covered fraction (nf,)) or None
     cut: np.ndarray | None = None  # (nc,) int64 cut zones (sorted)
     nodes: np.ndarray | None = None  # (nn,) int64 nodes the next constraint solve needs (sorted)
     velocity: np.ndarray | None = None  # (nc, dim) the surface's mean velocity in each cut zone
+    # zones covered whole, as runs of consecutive zone ids [start, start + length) (along x): a body's
+    # interior costs one pair per grid row, not one entry per zone; every face between two covered
+    # zones (fraction 1) is covered whole unless ``faces`` lists it
+    run_start: np.ndarray | None = None
+    run_length: np.ndarray | None = None
+
+    def blocks_anything(self) -> bool:
+        return bool(np.any(np.asarray(self.fractions) != 0.0)
+                    or (self.run_length is not None and np.any(self.run_length > 0)))
 
     def pack(self, dim: int) -> np.ndarray:
         """One float64 buffer (ids below 2^53 are exact in float64)."""
@@ -43,7 +53,7 @@ class BodyGeometry:
         for f in faces:
             ids, cov = f if f is not None else (np.zeros(0), np.zeros(0))
             parts += [np.array([float(len(ids))]), np.asarray(ids, np.float64), np.asarray(cov, np.float64)]
-        for a in (self.cut, self.nodes, self.velocity):
+        for a in (self.cut, self.nodes, self.velocity, self.run_start, self.run_length):
             a = np.zeros(0) if a is None else a
             parts += [np.array([float(a.size)]), a.astype(np.float64).ravel()]
         return np.concatenate(parts)
@@ -69,7 +79,10 @@ class BodyGeometry:
         cut = take(int(take(1)[0])).astype(np.int64)
         nodes = take(int(take(1)[0])).astype(np.int64)
         velocity = take(int(take(1)[0])).reshape(-1, dim).copy()
-        return cls(zones, fractions, tuple(faces) if has_faces else None, cut, nodes, velocity)
+        run_start = take(int(take(1)[0])).astype(np.int64)
+        run_length = take(int(take(1)[0])).astype(np.int64)
+        return cls(zones, fractions, tuple(faces) if has_faces else None, cut, nodes, velocity, run_start,
+                   run_length)
 
 
 class GlobalIndex:
@@ -87,6 +100,29 @@ class GlobalIndex:
         for d in range(self.dim):
             r, ijk[:, d] = np.divmod(r, extent[d])
         return ijk
+
+    def padded_range(self):
+        """Global ijk (3,) of padded zone 0 and the end (exclusive) of the padded block, clipped to
+        the grid below (the ghost layers beyond the grid's faces hold no coupled-body zone)."""
+        B = self.block
+        lo = np.zeros(3, np.int64)
+        hi = np.ones(3, np.int64)
+        lo[: self.dim] = B.offset - GHOST
+        hi[: self.dim] = B.offset + B.n + GHOST
+        return lo, hi
+
+    def runs(self, start, length) -> np.ndarray:
+        """(nzones,) 1.0 in every padded zone (ghost layers included) of the runs, else 0."""
+        B = self.block
+        out = np.zeros(B.nzones)
+        if start is None or len(start) == 0:
+            return out
+        lo, hi = self.padded_range()
+        cells = np.ones(3, np.int64)
+        cells[: self.dim] = self.cells
+        fill_runs(np.asarray(start, np.int64), np.asarray(length, np.int64), cells, lo, hi,
+                  np.asarray(B.zs, np.int64), out)
+        return out
 
     def zones(self, ids, ghosts: int = 0):
         """(local padded zone index, mask: a real zone of this block -- or, with ``ghosts`` = k,
@@ -125,3 +161,36 @@ class GlobalIndex:
         pad = np.zeros((ids.size, 3), np.int64)
         pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
         return pad @ B.zs, inside
+
+
+@njit(cache=True)
+def fill_runs(start, length, cells, lo, hi, zs, out):
+    """out[z] = 1 for every padded zone z of the runs (global zone ids ``[start, start + length)``
+    along x, x fastest) whose global ijk lies in [lo, hi) (the part of the grid the padded block
+    holds: its real zones and ghost layers; padded index of ``lo`` is 0).  Work: runs + zones set."""
+    nx, ny = cells[0], cells[1]
+    for r in range(start.size):
+        s0 = start[r]
+        i0 = s0 % nx
+        j = (s0 // nx) % ny
+        k = s0 // (nx * ny)
+        if j < lo[1] or j >= hi[1] or k < lo[2] or k >= hi[2]:
+            continue
+        a = max(i0, lo[0])
+        b = min(i0 + length[r], hi[0])
+        base = (j - lo[1]) * zs[1] + (k - lo[2]) * zs[2]
+        for i in range(a, b):
+            out[(i - lo[0]) * zs[0] + base] = 1.0
+
+
+@njit(cache=True)
+def close_inner_faces(b, zs, dim, A):
+    """A[d, z] = 0 (the lower d-face of padded zone z closed) where z and its lower d-neighbour are
+    both covered whole (b == 1): the faces inside a body, which the coupler does not list."""
+    for z in range(b.size):
+        if b[z] < 1.0:
+            continue
+        for d in range(dim):
+            w = z - zs[d]
+            if w >= 0 and b[w] >= 1.0:
+                A[d, z] = 0.0

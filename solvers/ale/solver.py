@@ -674,10 +674,10 @@ class AleSolver:
         material into the blocked part (solvers/ale/blocked.py).
         """
         if self.mode != "eulerian" or not self._pending_remap:
-            if blocked is not None and self.mode != "eulerian" and np.any(np.asarray(blocked.fractions) != 0.0):
+            if blocked is not None and self.mode != "eulerian" and blocked.blocks_anything():
                 raise ValueError("blocked volume fractions need mode = 'eulerian'")
             return
-        if self._blk is None and blocked is not None and np.any(np.asarray(blocked.fractions) != 0.0):
+        if self._blk is None and blocked is not None and blocked.blocks_anything():
             if self.mm is not None:
                 raise ValueError("blocked volume fractions with several ALE materials are not supported yet")
             from solvers.ale.blocked import Blocked

@@ -130,13 +130,14 @@ def test_moving_piston_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
     a, b = outs["ale=1"], outs["ale=2"]
     assert_same_steps(a, b)
     # the diagnostics are sums over the ranks (another order): equal within 1e-12 relative, the
-    # balance residuals both at round-off
+    # balance residuals both at round-off (the largest, the gas's momentum against its gross momentum
+    # m|v|: measured 4.8e-14, 1.4e-13 and 2.4e-13 with three round-off orders of the multiplier solve)
     sa = json.loads((a / "summary.json").read_text())["final"]
     sb = json.loads((b / "summary.json").read_text())["final"]
     assert sa.keys() == sb.keys()
     for k in sa:
         if k.endswith("_rel"):
-            assert abs(sa[k]) < 1e-13 and abs(sb[k]) < 1e-13, k
+            assert abs(sa[k]) < 5e-13 and abs(sb[k]) < 5e-13, k
         else:
             assert sa[k] == pytest.approx(sb[k], rel=1e-12, abs=1e-300), k
 

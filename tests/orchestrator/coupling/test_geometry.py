@@ -11,7 +11,7 @@ import itertools
 import numpy as np
 import pytest
 
-from orchestrator.coupling.geometry import (GeometryError, Pieces, _TRI_BARY, _TRI_W, blocked_fractions,
+from orchestrator.coupling.geometry import (GeometryError, Pieces, _TRI_BARY, _TRI_W, blocked_fractions, coverage,
                                             clip_surface, closed_surface_from_cells, cube_sphere_surface,
                                             face_coverage, geometry_cost)
 from orchestrator.coupling.grid import Grid
@@ -592,3 +592,51 @@ def test_geometry_cost_reports_timings():
     out = geometry_cost(600)
     assert out["n_facets"] == 600 and out["n_pieces"] > out["n_facets"]
     assert all(out[k] >= 0 for k in ("clip_s", "fractions_s", "faces_s"))
+
+
+# ------------------------------------------------------------------ the interior as runs (coverage)
+def _coverage_cases():
+    out = {}
+    for name in sorted(POLYGONS):
+        g = Grid([0.0, 0.0], [1.0, 1.0], [13, 11])
+        x, segs = polygon(POLYGONS[name])
+        out[name] = (g, clip_surface(g, x, segs))
+    for name, (g, x, q) in bodies_3d().items():
+        out[name] = (g, clip_surface(g, x, q))
+    return out
+
+
+@pytest.mark.parametrize("name", ["rotated_square", "regular_64gon", "rotated_cube", "grid_box", "sphere"])
+def test_coverage_runs_and_listed_values_are_the_full_lists(name):
+    """`coverage` lists only what the surface touches and gives the interior as runs along x; with the
+    runs' zones at fraction 1 and every face between two zones at fraction 1 covered whole, it is
+    exactly (bit for bit) the full lists of blocked_fractions / face_coverage -- and it lists fewer."""
+    g, pieces = _coverage_cases()[name]
+    c = coverage(g, pieces, 1)
+    zones, frac = blocked_fractions(g, pieces, 1)
+    run_zones = np.concatenate([np.arange(s, s + n) for s, n in zip(c.run_start, c.run_length)] or [[]])
+    run_zones = run_zones.astype(np.int64)
+    assert np.intersect1d(run_zones, c.zones).size == 0
+    b = np.zeros(g.n_zones)
+    b[c.zones] = c.fractions[:, 0]
+    b[run_zones] = 1.0
+    assert np.array_equal(np.flatnonzero(b), zones) and np.array_equal(b[zones], frac[:, 0])
+    if name != "grid_box":  # (a box on the grid planes: every covered zone in a run, none listed)
+        assert c.zones.size < zones.size
+    shape = [int(v) for v in g.cells[::-1]]
+    full = (b == 1.0).reshape(shape)  # zones covered whole, indexed [k, j, i] (x fastest)
+    for d in range(g.dim):
+        fids, cov = face_coverage(g, pieces, 1, d)
+        a = g.dim - 1 - d  # axis of d in the [k, j, i] array
+        lo = [slice(None)] * g.dim
+        hi = [slice(None)] * g.dim
+        lo[a], hi[a] = slice(0, -1), slice(1, None)
+        inner = np.zeros([v + (1 if i == a else 0) for i, v in enumerate(shape)], bool)
+        mid = [slice(None)] * g.dim
+        mid[a] = slice(1, -1)
+        inner[tuple(mid)] = full[tuple(lo)] & full[tuple(hi)]
+        f = np.where(inner.ravel(), 1.0, 0.0)
+        ids, val = c.faces[d]
+        assert not np.any(inner.ravel()[ids] & (val[:, 0] != 1.0))
+        f[ids] = val[:, 0]
+        assert np.array_equal(np.flatnonzero(f), fids) and np.array_equal(f[fids], cov[:, 0])

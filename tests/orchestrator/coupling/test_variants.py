@@ -171,9 +171,13 @@ def test_multiplier_variant_is_the_solve_with_no_step_limit_and_a_warm_start():
     state = mult.new_state()
     r = mult.step(ops, v_b, m_b, v_f, m_f, 1e-3, state)
     sol = S.solve(ops, m_b, m_f, v_b, v_f, 1e-3, "slip", 100.0, 0.5)
-    assert np.array_equal(r.impulse_b, sol.impulse_b) and np.array_equal(r.impulse_f, sol.impulse_f)
-    assert r.diagnostics["iterations"] == sol.iterations and r.diagnostics["interface_dissipation"] == sol.dissipation
-    assert np.array_equal(state.lam[:, 0], sol.lam) and np.array_equal(state.zones, ops.zones)
+    # (the variant applies H without assembling it, coupling.matrix_free: equal to round-off)
+    def close(a, b):
+        return np.abs(a - b).max() <= 1e-13 * np.abs(b).max()
+    assert close(r.impulse_b, sol.impulse_b) and close(r.impulse_f, sol.impulse_f)
+    assert r.diagnostics["iterations"] == sol.iterations
+    assert abs(r.diagnostics["interface_dissipation"] - sol.dissipation) <= 1e-13 * sol.dissipation
+    assert close(state.lam[:, 0], sol.lam) and np.array_equal(state.zones, ops.zones)
     r2 = mult.step(ops, v_b * 1.001, m_b, v_f * 1.001, m_f, 1e-3, state)
     assert r2.diagnostics["iterations"] < r.diagnostics["iterations"]  # measured 14 -> 11
 

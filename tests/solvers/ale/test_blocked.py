@@ -570,3 +570,49 @@ def test_checkpoint_restart_with_coupler_fractions_across_rank_counts(static):
             [k for k, v in diff.items() if not k.startswith("diag:") and not v[1]]
         if bitwise:
             assert all(v[1] for v in diff.values())
+
+
+@pytest.mark.parametrize("box", [False, True])
+def test_coupler_runs_give_the_same_fractions_and_apertures_as_full_lists(box):
+    """The coupler sends a body's interior as runs of zone ids (orchestrator.coupling.geometry.coverage);
+    the background fills them and closes the faces between two covered zones: open fractions, face
+    apertures, solid flags and the zones that get the aperture correction are bit for bit those of
+    the same body listed zone by zone and face by face (a rotated square; a box on the grid planes,
+    whose covered zones all lie in runs), with a static obstacle beside it."""
+    from orchestrator.coupling.geometry import blocked_fractions, clip_surface, coverage, face_coverage
+    from orchestrator.coupling.grid import Grid
+    from solvers.ale.coupled import BodyGeometry
+
+    n = (26, 22)
+    cfg = {"dimension": 2, "mode": "eulerian", "grid": {"lower": [0.0, 0.0], "upper": [1.0, 1.0], "cells": list(n)},
+           "materials": {"gas": {"eos": "ideal_gas", "gamma": 1.4}},
+           "regions": [{"material": "gas", "density": 1.0, "pressure": 1.0}],
+           "obstacles": [{"region": "x > 0.9"}]}
+    g = Grid([0.0, 0.0], [1.0, 1.0], list(n))
+    if box:  # on grid planes: x in [4, 12] h_x, y in [5, 14] h_y
+        v = np.array([[4 / 26, 5 / 22], [12 / 26, 5 / 22], [12 / 26, 14 / 22], [4 / 26, 14 / 22]])
+    else:
+        t = 0.37
+        v = 0.27 * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) @ np.array(
+            [[np.cos(t), np.sin(t)], [-np.sin(t), np.cos(t)]]) + [0.45, 0.5]
+    segs = np.stack([np.arange(4), (np.arange(4) + 1) % 4], 1)
+    pieces = clip_surface(g, v, segs)
+    cut = np.unique(pieces.zone)
+    nodes = np.unique(g.zone_nodes(cut))
+    zones, frac = blocked_fractions(g, pieces, 1)
+    faces = tuple((lambda f: (f[0], f[1][:, 0]))(face_coverage(g, pieces, 1, d)) for d in range(2))
+    listed = BodyGeometry(zones, frac[:, 0], faces, cut, nodes)
+    c = coverage(g, pieces, 1)
+    runs = BodyGeometry(c.zones, c.fractions[:, 0], tuple((i, f[:, 0]) for i, f in c.faces), cut, nodes,
+                        run_start=c.run_start, run_length=c.run_length)
+    assert c.run_length.sum() > 0 and (c.zones.size == 0) == box
+    a, b = AleSolver(None, cfg, bodies=listed)._blk, AleSolver(None, cfg, bodies=runs)._blk
+    for name in ("b", "phi", "solid", "A"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    # the aperture correction: the same zones among those with material (the covered ones have none)
+    s = AleSolver(None, cfg, bodies=runs)
+    held = s.M > 0.0
+    assert np.array_equal(a.touched[held[a.touched]], b.touched[held[b.touched]])
+    # the static obstacle's reaction: the same zones but the covered ones (no material, no force)
+    assert np.all(np.isin(b.touched_static, a.touched_static))
+    assert not np.any(held[np.setdiff1d(a.touched_static, b.touched_static)])

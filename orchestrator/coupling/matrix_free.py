@@ -1,0 +1,331 @@
+"""The stabilised multiplier solve of one coupled step without assembling H (the step's hot path).
+
+Same system as `solve.assemble` / `solve.solve_system` (read that module for the equations):
+
+    H λ = g*,   H = Δt (B^b M_b^-1 B^bT + Bf M_f^-1 BfT) [∘ n·n for slip] + diag(s/α) + J,
+
+but H is never formed: every CG iteration applies it as B M^-1 B^T p (two scatter / gather passes
+over the operators' entries per side) plus the jump term over the zone pairs.  Why: forming H is a
+sparse matrix-matrix product whose work is small (each zone couples to its few neighbours) but
+whose assembly through scipy costs ~20 sparse constructions per step, several milliseconds of
+interpreter overhead for any interface size -- most of the coupler's time on a 1000-facet surface.
+Here the whole solve is one numba kernel: material columns, the diagonal (for the Jacobi
+preconditioner and the stabilisation scale s_e), the Galilean relative velocity, Jacobi-PCG with the
+warm start and the impulses, in a fixed loop order (equal inputs give bitwise-equal outputs).
+
+The operators arrive as CSR arrays (rows = cut zones); the material restriction of
+`solve.material_operators` is applied on the fly: void background nodes (m_b = 0) drop out and each
+row's remaining weights are rescaled to sum to A_e again.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from orchestrator.coupling.solve import MAX_ITER, RTOL, MultiplierSolveError, Solution
+
+
+@njit(cache=True)
+def _material(indptr, indices, data, m_b, area):
+    """Bb restricted to the material nodes, rows rescaled to sum to A_e: (weights like data, active
+    row mask, reference column per row: the first material column, -1 if none)."""
+    nz = indptr.size - 1
+    w = np.zeros(data.size)
+    active = np.zeros(nz, np.bool_)
+    ref = np.full(nz, -1, np.int64)
+    for e in range(nz):
+        s = 0.0
+        for k in range(indptr[e], indptr[e + 1]):
+            if m_b[indices[k]] > 0.0:
+                s += data[k]
+                if ref[e] < 0:
+                    ref[e] = indices[k]
+        if s > 0.0:
+            active[e] = True
+            f = area[e] / s
+            for k in range(indptr[e], indptr[e + 1]):
+                if m_b[indices[k]] > 0.0:
+                    w[k] = data[k] * f
+    return w, active, ref
+
+
+@njit(cache=True)
+def _apply(p, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c,
+           tb, tf, out):
+    """out = H p over the active rows (p, out (nz, k); k = 1 for slip, dim for tied)."""
+    nz = p.shape[0]
+    dim = tb.shape[1]
+    tb[:] = 0.0
+    tf[:] = 0.0
+    for e in range(nz):
+        if not active[e]:
+            continue
+        for c in range(dim):
+            v = p[e, 0] * normal[e, c] if slip else p[e, c]
+            for k in range(bp[e], bp[e + 1]):
+                tb[bi[k], c] += bw[k] * v
+            for k in range(fp[e], fp[e + 1]):
+                tf[fi[k], c] += fw[k] * v
+    for a in range(tb.shape[0]):
+        for c in range(dim):
+            tb[a, c] *= inv_mb[a]
+    for a in range(tf.shape[0]):
+        for c in range(dim):
+            tf[a, c] *= inv_mf[a]
+    for e in range(nz):
+        for c in range(out.shape[1]):
+            out[e, c] = 0.0
+        if not active[e]:
+            continue
+        for c in range(dim):
+            s = 0.0
+            for k in range(bp[e], bp[e + 1]):
+                s += bw[k] * tb[bi[k], c]
+            for k in range(fp[e], fp[e + 1]):
+                s += fw[k] * tf[fi[k], c]
+            if slip:
+                out[e, 0] += dt * s * normal[e, c]
+            else:
+                out[e, c] = dt * s
+        for c in range(out.shape[1]):
+            out[e, c] += diag_c[e] * p[e, c]
+    for q in range(pi.size):
+        i, j = pi[q], pj[q]
+        for c in range(out.shape[1]):
+            d = pw[q] * (p[i, c] - p[j, c])
+            out[i, c] += d
+            out[j, c] -= d
+
+
+@njit(cache=True)
+def _dot(a, b):
+    s = 0.0
+    for e in range(a.shape[0]):
+        for c in range(a.shape[1]):
+            s += a[e, c] * b[e, c]
+    return s
+
+
+@njit(cache=True)
+def _solve_kernel(bp, bi, bd, m_b, fp, fi, fw, m_f, area, full_area, normal, slip, pairs, alpha, beta, dt,
+                  v_b, v_f, x0, rtol, max_iter):
+    nz = area.size
+    dim = v_b.shape[1]
+    nb = m_b.size
+    ns = m_f.size
+    k = 1 if slip else dim
+    bw, active, ref = _material(bp, bi, bd, m_b, area)
+    inv_mb = np.zeros(nb)
+    for a in range(nb):
+        if m_b[a] > 0.0:
+            inv_mb[a] = 1.0 / m_b[a]
+    inv_mf = np.zeros(ns)
+    for e in range(nz):
+        for q in range(fp[e], fp[e + 1]):
+            inv_mf[fi[q]] = 1.0 / m_f[fi[q]]
+    # the unstabilised diagonal, the scale s_e of a full cut and C^-1's diagonal s_e / alpha
+    du = np.zeros(nz)
+    for e in range(nz):
+        if not active[e]:
+            continue
+        s = 0.0
+        for q in range(bp[e], bp[e + 1]):
+            s += bw[q] * bw[q] * inv_mb[bi[q]]
+        for q in range(fp[e], fp[e + 1]):
+            s += fw[q] * fw[q] * inv_mf[fi[q]]
+        du[e] = dt * s
+    scale = np.zeros(nz)
+    diag_c = np.zeros(nz)
+    for e in range(nz):
+        if active[e]:
+            r = full_area / area[e]
+            scale[e] = r * r * du[e]
+            diag_c[e] = scale[e] / alpha
+    # the jump term over the face pairs of active zones
+    npair = 0
+    for q in range(pairs.shape[0]):
+        if active[pairs[q, 0]] and active[pairs[q, 1]]:
+            npair += 1
+    pi = np.empty(npair, np.int64)
+    pj = np.empty(npair, np.int64)
+    pw = np.empty(npair)
+    n = 0
+    for q in range(pairs.shape[0]):
+        i, j = pairs[q, 0], pairs[q, 1]
+        if active[i] and active[j]:
+            pi[n] = i
+            pj[n] = j
+            pw[n] = beta * np.sqrt(scale[i] * scale[j])
+            n += 1
+    dinv = np.zeros(nz)
+    hd = du + diag_c
+    for q in range(npair):
+        hd[pi[q]] += pw[q]
+        hd[pj[q]] += pw[q]
+    for e in range(nz):
+        if active[e]:
+            dinv[e] = 1.0 / hd[e]
+    # g* = B^b v_b - Bf v_f, Galilean form (solve.relative_velocity), slip: its normal part
+    g = np.zeros((nz, k))
+    for e in range(nz):
+        if not active[e]:
+            continue
+        r0 = ref[e]
+        for c in range(dim):
+            vr = v_b[r0, c]
+            s = 0.0
+            for q in range(bp[e], bp[e + 1]):
+                s += bw[q] * (v_b[bi[q], c] - vr)
+            for q in range(fp[e], fp[e + 1]):
+                s -= fw[q] * (v_f[fi[q], c] - vr)
+            if slip:
+                g[e, 0] += s * normal[e, c]
+            else:
+                g[e, c] = s
+    # Jacobi-PCG (solve.pcg: why Jacobi, the stopping rule over all columns together)
+    tb = np.zeros((nb, dim))
+    tf = np.zeros((ns, dim))
+    x = np.zeros((nz, k))
+    for e in range(nz):
+        if active[e]:
+            for c in range(k):
+                x[e, c] = x0[e, c]
+    bnorm = np.sqrt(_dot(g, g))
+    it = 0
+    Hx = np.zeros((nz, k))
+    if bnorm == 0.0:
+        x[:] = 0.0
+        rel = 0.0
+    else:
+        _apply(x, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c, tb, tf, Hx)
+        r = g - Hx
+        z = np.empty_like(r)
+        for e in range(nz):
+            for c in range(k):
+                z[e, c] = dinv[e] * r[e, c]
+        p = z.copy()
+        rz = np.zeros(k)
+        for e in range(nz):
+            for c in range(k):
+                rz[c] += r[e, c] * z[e, c]
+        rnorm = np.sqrt(_dot(r, r))
+        Hp = np.zeros((nz, k))
+        while rnorm > rtol * bnorm:
+            if it >= max_iter:
+                return x, it, rnorm / bnorm, active, bw, inv_mb, diag_c, pi, pj, pw, True
+            _apply(p, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c,
+                   tb, tf, Hp)
+            pHp = np.zeros(k)
+            for e in range(nz):
+                for c in range(k):
+                    pHp[c] += p[e, c] * Hp[e, c]
+            for c in range(k):
+                a = rz[c] / pHp[c] if pHp[c] > 0.0 else 0.0
+                for e in range(nz):
+                    x[e, c] += a * p[e, c]
+                    r[e, c] -= a * Hp[e, c]
+            rzn = np.zeros(k)
+            for e in range(nz):
+                for c in range(k):
+                    z[e, c] = dinv[e] * r[e, c]
+                    rzn[c] += r[e, c] * z[e, c]
+            for c in range(k):
+                gam = rzn[c] / rz[c] if rz[c] > 0.0 else 0.0
+                for e in range(nz):
+                    p[e, c] = z[e, c] + gam * p[e, c]
+                rz[c] = rzn[c]
+            rnorm = np.sqrt(_dot(r, r))
+            it += 1
+        _apply(x, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c, tb, tf, Hx)
+        rel = np.sqrt(_dot(g - Hx, g - Hx)) / bnorm
+    return x, it, rel, active, bw, inv_mb, diag_c, pi, pj, pw, False
+
+
+@njit(cache=True)
+def _impulses(x, active, slip, normal, bp, bi, bw, fp, fi, fw, dt, nb, ns, diag_c, pi, pj, pw):
+    """-dt B^bT λ, +dt BfT λ (λ_e = μ_e n_e for slip) and the stabilisation's dissipation dt λ·C^-1 λ."""
+    nz = x.shape[0]
+    dim = normal.shape[1]
+    ib = np.zeros((nb, dim))
+    jf = np.zeros((ns, dim))
+    for e in range(nz):
+        if not active[e]:
+            continue
+        for c in range(dim):
+            v = x[e, 0] * normal[e, c] if slip else x[e, c]
+            for q in range(bp[e], bp[e + 1]):
+                ib[bi[q], c] += bw[q] * v
+            for q in range(fp[e], fp[e + 1]):
+                jf[fi[q], c] += fw[q] * v
+    # (B^T λ first, then the step: the impulses of both sides scaled alike)
+    for a in range(nb):
+        for c in range(dim):
+            ib[a, c] *= -dt
+    for a in range(ns):
+        for c in range(dim):
+            jf[a, c] *= dt
+    diss = 0.0
+    for e in range(nz):
+        for c in range(x.shape[1]):
+            diss += diag_c[e] * x[e, c] * x[e, c]
+    for q in range(pi.size):
+        for c in range(x.shape[1]):
+            d = x[pi[q], c] - x[pj[q], c]
+            diss += pw[q] * d * d
+    return ib, jf, dt * diss
+
+
+def _check_masses(ops, m_b, m_f) -> None:
+    """The mass checks of `solve.material_operators` (same messages)."""
+    if m_b.shape != ops.bnodes.shape:
+        raise ValueError(f"m_b has shape {m_b.shape}; one mass per background node {ops.bnodes.shape} expected")
+    if m_f.shape != (ops.Bf.shape[1],):
+        raise ValueError(f"m_f has shape {m_f.shape}; one mass per surface node ({ops.Bf.shape[1]},) expected")
+    if not (np.all(np.isfinite(m_b)) and np.all(m_b >= 0.0)):
+        bad_b = float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])
+        raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
+    mf = m_f[ops.Bf.indices]
+    if not np.all(mf > 0.0) or np.any(np.isnan(m_f)):
+        touched = np.zeros(m_f.size, bool)
+        touched[ops.Bf.indices] = True
+        i = int(np.flatnonzero((touched & ~(m_f > 0.0)) | np.isnan(m_f))[0])
+        raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
+                         f"needs a mass > 0 (inf: immovable)")
+
+
+def solve(ops, m_b, m_f, v_b, v_f, dt: float, condition: str, alpha: float, beta: float, warm=None,
+          rtol: float = RTOL, max_iter: int = MAX_ITER) -> Solution:
+    """`solve.solve` without the assembled H (same arguments and result, equal to round-off)."""
+    dim = ops.dim
+    slip = condition == "slip"
+    k = 1 if slip else dim
+    m_b = np.ascontiguousarray(m_b, dtype=np.float64)
+    m_f = np.ascontiguousarray(m_f, dtype=np.float64)
+    v_b = np.ascontiguousarray(np.asarray(v_b, dtype=np.float64).reshape(-1, dim))
+    v_f = np.ascontiguousarray(np.asarray(v_f, dtype=np.float64).reshape(-1, dim))
+    x0 = np.zeros((ops.n_zones, k))
+    if warm is not None and np.size(warm[0]):
+        wz, wl = np.asarray(warm[0], np.int64), np.asarray(warm[1], dtype=float)
+        wl = wl.reshape(wz.size, -1)
+        if wl.shape[1] == k:
+            pos = np.minimum(np.searchsorted(wz, ops.zones), wz.size - 1)
+            hit = wz[pos] == ops.zones
+            x0[hit] = wl[pos[hit]]
+    Bb, Bf = ops.Bb, ops.Bf
+    _check_masses(ops, m_b, m_f)
+    x, it, rel, active, bw, inv_mb, diag_c, pi, pj, pw, failed = _solve_kernel(
+        Bb.indptr.astype(np.int64), Bb.indices.astype(np.int64), Bb.data, m_b, Bf.indptr.astype(np.int64),
+        Bf.indices.astype(np.int64), Bf.data, m_f, np.ascontiguousarray(ops.area), float(ops.full_area),
+        np.ascontiguousarray(ops.normal), slip, np.ascontiguousarray(ops.pairs, dtype=np.int64).reshape(-1, 2),
+        float(alpha), float(beta), float(dt), v_b, v_f, x0, float(rtol), int(max_iter))
+    if failed:
+        raise MultiplierSolveError(
+            f"multiplier solve: no convergence in {max_iter} CG iterations (relative residual "
+            f"{rel:.3e} > tolerance {rtol:.1e}) on {int(active.sum())} cut zones; H is too ill "
+            f"conditioned: raise coupling.beta or lower coupling.alpha")
+    ib, jf, diss = _impulses(x, active, slip, np.ascontiguousarray(ops.normal), Bb.indptr.astype(np.int64),
+                             Bb.indices.astype(np.int64), bw, Bf.indptr.astype(np.int64),
+                             Bf.indices.astype(np.int64), Bf.data, float(dt), m_b.size, m_f.size, diag_c, pi,
+                             pj, pw)
+    return Solution(zones=ops.zones, lam=x[:, 0] if slip else x, impulse_b=ib, impulse_f=jf, iterations=int(it),
+                    residual=float(rel), dissipation=float(diss))
