@@ -4,36 +4,68 @@ bench.py's format ({"results": [{"name", "metric", "value", "unit", "params"}], 
 charts written beside it.
 
 `immerse bench plate_convergence`
-    cases/plate_in_shock_2d at three meshes, background and plate refined together by 2: zone width
-    20, 10, 5 mm (80 x 30, 160 x 60, 320 x 120 zones) with the plate 2 x 15, 4 x 30, 8 x 60
-    elements (4 across the thickness in the middle mesh, where the case has 3: the thickness must
-    halve with the zones, and 3 does not halve).  The tip's x displacement (the node at the top of
-    the plate's mid-plane, from the Lagrangian output steps, every 0.1 ms) against time; per pair of
-    successive meshes the largest difference over time and the difference at the end; their ratio
-    and the observed order log2(ratio) (Richardson, refinement ratio 2); the Richardson estimate of
-    the finest mesh's error.  Chart plate_convergence.png (tip deflection against time, and the
-    successive differences).
-    --quick: the same three refinements on a cropped tube (x in [0.4, 0.9] m, the shock starting at
+    cases/plate_in_shock_2d (to its end time, 4 ms) over meshes refined together by 2: zone width 20,
+    10, 5, 2.5 mm (80 x 30 .. 640 x 240 zones) with the plate 2 x 15, 4 x 30, 8 x 60, 16 x 120
+    elements (4 across the thickness in the 10 mm mesh, where the case has 3: the thickness must
+    halve with the zones, and 3 does not halve); and two split runs from the 10 mm mesh that refine
+    the background alone (5 mm, plate 4 x 30) or the plate alone (10 mm, plate 8 x 60): which of
+    the two makes the difference.  The tip's x displacement (the node at the top of the plate's
+    mid-plane, from the Lagrangian output steps, every 0.1 ms) against time; per pair of successive
+    meshes the largest difference over time (also up to 1/4, 1/2, 3/4 of the end time), the RMS over
+    time and the signed difference at the end; for successive pairs their ratio and the observed
+    order log2(ratio) (Richardson, refinement ratio 2), monotone or oscillating, the Richardson
+    extrapolation where monotone.  Chart plate_convergence.png (tip deflection against time; the
+    successive differences against time).
+    --quick: three meshes (20, 10, 5 mm) on a cropped tube (x in [0.4, 0.9] m, the shock starting at
     0.5 m: it reaches the plate at 0.24 ms; its reflections and the outflow stay clear of the plate
     until the end) to 0.7 ms, every 0.05 ms.
 
 `immerse bench penalty_sweep`
     cases/embedded_piston_sod with `method = "penalty"` and `stiffness = k` (Pa/m) over k = 0.1 ..
-    1e5, and the multiplier method (the case as it is) as the reference line: per run the case's
-    check metrics (piston centre, velocity, the pressure on both faces, against Sod's exact
-    solution), the centre's displacement error (centre - exact) / (exact - initial centre), wall
-    time, steps, status (stable, or stopped as unstable with the coupler's message naming the
-    penalty's explicit stable-step limit and the step used), and the penalty's stable-step limit
-    (coupling.stable_dt_limit: its smallest value over the run and at the end; for a stopped run the
-    limit its message names).  Charts penalty_sweep.png (error against stiffness, log-log, the
-    multiplier's errors as horizontal lines, unstable runs marked) and penalty_sweep_cost.png (wall
+    1e5, and the multiplier method (the case as it is) as the reference line; 20 output steps per
+    run.  Per run the case's check metrics (piston centre, velocity, the pressure on both faces in
+    windows 3 zones .. span from them, against Sod's exact solution), the centre's displacement
+    error |centre - exact| / (exact - initial centre), the gas pressure right next to the faces
+    (RMS of (p - p*)/p* over the open zones within 3 zones, mean over the outputs from t_end/5: where
+    the coupling acts), wall time, steps, status (stable, or stopped as unstable with the coupler's
+    message naming the penalty's explicit stable-step limit and the step used), and the penalty's
+    stable-step limit (coupling.stable_dt_limit: its smallest value over the run and at the end, as
+    summary.json; for a stopped run the limit its message names).  Charts penalty_sweep.png (error
+    against stiffness, log-log, the multiplier's errors as horizontal lines, unstable runs marked,
+    the stiffness where the computed limit meets the solvers' step) and penalty_sweep_cost.png (wall
     time against stiffness).
     --quick: end time 0.05 s instead of 0.2 (the exact solution is self-similar: centre
     0.5 + u* t, velocity u* and p* unchanged; the check's pressure windows shrink with t so that
     they stay inside the star states), k = 10, 1e3, 1e5.
 
-Measured (full runs, 2-core VM shared with other jobs, one simulation at a time):
-    (filled in below after the runs)
+Measured (full runs, 2-core VM shared with other jobs, one simulation at a time, 2026-11-24):
+  plate_convergence (~7 min): tip deflection at 4 ms 9.75, 10.22, 11.90, 12.84 mm (h = 20, 10, 5,
+    2.5 mm).  Successive differences, largest over time: 0.65, 1.67, 0.95 mm (at the end: +0.47,
+    +1.67, +0.95).  The first ratio (20/10/5 mm) is 0.39: NOT converging there; the finer one
+    (10/5/2.5 mm) 1.76 (observed order 0.82, monotone; Richardson: 14.1 mm at 4 ms, the 2.5 mm mesh
+    ~1.2 mm (10 %) short).  The meshes part late: largest differences up to 1 ms 0.027, 0.008,
+    0.002 mm; up to 2 ms 0.19, 0.12, 0.12 mm; up to 3 ms 0.63, 0.73, 0.56 mm.  The split runs put
+    the mesh dependence in the gas: refining the background alone moves the tip at 4 ms by
+    +1.45 mm, the plate alone by +0.01 mm (at most 0.15 mm over time).  (Inviscid gas: the shear
+    layer shed at the plate's tip rolls up finer with every refinement and sucks harder on its lee
+    side; the plate itself is resolved.)  Coupled momentum balance <= 1.8e-15 on all meshes.  Wall
+    (stepping) 5.3, 15.7, 49, 240 s.
+  penalty_sweep (~2.5 min), t = 0.2 s, the solvers' step 5.97e-4 s: stable for k = 0.1 .. 1e3
+    Pa/m, 360 steps each (the penalty never cuts the step); k = 2e3 stopped at step 11 by the
+    energy check (limit 3.28e-4 s, step 5.89e-4 s); 1e4 and 1e5 stopped at step 1 (limits 2.54e-4
+    and 8.02e-5 s against 5.92e-4 s).  The computed limit scales as k^-1/2: limit x sqrt(k) =
+    0.0143 .. 0.0153 s (Pa/m)^1/2 over the stable runs, so it meets the step at k ~ 600 Pa/m; k =
+    1e3 (limit 4.5e-4 s) still runs: the bound (Irons' element bound) is conservative.  Errors,
+    multiplier -> penalty over k = 0.1 .. 1e3: centre 0.71 % -> 0.70 .. 0.75 %, velocity 0.18 % ->
+    0.2 .. 2.1 % (ringing, no order in k), pressure windows 0.15 / 0.20 % -> 0.01 .. 0.27 %,
+    displacement 2.63 % -> 2.57 .. 2.76 %; near-face pressure left 3.6 % -> 2.8 .. 3.9 %, right
+    0.53 % -> 1.37 % (k <= 1), 1.25 % (10), 0.75 .. 0.83 % (100 .. 300), 1.18 % (1e3).  So the
+    stiffness does not order the piston's errors over four decades: the body's blocked volume
+    (restricted advection) and the fluid pressure load, which every method transfers, carry the
+    piston; the spring only ties the interface's nodal velocities, visible in the pressure of the
+    zones next to the right face (penalty 1.4 .. 2.6x the multiplier's), best near k ~ 100 Pa/m.
+    Wall (stepping) over two sweeps: multiplier 8.4, 8.9 s; penalty 7.8 .. 12.1 s (machine load; no
+    trend in k).
 
 Nothing here asserts a time; tests/orchestrator/test_bench_coupling_studies.py checks the quick
 modes' structure and physics.
@@ -254,8 +286,8 @@ def _draw_plate(runs, split, path: Path, quick: bool) -> None:
     plt, fig, (ax, bx) = _figure(2)
     for r, lw in zip(runs, (1.0, 1.4, 1.8, 2.2)):
         ax.plot(r["times_s"] * 1e3, r["tip_dx_m"] * 1e3, "-", lw=lw, label=_label(r))
-    for r in split:
-        ax.plot(r["times_s"] * 1e3, r["tip_dx_m"] * 1e3, ":", lw=1.2, label=_label(r) + " (split)")
+    for r, colour in zip(split, ("tab:purple", "tab:brown")):
+        ax.plot(r["times_s"] * 1e3, r["tip_dx_m"] * 1e3, ":", lw=1.5, color=colour, label=_label(r) + " (split)")
     ax.axvline(runs[0]["shock_arrival_s"] * 1e3, color="gray", lw=0.8, ls=":", label="shock reaches the plate")
     ax.set_xlabel("time t (ms)")
     ax.set_ylabel("tip displacement along x (mm)")
@@ -420,13 +452,22 @@ def penalty_results(rows: list[dict], ref: dict) -> list[dict]:
     unstable = [r["stiffness_pa_per_m"] for r in rows if r["status"] == "unstable"]
     # k_e sqrt-scaling of the computed limit: Δt_limit = 2/ω, ω² ∝ k (variants._Spring.stable_dt)
     scaled = [r["stable_dt_limit_min_s"] * np.sqrt(r["stiffness_pa_per_m"]) for r in rows if r["status"] == "stable"]
+    k_star = _k_at_step(rows, ref)
     results.append({"name": f"{PISTON}_penalty", "metric": "stability_boundary",
                     "value": min(unstable, default=None), "unit": "Pa/m",
                     "params": {"largest_stable_stiffness": max(stable, default=None),
                                "smallest_unstable_stiffness": min(unstable, default=None),
                                "solver_step_max_s": ref["dt_max_s"],
-                               "limit_times_sqrt_k_over_stable_runs": scaled}})
+                               "limit_times_sqrt_k_over_stable_runs": scaled,
+                               "stiffness_where_limit_equals_step": k_star}})
     return results
+
+
+def _k_at_step(rows: list[dict], ref: dict) -> float | None:
+    """The stiffness at which the computed limit (∝ k^-1/2: its median limit x sqrt(k) over the
+    stable runs) equals the solvers' largest step: above it the bound says unstable."""
+    c = [r["stable_dt_limit_min_s"] * np.sqrt(r["stiffness_pa_per_m"]) for r in rows if r["status"] == "stable"]
+    return float((np.median(c) / ref["dt_max_s"]) ** 2) if c else None
 
 
 def _draw_penalty(rows, ref, path_err: Path, path_cost: Path, end_time: float) -> None:
@@ -438,6 +479,7 @@ def _draw_penalty(rows, ref, path_err: Path, path_cost: Path, end_time: float) -
     stable = [r for r in rows if r["status"] == "stable"]
     unstable = [r for r in rows if r["status"] != "stable"]
     ks = [r["stiffness_pa_per_m"] for r in stable]
+    k_star = _k_at_step(rows, ref)
     panels = [
         ("check metrics (windows 3 zones .. span from the faces)",
          {**{k: ([r["rel_errors"][k] for r in stable], ref["rel_errors"][k]) for k in CHECKED},
@@ -462,6 +504,9 @@ def _draw_penalty(rows, ref, path_err: Path, path_cost: Path, end_time: float) -
             ax.annotate(note, (r["stiffness_pa_per_m"], top), textcoords="offset points",
                         xytext=(0, -22 - 16 * (i % 2)), ha="center", fontsize=6)
         ax.plot([], [], "kx", ms=8, mew=2, label="unstable: stopped by the coupler")
+        if k_star is not None:
+            ax.axvline(k_star, color="gray", ls=":", lw=1.0,
+                       label=f"computed limit = solver step (k ≈ {k_star:.3g} Pa/m)")
         ax.set_ylim(lo / 3, top * 4)
         ax.set_xlabel("penalty stiffness k (Pa/m)")
         ax.set_ylabel("relative error against Sod's exact solution")
@@ -475,16 +520,17 @@ def _draw_penalty(rows, ref, path_err: Path, path_cost: Path, end_time: float) -
     plt.close(fig)
 
     plt, fig, ax = _figure()
-    ax.loglog(ks, [r["wall_time_s"] for r in stable], "o-", color="tab:blue",
-              label="penalty: coupled stepping (summary wall_time_s)")
-    ax.loglog([r["stiffness_pa_per_m"] for r in rows], [r["launcher_wall_s"] for r in rows], "s:", color="tab:orange",
-              label="penalty: whole run incl. start-up (launcher)")
+    ax.semilogx(ks, [r["wall_time_s"] for r in stable], "o-", color="tab:blue",
+                label="penalty: coupled stepping (summary wall_time_s)")
+    ax.semilogx([r["stiffness_pa_per_m"] for r in rows], [r["launcher_wall_s"] for r in rows], "s:",
+                color="tab:orange", label="penalty: whole run incl. start-up (launcher)")
     ax.axhline(ref["wall_time_s"], color="tab:blue", ls="--", lw=0.9, label="multiplier: coupled stepping")
     ax.axhline(ref["launcher_wall_s"], color="tab:orange", ls="--", lw=0.9, label="multiplier: whole run")
     for r in unstable:
         ax.plot(r["stiffness_pa_per_m"], r["launcher_wall_s"], "kx", ms=10, mew=2)
     ax.plot([], [], "kx", ms=8, mew=2, label="unstable: stopped by the coupler")
     ax.set_xlabel("penalty stiffness k (Pa/m)")
+    ax.set_ylim(bottom=0.0)
     ax.set_ylabel("wall time (s), 1 + 1 ranks")
     ax.set_title(f"cases/{PISTON}: cost against penalty stiffness, t_end = {end_time:g} s\n"
                  f"(steps: {', '.join(str(r['steps']) for r in stable)}; multiplier {ref['steps']})", fontsize=9)
