@@ -64,8 +64,9 @@ Measured (full runs, 2-core VM shared with other jobs, one simulation at a time,
     (restricted advection) and the fluid pressure load, which every method transfers, carry the
     piston; the spring only ties the interface's nodal velocities, visible in the pressure of the
     zones next to the right face (penalty 1.4 .. 2.6x the multiplier's), best near k ~ 100 Pa/m.
-    Wall (stepping) over two sweeps: multiplier 8.4, 8.9 s; penalty 7.8 .. 12.1 s (machine load; no
-    trend in k).
+    Wall (stepping) over three sweeps: multiplier 5.6 .. 8.9 s, penalty 4.0 .. 12.1 s, the order of
+    the stiffnesses different in each sweep: the machine's load, not k (the same steps; the spring
+    saves the multiplier's CG solve, small with two cut zones).
 
 Nothing here asserts a time; tests/orchestrator/test_bench_coupling_studies.py checks the quick
 modes' structure and physics.
