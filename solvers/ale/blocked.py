@@ -180,7 +180,7 @@ class Blocked:
         B = s.block
         if geometry is None:
             return self.b_static
-        from solvers.ale.coupled import GlobalIndex, close_inner_faces
+        from solvers.ale.coupled import GlobalIndex
 
         gi = GlobalIndex(B)
         f = np.asarray(geometry.fractions, dtype=np.float64)
@@ -195,16 +195,6 @@ class Blocked:
         z, held = gi.zones(geometry.zones, ghosts=GHOST)
         b[z[held]] = f[held]
         self.b_bodies = b
-        if geometry.faces is not None:
-            A = np.ones((B.dim, B.nzones))
-            close_inner_faces(b, np.asarray(B.zs, np.int64), B.dim, A)
-            for d, (ids, cov) in enumerate(geometry.faces):
-                fz, fm = gi.faces(d, ids)
-                A[d, fz[fm]] = np.clip(1.0 - np.asarray(cov)[fm], 0.0, 1.0)
-            A[~self._face_entries] = 1.0  # (the ghost zones' own faces: not this block's)
-            self.A_body = A
-        else:
-            self.A_body = None
         cut = np.zeros(0, np.int64) if geometry.cut is None else geometry.cut
         cz, cm = gi.zones(cut)
         self.cut = np.ascontiguousarray(cz[cm])
@@ -212,9 +202,19 @@ class Blocked:
         # only ones besides the wholly covered where a body changes a fraction or an aperture
         named = [z[held], self.cut]
         if geometry.faces is not None:
-            for d, (ids, _) in enumerate(geometry.faces):
+            self._static_parts(s)
+            # exact apertures: closed between two zones covered whole, the listed faces' values,
+            # open elsewhere; with the static obstacles' min-model ones (the smaller of the two)
+            A = np.empty((B.dim, B.nzones))
+            body_apertures(b, self._face_ok, self._A_static, np.asarray(B.zs, np.int64), A)
+            for d, (ids, cov) in enumerate(geometry.faces):
                 fz, fm = gi.faces(d, ids)
-                named += [fz[fm], fz[fm] - B.zs[d]]
+                fz = fz[fm]
+                A[d, fz] = np.minimum(self._A_static[d, fz], np.clip(1.0 - np.asarray(cov)[fm], 0.0, 1.0))
+                named += [fz, fz - B.zs[d]]
+            self.A_body = A
+        else:
+            self.A_body = None
         c = np.unique(np.concatenate(named))
         self._body_cand = c[B.real_zone[c]]
         self.cut_rows = np.flatnonzero(cm)
@@ -264,16 +264,20 @@ class Blocked:
         """Open fractions (ghosts filled like zone fields), solid flags, apertures, cut zones and
         immersed-wall nodes from the blocked fraction b of the real zones."""
         B, dim = s.block, self.dim
-        phi = np.where(b >= 1.0 - SOLID_TOL, 0.0, 1.0 - b)
-        phi[~B.real_zone] = 1.0
+        if self.A_body is None:
+            phi = np.where(b >= 1.0 - SOLID_TOL, 0.0, 1.0 - b)
+            phi[~B.real_zone] = 1.0
+            self.b = np.where(B.real_zone, b, 0.0)  # (checkpointed: the rest follows from it)
+            n_open = float(np.count_nonzero(phi[B.real_zone] > 0.0))
+        else:  # (one pass: phi, b of the real zones, solid flags, open zones)
+            phi, self.b, n_open = open_fractions(b, self._real, SOLID_TOL)
         s.bc.fill_zones([phi])
-        n_open = np.array([float(np.count_nonzero(phi[B.real_zone] > 0.0))])
+        n_open = np.array([n_open])
         dec = getattr(s, "dec", None)
         if dec is not None and dec.parallel:
             n_open = dec.sum(n_open)
         if n_open[0] == 0.0:
             raise ValueError("the obstacles block every zone of the ALE grid")
-        self.b = np.where(B.real_zone, b, 0.0)  # (checkpointed: the rest follows from it)
         self.phi = phi
         self.solid = (phi <= 0.0).astype(np.uint8)
         if self.A_body is None:
@@ -285,16 +289,9 @@ class Blocked:
             self.SF[:] = 0.0
             self._wall_nodes(s)
         else:
-            # a coupled body's exact face apertures with the static obstacles' min-model ones (the
-            # smaller of the two); what depends on the static obstacles alone is computed once
-            if not hasattr(self, "_A_static"):
-                ps = self._static_phi(s)
-                self._A_static = self._min_apertures(s, ps)
-                self._touched_static_all = self._touched(s, ps < 1.0, self._A_static)
-                self._wall_nodes(s)
-                self.is_cut = np.zeros(B.nzones, np.uint8)
-                self._prev_cut = np.zeros(0, np.int64)
-            self.A = np.minimum(self._A_static, self.A_body)
+            # a coupled body's exact face apertures with the static obstacles' (combined); what
+            # depends on the static obstacles alone is computed once (_static_parts)
+            self.A = self.A_body
             # zones whose forces need the aperture correction near the bodies: among the zones
             # the coupler lists (cut, partly covered, next to a listed face), those with phi < 1
             # or a closed face (a zone a body covers whole has no material and needs none)
@@ -302,7 +299,8 @@ class Blocked:
             near = phi[c] < 1.0
             for d in range(dim):
                 near |= (self.A[d, c] < 1.0) | (self.A[d, c + B.zs[d]] < 1.0)
-            self.touched = np.union1d(self._touched_static_all, c[near]).astype(np.int64)
+            self.touched = (np.union1d(self._touched_static_all, c[near]).astype(np.int64)
+                            if self._touched_static_all.size else c[near])
             self.is_cut[self._prev_cut] = 0  # (the previous step's cut zones: the flags are sparse)
             self.is_cut[self.cut] = 1
             self.SF[self._prev_cut] = 0.0
@@ -311,6 +309,22 @@ class Blocked:
         self.touched_static = np.ascontiguousarray(self.touched[self.is_cut[self.touched] == 0])
         if self.cut.size:
             self.SF[self.cut] = np.einsum("ij,ij->i", self.surface_vectors(s), self._cut_velocity)
+
+    def _static_parts(self, s) -> None:
+        """What the static obstacles alone decide, computed once for the coupled steps: their
+        min-model apertures, the zones those touch, the immersed-wall nodes (a coupled body moves:
+        the constraint ties the nodes of its cut zones instead), the real-zone and face-entry masks."""
+        if hasattr(self, "_A_static"):
+            return
+        B = s.block
+        ps = self._static_phi(s)
+        self._A_static = self._min_apertures(s, ps)
+        self._touched_static_all = self._touched(s, ps < 1.0, self._A_static)
+        self._wall_nodes(s)
+        self.is_cut = np.zeros(B.nzones, np.uint8)
+        self._prev_cut = np.zeros(0, np.int64)
+        self._real = B.real_zone.astype(np.uint8)
+        self._face_ok = np.ascontiguousarray(self._face_entries.astype(np.uint8))
 
     def _min_apertures(self, s, phi) -> np.ndarray:
         """Min-model face apertures: a face is as open as the less open of its two zones."""
@@ -557,6 +571,45 @@ def _sync(s) -> None:
 # ------------------------------------------------------------------------------------------------
 # kernels
 # ------------------------------------------------------------------------------------------------
+@njit(cache=True)
+def body_apertures(b, face_ok, A_static, zs, A):
+    """A[d, z] (the lower d-face of padded zone z) = min(A_static, 0 if z and its lower d-neighbour
+    are both covered whole by the bodies (b == 1), else 1) on this block's faces (face_ok), A_static
+    on the rest: the faces inside a body, which the coupler does not list (it lists the others it
+    covers)."""
+    dim = A.shape[0]
+    for d in range(dim):
+        s = zs[d]
+        for z in range(b.size):
+            if face_ok[d, z] == 0:
+                A[d, z] = A_static[d, z]
+            elif z >= s and b[z] >= 1.0 and b[z - s] >= 1.0:
+                A[d, z] = 0.0
+            else:
+                A[d, z] = A_static[d, z]
+
+
+@njit(cache=True)
+def open_fractions(b, real, solid_tol):
+    """From the bodies' blocked fractions b (padded, ghost layers too): the open fraction of the real
+    zones (0 within solid_tol of full, 1 elsewhere: ghosts are filled after), b of the real zones,
+    the number of real zones with some open volume."""
+    n = b.size
+    phi = np.empty(n)
+    br = np.empty(n)
+    n_open = 0.0
+    for z in range(n):
+        if real[z]:
+            br[z] = b[z]
+            phi[z] = 0.0 if b[z] >= 1.0 - solid_tol else 1.0 - b[z]
+            if phi[z] > 0.0:
+                n_open += 1.0
+        else:
+            br[z] = 0.0
+            phi[z] = 1.0
+    return phi, br, n_open
+
+
 @njit(cache=True)
 def open_eos(code, par, M, e, de_h, phi, VE, rho, p, c, q, zlo, zhi, zs):
     """rho = M / (phi VE) and the EOS at e + de_h of the zones in range; massless zones get

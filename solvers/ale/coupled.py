@@ -181,16 +181,3 @@ def fill_runs(start, length, cells, lo, hi, zs, out):
         base = (j - lo[1]) * zs[1] + (k - lo[2]) * zs[2]
         for i in range(a, b):
             out[(i - lo[0]) * zs[0] + base] = 1.0
-
-
-@njit(cache=True)
-def close_inner_faces(b, zs, dim, A):
-    """A[d, z] = 0 (the lower d-face of padded zone z closed) where z and its lower d-neighbour are
-    both covered whole (b == 1): the faces inside a body, which the coupler does not list."""
-    for z in range(b.size):
-        if b[z] < 1.0:
-            continue
-        for d in range(dim):
-            w = z - zs[d]
-            if w >= 0 and b[w] >= 1.0:
-                A[d, z] = 0.0

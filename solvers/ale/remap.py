@@ -284,6 +284,14 @@ def sweep_dual(F, zact, solid, v, m, PHI, VS, d, nlo, nhi, zs, ns):
             for k in range(nlo[2], nhi[2]):
                 n = i * ns[0] + j * ns[1] + k * ns[2]
                 zn = i * zs[0] + j * zs[1] + k * zs[2]
+                if solid is not None and _layer_solid(solid, zn, t1, t2, dim) and \
+                        _layer_solid(solid, zn - sd, t1, t2, dim):
+                    # inside a body or obstacle: no flux (the faces are closed), the node's own
+                    # velocity (what the wall ghosts below give: both layers solid)
+                    PHI[n] = 0.0
+                    for c in range(dim):
+                        VS[n, c] = v[n, c]
+                    continue
                 za = zn - sd - t1
                 zb = za + t1
                 if dim == 3:
