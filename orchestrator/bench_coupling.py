@@ -342,11 +342,13 @@ def step_share(quick: bool) -> tuple[list, dict]:
     top = sorted(pstats.Stats(prof).stats.items(), key=lambda kv: -kv[1][2])[:10]
     profile = [(fn if f == "~" else f"{Path(f).parent.name}/{Path(f).name}:{fn}") + f" {tt * 1e3:.1f} ms"
                for (f, _, fn), (_, _, tt, _, _) in top]  # ("~": numpy's and Python's builtins)
-    covered = int(c.geometry().zones.size)  # zones with a blocked fraction: the fractions' and remap's work
+    geo = c.geometry()  # zones with a blocked fraction: listed (cut) and in runs (covered whole)
+    covered = int(geo.zones.size + geo.run_length.sum())
     share = med["coupler"] / med["coupled"]
     over = med["coupled"] / (med["ale"] + med["lagrange"])
     params = {"zones": zones**2, "elements": elements**2, "surface_facets": int(c.facets.shape[0]),
-              "cut_zones": int(c.ops.zones.size), "covered_zones": covered, "rounds": rounds, "warm_up_rounds": warm,
+              "cut_zones": int(c.ops.zones.size), "covered_zones": covered, "listed_zones": int(geo.zones.size),
+              "runs": int(geo.run_length.size), "rounds": rounds, "warm_up_rounds": warm,
               "dt_s": float(coupled.dt_prev), "condition": "slip", "method": "multiplier",
               "ms": {k: v * 1e3 for k, v in med.items() if k != "cg_iterations"},
               "cg_iterations_median": med["cg_iterations"]}

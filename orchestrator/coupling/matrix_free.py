@@ -1,17 +1,18 @@
-"""The stabilised multiplier solve of one coupled step without assembling H (the step's hot path).
+"""The stabilised multiplier solve of one coupled step in one numba kernel (the step's hot path).
 
 Same system as `solve.assemble` / `solve.solve_system` (read that module for the equations):
 
     H λ = g*,   H = Δt (B^b M_b^-1 B^bT + Bf M_f^-1 BfT) [∘ n·n for slip] + diag(s/α) + J,
 
-but H is never formed: every CG iteration applies it as B M^-1 B^T p (two scatter / gather passes
-over the operators' entries per side) plus the jump term over the zone pairs.  Why: forming H is a
-sparse matrix-matrix product whose work is small (each zone couples to its few neighbours) but
-whose assembly through scipy costs ~20 sparse constructions per step, several milliseconds of
-interpreter overhead for any interface size -- most of the coupler's time on a 1000-facet surface.
-Here the whole solve is one numba kernel: material columns, the diagonal (for the Jacobi
-preconditioner and the stabilisation scale s_e), the Galilean relative velocity, Jacobi-PCG with the
-warm start and the impulses, in a fixed loop order (equal inputs give bitwise-equal outputs).
+but H is assembled here by a kernel (`_assemble`: per zone, the zones sharing a node with it, once
+per step) instead of through scipy.  Why: the product's work is small (each zone couples to its few
+neighbours) but scipy's sparse products and constructions cost ~20 interpreter round trips per
+step, several milliseconds for any interface size -- most of the coupler's time on a 1000-facet
+surface before this module.  An earlier form applied B M^-1 B^T inside every CG iteration without
+forming H; assembling once and then multiplying by H's few entries per row is ~2.5x faster at the
+10-25 iterations a step takes.  The whole solve is one kernel: material columns, the diagonal (for
+the stabilisation scale s_e), H, the Galilean relative velocity, Jacobi-PCG with the warm start and
+the impulses, in a fixed loop order (equal inputs give bitwise-equal outputs).
 
 The operators arrive as CSR arrays (rows = cut zones); the material restriction of
 `solve.material_operators` is applied on the fly: void background nodes (m_b = 0) drop out and each
@@ -50,51 +51,132 @@ def _material(indptr, indices, data, m_b, area):
 
 
 @njit(cache=True)
-def _apply(p, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c,
-           tb, tf, out):
-    """out = H p over the active rows (p, out (nz, k); k = 1 for slip, dim for tied)."""
-    nz = p.shape[0]
-    dim = tb.shape[1]
-    tb[:] = 0.0
-    tf[:] = 0.0
-    for e in range(nz):
-        if not active[e]:
+def _transpose(active, ptr, idx, w, n):
+    """Column lists of the active rows of a CSR (ptr, idx, w): for each of the n columns the rows
+    and weights, in row order."""
+    cnt = np.zeros(n + 1, np.int64)
+    for e in range(ptr.size - 1):
+        if active[e]:
+            for q in range(ptr[e], ptr[e + 1]):
+                cnt[idx[q] + 1] += 1
+    for a in range(n):
+        cnt[a + 1] += cnt[a]
+    rows = np.empty(cnt[n], np.int64)
+    vals = np.empty(cnt[n])
+    fill = cnt[:-1].copy()
+    for e in range(ptr.size - 1):
+        if active[e]:
+            for q in range(ptr[e], ptr[e + 1]):
+                a = idx[q]
+                rows[fill[a]] = e
+                vals[fill[a]] = w[q]
+                fill[a] += 1
+    return cnt, rows, vals
+
+
+@njit(cache=True)
+def _row_terms(e, ptr, idx, w, inv_m, tptr, trows, tvals, scale, mark, start, pos, Hi, Hv):
+    """Add scale Σ_A w_eA w_e'A / m_A over the nodes A of row e to row e's entries (mark: the
+    position of zone e' in the row being built, >= start when present)."""
+    for q in range(ptr[e], ptr[e + 1]):
+        a = idx[q]
+        f = scale * w[q] * inv_m[a]
+        if f == 0.0:
             continue
-        for c in range(dim):
-            v = p[e, 0] * normal[e, c] if slip else p[e, c]
-            for k in range(bp[e], bp[e + 1]):
-                tb[bi[k], c] += bw[k] * v
-            for k in range(fp[e], fp[e + 1]):
-                tf[fi[k], c] += fw[k] * v
-    for a in range(tb.shape[0]):
-        for c in range(dim):
-            tb[a, c] *= inv_mb[a]
-    for a in range(tf.shape[0]):
-        for c in range(dim):
-            tf[a, c] *= inv_mf[a]
-    for e in range(nz):
-        for c in range(out.shape[1]):
-            out[e, c] = 0.0
-        if not active[e]:
-            continue
-        for c in range(dim):
-            s = 0.0
-            for k in range(bp[e], bp[e + 1]):
-                s += bw[k] * tb[bi[k], c]
-            for k in range(fp[e], fp[e + 1]):
-                s += fw[k] * tf[fi[k], c]
-            if slip:
-                out[e, 0] += dt * s * normal[e, c]
+        for t in range(tptr[a], tptr[a + 1]):
+            e2 = trows[t]
+            val = f * tvals[t]
+            if mark[e2] >= start:
+                Hv[mark[e2]] += val
             else:
-                out[e, c] = dt * s
-        for c in range(out.shape[1]):
-            out[e, c] += diag_c[e] * p[e, c]
+                mark[e2] = pos
+                Hi[pos] = e2
+                Hv[pos] = val
+                pos += 1
+    return pos
+
+
+@njit(cache=True)
+def _assemble(active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c):
+    """H as a CSR over the zones (rows of inactive zones empty): dt (B^b M_b^-1 B^bT + Bf M_f^-1 BfT)
+    [∘ n·n for slip] + diag(s/α) + J.  Work: Σ over the nodes of (zones sharing it)^2, once per
+    step; every CG iteration is then one product over H's few entries per row."""
+    nz = active.size
+    tb_ptr, tb_rows, tb_vals = _transpose(active, bp, bi, bw, inv_mb.size)
+    tf_ptr, tf_rows, tf_vals = _transpose(active, fp, fi, fw, inv_mf.size)
+    # the face pairs of each zone
+    pc = np.zeros(nz + 1, np.int64)
     for q in range(pi.size):
-        i, j = pi[q], pj[q]
-        for c in range(out.shape[1]):
-            d = pw[q] * (p[i, c] - p[j, c])
-            out[i, c] += d
-            out[j, c] -= d
+        pc[pi[q] + 1] += 1
+        pc[pj[q] + 1] += 1
+    for e in range(nz):
+        pc[e + 1] += pc[e]
+    pother = np.empty(pc[nz], np.int64)
+    pweight = np.empty(pc[nz])
+    fill = pc[:-1].copy()
+    for q in range(pi.size):
+        pother[fill[pi[q]]] = pj[q]
+        pweight[fill[pi[q]]] = pw[q]
+        fill[pi[q]] += 1
+        pother[fill[pj[q]]] = pi[q]
+        pweight[fill[pj[q]]] = pw[q]
+        fill[pj[q]] += 1
+    cap = 16 * nz + 16
+    Hp = np.zeros(nz + 1, np.int64)
+    Hi = np.empty(cap, np.int64)
+    Hv = np.empty(cap)
+    mark = np.full(nz, -1, np.int64)
+    pos = 0
+    for e in range(nz):
+        start = pos
+        if active[e]:
+            # (worst case of this row: every zone sharing one of its nodes, and its pairs)
+            need = pos + nz
+            if need > Hi.size:
+                c2 = max(2 * Hi.size, need)
+                Hi2 = np.empty(c2, np.int64)
+                Hv2 = np.empty(c2)
+                Hi2[:pos] = Hi[:pos]
+                Hv2[:pos] = Hv[:pos]
+                Hi, Hv = Hi2, Hv2
+            pos = _row_terms(e, bp, bi, bw, inv_mb, tb_ptr, tb_rows, tb_vals, dt, mark, start, pos, Hi, Hv)
+            pos = _row_terms(e, fp, fi, fw, inv_mf, tf_ptr, tf_rows, tf_vals, dt, mark, start, pos, Hi, Hv)
+            if slip:
+                for q in range(start, pos):
+                    e2 = Hi[q]
+                    d = 0.0
+                    for c in range(normal.shape[1]):
+                        d += normal[e, c] * normal[e2, c]
+                    Hv[q] *= d
+            # C^-1 = diag(s/α) + J
+            for t in range(-1, pc[e + 1] - pc[e]):
+                if t < 0:
+                    e2 = e
+                    val = diag_c[e]
+                    for u in range(pc[e], pc[e + 1]):
+                        val += pweight[u]
+                else:
+                    e2 = pother[pc[e] + t]
+                    val = -pweight[pc[e] + t]
+                if mark[e2] >= start:
+                    Hv[mark[e2]] += val
+                else:
+                    mark[e2] = pos
+                    Hi[pos] = e2
+                    Hv[pos] = val
+                    pos += 1
+        Hp[e + 1] = pos
+    return Hp, Hi[:pos], Hv[:pos]
+
+
+@njit(cache=True)
+def _spmv(Hp, Hi, Hv, x, out):
+    for e in range(Hp.size - 1):
+        for c in range(x.shape[1]):
+            s = 0.0
+            for q in range(Hp[e], Hp[e + 1]):
+                s += Hv[q] * x[Hi[q], c]
+            out[e, c] = s
 
 
 @njit(cache=True)
@@ -157,14 +239,12 @@ def _solve_kernel(bp, bi, bd, m_b, fp, fi, fw, m_f, area, full_area, normal, sli
             pj[n] = j
             pw[n] = beta * np.sqrt(scale[i] * scale[j])
             n += 1
+    Hp, Hi, Hv = _assemble(active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c)
     dinv = np.zeros(nz)
-    hd = du + diag_c
-    for q in range(npair):
-        hd[pi[q]] += pw[q]
-        hd[pj[q]] += pw[q]
     for e in range(nz):
-        if active[e]:
-            dinv[e] = 1.0 / hd[e]
+        for q in range(Hp[e], Hp[e + 1]):
+            if Hi[q] == e:
+                dinv[e] = 1.0 / Hv[q]
     # g* = B^b v_b - Bf v_f, Galilean form (solve.relative_velocity), slip: its normal part
     g = np.zeros((nz, k))
     for e in range(nz):
@@ -183,8 +263,6 @@ def _solve_kernel(bp, bi, bd, m_b, fp, fi, fw, m_f, area, full_area, normal, sli
             else:
                 g[e, c] = s
     # Jacobi-PCG (solve.pcg: why Jacobi, the stopping rule over all columns together)
-    tb = np.zeros((nb, dim))
-    tf = np.zeros((ns, dim))
     x = np.zeros((nz, k))
     for e in range(nz):
         if active[e]:
@@ -197,7 +275,7 @@ def _solve_kernel(bp, bi, bd, m_b, fp, fi, fw, m_f, area, full_area, normal, sli
         x[:] = 0.0
         rel = 0.0
     else:
-        _apply(x, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c, tb, tf, Hx)
+        _spmv(Hp, Hi, Hv, x, Hx)
         r = g - Hx
         z = np.empty_like(r)
         for e in range(nz):
@@ -209,21 +287,20 @@ def _solve_kernel(bp, bi, bd, m_b, fp, fi, fw, m_f, area, full_area, normal, sli
             for c in range(k):
                 rz[c] += r[e, c] * z[e, c]
         rnorm = np.sqrt(_dot(r, r))
-        Hp = np.zeros((nz, k))
+        HP = np.zeros((nz, k))
         while rnorm > rtol * bnorm:
             if it >= max_iter:
                 return x, it, rnorm / bnorm, active, bw, inv_mb, diag_c, pi, pj, pw, True
-            _apply(p, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c,
-                   tb, tf, Hp)
+            _spmv(Hp, Hi, Hv, p, HP)
             pHp = np.zeros(k)
             for e in range(nz):
                 for c in range(k):
-                    pHp[c] += p[e, c] * Hp[e, c]
+                    pHp[c] += p[e, c] * HP[e, c]
             for c in range(k):
                 a = rz[c] / pHp[c] if pHp[c] > 0.0 else 0.0
                 for e in range(nz):
                     x[e, c] += a * p[e, c]
-                    r[e, c] -= a * Hp[e, c]
+                    r[e, c] -= a * HP[e, c]
             rzn = np.zeros(k)
             for e in range(nz):
                 for c in range(k):
@@ -236,7 +313,7 @@ def _solve_kernel(bp, bi, bd, m_b, fp, fi, fw, m_f, area, full_area, normal, sli
                 rz[c] = rzn[c]
             rnorm = np.sqrt(_dot(r, r))
             it += 1
-        _apply(x, active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, pi, pj, pw, diag_c, tb, tf, Hx)
+        _spmv(Hp, Hi, Hv, x, Hx)
         rel = np.sqrt(_dot(g - Hx, g - Hx)) / bnorm
     return x, it, rel, active, bw, inv_mb, diag_c, pi, pj, pw, False
 
