@@ -558,6 +558,91 @@ def _scan_rows(body, oth, pos, s, m, F, X, snap):
 
 
 @njit(cache=True)
+def _axis_coverage(zone, body, nd, cd, area, cells, planes, d, snap):
+    """``_row_coverage``'s work for axis d in one kernel: the pieces' positions along d (a facet on
+    the grid's boundary plane counts as just outside it), their terms s = n_d a and
+    m = (c_d - X[pos]) n_d a, the canonical order (body, row, position, then s, m: three stable
+    sorts, as np.lexsort), the row scan and the ids of what it gives."""
+    dim = cells.size
+    n = cells[d]
+    npc = zone.size
+    others = np.empty(dim - 1, np.int64)
+    j = 0
+    for e in range(dim):
+        if e != d:
+            others[j] = e
+            j += 1
+    ijk = np.empty((npc, dim), np.int64)
+    pos = np.empty(npc, np.int64)
+    s = np.empty(npc)
+    m = np.zeros(npc)
+    F = np.ones(npc)
+    key = np.empty(npc, np.int64)
+    n_rows = 1
+    for e in range(dim - 1):
+        n_rows *= cells[others[e]]
+    for p in range(npc):
+        rest = zone[p]
+        for e in range(dim):
+            ijk[p, e] = rest % cells[e]
+            rest //= cells[e]
+        q = ijk[p, d]
+        if q == 0 and nd[p] < 0.0 and cd[p] == planes[d, 0]:
+            q = -1
+        elif q == n - 1 and nd[p] > 0.0 and cd[p] == planes[d, n]:
+            q = n
+        pos[p] = q
+        s[p] = nd[p] * area[p]
+        if 0 <= q < n:
+            m[p] = (cd[p] - planes[d, q]) * s[p]
+        row = 0
+        for jj in range(dim - 2, -1, -1):
+            e = others[jj]
+            row = row * cells[e] + ijk[p, e]
+        for jj in range(dim - 1):
+            e = others[jj]
+            F[p] *= planes[e, ijk[p, e] + 1] - planes[e, ijk[p, e]]
+        key[p] = (body[p] * n_rows + row) * (n + 2) + (q + 1)
+    o = np.argsort(m, kind="mergesort")
+    o = o[np.argsort(s[o], kind="mergesort")]
+    o = o[np.argsort(key[o], kind="mergesort")]
+    oth = np.empty((npc, dim - 1), np.int64)
+    for t in range(npc):
+        for jj in range(dim - 1):
+            oth[t, jj] = ijk[o[t], others[jj]]
+    zb, zo, zi, zv, fb, fo, fk, fv, rb, ro, r0, r1 = _scan_rows(
+        body[o], oth, pos[o], s[o], m[o], F[o], planes[d, : n + 1].copy(), snap)
+    # ids (x fastest): zones on the grid's lattice, faces on the one with n_d + 1 planes along d
+    zid = np.empty(zi.size, np.int64)
+    for t in range(zi.size):
+        v = 0
+        for e in range(dim - 1, -1, -1):
+            c = zi[t] if e == d else zo[t, _slot(others, e)]
+            v = v * cells[e] + c
+        zid[t] = v
+    fid = np.empty(fk.size, np.int64)
+    for t in range(fk.size):
+        v = 0
+        for e in range(dim - 1, -1, -1):
+            c = fk[t] if e == d else fo[t, _slot(others, e)]
+            v = v * (cells[e] + (1 if e == d else 0)) + c
+        fid[t] = v
+    first = np.empty((rb.size, dim), np.int64)
+    for t in range(rb.size):
+        for e in range(dim):
+            first[t, e] = r0[t] if e == d else ro[t, _slot(others, e)]
+    return zid, zb, zv, fid, fb, fv, rb, first, r1 - r0
+
+
+@njit(cache=True, inline="always")
+def _slot(others, e):
+    for jj in range(others.size):
+        if others[jj] == e:
+            return jj
+    return -1
+
+
+@njit(cache=True)
 def _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv):
     """The quadrature points in sorted piece order, with the foreground shape functions of the
     parent facet's nv nodes (3-D: part 0 holds nodes (0, 1, 2), part 1 nodes (0, 2, 3)) and the
@@ -687,51 +772,25 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
 
 
 def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
-    """Run the suffix sums along axis d: the zone rows, face rows and runs of ``_scan_rows``, as
-    (ids, body, value) for zones and faces and (body, ijk of the first zone, length) for runs."""
-    dim = grid.dim
+    """Run the suffix sums along axis d (``_axis_coverage``): the zone rows, face rows and runs of
+    ``_scan_rows``, as (ids, body, value) for zones and faces and (body, ijk of the first zone,
+    length) for runs."""
     if pieces.body.size and pieces.body.max() >= n_bodies:
         raise GeometryError(f"pieces name body {int(pieces.body.max())} but n_bodies = {n_bodies}")
-    X = grid.planes(d)
-    n = int(grid.cells[d])
-    ijk = grid.zone_ijk(pieces.zone).reshape(-1, dim)
-    nd = pieces.normal[:, d]
-    cd = pieces.centroid[:, d]
-    pos = ijk[:, d].copy()
-    # facets on the grid boundary plane count as just outside the grid (module docstring)
-    pos[(pos == 0) & (nd < 0.0) & (cd == X[0])] = -1
-    pos[(pos == n - 1) & (nd > 0.0) & (cd == X[n])] = n
-    s = nd * pieces.area
-    inside = (pos >= 0) & (pos < n)
-    m = np.zeros_like(s)
-    m[inside] = (cd[inside] - X[pos[inside]]) * s[inside]
-    others = [e for e in range(dim) if e != d]
-    oth = ijk[:, others]
-    F = np.ones_like(s)
-    for j, e in enumerate(others):
-        Xe = grid.planes(e)
-        F *= Xe[oth[:, j] + 1] - Xe[oth[:, j]]
-    # canonical summation order: by body, row and position, then by the summed values themselves
-    # (s, m): pieces tied in both contribute identical terms, so the sums do not depend on the
-    # facet numbering, bitwise
-    row = np.zeros_like(pos)
-    for j in range(dim - 2, -1, -1):
-        row = row * grid.cells[others[j]] + oth[:, j]
-    n_rows = int(np.prod(grid.cells)) // n
-    key = (pieces.body * n_rows + row) * (n + 2) + (pos + 1)
-    order = np.lexsort((m, s, key))
-    zb, zo, zi, zv, fb, fo, fk, fv, rb, ro, r0, r1 = _scan_rows(
-        pieces.body[order], np.ascontiguousarray(oth[order]), pos[order], s[order], m[order], F[order],
-        X, _SNAP)
+    zid, zb, zv, fid, fb, fv, rb, first, length = _axis_coverage(
+        np.ascontiguousarray(pieces.zone, dtype=np.int64), np.ascontiguousarray(pieces.body, dtype=np.int64),
+        np.ascontiguousarray(pieces.normal[:, d]), np.ascontiguousarray(pieces.centroid[:, d]),
+        np.ascontiguousarray(pieces.area, dtype=np.float64), grid.cells.astype(np.int64), _planes(grid), int(d),
+        _SNAP)
+    return (zid, zb, zv), (fid, fb, fv), (rb, first, length)
 
-    def ijk_of(along, rest):
-        out = np.empty((along.size, dim), np.int64)
-        out[:, d] = along
-        out[:, others] = rest
-        return out
 
-    return ((grid.zone_ids(ijk_of(zi, zo)), zb, zv), (grid.face_ids(d, ijk_of(fk, fo)), fb, fv),
-            (rb, ijk_of(r0, ro), r1 - r0))
+def _planes(grid: Grid) -> np.ndarray:
+    """(dim, max n + 1) the grid planes of every axis (padded with zeros)."""
+    out = np.zeros((grid.dim, int(grid.cells.max()) + 1))
+    for e in range(grid.dim):
+        out[e, : grid.cells[e] + 1] = grid.planes(e)
+    return out
 
 
 def _by_id(ids, bodies, values, n_bodies):
