@@ -272,6 +272,7 @@ def _import_solvers() -> None:
     import solvers.lagrange.solver  # noqa: F401
     import orchestrator.coupling.geometry  # noqa: F401  (the coupler's interface geometry)
     import orchestrator.coupling.matrix_free  # noqa: F401  (its multiplier solve)
+    import orchestrator.coupling.operator_rows  # noqa: F401  (its operators)
 
 
 def warm(log=print) -> dict:

@@ -22,7 +22,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from numba import njit
 
 MIN_AREA_FRACTION = 1e-12
 """A zone whose cut area is at most this fraction of a full cut (`Operators.full_area`) gets no
@@ -92,7 +91,9 @@ class Operators:
 
         # per zone (pieces arrive sorted by zone): cut area, area vector, B^b row (one weight per
         # corner) and B^f row (sorted surface nodes) -- one pass of a kernel over the points
-        all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = _zone_rows(
+        from orchestrator.coupling.operator_rows import zone_rows  # (numba: only when building)
+
+        all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = zone_rows(
             pzone, parea, pnormal, np.asarray(pieces.qpiece, dtype=np.int64), np.asarray(pieces.qw, dtype=float),
             np.ascontiguousarray(np.asarray(pieces.qb, dtype=float).reshape(-1, 2**dim)),
             np.ascontiguousarray(pieces.qf, dtype=float), np.asarray(pieces.facet, dtype=np.int64), facets)
@@ -122,72 +123,6 @@ class Operators:
         pairs = face_pairs(zones, np.asarray(grid.cells, dtype=np.int64))
         return cls(zones=zones, bnodes=bnodes, Bb=Bb, Bf=Bf, area=area, avec=avec, normal=normal,
                    fallback=fallback, pairs=pairs, full_area=full_area, width=width)
-
-
-@njit(cache=True)
-def _zone_rows(pzone, parea, pnormal, qpiece, qw, qb, qf, pfacet, facets):
-    """The per-zone sums of ``Operators.build`` over pieces sorted by zone: zone ids, area, area
-    vector, B^b weights (nz, 2^dim) = Σ_points qw φ^b, and B^f rows (CSR: sorted surface node ids, their
-    Σ qw φ^f; duplicates summed in point order); and each piece's zone row."""
-    npc = pzone.size
-    dim = pnormal.shape[1]
-    nc = qb.shape[1]
-    nv = qf.shape[1]
-    nz = 0
-    for p in range(npc):
-        if p == 0 or pzone[p] != pzone[p - 1]:
-            nz += 1
-    zones = np.empty(nz, np.int64)
-    area = np.zeros(nz)
-    avec = np.zeros((nz, dim))
-    bw = np.zeros((nz, nc))
-    prow = np.empty(npc, np.int64)
-    # point ranges of the pieces (points grouped by piece, in piece order)
-    q0 = np.zeros(npc + 1, np.int64)
-    for q in range(qpiece.size):
-        q0[qpiece[q] + 1] += 1
-    for p in range(npc):
-        q0[p + 1] += q0[p]
-    fptr = np.zeros(nz + 1, np.int64)
-    fcol = np.empty(qpiece.size * nv, np.int64)
-    fval = np.empty(qpiece.size * nv)
-    nodes = np.empty(qpiece.size * nv, np.int64)
-    vals = np.empty(qpiece.size * nv)
-    r = -1
-    p = 0
-    nf = 0
-    while p < npc:
-        r += 1
-        zones[r] = pzone[p]
-        p1 = p
-        while p1 < npc and pzone[p1] == pzone[p]:
-            p1 += 1
-        m = 0
-        for a in range(p, p1):
-            prow[a] = r
-            area[r] += parea[a]
-            for d in range(dim):
-                avec[r, d] += parea[a] * pnormal[a, d]
-            for q in range(q0[a], q0[a + 1]):
-                for c in range(nc):
-                    bw[r, c] += qw[q] * qb[q, c]
-                for j in range(nv):
-                    nodes[m] = facets[pfacet[a], j]
-                    vals[m] = qw[q] * qf[q, j]
-                    m += 1
-        # the row's surface nodes sorted (stable: duplicates summed in point order)
-        order = np.argsort(nodes[:m], kind="mergesort")
-        for t in range(m):
-            k = order[t]
-            if t > 0 and nodes[k] == fcol[nf - 1]:
-                fval[nf - 1] += vals[k]
-            else:
-                fcol[nf] = nodes[k]
-                fval[nf] = vals[k]
-                nf += 1
-        fptr[r + 1] = nf
-        p = p1
-    return zones, area, avec, bw, fptr, fcol[:nf], fval[:nf], prow
 
 
 def _slip_normals(avec, area, prow, parea, pnormal):

@@ -20,7 +20,6 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from orchestrator.coupling import matrix_free
 from orchestrator.coupling import solve as S
 from orchestrator.coupling.operators import Operators
 
@@ -215,7 +214,10 @@ class Multiplier(CouplingMethod):
         return math.inf
 
     def step(self, ops, v_b, m_b, v_f, m_f, dt, state, modulus=None) -> StepResult:
-        # (matrix_free: the same solve as S.solve, H applied instead of assembled -- the step's hot path)
+        # (matrix_free: the same solve as S.solve in one numba kernel -- the step's hot path; imported
+        # here: validating a case imports this module and no numba)
+        from orchestrator.coupling import matrix_free
+
         sol = matrix_free.solve(ops, m_b, m_f, v_b, v_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
                                 beta=float(self.cfg["beta"]), warm=(state.zones, state.lam))
         lam = sol.lam.reshape(ops.n_zones, -1)
