@@ -460,6 +460,40 @@ def embedded_piston(case, out, history, params):
     return vals
 
 
+@register_check("acoustic_transmission")
+def acoustic_transmission(case, out, history, params):
+    """A plane pressure pulse of amplitude `incident` (Pa above `ambient`) in the background fluid,
+    reflected from and transmitted into an immersed body at normal incidence along `axis`: at the last
+    output, the reflected amplitude = mean fluid pressure over `reflected_window` (zone centres
+    along the axis, m) and the transmitted one = mean of -stress_aa of the body's elements whose
+    centroids lie in `transmitted_window`, both divided by the incident amplitude (the windows: the
+    plateaus of the two pulses at that time, given in the case with their derivation).  Reference:
+    the acoustic coefficients 2 Z2/(Z1+Z2) and (Z2-Z1)/(Z1+Z2)."""
+    axis = "xyz".index(params.get("axis", "x"))
+    amp = float(params["incident"])
+    ambient = float(params.get("ambient", 0.0))
+    _, _, aindex = _last_step(out, "ale")
+    prof = _zone_stations(out, "ale", aindex, axis)
+    lo, hi = (float(v) for v in params["reflected_window"])
+    w = (prof["x"] > lo) & (prof["x"] < hi)
+    _, _, lindex = _last_step(out, "lagrange")
+    cen, _, _, cd = _cell_centroids(out, "lagrange", lindex)
+    stress = np.asarray(cd["stress"])
+    saa = stress[:, axis, axis] if stress.ndim == 3 else stress[:, axis]
+    tlo, thi = (float(v) for v in params["transmitted_window"])
+    ws = (cen[:, axis] > tlo) & (cen[:, axis] < thi)
+    vals = {
+        "reflection": float((prof["p"][w] - ambient).mean() / amp) if w.any() else float("nan"),
+        "transmission": float(-saa[ws].mean() / amp) if ws.any() else float("nan"),
+        "reflected_zones": float(w.sum()), "transmitted_elements": float(ws.sum()),
+    }
+    for key, a in history.items():
+        if key.endswith("_balance_rel"):
+            name = key.split(".", 1)[1]
+            vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
+    return vals
+
+
 @register_check("coupled_balances")
 def coupled_balances(case, out, history, params):
     """A coupled run's bookkeeping: the largest |balance| of every solver and of the coupling over
