@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from orchestrator.coupling.solve import MAX_ITER, RTOL, MultiplierSolveError, Solution
+from orchestrator.coupling.solve import MAX_ITER, RTOL, MultiplierSolveError, Solution, check_masses
 
 
 @njit(cache=True)
@@ -84,16 +84,21 @@ def _row_terms(e, ptr, idx, w, inv_m, tptr, trows, tvals, scale, mark, start, po
         if f == 0.0:
             continue
         for t in range(tptr[a], tptr[a + 1]):
-            e2 = trows[t]
-            val = f * tvals[t]
-            if mark[e2] >= start:
-                Hv[mark[e2]] += val
-            else:
-                mark[e2] = pos
-                Hi[pos] = e2
-                Hv[pos] = val
-                pos += 1
+            pos = _add_entry(trows[t], f * tvals[t], mark, start, pos, Hi, Hv)
     return pos
+
+
+@njit(cache=True, inline="always")
+def _add_entry(e2, val, mark, start, pos, Hi, Hv):
+    """Add val to entry e2 of the row being built (it starts at `start`; mark[e2] >= start: the
+    entry's position, else a new entry at pos).  Returns the row's end."""
+    if mark[e2] >= start:
+        Hv[mark[e2]] += val
+        return pos
+    mark[e2] = pos
+    Hi[pos] = e2
+    Hv[pos] = val
+    return pos + 1
 
 
 @njit(cache=True)
@@ -158,13 +163,7 @@ def _assemble(active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, 
                 else:
                     e2 = pother[pc[e] + t]
                     val = -pweight[pc[e] + t]
-                if mark[e2] >= start:
-                    Hv[mark[e2]] += val
-                else:
-                    mark[e2] = pos
-                    Hi[pos] = e2
-                    Hv[pos] = val
-                    pos += 1
+                pos = _add_entry(e2, val, mark, start, pos, Hi, Hv)
         Hp[e + 1] = pos
     return Hp, Hi[:pos], Hv[:pos]
 
@@ -352,24 +351,6 @@ def _impulses(x, active, slip, normal, bp, bi, bw, fp, fi, fw, dt, nb, ns, diag_
     return ib, jf, dt * diss
 
 
-def _check_masses(ops, m_b, m_f) -> None:
-    """The mass checks of `solve.material_operators` (same messages)."""
-    if m_b.shape != ops.bnodes.shape:
-        raise ValueError(f"m_b has shape {m_b.shape}; one mass per background node {ops.bnodes.shape} expected")
-    if m_f.shape != (ops.Bf.shape[1],):
-        raise ValueError(f"m_f has shape {m_f.shape}; one mass per surface node ({ops.Bf.shape[1]},) expected")
-    if not (np.all(np.isfinite(m_b)) and np.all(m_b >= 0.0)):
-        bad_b = float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])
-        raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
-    mf = m_f[ops.Bf.indices]
-    if not np.all(mf > 0.0) or np.any(np.isnan(m_f)):
-        touched = np.zeros(m_f.size, bool)
-        touched[ops.Bf.indices] = True
-        i = int(np.flatnonzero((touched & ~(m_f > 0.0)) | np.isnan(m_f))[0])
-        raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
-                         f"needs a mass > 0 (inf: immovable)")
-
-
 def solve(ops, m_b, m_f, v_b, v_f, dt: float, condition: str, alpha: float, beta: float, warm=None,
           rtol: float = RTOL, max_iter: int = MAX_ITER) -> Solution:
     """`solve.solve` without the assembled H (same arguments and result, equal to round-off)."""
@@ -389,7 +370,7 @@ def solve(ops, m_b, m_f, v_b, v_f, dt: float, condition: str, alpha: float, beta
             hit = wz[pos] == ops.zones
             x0[hit] = wl[pos[hit]]
     Bb, Bf = ops.Bb, ops.Bf
-    _check_masses(ops, m_b, m_f)
+    check_masses(ops, m_b, m_f)
     x, it, rel, active, bw, inv_mb, diag_c, pi, pj, pw, failed = _solve_kernel(
         Bb.indptr.astype(np.int64), Bb.indices.astype(np.int64), Bb.data, m_b, Bf.indptr.astype(np.int64),
         Bf.indices.astype(np.int64), Bf.data, m_f, np.ascontiguousarray(ops.area), float(ops.full_area),

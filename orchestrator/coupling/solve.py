@@ -133,6 +133,27 @@ class MaterialOperators:
     ref: np.ndarray  # (n,) first material column of each row of Bb (Galilean RHS reference)
 
 
+def check_masses(ops: Operators, m_b: np.ndarray, m_f: np.ndarray) -> np.ndarray:
+    """One mass per background node (finite, >= 0: 0 is void) and per surface node (> 0 on the
+    interface; +inf: a node whose velocity a boundary condition prescribes, immovable for the solve).
+    Returns the surface nodes the operators touch."""
+    if m_b.shape != ops.bnodes.shape:
+        raise ValueError(f"m_b has shape {m_b.shape}; one mass per background node {ops.bnodes.shape} expected")
+    if m_f.shape != (ops.Bf.shape[1],):
+        raise ValueError(f"m_f has shape {m_f.shape}; one mass per surface node ({ops.Bf.shape[1]},) expected")
+    if not (np.all(np.isfinite(m_b)) and np.all(m_b >= 0.0)):
+        bad_b = float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])
+        raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
+    touched_f = np.zeros(m_f.size, bool)
+    touched_f[ops.Bf.indices] = True
+    bad = touched_f & ~(m_f > 0.0)
+    if bad.any() or np.any(np.isnan(m_f)):
+        i = int(np.flatnonzero(bad | np.isnan(m_f))[0])
+        raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
+                         f"needs a mass > 0 (inf: immovable)")
+    return touched_f
+
+
 def material_operators(ops: Operators, m_b, m_f) -> MaterialOperators:
     """The operators of the material nodes.
 
@@ -146,22 +167,7 @@ def material_operators(ops: Operators, m_b, m_f) -> MaterialOperators:
     surface in void has nothing to be tied to."""
     m_b = np.asarray(m_b, dtype=float)
     m_f = np.asarray(m_f, dtype=float)
-    if m_b.shape != ops.bnodes.shape:
-        raise ValueError(f"m_b has shape {m_b.shape}; one mass per background node {ops.bnodes.shape} expected")
-    if m_f.shape != (ops.Bf.shape[1],):
-        raise ValueError(f"m_f has shape {m_f.shape}; one mass per surface node ({ops.Bf.shape[1]},) expected")
-    if not (np.all(np.isfinite(m_b)) and np.all(m_b >= 0.0)):
-        bad_b = float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])
-        raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
-    touched_f = np.zeros(m_f.size, bool)
-    touched_f[ops.Bf.indices] = True
-    # m_f = +inf: a node whose velocity a boundary condition prescribes (immovable for the solve)
-    bad = touched_f & ~(m_f > 0.0)
-    if bad.any() or np.any(np.isnan(m_f)):
-        i = int(np.flatnonzero(bad | np.isnan(m_f))[0])
-        raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
-                         f"needs a mass > 0 (inf: immovable)")
-
+    touched_f = check_masses(ops, m_b, m_f)
     inv_mb = np.zeros_like(m_b)
     inv_mb[m_b > 0.0] = 1.0 / m_b[m_b > 0.0]
     inv_mf = np.zeros_like(m_f)
