@@ -455,6 +455,44 @@ def test_embedded_piston(tmp_path):
     assert failed(r) == ["p_left", "p_right"], failed(r)
 
 
+# ---- acoustic_transmission -----------------------------------------------------------------------
+def acoustic_output(out, case, r_factor=1.0, t_factor=1.0):
+    """The exact plane pulses at the case's end time: the reflected one (R p_i) in the fluid over
+    0.317 .. 0.467 m, the transmitted one (stress_xx = -T p_i) in the body over 0.690 .. 0.791 m
+    (the case's geometry), zero elsewhere; R and T scaled by the factors."""
+    t = case["run"]["end_time"]
+    z1, z2 = 1000.0 * (2.19e9 / 1000.0) ** 0.5, 4000.0 * 1000.0
+    R, T = (z2 - z1) / (z1 + z2) * r_factor, 2.0 * z2 / (z1 + z2) * t_factor
+    g = case["ale"]["grid"]
+    xn = np.linspace(g["lower"][0], g["upper"][0], g["cells"][0] + 1)
+    pts, cells = structured(xn, np.linspace(g["lower"][1], g["upper"][1], g["cells"][1] + 1))
+    xc = np.tile(0.5 * (xn[1:] + xn[:-1]), g["cells"][1])
+    p = np.where((xc > 0.317) & (xc < 0.467), R * 1e6, 0.0)
+    write(out, "ale", cells, [(t, pts, {"velocity": np.zeros_like(pts)}, {"density": np.full(xc.size, 1e3),
+                                                                          "pressure": p})])
+    box = case["lagrange"]["bodies"][0]["mesh"]["box"]
+    bx = np.linspace(box["lower"][0], box["upper"][0], box["cells"][0] + 1)
+    bp, bc = structured(bx, np.linspace(box["lower"][1], box["upper"][1], box["cells"][1] + 1))
+    bxc = np.tile(0.5 * (bx[1:] + bx[:-1]), box["cells"][1])
+    stress = np.zeros((bxc.size, 6))
+    stress[:, 0] = np.where((bxc > 0.690) & (bxc < 0.791), -T * 1e6, 0.0)
+    write(out, "lagrange", bc, [(t, bp, {"velocity": np.zeros_like(bp)}, {"stress": stress})])
+    return out
+
+
+def test_acoustic_transmission(tmp_path):
+    """The exact amplitudes pass (to the 6 digits of the references); a reflected pulse 1 % low fails
+    the reflection only, a transmitted one 1 % high the transmission only."""
+    case = load_case(CASES / "acoustic_transmission")
+    r = checks.run_check(case, acoustic_output(tmp_path / "good", case), history("ale"))
+    assert r["passed"], r
+    assert r["metrics"]["reflection"]["rel_error"] < 2e-6 and r["metrics"]["transmission"]["rel_error"] < 2e-6
+    r = checks.run_check(case, acoustic_output(tmp_path / "r", case, r_factor=0.99), history("ale"))
+    assert failed(r) == ["reflection"], failed(r)
+    r = checks.run_check(case, acoustic_output(tmp_path / "t", case, t_factor=1.01), history("ale"))
+    assert failed(r) == ["transmission"], failed(r)
+
+
 # ---- coupled_balances ----------------------------------------------------------------------------
 def test_coupled_balances(tmp_path):
     """The bookkeeping of a coupled run: balances from the history, gas left in zones a body fills
@@ -482,7 +520,7 @@ def test_coupled_balances(tmp_path):
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
-              "advected_shape", "embedded_piston", "coupled_balances"}
+              "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission"}
     assert set(checks.CHECKS) == tested
 
 
