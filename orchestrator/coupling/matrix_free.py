@@ -109,23 +109,14 @@ def _assemble(active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, 
     nz = active.size
     tb_ptr, tb_rows, tb_vals = _transpose(active, bp, bi, bw, inv_mb.size)
     tf_ptr, tf_rows, tf_vals = _transpose(active, fp, fi, fw, inv_mf.size)
-    # the face pairs of each zone
-    pc = np.zeros(nz + 1, np.int64)
-    for q in range(pi.size):
-        pc[pi[q] + 1] += 1
-        pc[pj[q] + 1] += 1
-    for e in range(nz):
-        pc[e + 1] += pc[e]
-    pother = np.empty(pc[nz], np.int64)
-    pweight = np.empty(pc[nz])
-    fill = pc[:-1].copy()
-    for q in range(pi.size):
-        pother[fill[pi[q]]] = pj[q]
-        pweight[fill[pi[q]]] = pw[q]
-        fill[pi[q]] += 1
-        pother[fill[pj[q]]] = pi[q]
-        pweight[fill[pj[q]]] = pw[q]
-        fill[pj[q]] += 1
+    # the face pairs of each zone (a pair is a row with its two zones as columns: transposed, each
+    # zone's pairs in pair order); the other zone of pair u is pi[u] + pj[u] - e
+    npair = pi.size
+    pptr = np.arange(0, 2 * npair + 1, 2).astype(np.int64)
+    pidx = np.empty(2 * npair, np.int64)
+    pidx[0::2] = pi
+    pidx[1::2] = pj
+    pc, prow, pweight = _transpose(np.ones(npair, np.bool_), pptr, pidx, np.repeat(pw, 2), nz)
     cap = 16 * nz + 16
     Hp = np.zeros(nz + 1, np.int64)
     Hi = np.empty(cap, np.int64)
@@ -161,7 +152,8 @@ def _assemble(active, slip, normal, bp, bi, bw, inv_mb, fp, fi, fw, inv_mf, dt, 
                     for u in range(pc[e], pc[e + 1]):
                         val += pweight[u]
                 else:
-                    e2 = pother[pc[e] + t]
+                    u = prow[pc[e] + t]
+                    e2 = pi[u] + pj[u] - e
                     val = -pweight[pc[e] + t]
                 pos = _add_entry(e2, val, mark, start, pos, Hi, Hv)
         Hp[e + 1] = pos

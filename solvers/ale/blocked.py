@@ -152,12 +152,12 @@ class Blocked:
         # d-face of zone z; the upper block face is a ghost zone's entry) and the zones a small zone
         # of this block's groups may lie in (real zones and the first ghost layer)
         pad = np.indices(B.zdims).reshape(3, -1)
-        self._face_entries = np.zeros((B.dim, B.nzones), bool)
+        self._face_ok = np.zeros((B.dim, B.nzones), np.uint8)
         for d in range(B.dim):
             ok = np.ones(B.nzones, bool)
             for e in range(B.dim):
                 ok &= (pad[e] >= GHOST) & (pad[e] < GHOST + B.n[e] + (1 if e == d else 0))
-            self._face_entries[d] = ok
+            self._face_ok[d] = ok
         self._layer1 = np.all([(pad[e] >= GHOST - 1) & (pad[e] < GHOST + B.n[e] + 1) for e in range(B.dim)], axis=0)
         # zones a small zone may merge into: real zones and images of the neighbours' (not the
         # ghosts of physical boundaries)
@@ -313,7 +313,7 @@ class Blocked:
     def _static_parts(self, s) -> None:
         """What the static obstacles alone decide, computed once for the coupled steps: their
         min-model apertures, the zones those touch, the immersed-wall nodes (a coupled body moves:
-        the constraint ties the nodes of its cut zones instead), the real-zone and face-entry masks."""
+        the constraint ties the nodes of its cut zones instead), the real-zone mask."""
         if hasattr(self, "_A_static"):
             return
         B = s.block
@@ -324,7 +324,6 @@ class Blocked:
         self.is_cut = np.zeros(B.nzones, np.uint8)
         self._prev_cut = np.zeros(0, np.int64)
         self._real = B.real_zone.astype(np.uint8)
-        self._face_ok = np.ascontiguousarray(self._face_entries.astype(np.uint8))
 
     def _min_apertures(self, s, phi) -> np.ndarray:
         """Min-model face apertures: a face is as open as the less open of its two zones."""
