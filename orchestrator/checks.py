@@ -494,6 +494,40 @@ def acoustic_transmission(case, out, history, params):
     return vals
 
 
+@register_check("uniform_flow")
+def uniform_flow(case, out, history, params):
+    """A uniform flow `velocity` (m/s) that the bodies should leave undisturbed (a slip wall along
+    it): at the last output, over the background's nodes whose zones are on average at least
+    `min_open` (default 0.5) open, the largest normal component |v . n| along the unit `normal` and
+    the largest deviation |v - u|, both relative to |u| (`normal_velocity_max`,
+    `velocity_deviation_max`); plus every balance's largest |value| over the run."""
+    from orchestrator import output
+
+    u = np.asarray(params["velocity"], dtype=float)
+    n = np.asarray(params["normal"], dtype=float)
+    n = n / np.linalg.norm(n)
+    speed = float(np.linalg.norm(u))
+    _, _, index = _last_step(out, "ale")
+    cells, _ = output.read_mesh_file(out, "ale")
+    points, pd, cd = output.read_step(out, "ale", index)
+    v = np.asarray(pd["velocity"])[:, : u.size]
+    open_z = 1.0 - np.asarray(cd.get("blocked_fraction", np.zeros(cells.shape[0])))
+    # the mean open fraction of each node's zones
+    share = np.bincount(cells.ravel(), weights=np.repeat(open_z, cells.shape[1]), minlength=len(points))
+    count = np.bincount(cells.ravel(), minlength=len(points))
+    gas = share >= float(params.get("min_open", 0.5)) * np.maximum(count, 1)
+    vals = {
+        "normal_velocity_max": float(np.abs(v[gas] @ n).max() / speed) if gas.any() else float("nan"),
+        "velocity_deviation_max": float(np.linalg.norm(v[gas] - u, axis=1).max() / speed) if gas.any() else float("nan"),
+        "gas_nodes": float(gas.sum()),
+    }
+    for key, a in history.items():
+        if key.endswith("_balance_rel") and len(a):
+            name = key.split(".", 1)[1]
+            vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
+    return vals
+
+
 @register_check("coupled_balances")
 def coupled_balances(case, out, history, params):
     """A coupled run's bookkeeping: the largest |balance| of every solver and of the coupling over

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -14,6 +15,12 @@ CASES = REPO / "cases"
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+# A suite started in the background by a shell without job control (`.ci/run &` in a script) inherits
+# SIGINT ignored, and so would every process it starts: the tests that press Ctrl-C on a run would
+# see it ignored.  Restore the default here (children then start with SIGINT at its default).
+if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def immerse(*args, timeout=600, **kw) -> subprocess.CompletedProcess:

@@ -98,9 +98,13 @@ def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
     w = pieces.area
     cen = np.stack([np.bincount(row, weights=w * pieces.centroid[:, d], minlength=nz)
                     for d in range(dim)], axis=1) / np.where(ops.area > 0.0, ops.area, 1.0)[:, None]
-    # (Operators.build gives every row all 2^dim corners, in ascending node order)
+    # (Operators.build gives every row all 2^dim corners in corner order c, offset (c&1, c>>1&1, ...)
+    # from the zone's lower node: their positions from the zone's, not from the node ids, which wrap
+    # on a periodic axis)
     data = ops.Bb.data.reshape(nz, nc)
-    xn = grid.lower + grid.node_ijk(ops.bnodes[ops.Bb.indices]).reshape(nz, nc, dim) * grid.h
+    c = np.arange(nc)
+    offsets = (c[:, None] >> np.arange(dim)[None, :]) & 1
+    xn = grid.lower + (grid.zone_ijk(ops.zones)[:, None, :] + offsets[None, :, :]) * grid.h
     side = np.einsum("ecj,ej->ec", xn - cen[:, None, :], ops.normal)
     behind = side <= 0.0
     keep = behind | ~behind.any(axis=1)[:, None]

@@ -37,6 +37,7 @@ class Grid:
     lower: np.ndarray   # (dim,) float64
     upper: np.ndarray   # (dim,) float64
     cells: np.ndarray   # (dim,) int64
+    periodic: tuple = ()  # axes whose upper node plane is the lower one (node ids wrap there)
 
     def __post_init__(self):
         lower = np.array(self.lower, dtype=np.float64).reshape(-1)
@@ -48,15 +49,20 @@ class Grid:
         if np.any(cells < 1) or not np.all(upper > lower) or not np.all(np.isfinite(lower + upper)):
             raise GridError(f"grid needs cells >= 1 and finite lower < upper, got lower={lower.tolist()}, "
                             f"upper={upper.tolist()}, cells={cells.tolist()}")
-        for name, v in (("lower", lower), ("upper", upper), ("cells", cells)):
+        periodic = np.zeros(lower.size, dtype=bool)
+        periodic[np.asarray(self.periodic, dtype=np.int64)] = True
+        for name, v in (("lower", lower), ("upper", upper), ("cells", cells), ("periodic", periodic)):
             v.setflags(write=False)
             object.__setattr__(self, name, v)
 
     @classmethod
     def from_ale(cls, ale_cfg: dict) -> "Grid":
-        """The grid of a normalised ``[ale]`` case table (``ale_cfg["grid"] = {lower, upper, cells}``)."""
+        """The grid of a normalised ``[ale]`` case table (``ale_cfg["grid"] = {lower, upper, cells}``;
+        an axis whose ``boundaries`` are ``periodic`` wraps its node ids)."""
         g = ale_cfg["grid"]
-        return cls(g["lower"], g["upper"], g["cells"])
+        faces = ale_cfg.get("boundaries", {})
+        axes = tuple(d for d, a in enumerate("xyz"[: len(g["cells"])]) if faces.get(f"{a}_lower") == "periodic")
+        return cls(g["lower"], g["upper"], g["cells"], axes)
 
     # --- sizes ---------------------------------------------------------------------------------
     @property
@@ -132,11 +138,17 @@ class Grid:
         return self._ijk(ids, self.face_shape(d))
 
     def zone_nodes(self, zone_ids) -> np.ndarray:
-        """(n, 2**dim) node ids of the zones' corners; corner c has offset (c&1, c>>1&1, c>>2&1)."""
+        """(n, 2**dim) node ids of the zones' corners; corner c has offset (c&1, c>>1&1, c>>2&1).
+        Along a periodic axis the upper plane's nodes are the lower plane's (one node, one mass, one
+        velocity in the ALE solver: the upper plane is its image), so a zone of the last layer names
+        the nodes of plane 0 and the multipliers' impulses land on the node the solver owns."""
         ijk = self.zone_ijk(np.asarray(zone_ids, dtype=np.int64).reshape(-1))
         c = np.arange(2 ** self.dim)
         offsets = (c[:, None] >> np.arange(self.dim)[None, :]) & 1          # (2**dim, dim)
-        return self.node_ids(ijk[:, None, :] + offsets[None, :, :])
+        nijk = ijk[:, None, :] + offsets[None, :, :]
+        if self.periodic.any():
+            nijk = np.where(self.periodic & (nijk == self.cells), 0, nijk)
+        return self.node_ids(nijk)
 
     def neighbours(self, zone_ids):
         """Face-adjacent pairs among a set of zones: ``(pairs (m, 2), axis (m,))``, ``pairs[:, 0]`` the

@@ -85,6 +85,8 @@ from solvers.ale.boundary import constrain as _constrain_kernel
 from solvers.ale.grid import GHOST
 from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
+from solvers.ale.merge import (PHI_MERGE, _group_sums, group_totals, merge_members, merge_nodes,
+                               merge_targets, merge_velocities, zone_gids)
 from solvers.ale.remap import set_positions
 from solvers import elements as _elements
 from solvers.elements import hex_bvectors, quad_bvectors
@@ -163,6 +165,8 @@ class Blocked:
         # ghosts of physical boundaries)
         from solvers.ale.grid import Z_IMAGE, Z_REAL
         self._usable = ((B.zkind == Z_REAL) | (B.zkind == Z_IMAGE)).astype(np.uint8)
+        self._gper = np.zeros(3, np.uint8)  # periodic axes of the whole grid (merge group ids wrap)
+        self._gper[: B.dim] = B.periodic
         self.SF = np.zeros(B.nzones)  # a_e . (surface velocity) of the cut zones (their q)
         self._cut_velocity = np.zeros((0, B.dim))
         self.SB = np.zeros(B.nzones)  # body-surface swept volume of the Lagrange step (cut zones)
@@ -194,6 +198,11 @@ class Blocked:
         b = gi.runs(geometry.run_start, geometry.run_length)
         z, held = gi.zones(geometry.zones, ghosts=GHOST)
         b[z[held]] = f[held]
+        # ghost layers like a zone field: a periodic image holds its zone's fraction (the small-zone
+        # merge must see a group across a periodic face from both sides, or the mass it moves into
+        # the image is lost); an open face's ghosts continue the body through the face (the face
+        # between two zones it covers whole closes)
+        s.bc.fill_zones([b])
         self.b_bodies = b
         cut = np.zeros(0, np.int64) if geometry.cut is None else geometry.cut
         cz, cm = gi.zones(cut)
@@ -488,31 +497,57 @@ class Blocked:
         self.set_fractions(s, b_new)
 
     def _merge(self, s, gdims, goff) -> int:
-        """The small-zone merge (merge_groups, merge_velocities) with the groups' node sums over
-        the ranks: every group that touches an owned node or zone is seen whole by the ranks that
-        hold it, and each node is counted by its owner only, then summed by group (target id)."""
-        B = s.block
-        owned = B.owned.astype(np.uint8)
-        # candidates: zones of the first ghost layer or inside that a body covers and that hold
-        # material (the cut zones, and any a body has just covered)
-        cand = np.flatnonzero((self.b_bodies > 0.0) & (s.M != 0.0) & self._layer1)
-        bad, ugt, un, ugr, m0, m1, members, mgroup, Mg, part = merge_groups(
-            cand, s.M, s.e, self.phi, self._VE_uniform, B.zact, self._usable, s.v, s.m,
-            owned, B.zs, B.ns, PHI_MERGE, gdims, goff)
+        """The small-zone merge (solvers/ale/merge.py): targets decided where the donors are real and
+        handed to the ghost layers, group totals summed where the targets are real and handed out
+        the same way, node sums by group over the ranks.  Collective (ghost fills, group sums).
+        Returns -1, or a zone that cannot pass its content on."""
+        B, dim = s.block, s.block.dim
+        usable = self._usable
+        code = np.full(B.nzones, -1.0)
+        # candidates: real zones a body covers in part or whole that hold material
+        cand = np.flatnonzero((self.b_bodies > 0.0) & (s.M != 0.0) & B.real_zone)
+        bad = merge_targets(cand, s.M, self.phi, self.b_bodies, usable, B.zs, dim, PHI_MERGE, code)
         dec = s.dec
+        if not dec.parallel and not (code >= 0.0).any():
+            return int(bad)
+        zdims = np.array(B.zdims, np.int64)
+        s.bc.fill_zones([code])
+        code[usable == 0] = -1.0  # (the fills copy into the ghosts of physical faces: no zones of groups)
+        donors = np.flatnonzero((code >= 0.0) & (usable != 0))
+        donors = donors[np.argsort(zone_gids(donors, B.zs, gdims, goff, self._gper), kind="stable")]
+        Mg, Eg, Vg = np.zeros(B.nzones), np.zeros(B.nzones), np.zeros(B.nzones)
+        group_totals(donors, code, s.M, s.e, self.phi, self._VE_uniform, self._real, B.zs, zdims, Mg, Eg, Vg)
+        s.bc.fill_zones([Mg, Eg, Vg])
+        Vg[usable == 0] = 0.0
+        member = ((code >= 0.0) | (Vg > 0.0)) & (usable != 0)
+        members = np.flatnonzero(member & B.real_zone)
+        dM = np.zeros(B.nzones)
+        en = np.empty(members.size)
+        mgid = np.empty(members.size, np.int64)
+        mg = np.empty(members.size)
+        bad2 = merge_members(members, code, s.M, self.phi, self._VE_uniform, Mg, Eg, Vg, B.zs, gdims, goff,
+                             self._gper, dM, en, mgid, mg)
+        bad = bad if bad >= 0 else bad2
+        s.bc.fill_zones([dM])
+        dM[usable == 0] = 0.0
+        owned = B.owned.astype(np.uint8)
+        un, m0, m1, ngid, part = merge_nodes(np.flatnonzero(member & self._layer1), code, Vg, s.M, dM, B.zact, s.v,
+                                             owned, B.zs, B.ns, dim, gdims, goff, self._gper)
+        keys = np.unique(np.concatenate([ngid, mgid]))
         comm = dec.comm if dec.parallel else None
         nid = self._node_gid(B, un)
-        mine = owned[un].astype(bool)
         # (collective: every rank takes part in both sums, with or without groups)
-        part = _group_sums(comm, ugt, ugt[ugr[mine]], nid[mine], part[mine])
-        ke1 = merge_velocities(un, ugr, m0, m1, s.v, part, owned) if bad < 0 else np.zeros(un.size)
-        ke1 = _group_sums(comm, ugt, ugt[ugr[mine]], nid[mine], ke1[mine][:, None])[:, 0]
-        if dec.parallel:  # the owners' node velocities to the other ranks' copies (the shared plane
-            s.bc.fill_nodes_vector(s.v)  # of a cut and the ghosts) before anything reads them
-        if bad >= 0 or ugt.size == 0:
+        tot = _group_sums(comm, keys, ngid, nid, part)
+        ugr = np.searchsorted(keys, ngid)
+        ke1 = merge_velocities(un, ugr, m0, m1, s.v, tot, owned) if bad < 0 else np.zeros(un.size)
+        ke1 = _group_sums(comm, keys, ngid, nid, ke1[:, None])[:, 0]
+        s.bc.fill_nodes_vector(s.v)  # (the owners' node velocities to the ghosts and images)
+        if bad >= 0:
             return int(bad)
-        dim = B.dim
-        s.e[members] += (part[mgroup, dim + 2] - ke1[mgroup]) / Mg[mgroup]
+        # the real members' new state; the ghosts are refilled with the zone state (_forces)
+        g = np.searchsorted(keys, mgid)
+        s.M[members] += dM[members]
+        s.e[members] = en + (tot[g, dim + 2] - ke1[g]) / mg
         return -1
 
     @staticmethod
@@ -527,38 +562,6 @@ class Blocked:
 
     def blocked_fraction(self) -> np.ndarray:
         return 1.0 - self.phi
-
-
-def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
-    """Per group (keys: this rank's sorted group ids) the sum of the rows (one per owned node: its
-    group id, global node id, values) of every rank, added in the order of (group id, node id): the
-    same numbers in the same order whatever the ranks (float64 buffers; comm None: one rank)."""
-    k = rows.shape[1]
-    mine = np.hstack([row_key[:, None].astype(np.float64), row_node[:, None].astype(np.float64), rows])
-    if comm is not None:
-        from mpi4py import MPI
-
-        counts = np.zeros(comm.size, dtype=np.int64)
-        comm.Allgather(np.array([mine.size], dtype=np.int64), counts)
-        allrows = np.empty(int(counts.sum()))
-        comm.Allgatherv(mine.ravel(), [allrows, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
-        mine = allrows.reshape(-1, k + 2)
-    order = np.lexsort((mine[:, 1], mine[:, 0]))
-    return _ordered_sums(keys.astype(np.int64), mine[order, 0].astype(np.int64), mine[order, 2:].copy())
-
-
-@njit(cache=True)
-def _ordered_sums(keys, row_key, rows):
-    """out[g] = sum of the rows whose key is keys[g], added in row order (rows sorted by key)."""
-    out = np.zeros((keys.size, rows.shape[1]))
-    g = 0
-    for r in range(row_key.size):
-        while g < keys.size and keys[g] < row_key[r]:
-            g += 1
-        if g < keys.size and keys[g] == row_key[r]:
-            for c in range(rows.shape[1]):
-                out[g, c] += rows[r, c]
-    return out
 
 
 def _sync(s) -> None:
@@ -824,295 +827,3 @@ def _flush():
 
 
 _flush()
-
-
-# ------------------------------------------------------------------------------------------------
-# small cut zones of moving bodies: conservative merging after the remap
-# ------------------------------------------------------------------------------------------------
-PHI_MERGE = 0.5
-"""A zone a coupled body cuts to an open fraction below this (or a fully covered zone that still
-holds material, or one the remap left with negative mass) shares its content with its most open
-face neighbour after every remap (one density and specific energy for both): a small cut zone's
-state would otherwise follow its explicit Lagrange step with a time step set by full zones (its
-volume changes by O(1) of itself per step), the remap's face fluxes and the body's swept volume
-agree only to the order of the scheme, and a body crossing a zone face within one step sweeps more
-than the zone holds."""
-
-
-@njit(cache=True, inline="always")
-def _split(n, strides):
-    """(i, j, k) of the flat padded index n (zone or node strides)."""
-    i = n // strides[0]
-    r = n - i * strides[0]
-    j = r // strides[1]
-    return i, j, r - j * strides[1]
-
-
-@njit(cache=True)
-def _corners(z, zs, ns, dim, out):
-    i, j, k = _split(z, zs)
-    n0 = i * ns[0] + j * ns[1] + k * ns[2]
-    nc = 0
-    for c in range(1 << dim):
-        o0 = c & 1
-        o1 = (c >> 1) & 1
-        o2 = (c >> 2) & 1
-        out[nc] = n0 + o0 * ns[0] + o1 * ns[1] + o2 * ns[2]
-        nc += 1
-    return nc
-
-
-@njit(cache=True)
-def _node_mass(n, M, zact, zs, ns, dim):
-    """The gather's nodal mass (hydro.gather_*: 2^-dim sum of the active zones' masses)."""
-    i, j, k = _split(n, ns)
-    s = 0.0
-    for c in range(1 << dim):
-        zi = i - 1 + (c & 1)
-        zj = j - 1 + ((c >> 1) & 1)
-        zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
-        z = zi * zs[0] + zj * zs[1] + zk * zs[2]
-        s += zact[z] * M[z]
-    return s / (1 << dim)
-
-
-@njit(cache=True)
-def _gid(z, zs, gdims, goff):
-    """Global zone id (x fastest) of padded zone z: the same number on every rank that holds it."""
-    i, j, k = _split(z, zs)
-    return (i + goff[0]) + gdims[0] * ((j + goff[1]) + gdims[1] * (k + goff[2]))
-
-
-@njit(cache=True)
-def _inside(n, ns, zs, nzones, dim):
-    """Node n's 2^dim zones all lie in the padded block (zone dims from the strides and size)."""
-    i, j, k = _split(n, ns)
-    n0 = nzones // zs[0]
-    n1 = zs[0] // zs[1]
-    n2 = zs[1]
-    if i < 1 or i > n0 - 1 or j < 1 or j > n1 - 1:
-        return False
-    if dim == 3 and (k < 1 or k > n2 - 1):
-        return False
-    return True
-
-
-@njit(cache=True)
-def _no_merge(status, dim):
-    z = np.zeros(0, np.int64)
-    f = np.zeros(0)
-    return status, z, z, z, f, f, z, z, f, np.zeros((0, dim + 4))
-
-
-@njit(cache=True)
-def merge_velocities(un, ugr, m0, m1, v, tot, owned):
-    """The nodes' new velocities from their group's totals ``tot`` (over all ranks: [pool, gain, mass
-    after, kinetic energy before]): a node that gains mass takes its share of the momentum the others
-    released with theirs; when no node of a group gains (its zones' mass moved between nodes of
-    other groups) the pool goes to its nodes by mass; a node left without mass stops.  Returns the
-    groups' kinetic energy after, over the nodes this rank owns."""
-    dim = v.shape[1]
-    ke1 = np.zeros(un.size)  # per node (owned ones), summed by group like merge_groups' rows
-    ng = tot.shape[0]
-    # the released mass moves at its mean velocity u = pool / released into the nodes that gain it;
-    # what the gains do not take (a node's change may come from a neighbouring group's zones: gains
-    # and releases of one group need not balance) goes to all of the group's nodes by mass
-    u = np.zeros((ng, dim))
-    rest = np.zeros((ng, dim))
-    for g in range(ng):
-        rel, gain = tot[g, dim + 3], tot[g, dim]
-        for d in range(dim):
-            u[g, d] = tot[g, d] / rel if rel > 0.0 else 0.0
-            rest[g, d] = tot[g, d] - (gain * u[g, d] if rel > 0.0 else 0.0)
-    for a in range(un.size):
-        g = ugr[a]
-        n = un[a]
-        if m1[a] > m0[a] and m1[a] > 0.0:  # (u = 0 when nothing was released: diluted)
-            m_own = m0[a] if m0[a] > 0.0 else 0.0  # (see merge_groups: negative masses)
-            for d in range(dim):
-                v[n, d] = (m_own * v[n, d] + (m1[a] - m_own) * u[g, d]) / m1[a]
-        if m1[a] > 0.0 and tot[g, dim + 1] > 0.0:
-            for d in range(dim):
-                v[n, d] += rest[g, d] / tot[g, dim + 1]
-        if not (m1[a] > 0.0):
-            for d in range(dim):
-                v[n, d] = 0.0
-        if owned[n]:
-            for d in range(dim):
-                ke1[a] += 0.5 * m1[a] * v[n, d] * v[n, d]
-    return ke1
-
-
-@njit(cache=True)
-def merge_groups(cand, M, e, phi, VE, zact, usable, v, m, owned, zs, ns, phi_merge, gdims, goff):
-    """Merge every candidate zone with material and an open fraction below phi_merge (or negative
-    mass) into its face neighbour with the largest open fraction (the group's mass and internal
-    energy shared in proportion to the open volumes: one density and one specific energy).  Nodal
-    momentum is conserved: a node keeps its velocity when its mass falls and hands the momentum of
-    the lost mass to the nodes of its group that gain mass; the kinetic energy this inelastic
-    exchange removes becomes the group's internal energy (total energy conserved).
-
-    Parallel runs: ``cand`` holds the candidates of this rank's padded block, ghosts (images of the
-    neighbours' zones, ``usable``) included, so every rank sees the whole of every group that
-    touches its real zones and nodes and computes it alike: groups, their order and the group a
-    node belongs to (the one with the lowest target) follow global ids (``gdims``: zones per axis;
-    ``goff``: global index of padded index 0 per axis), not the block's layout.  Values written to
-    ghosts are refilled by the next halo exchange.  Returns -1, or a zone that holds material and
-    has no open neighbour."""
-    dim = v.shape[1]
-    nd = 0
-    donors = np.empty(cand.size, np.int64)
-    targets = np.empty(cand.size, np.int64)
-    for t in range(cand.size):
-        z = cand[t]
-        if not usable[z] or M[z] == 0.0 or (phi[z] >= phi_merge and M[z] > 0.0):
-            continue
-        best = -1
-        bphi = 0.0
-        for d in range(dim):
-            for sgn in (-1, 1):
-                nb = z + sgn * zs[d]
-                if nb < 0 or nb >= M.shape[0]:
-                    continue
-                if usable[nb] and phi[nb] > bphi:
-                    bphi = phi[nb]
-                    best = nb
-        if best < 0:
-            return _no_merge(z, dim)
-        donors[nd] = z
-        targets[nd] = best
-        nd += 1
-    if nd == 0:
-        return _no_merge(-1, dim)
-    donors = donors[:nd]
-    targets = targets[:nd]
-    gd = np.empty(nd, np.int64)
-    for a in range(nd):
-        gd[a] = _gid(donors[a], zs, gdims, goff)
-    o = np.argsort(gd, kind="mergesort")
-    donors = donors[o]
-    targets = targets[o]
-    # a target that is itself a donor passes its group on to its own target
-    for it in range(nd):
-        changed = False
-        for a in range(nd):
-            for b in range(nd):
-                if targets[a] == donors[b] and targets[b] != donors[a]:
-                    targets[a] = targets[b]
-                    changed = True
-        if not changed:
-            break
-    gt = np.empty(nd, np.int64)
-    for a in range(nd):
-        gt[a] = _gid(targets[a], zs, gdims, goff)
-    ot = np.argsort(gt, kind="mergesort")
-    ng = 0
-    ut = np.empty(nd, np.int64)
-    ugt = np.empty(nd, np.int64)
-    for a in range(nd):
-        t = targets[ot[a]]
-        if ng == 0 or ut[ng - 1] != t:
-            ut[ng] = t
-            ugt[ng] = gt[ot[a]]
-            ng += 1
-    ut = ut[:ng]
-    ugt = ugt[:ng]
-    gid_of = np.empty(nd, np.int64)
-    for a in range(nd):
-        for g in range(ng):
-            if ut[g] == targets[a]:
-                gid_of[a] = g
-                break
-    members = np.concatenate((ut, donors))
-    mgroup = np.concatenate((np.arange(ng), gid_of))
-    # affected nodes; a node belongs to the group with the lowest target id among its zones' groups
-    corners = np.empty(8, np.int64)
-    nodes = np.empty(members.size * (1 << dim), np.int64)
-    ngr = np.empty(members.size * (1 << dim), np.int64)
-    q = 0
-    for a in range(members.size):
-        nc = _corners(members[a], zs, ns, dim, corners)
-        for c in range(nc):
-            nodes[q] = corners[c]
-            ngr[q] = mgroup[a]
-            q += 1
-    order = np.argsort(nodes, kind="mergesort")
-    nodes_s = nodes[order]
-    ngr_s = ngr[order]
-    un = np.empty(q, np.int64)
-    ugr = np.empty(q, np.int64)
-    nu = 0
-    for a in range(q):
-        if nu > 0 and un[nu - 1] == nodes_s[a]:
-            if ngr_s[a] < ugr[nu - 1]:  # groups are numbered in target-id order
-                ugr[nu - 1] = ngr_s[a]
-        else:
-            un[nu] = nodes_s[a]
-            ugr[nu] = ngr_s[a]
-            nu += 1
-    un = un[:nu]
-    ugr = ugr[:nu]
-    # the nodes' masses before (the remap's, ghosts filled) and their change: 2^-dim of the change
-    # of every member zone around them (only members change)
-    m0 = np.empty(nu)
-    for a in range(nu):
-        # the gather's nodal mass (what the diagnostics and the next step use) where all the node's
-        # zones lie in the padded block; the remap's nodal mass at its edge (ghost nodes: refilled)
-        m0[a] = _node_mass(un[a], M, zact, zs, ns, dim) if _inside(un[a], ns, zs, M.shape[0], dim) else m[un[a]]
-    Mold = np.empty(members.size)
-    for a in range(members.size):
-        Mold[a] = M[members[a]]
-    # zone masses and energies of every group
-    Mg = np.zeros(ng)
-    Eg = np.zeros(ng)
-    Vg = np.zeros(ng)
-    for a in range(members.size):
-        z = members[a]
-        g = mgroup[a]
-        Mg[g] += M[z]
-        Eg[g] += M[z] * e[z]
-        Vg[g] += phi[z] * VE[z]
-    for a in range(members.size):
-        z = members[a]
-        g = mgroup[a]
-        if not (Mg[g] > 0.0):
-            return _no_merge(z, dim)
-        M[z] = Mg[g] * (phi[z] * VE[z]) / Vg[g]
-        e[z] = Eg[g] / Mg[g]
-    # nodal momentum: each node's mass change, and the group sums over the nodes this rank owns
-    m1 = m0.copy()
-    for a in range(members.size):
-        z = members[a]
-        dmz = zact[z] * (M[z] - Mold[a]) / (1 << dim)
-        nc = _corners(z, zs, ns, dim, corners)
-        for c in range(nc):
-            m1[np.searchsorted(un, corners[c])] += dmz
-    # per owned node: [pool (dim), gain, mass after, kinetic energy before, mass released]; summed
-    # by group in a canonical order (Blocked._merge), so any number of ranks gives the same bits
-    part = np.zeros((nu, dim + 4))
-    for a in range(nu):
-        if not owned[un[a]]:
-            continue
-        g = ugr[a]
-        n = un[a]
-        for d in range(dim):
-            part[a, dim + 2] += 0.5 * m0[a] * v[n, d] * v[n, d]
-        if m1[a] <= m0[a] or not (m1[a] > 0.0):
-            # (a node that gains only up to zero mass -- a negative zone mass filled -- can hold no
-            # momentum: its own goes to the pool)
-            c = (m0[a] - m1[a]) if m1[a] <= m0[a] else m0[a]
-            for d in range(dim):
-                part[a, d] += c * v[n, d]
-            part[a, dim + 3] += c
-        elif m0[a] < 0.0:
-            # a node of negative mass (round-off of a zone a body empties) that ends with some: its
-            # momentum goes to the pool and it gains all of its new mass from it (bounded velocity)
-            for d in range(dim):
-                part[a, d] += m0[a] * v[n, d]
-            part[a, dim + 3] += m0[a]
-            part[a, dim] += m1[a]
-        else:
-            part[a, dim] += m1[a] - m0[a]
-        if m1[a] > 0.0:
-            part[a, dim + 1] += m1[a]
-    return -1, ugt, un, ugr, m0, m1, members, mgroup, Mg, part

@@ -120,6 +120,8 @@ class Block:
                     self.face[d, s] = FACE_CODES[spec]
             if (self.face[d, 0] == PERIODIC) != (self.face[d, 1] == PERIODIC):
                 raise GridError(f"periodic must be set on both {FACE_NAMES[2 * d]} and {FACE_NAMES[2 * d + 1]}")
+        # periodic axes of the whole grid (a rank cut may replace the face code on this block)
+        self.periodic = np.array([self.face[d, 0] == PERIODIC for d in range(dim)], dtype=bool)
         if cuts is not None:
             for d in range(dim):
                 for s in range(2):

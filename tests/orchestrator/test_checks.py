@@ -493,6 +493,49 @@ def test_acoustic_transmission(tmp_path):
     assert failed(r) == ["transmission"], failed(r)
 
 
+# ---- uniform_flow --------------------------------------------------------------------------------
+def uniform_flow_output(out, case, kick=0.0, at_wall=True):
+    """The oblique wall case's exact state (its initial velocity everywhere, the strip's zones
+    blocked) with one gas node given a normal velocity ``kick`` (relative to the flow speed): next
+    to the wall (half-open zones around it), or in a zone the wall covers (not gas: ignored)."""
+    g = case["ale"]["grid"]
+    nx, ny = g["cells"]
+    xn, yn = np.linspace(0.0, 1.0, nx + 1), np.linspace(0.0, g["upper"][1], ny + 1)
+    pts, cells = structured(xn, yn)
+    xc = np.tile(0.5 * (xn[1:] + xn[:-1]), ny)
+    yc = np.repeat(0.5 * (yn[1:] + yn[:-1]), nx)
+    th = np.radians(30.0)
+    dist = -np.sin(th) * xc + np.cos(th) * yc  # from the diagonal, along the wall's normal
+    bf = np.clip((0.05 + 0.5 * 0.02 - np.abs(dist)) / 0.02, 0.0, 1.0)  # the strip, smeared over a zone
+    u = np.array(case["check"]["params"]["velocity"])
+    n = np.array(case["check"]["params"]["normal"])
+    v = np.tile(np.append(u, 0.0), (len(pts), 1))
+    share = np.bincount(cells.ravel(), weights=np.repeat(1.0 - bf, 4), minlength=len(pts))
+    count = np.bincount(cells.ravel(), minlength=len(pts))
+    frac = share / count
+    node = np.flatnonzero((frac > 0.6) & (frac < 0.9) if at_wall else frac < 0.3)[0]
+    v[node, :2] += kick * np.linalg.norm(u) * n
+    return write(out, "ale", cells, [(1.0, pts, {"velocity": v}, {"density": np.ones(nx * ny), "blocked_fraction": bf})])
+
+
+def test_uniform_flow(tmp_path):
+    """The initial state passes exactly; a gas node next to the wall moving across it at 4 % of the
+    flow speed fails both metrics, the same kick at a node inside the wall counts for nothing; a mass
+    balance of 1e-12 fails that metric only."""
+    case = load_case(CASES / "oblique_slip_wall")
+    r = checks.run_check(case, uniform_flow_output(tmp_path / "good", case), history("ale"))
+    assert r["passed"], r
+    assert r["metrics"]["normal_velocity_max"]["value"] < 1e-15
+    r = checks.run_check(case, uniform_flow_output(tmp_path / "kick", case, 0.04), history("ale"))
+    assert failed(r) == ["normal_velocity_max"], failed(r)  # (deviation 4 % < its tolerance 5 %)
+    r = checks.run_check(case, uniform_flow_output(tmp_path / "kick2", case, 0.06), history("ale"))
+    assert failed(r) == ["normal_velocity_max", "velocity_deviation_max"], failed(r)
+    r = checks.run_check(case, uniform_flow_output(tmp_path / "inside", case, 0.06, at_wall=False), history("ale"))
+    assert r["passed"], r
+    r = checks.run_check(case, uniform_flow_output(tmp_path / "m", case), history("ale", mass=1e-12))
+    assert failed(r) == ["mass_balance_rel"], failed(r)
+
+
 # ---- coupled_balances ----------------------------------------------------------------------------
 def test_coupled_balances(tmp_path):
     """The bookkeeping of a coupled run: balances from the history, gas left in zones a body fills
@@ -520,7 +563,8 @@ def test_coupled_balances(tmp_path):
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
-              "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission"}
+              "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
+              "uniform_flow"}
     assert set(checks.CHECKS) == tested
 
 

@@ -1,0 +1,336 @@
+"""Small cut zones of moving bodies: the conservative merge after the remap (``Blocked._merge``).
+
+A zone a coupled body cuts to a small open fraction, or covers while it still holds material, hands
+its content to a face neighbour (``PHI_MERGE``): the target's group (the target and its donors)
+shares one density and one specific energy, in proportion to the open volumes.  Nodal momentum is
+conserved (a node keeps its velocity when its mass falls and hands the momentum of the lost mass to
+the nodes of its group that gain), and the kinetic energy the exchange removes becomes the group's
+internal energy (total energy conserved).
+
+Who merges into whom is decided where the zone is real, from the zones within two of it (the
+neighbours' open fractions and whether they merge themselves), and handed to the ghost layers of the
+other ranks and of the periodic images as a code (the offset of its target, ``merge_targets``);
+each target's group totals are summed where the target is real, over its donors (within two zones),
+and handed out the same way (``group_totals``).  So every group that touches a zone or a node of a
+block is seen whole with the two ghost layers the remap has, whatever the ranks and across periodic
+faces (deciding in the ghost layers instead needs the zones three and four away: a group's donor
+two zones out picks its target among zones the block does not hold).
+
+The rule: a donor merges into the open, usable neighbour that does not merge itself, the most open
+one (ties to the first in axis order, lower side first); if all its open neighbours merge, into the
+target of the most open of them (two zones away); a zone whose open neighbours and their targets
+all merge (a pocket of small zones, rare) keeps its content if it is open and holds positive mass,
+and is an error otherwise (a covered zone with material and nowhere to pass it: the caller names
+it).  Groups are keyed by their target's global zone id (periodic images share it), and every sum
+over a group's nodes is taken by the nodes' owners and added in (group, node) order
+(``_group_sums``), so any number of ranks gives the same bits.
+"""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+PHI_MERGE = 0.5
+"""A zone a coupled body cuts to an open fraction below this (or a fully covered zone that still
+holds material, or one the remap left with negative mass) shares its content with its most open
+face neighbour after every remap (one density and specific energy for both): a small cut zone's
+state would otherwise follow its explicit Lagrange step with a time step set by full zones (its
+volume changes by O(1) of itself per step), the remap's face fluxes and the body's swept volume
+agree only to the order of the scheme, and a body crossing a zone face within one step sweeps more
+than the zone holds."""
+
+
+@njit(cache=True, inline="always")
+def _split(n, strides):
+    """(i, j, k) of the flat padded index n (zone or node strides)."""
+    i = n // strides[0]
+    r = n - i * strides[0]
+    j = r // strides[1]
+    return i, j, r - j * strides[1]
+
+@njit(cache=True)
+def _corners(z, zs, ns, dim, out):
+    i, j, k = _split(z, zs)
+    n0 = i * ns[0] + j * ns[1] + k * ns[2]
+    nc = 0
+    for c in range(1 << dim):
+        o0 = c & 1
+        o1 = (c >> 1) & 1
+        o2 = (c >> 2) & 1
+        out[nc] = n0 + o0 * ns[0] + o1 * ns[1] + o2 * ns[2]
+        nc += 1
+    return nc
+
+@njit(cache=True)
+def _node_mass(n, M, zact, zs, ns, dim):
+    """The gather's nodal mass (hydro.gather_*: 2^-dim sum of the active zones' masses)."""
+    i, j, k = _split(n, ns)
+    s = 0.0
+    for c in range(1 << dim):
+        zi = i - 1 + (c & 1)
+        zj = j - 1 + ((c >> 1) & 1)
+        zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
+        z = zi * zs[0] + zj * zs[1] + zk * zs[2]
+        s += zact[z] * M[z]
+    return s / (1 << dim)
+
+@njit(cache=True)
+def merge_velocities(un, ugr, m0, m1, v, tot, owned):
+    """The nodes' new velocities from their group's totals ``tot`` (over all ranks: [pool, gain, mass
+    after, kinetic energy before]): a node that gains mass takes its share of the momentum the others
+    released with theirs; when no node of a group gains (its zones' mass moved between nodes of
+    other groups) the pool goes to its nodes by mass; a node left without mass stops.  Returns the
+    groups' kinetic energy after, over the nodes this rank owns."""
+    dim = v.shape[1]
+    ke1 = np.zeros(un.size)  # per node (owned ones), summed by group like merge_nodes' rows
+    ng = tot.shape[0]
+    # the released mass moves at its mean velocity u = pool / released into the nodes that gain it;
+    # what the gains do not take (a node's change may come from a neighbouring group's zones: gains
+    # and releases of one group need not balance) goes to all of the group's nodes by mass
+    u = np.zeros((ng, dim))
+    rest = np.zeros((ng, dim))
+    for g in range(ng):
+        rel, gain = tot[g, dim + 3], tot[g, dim]
+        for d in range(dim):
+            u[g, d] = tot[g, d] / rel if rel > 0.0 else 0.0
+            rest[g, d] = tot[g, d] - (gain * u[g, d] if rel > 0.0 else 0.0)
+    for a in range(un.size):
+        g = ugr[a]
+        n = un[a]
+        if m1[a] > m0[a] and m1[a] > 0.0:  # (u = 0 when nothing was released: diluted)
+            m_own = m0[a] if m0[a] > 0.0 else 0.0  # (see merge_nodes: negative masses)
+            for d in range(dim):
+                v[n, d] = (m_own * v[n, d] + (m1[a] - m_own) * u[g, d]) / m1[a]
+        if m1[a] > 0.0 and tot[g, dim + 1] > 0.0:
+            for d in range(dim):
+                v[n, d] += rest[g, d] / tot[g, dim + 1]
+        if not (m1[a] > 0.0):
+            for d in range(dim):
+                v[n, d] = 0.0
+        if owned[n]:
+            for d in range(dim):
+                ke1[a] += 0.5 * m1[a] * v[n, d] * v[n, d]
+    return ke1
+
+def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
+    """Per group (keys: this rank's sorted group ids) the sum of the rows (one per owned node: its
+    group id, global node id, values) of every rank, added in the order of (group id, node id): the
+    same numbers in the same order whatever the ranks (float64 buffers; comm None: one rank)."""
+    k = rows.shape[1]
+    mine = np.hstack([row_key[:, None].astype(np.float64), row_node[:, None].astype(np.float64), rows])
+    if comm is not None:
+        from mpi4py import MPI
+
+        counts = np.zeros(comm.size, dtype=np.int64)
+        comm.Allgather(np.array([mine.size], dtype=np.int64), counts)
+        allrows = np.empty(int(counts.sum()))
+        comm.Allgatherv(mine.ravel(), [allrows, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
+        mine = allrows.reshape(-1, k + 2)
+    order = np.lexsort((mine[:, 1], mine[:, 0]))
+    return _ordered_sums(keys.astype(np.int64), mine[order, 0].astype(np.int64), mine[order, 2:].copy())
+
+
+@njit(cache=True)
+def _ordered_sums(keys, row_key, rows):
+    """out[g] = sum of the rows whose key is keys[g], added in row order (rows sorted by key)."""
+    out = np.zeros((keys.size, rows.shape[1]))
+    g = 0
+    for r in range(row_key.size):
+        while g < keys.size and keys[g] < row_key[r]:
+            g += 1
+        if g < keys.size and keys[g] == row_key[r]:
+            for c in range(rows.shape[1]):
+                out[g, c] += rows[r, c]
+    return out
+
+
+@njit(cache=True)
+def _gid(z, zs, gdims, goff, gper):
+    """Global zone id (x fastest) of padded zone z: the same number on every rank that holds it,
+    and for a periodic image (``gper``: periodic axes) its zone's number."""
+    i, j, k = _split(z, zs)
+    i += goff[0]
+    j += goff[1]
+    k += goff[2]
+    if gper[0]:
+        i %= gdims[0]
+    if gper[1]:
+        j %= gdims[1]
+    if gper[2]:
+        k %= gdims[2]
+    return i + gdims[0] * (j + gdims[1] * k)
+
+
+@njit(cache=True)
+def zone_gids(zones, zs, gdims, goff, gper):
+    out = np.empty(zones.size, np.int64)
+    for a in range(zones.size):
+        out[a] = _gid(zones[a], zs, gdims, goff, gper)
+    return out
+
+
+@njit(cache=True, inline="always")
+def _is_donor(z, M, phi, b, usable, phi_merge):
+    return usable[z] != 0 and b[z] > 0.0 and M[z] != 0.0 and (phi[z] < phi_merge or M[z] < 0.0)
+
+
+@njit(cache=True)
+def _best(z, M, phi, b, usable, zs, dim, phi_merge):
+    """The face neighbour zone z would merge into (module docstring), or -1: open and usable; one
+    that does not merge itself before one that does, then the most open; ties to the first."""
+    best = -1
+    bphi = 0.0
+    bkeep = False
+    for d in range(dim):
+        for sgn in (-1, 1):
+            nb = z + sgn * zs[d]
+            if usable[nb] == 0 or not (phi[nb] > 0.0):
+                continue
+            keep = not _is_donor(nb, M, phi, b, usable, phi_merge)
+            if best < 0 or (keep and not bkeep) or (keep == bkeep and phi[nb] > bphi):
+                best = nb
+                bphi = phi[nb]
+                bkeep = keep
+    return best
+
+
+@njit(cache=True, inline="always")
+def _target(z, code, zs):
+    """The target of donor z from its code (offsets -2..2 per axis, base 5)."""
+    c = int(code[z])
+    ox = c % 5 - 2
+    oy = (c // 5) % 5 - 2
+    oz = c // 25 - 2
+    return z + ox * zs[0] + oy * zs[1] + oz * zs[2]
+
+
+@njit(cache=True)
+def merge_targets(cand, M, phi, b, usable, zs, dim, phi_merge, code):
+    """code[z] of the real candidate zones (the others stay -1): the offset of the zone each donor's
+    content goes to (module docstring).  Returns -1, or a zone that must pass its content on (covered
+    with material, or negative mass) and has nowhere to."""
+    for t in range(cand.size):
+        z = cand[t]
+        if not _is_donor(z, M, phi, b, usable, phi_merge):
+            continue
+        y = _best(z, M, phi, b, usable, zs, dim, phi_merge)
+        if y < 0:
+            return z
+        if _is_donor(y, M, phi, b, usable, phi_merge):
+            w = _best(y, M, phi, b, usable, zs, dim, phi_merge)
+            if w < 0 or _is_donor(w, M, phi, b, usable, phi_merge):
+                if phi[z] > 0.0 and M[z] > 0.0:
+                    continue  # a pocket of small zones: this one keeps its content
+                return z
+            y = w
+        zi, zj, zk = _split(z, zs)
+        yi, yj, yk = _split(y, zs)
+        code[z] = (yi - zi + 2) + 5 * (yj - zj + 2) + 25 * (yk - zk + 2)
+    return -1
+
+
+@njit(cache=True)
+def group_totals(donors, code, M, e, phi, VE, real, zs, zdims, Mg, Eg, Vg):
+    """Mass, internal energy and open volume of the group of every real target (zone-shaped, 0
+    elsewhere): the target's own, then its donors' in the order given (global id)."""
+    for a in range(donors.size):
+        z = donors[a]
+        zi, zj, zk = _split(z, zs)
+        c = int(code[z])
+        ti = zi + c % 5 - 2
+        tj = zj + (c // 5) % 5 - 2
+        tk = zk + c // 25 - 2
+        if ti < 0 or ti >= zdims[0] or tj < 0 or tj >= zdims[1] or tk < 0 or tk >= zdims[2]:
+            continue
+        t = ti * zs[0] + tj * zs[1] + tk * zs[2]
+        if not real[t]:
+            continue
+        if Vg[t] == 0.0:
+            Mg[t] = M[t]
+            Eg[t] = M[t] * e[t]
+            Vg[t] = phi[t] * VE[t]
+        Mg[t] += M[z]
+        Eg[t] += M[z] * e[z]
+        Vg[t] += phi[z] * VE[z]
+
+
+@njit(cache=True)
+def merge_members(members, code, M, phi, VE, Mg, Eg, Vg, zs, gdims, goff, gper, dM, en, mgid, mg):
+    """The real members' new mass (as its change dM) and specific energy en, their group's id mgid
+    (global id of the target) and mass mg.  Returns -1, or a member of a group without positive
+    mass."""
+    for a in range(members.size):
+        z = members[a]
+        t = z if code[z] < 0.0 else _target(z, code, zs)
+        if not (Mg[t] > 0.0):
+            return z
+        dM[z] = Mg[t] * (phi[z] * VE[z]) / Vg[t] - M[z]
+        en[a] = Eg[t] / Mg[t]
+        mgid[a] = _gid(t, zs, gdims, goff, gper)
+        mg[a] = Mg[t]
+    return -1
+
+
+@njit(cache=True)
+def merge_nodes(near, code, Vg, M, dM, zact, v, owned, zs, ns, dim, gdims, goff, gper):
+    """The owned nodes of the member zones ``near`` (real or first ghost layer): their masses before
+    and after (m0, m1), their group (the lowest target id among their zones' groups) and their rows
+    [pool (dim), gain, mass after, kinetic energy before, mass released] to be summed by group."""
+    corners = np.empty(8, np.int64)
+    nodes = np.empty(near.size * (1 << dim), np.int64)
+    q = 0
+    for a in range(near.size):
+        nc = _corners(near[a], zs, ns, dim, corners)
+        for c in range(nc):
+            if owned[corners[c]]:
+                nodes[q] = corners[c]
+                q += 1
+    un = np.unique(nodes[:q])
+    nu = un.size
+    m0 = np.empty(nu)
+    m1 = np.empty(nu)
+    ngid = np.empty(nu, np.int64)
+    part = np.zeros((nu, dim + 4))
+    for a in range(nu):
+        n = un[a]
+        m0[a] = _node_mass(n, M, zact, zs, ns, dim)
+        i, j, k = _split(n, ns)
+        dm = 0.0
+        g = -1
+        for c in range(1 << dim):
+            zi = i - 1 + (c & 1)
+            zj = j - 1 + ((c >> 1) & 1)
+            zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
+            z = zi * zs[0] + zj * zs[1] + zk * zs[2]
+            dm += zact[z] * dM[z]
+            if code[z] >= 0.0:
+                gz = _gid(_target(z, code, zs), zs, gdims, goff, gper)
+            elif Vg[z] > 0.0:
+                gz = _gid(z, zs, gdims, goff, gper)
+            else:
+                continue
+            if g < 0 or gz < g:
+                g = gz
+        m1[a] = m0[a] + dm / (1 << dim)
+        ngid[a] = g
+        for d in range(dim):
+            part[a, dim + 2] += 0.5 * m0[a] * v[n, d] * v[n, d]
+        if m1[a] <= m0[a] or not (m1[a] > 0.0):
+            # (a node that gains only up to zero mass -- a negative zone mass filled -- can hold no
+            # momentum: its own goes to the pool)
+            c = (m0[a] - m1[a]) if m1[a] <= m0[a] else m0[a]
+            for d in range(dim):
+                part[a, d] += c * v[n, d]
+            part[a, dim + 3] += c
+        elif m0[a] < 0.0:
+            # a node of negative mass (round-off of a zone a body empties) that ends with some: its
+            # momentum goes to the pool and it gains all of its new mass from it (bounded velocity)
+            for d in range(dim):
+                part[a, d] += m0[a] * v[n, d]
+            part[a, dim + 3] += m0[a]
+            part[a, dim] += m1[a]
+        else:
+            part[a, dim] += m1[a] - m0[a]
+        if m1[a] > 0.0:
+            part[a, dim + 1] += m1[a]
+    return un, m0, m1, ngid, part

@@ -1,0 +1,96 @@
+"""The small-zone merge's decisions (solvers/ale/merge.py) on a padded 2-D block of 7 x 7 zones (the
+real ones 3 x 3 in the middle, two ghost layers): whom a donor merges into, chains through a donor,
+a pocket of small zones, and the group totals a target's owner sums."""
+from __future__ import annotations
+
+import numpy as np
+
+from solvers.ale.merge import PHI_MERGE, group_totals, merge_targets
+
+N = 7
+ZS = np.array([N, 1, 1], np.int64)  # x slow, y fast (the solver's padded layout)
+ZDIMS = np.array([N, N, 1], np.int64)
+
+
+def z(i, j):
+    return (i + 2) * N + (j + 2)
+
+
+def block(small):
+    """Every zone open and empty of body (phi 1, b 0) except ``small``: {(i, j): phi} cut by a body
+    (b = 1 - phi); masses rho phi V with rho = 1, V = 1."""
+    phi, b = np.ones(N * N), np.zeros(N * N)
+    for (i, j), f in small.items():
+        phi[z(i, j)] = f
+        b[z(i, j)] = 1.0 - f
+    M = phi.copy()
+    return phi, b, M, np.ones(N * N, np.uint8)
+
+
+def targets(phi, b, M, usable, cand):
+    code = np.full(N * N, -1.0)
+    bad = merge_targets(np.array([z(*c) for c in cand], np.int64), M, phi, b, usable, ZS, 2, PHI_MERGE, code)
+    return bad, code
+
+
+def offset(code, c):
+    k = int(code[z(*c)])
+    return (k % 5 - 2, (k // 5) % 5 - 2)
+
+
+def test_a_sliver_merges_into_its_most_open_neighbour_that_does_not_merge():
+    """(1, 1) at 0.01 beside (0, 1) at 0.3 (a donor itself), (2, 1) at 0.9 and (1, 2) fully open:
+    into (1, 2), the most open; beside a donor at 0.4 and an empty zone at 0.2, into the empty one."""
+    phi, b, M, usable = block({(1, 1): 0.01, (0, 1): 0.3, (2, 1): 0.9, (1, 0): 0.0})
+    bad, code = targets(phi, b, M, usable, [(1, 1), (0, 1), (2, 1)])
+    assert bad == -1 and offset(code, (1, 1)) == (0, 1)
+    assert offset(code, (0, 1)) != (1, 0)  # (0, 1) does not pick the sliver
+    assert code[z(2, 1)] == -1.0  # 0.9 >= PHI_MERGE: not a donor
+    # (1, 2) at 0.4 with material (a donor), (2, 1) at 0.2 empty (does not merge): into (2, 1)
+    phi, b, M, usable = block({(1, 1): 0.01, (0, 1): 0.0, (2, 1): 0.2, (1, 0): 0.0, (1, 2): 0.4})
+    M[z(2, 1)] = 0.0
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and offset(code, (1, 1)) == (1, 0)
+
+
+def test_a_donor_whose_open_neighbours_all_merge_passes_its_content_two_zones_on():
+    """(1, 1) covered with material (phi 0, M > 0), its only open neighbour (1, 2) a sliver whose own
+    target is (1, 3): the covered zone's code points two zones on, at (1, 3)."""
+    phi, b, M, usable = block({(1, 1): 0.0, (0, 1): 0.0, (2, 1): 0.0, (1, 0): 0.0, (1, 2): 0.05,
+                               (0, 2): 0.0, (2, 2): 0.0})
+    M[z(1, 1)] = 0.2
+    bad, code = targets(phi, b, M, usable, [(1, 1), (1, 2)])
+    assert bad == -1 and offset(code, (1, 1)) == (0, 2) and offset(code, (1, 2)) == (0, 1)
+
+
+def test_a_pocket_of_small_zones_keeps_an_open_zone_and_names_a_covered_one():
+    """Two slivers with only each other open: the open one keeps its content (no code); a covered
+    zone with material whose only open neighbour is such a sliver is returned (nowhere to go)."""
+    closed = {(i, j): 0.0 for i in range(-1, 4) for j in range(-1, 4)}
+    phi, b, M, usable = block({**closed, (1, 1): 0.05, (1, 2): 0.04})
+    bad, code = targets(phi, b, M, usable, [(1, 1), (1, 2)])
+    assert bad == -1 and code[z(1, 1)] == -1.0 and code[z(1, 2)] == -1.0
+    phi, b, M, usable = block({**closed, (1, 1): 0.05, (1, 2): 0.04})
+    M[z(2, 1)] = 0.1  # covered, holds material; its only open neighbour is the sliver (1, 1)
+    bad, code = targets(phi, b, M, usable, [(2, 1)])
+    assert bad == z(2, 1)
+
+
+def test_group_totals_are_the_targets_own_and_its_donors():
+    """A real target's mass, energy and open volume: its own plus its donors', in the order given; a
+    target outside the real zones gets nothing here (its owner sums it)."""
+    phi, b, M, usable = block({(1, 1): 0.01, (1, 0): 0.0, (0, 1): 0.0, (2, 1): 0.0, (3, 1): 0.02})
+    e = np.linspace(1.0, 2.0, N * N)
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    code[z(3, 1)] = (1 + 2) + 5 * (0 + 2)  # a ghost-layer donor into the ghost (4, 1)
+    real = np.zeros(N * N, np.uint8)
+    for i in range(3):
+        for j in range(3):
+            real[z(i, j)] = 1
+    Mg, Eg, Vg = np.zeros(N * N), np.zeros(N * N), np.zeros(N * N)
+    donors = np.flatnonzero(code >= 0.0)
+    group_totals(donors, code, M, e, phi, np.ones(N * N), real, ZS, ZDIMS, Mg, Eg, Vg)
+    t = z(1, 2)
+    assert Mg[t] == M[t] + M[z(1, 1)] and Vg[t] == phi[t] + phi[z(1, 1)]
+    assert Eg[t] == M[t] * e[t] + M[z(1, 1)] * e[z(1, 1)]
+    assert np.count_nonzero(Vg) == 1
