@@ -7,7 +7,8 @@ with its defaults filled in, e.g. ``{method: "multiplier", condition: "tied" | "
 
 Cross-field rules: a coupled case needs the background (``[ale]``, Eulerian mode: the bodies move
 through the fixed grid) and bodies (``[[lagrange.bodies]]``); every body made from a box or a
-quarter cylinder lies inside the grid's box (a mesh file's nodes are checked when the run starts);
+quarter cylinder lies inside the grid's box, and every mesh file's nodes (read by [lagrange]'s file
+check), by the coupler's own rule (``Grid.outside``);
 one gas material in the background (several materials or void beside coupled bodies: not yet).
 """
 from __future__ import annotations
@@ -51,7 +52,6 @@ def _body_box(mesh: dict, dim: int):
 
 def check(case: dict, data: dict) -> None:
     """The registry's hook."""
-    raw = data["coupling"]
     if "ale" not in case:
         raise CaseError("ale", MISSING, "a [coupling] case needs the background grid [ale] its bodies move through")
     bodies = case.get("lagrange", {}).get("bodies", [])
@@ -68,24 +68,46 @@ def check(case: dict, data: dict) -> None:
         raise CaseError("ale.mode", data["ale"].get("mode", mode),
                         "must be 'eulerian' with [coupling] (the bodies move through the fixed grid)")
     dim = int(case["run"]["dimension"])
-    g = case["ale"]["grid"]
-    lo, hi = [float(v) for v in g["lower"]], [float(v) for v in g["upper"]]
     for i, body in enumerate(bodies):
         box = _body_box(body["mesh"], dim)
-        if box is None:
-            continue
-        blo, bhi = box
-        for d in range(dim):
-            tol = 1e-9 * (hi[d] - lo[d])
-            if blo[d] < lo[d] - tol or bhi[d] > hi[d] + tol:
-                kind = next(iter(body["mesh"]))
-                raise CaseError(format_key(["lagrange", "bodies", i, "mesh", kind]),
-                                data["lagrange"]["bodies"][i]["mesh"][kind],
-                                f"body {body['name']!r} must lie inside the background grid "
-                                f"[{lo}, {hi}] ([coupling]); along {'xyz'[d]} it spans "
-                                f"[{blo[d]:g}, {bhi[d]:g}]")
-    del raw
+        if box is not None:
+            kind = next(iter(body["mesh"]))
+            _inside_grid(case, data, i, kind, box, dim)
+
+
+def check_files(case: dict, data: dict) -> None:
+    """The registry's file hook (after [lagrange]'s has read the mesh files): a mesh file's nodes
+    inside the grid's box."""
+    if "ale" not in case:
+        return
+    dim = int(case["run"]["dimension"])
+    for i, body in enumerate(case.get("lagrange", {}).get("bodies", [])):
+        ext = body.get("extent")
+        if "file" in body["mesh"] and ext is not None:
+            _inside_grid(case, data, i, "file", (ext["lower"], ext["upper"]), dim)
+
+
+def _inside_grid(case, data, i, kind, box, dim) -> None:
+    """Body i's box (lower, upper) inside the grid's box by the coupler's rule (Grid.outside: the
+    coordinates within a few ulps of a grid plane lie on it), or one line naming the body's mesh."""
+    import numpy as np
+
+    from orchestrator.coupling.grid import Grid
+
+    g = case["ale"]["grid"]
+    grid = Grid(g["lower"], g["upper"], g["cells"])
+    corners = np.array([box[0][:dim], box[1][:dim]], dtype=np.float64)
+    out = grid.outside(corners)
+    if out.any():
+        xs = grid.snap(corners)
+        d = int(np.flatnonzero((xs[0] < grid.lower) | (xs[1] > grid.upper))[0])
+        body = case["lagrange"]["bodies"][i]
+        raise CaseError(format_key(["lagrange", "bodies", i, "mesh", kind]),
+                        data["lagrange"]["bodies"][i]["mesh"][kind],
+                        f"body {body['name']!r} must lie inside the background grid "
+                        f"[{grid.lower.tolist()}, {grid.upper.tolist()}] ([coupling]); along {'xyz'[d]} its "
+                        f"nodes span [{corners[0, d]!r}, {corners[1, d]!r}]")
 
 
 # ---- registration (after [[boundaries]] 50) -----------------------------------------------------------
-register_table("coupling", COUPLING, normalise, check, order=60)
+register_table("coupling", COUPLING, normalise, check, order=60, check_files=check_files)

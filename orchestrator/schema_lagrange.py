@@ -290,14 +290,15 @@ def check_mesh_files(case: dict, data: dict) -> None:
     for key, raw, body in files:
         check_path_inside(key, raw, body["mesh"]["file"], case["case_dir"])
     for key, raw, body in files:
-        body["size"] = _check_mesh_file(key, raw, body["mesh"]["file"], dim)
+        body["size"], body["extent"] = _check_mesh_file(key, raw, body["mesh"]["file"], dim)
 
 
 _CELL_TYPE = {2: "quad", 3: "hexahedron"}
 
 
-def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> dict:
-    """Read and check a body's mesh file; its ``{"elements", "nodes"}`` counts."""
+def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> tuple[dict, dict]:
+    """Read and check a body's mesh file; its ``{"elements", "nodes"}`` counts and the ``{"lower",
+    "upper"}`` corners of its nodes' box (for [coupling]'s check that the body lies in the grid)."""
     from orchestrator.resources import machine_memory  # (resources imports orchestrator.case)
 
     memory = machine_memory()
@@ -325,7 +326,11 @@ def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> dict:
     if getattr(mesh, "cell_type", expected) != expected or len(mesh.cells) == 0:
         raise CaseError(key, raw, f"must be a readable {expected} mesh (no {expected} cells "
                                   f"for a {dim}D case)")
-    return {"elements": int(len(mesh.cells)), "nodes": int(len(mesh.points))}
+    import numpy as np
+
+    pts = np.asarray(mesh.points, dtype=np.float64)[:, :dim]
+    return ({"elements": int(len(mesh.cells)), "nodes": int(len(mesh.points))},
+            {"lower": pts.min(axis=0).tolist(), "upper": pts.max(axis=0).tolist()})
 
 
 # ---- [[boundaries]] -------------------------------------------------------------------------------

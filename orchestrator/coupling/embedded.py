@@ -90,32 +90,22 @@ def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
     them.  A zone whose corners all lie in front keeps its full row."""
     import scipy.sparse as sp
 
+    from orchestrator.coupling.operator_rows import behind_rows
+
     if ops.zones.size == 0:
         return ops
     dim = grid.dim
     nz, nc = ops.zones.size, 2**dim
-    row = np.searchsorted(ops.zones, pieces.zone)
-    w = pieces.area
-    cen = np.stack([np.bincount(row, weights=w * pieces.centroid[:, d], minlength=nz)
-                    for d in range(dim)], axis=1) / np.where(ops.area > 0.0, ops.area, 1.0)[:, None]
-    # (Operators.build gives every row all 2^dim corners in corner order c, offset (c&1, c>>1&1, ...)
-    # from the zone's lower node: their positions from the zone's, not from the node ids, which wrap
-    # on a periodic axis)
-    data = ops.Bb.data.reshape(nz, nc)
-    c = np.arange(nc)
-    offsets = (c[:, None] >> np.arange(dim)[None, :]) & 1
-    xn = grid.lower + (grid.zone_ijk(ops.zones)[:, None, :] + offsets[None, :, :]) * grid.h
-    side = np.einsum("ecj,ej->ec", xn - cen[:, None, :], ops.normal)
-    behind = side <= 0.0
-    keep = behind | ~behind.any(axis=1)[:, None]
-    data = np.where(keep, data, 0.0)
-    sums = data.sum(axis=1)
-    scale = np.divide(ops.area, sums, out=np.ones_like(sums), where=sums > 0.0)
-    data = data * scale[:, None]
+    # (Operators.build gives every row all 2^dim corners in corner order; the kernel places them from
+    # the zone's position, not from the node ids, which wrap on a periodic axis)
+    data = ops.Bb.data.reshape(nz, nc).copy()
+    keep = behind_rows(data, ops.zones, np.asarray(grid.cells, np.int64), np.asarray(grid.lower, float),
+                       np.asarray(grid.h, float), np.ascontiguousarray(ops.normal), ops.area,
+                       np.asarray(pieces.zone, np.int64), np.asarray(pieces.area, float),
+                       np.ascontiguousarray(pieces.centroid, dtype=float)).astype(bool)
     # the kept entries, in row order (a CSR with no stored zeros)
-    nk = np.count_nonzero(data, axis=1)
-    nzm = data != 0.0
-    new = sp.csr_matrix((data[nzm], ops.Bb.indices.reshape(nz, nc)[nzm],
+    nk = keep.sum(axis=1)
+    new = sp.csr_matrix((data[keep], ops.Bb.indices.reshape(nz, nc)[keep],
                          np.concatenate([[0], np.cumsum(nk)]).astype(np.int64)), shape=ops.Bb.shape)
     return dataclasses.replace(ops, Bb=new)
 

@@ -25,7 +25,7 @@ zone on its outward side (normal component > 0: the zone above the plane), at th
 the inner zone.  Why this rule keeps everything exact: it is the limit of the body dilated outward
 by epsilon -> 0, whose surface lies strictly inside the outward zone, and the volume fractions and
 face coverages of the dilated body tend to those of the body.  Positions are compared with the
-canonical grid planes of grid.py; node coordinates within ``_SNAP_ULPS`` ulps (of the grid's
+canonical grid planes of grid.py; node coordinates within ``SNAP_ULPS`` ulps (of the grid's
 coordinate scale) of a plane are first moved onto it, so a body face meshed at ``x = 0.3`` lies on
 the plane whichever way the mesh generator rounded it (the volume changes by O(eps)).
 
@@ -82,7 +82,6 @@ class GeometryError(ValueError):
     pass
 
 
-_SNAP_ULPS = 8
 _SNAP = 64 * np.finfo(np.float64).eps
 
 # 2-point Gauss on [0, 1]: exact to degree 3.
@@ -603,9 +602,22 @@ def _axis_coverage(zone, body, nd, cd, area, cells, planes, d, snap):
             e = others[jj]
             F[p] *= planes[e, ijk[p, e] + 1] - planes[e, ijk[p, e]]
         key[p] = (body[p] * n_rows + row) * (n + 2) + (q + 1)
-    o = np.argsort(m, kind="mergesort")
-    o = o[np.argsort(s[o], kind="mergesort")]
-    o = o[np.argsort(key[o], kind="mergesort")]
+    # (key, then s, then m, then piece order: one stable sort by key, then insertion sorts of the
+    # short runs of equal keys -- a zone row's pieces at one position -- by (s, m))
+    o = np.argsort(key, kind="mergesort")
+    t0 = 0
+    while t0 < npc:
+        t1 = t0 + 1
+        while t1 < npc and key[o[t1]] == key[o[t0]]:
+            t1 += 1
+        for a in range(t0 + 1, t1):
+            x = o[a]
+            b = a - 1
+            while b >= t0 and (s[o[b]] > s[x] or (s[o[b]] == s[x] and m[o[b]] > m[x])):
+                o[b + 1] = o[b]
+                b -= 1
+            o[b + 1] = x
+        t0 = t1
     oth = np.empty((npc, dim - 1), np.int64)
     for t in range(npc):
         for jj in range(dim - 1):
@@ -693,19 +705,9 @@ def _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv):
 
 # ------------------------------------------------------------------------------ public API
 def snap_to_planes(grid: Grid, x) -> np.ndarray:
-    """Copy of node positions x (nn, dim) with coordinates within ``_SNAP_ULPS`` ulps (of the grid's
-    coordinate scale) of a canonical grid plane moved onto it."""
-    xs = np.array(x, dtype=np.float64)
-    eps = np.finfo(np.float64).eps
-    for d in range(grid.dim):
-        X = grid.planes(d)
-        n = int(grid.cells[d])
-        k = np.clip(np.rint((xs[:, d] - grid.lower[d]) / (grid.upper[d] - grid.lower[d]) * n), 0, n)
-        k = k.astype(np.int64)
-        tol = _SNAP_ULPS * eps * max(abs(grid.lower[d]), abs(grid.upper[d]))
-        near = np.abs(xs[:, d] - X[k]) <= tol
-        xs[near, d] = X[k[near]]
-    return xs
+    """Copy of node positions x (nn, dim) with coordinates within ``SNAP_ULPS`` ulps (of the grid's
+    coordinate scale) of a canonical grid plane moved onto it (``Grid.snap``)."""
+    return grid.snap(x)
 
 
 def _check_inputs(grid: Grid, x, facets, body):
@@ -739,7 +741,7 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
     xs = snap_to_planes(grid, x)
     used = np.zeros(x.shape[0], dtype=bool)
     used[facets.reshape(-1)] = True
-    outside = used & np.any((xs < grid.lower) | (xs > grid.upper), axis=1)
+    outside = used & np.any((xs < grid.lower) | (xs > grid.upper), axis=1)  # (Grid.outside's rule)
     if outside.any():
         bad = np.any(outside[facets], axis=1)
         b = int(body[bad].min())

@@ -26,6 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 
 
+SNAP_ULPS = 8
+"""Node coordinates within this many ulps (of the grid's coordinate scale) of a grid plane lie on it
+(``Grid.snap``): a body face typed at a plane's value in other digits is still on the plane."""
+
+
 class GridError(ValueError):
     pass
 
@@ -92,6 +97,27 @@ class Grid:
         x = self.lower[d] + (self.upper[d] - self.lower[d]) * k / float(self.cells[d])
         x[-1] = self.upper[d]   # lower + (upper - lower) may round away from upper
         return x
+
+    def snap(self, x) -> np.ndarray:
+        """Copy of node positions x (nn, dim) with coordinates within ``SNAP_ULPS`` ulps (of the
+        grid's coordinate scale) of a canonical grid plane moved onto it."""
+        xs = np.array(x, dtype=np.float64)
+        eps = np.finfo(np.float64).eps
+        for d in range(self.dim):
+            X = self.planes(d)
+            n = int(self.cells[d])
+            k = np.clip(np.rint((xs[:, d] - self.lower[d]) / (self.upper[d] - self.lower[d]) * n), 0, n)
+            k = k.astype(np.int64)
+            tol = SNAP_ULPS * eps * max(abs(self.lower[d]), abs(self.upper[d]))
+            near = np.abs(xs[:, d] - X[k]) <= tol
+            xs[near, d] = X[k[near]]
+        return xs
+
+    def outside(self, x) -> np.ndarray:
+        """(nn,) mask of the node positions x (nn, dim) outside the grid's box once snapped (the rule
+        the coupler's geometry applies to a body's surface nodes)."""
+        xs = self.snap(np.asarray(x, dtype=np.float64).reshape(-1, self.dim))
+        return np.any((xs < self.lower) | (xs > self.upper), axis=1)
 
     # --- ids -------------------------------------------------------------------------------------
     @staticmethod

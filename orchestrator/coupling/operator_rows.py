@@ -70,3 +70,92 @@ def zone_rows(pzone, parea, pnormal, qpiece, qw, qb, qf, pfacet, facets):
         fptr[r + 1] = nf
         p = p1
     return zones, area, avec, bw, fptr, fcol[:nf], fval[:nf], prow
+
+
+@njit(cache=True)
+def behind_rows(data, zones, cells, lower, h, normal, area, pzone, parea, pcentroid):
+    """``embedded.behind_surface``'s rows in one pass: each cut zone's pieces' area-weighted centroid
+    c_e (pieces sorted by zone; a piece of a zone not in ``zones`` -- dropped for its zero area --
+    counts for none), its corners A (corner order c: offset (c&1, c>>1&1, c>>2&1) from the zone's
+    lower node) behind the surface, (x_A - c_e) . n_e <= 0, keep their weights (all of them if none
+    is), rescaled to sum to A_e.  ``data`` (nz, 2^dim) is overwritten; returns the kept mask."""
+    nz, nc = data.shape
+    dim = normal.shape[1]
+    cen = np.zeros((nz, dim))
+    r = 0
+    for p in range(pzone.size):
+        while r < nz and zones[r] < pzone[p]:
+            r += 1
+        if r < nz and zones[r] == pzone[p]:
+            for d in range(dim):
+                cen[r, d] += parea[p] * pcentroid[p, d]
+    keep = np.zeros((nz, nc), np.uint8)
+    ijk = np.empty(dim, np.int64)
+    for e in range(nz):
+        a = area[e] if area[e] > 0.0 else 1.0
+        rest = zones[e]
+        for d in range(dim):
+            ijk[d] = rest % cells[d]
+            rest //= cells[d]
+        nb = 0
+        for c in range(nc):
+            side = 0.0
+            for d in range(dim):
+                x = lower[d] + (ijk[d] + ((c >> d) & 1)) * h[d]
+                side += (x - cen[e, d] / a) * normal[e, d]
+            if side <= 0.0:
+                keep[e, c] = 1
+                nb += 1
+        s = 0.0
+        for c in range(nc):
+            if nb == 0:
+                keep[e, c] = 1
+            if keep[e, c] == 0:
+                data[e, c] = 0.0
+            s += data[e, c]
+        if s > 0.0:
+            scale = area[e] / s
+            for c in range(nc):
+                data[e, c] *= scale
+        for c in range(nc):
+            if data[e, c] == 0.0:
+                keep[e, c] = 0
+    return keep
+
+
+@njit(cache=True)
+def face_pair_rows(zones, cells, periodic):
+    """``operators.face_pairs`` in one pass: the face-adjacent pairs among the sorted zone ids as
+    (i, j) row indices, i < j, sorted; along a periodic axis (``periodic``, uint8 per axis) with more
+    than two layers the last layer's neighbour is the first."""
+    nz = zones.size
+    dim = cells.size
+    stride = np.ones(dim, np.int64)
+    for d in range(1, dim):
+        stride[d] = stride[d - 1] * cells[d - 1]
+    out = np.empty((nz * dim, 2), np.int64)
+    m = 0
+    for r in range(nz):
+        z = zones[r]
+        for d in range(dim):
+            idx = (z // stride[d]) % cells[d]
+            if idx < cells[d] - 1:
+                cand = z + stride[d]
+            elif periodic[d] != 0 and cells[d] > 2:
+                cand = z - (cells[d] - 1) * stride[d]
+            else:
+                continue
+            q = np.searchsorted(zones, cand)
+            if q < nz and zones[q] == cand:
+                out[m, 0] = min(r, q)
+                out[m, 1] = max(r, q)
+                m += 1
+    key = np.empty(m, np.int64)
+    for a in range(m):
+        key[a] = out[a, 0] * nz + out[a, 1]
+    o = np.argsort(key, kind="mergesort")
+    res = np.empty((m, 2), np.int64)
+    for a in range(m):
+        res[a, 0] = out[o[a], 0]
+        res[a, 1] = out[o[a], 1]
+    return res

@@ -91,7 +91,7 @@ class Operators:
 
         # per zone (pieces arrive sorted by zone): cut area, area vector, B^b row (one weight per
         # corner) and B^f row (sorted surface nodes) -- one pass of a kernel over the points
-        from orchestrator.coupling.operator_rows import zone_rows  # (numba: only when building)
+        from orchestrator.coupling.operator_rows import face_pair_rows, zone_rows  # (numba: only when building)
 
         all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = zone_rows(
             pzone, parea, pnormal, np.asarray(pieces.qpiece, dtype=np.int64), np.asarray(pieces.qw, dtype=float),
@@ -120,7 +120,9 @@ class Operators:
         Bf = sp.csr_matrix((fval[sel], fcol[sel], np.concatenate([[0], np.cumsum(nk)]).astype(np.int64)),
                            shape=(nz, int(n_surface_nodes)))
 
-        pairs = face_pairs(zones, np.asarray(grid.cells, dtype=np.int64), getattr(grid, "periodic", None))
+        per = getattr(grid, "periodic", None)
+        per = np.zeros(dim, np.uint8) if per is None else np.asarray(per, dtype=np.uint8)
+        pairs = face_pair_rows(zones, np.asarray(grid.cells, dtype=np.int64), per)
         return cls(zones=zones, bnodes=bnodes, Bb=Bb, Bf=Bf, area=area, avec=avec, normal=normal,
                    fallback=fallback, pairs=pairs, full_area=full_area, width=width)
 
@@ -152,32 +154,3 @@ def _slip_normals(avec, area, prow, parea, pnormal):
         sign = np.where(s != 0.0, np.sign(s), np.sign(big))
         normal[rows_fb] = axis * sign[:, None]
     return normal, fallback
-
-
-def face_pairs(zones: np.ndarray, cells: np.ndarray, periodic=None) -> np.ndarray:
-    """Face-adjacent pairs among sorted zone ids, as (i, j) row indices with i < j, sorted.
-
-    Zone id = i + nx (j + ny k): the +x neighbour is id + 1 (if i < nx - 1), +y is id + nx, +z is
-    id + nx ny; each pair is found once from its lower member.  Along a periodic axis (``periodic``:
-    one flag per axis) the last layer's neighbour is the first layer (a surface crossing the periodic
-    face keeps its stabilisation there)."""
-    zones = np.asarray(zones, dtype=np.int64)
-    dim = cells.size
-    stride = np.concatenate(([1], np.cumprod(cells)[:-1]))
-    index = (zones[:, None] // stride[None, :]) % cells[None, :]
-    found = []
-    for axis in range(dim):  # loop over directions only
-        cand = zones + stride[axis]
-        inside = index[:, axis] < cells[axis] - 1
-        wrap = np.zeros_like(inside)
-        if periodic is not None and periodic[axis] and cells[axis] > 2:
-            wrap = ~inside
-            cand = np.where(wrap, zones - (cells[axis] - 1) * stride[axis], cand)
-        pos = np.searchsorted(zones, cand)
-        hit = (inside | wrap) & (pos < zones.size)
-        hit[hit] = zones[pos[hit]] == cand[hit]
-        i, j = np.flatnonzero(hit), pos[hit]
-        found.append(np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1))
-    pairs = np.concatenate(found, axis=0) if found else np.zeros((0, 2), np.int64)
-    order = np.lexsort((pairs[:, 1], pairs[:, 0]))
-    return pairs[order].astype(np.int64)

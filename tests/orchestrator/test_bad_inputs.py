@@ -167,6 +167,18 @@ def _mesh_garbage(case, root):
     (case / "case.toml").write_text(FILEBAR)
 
 
+def _coupled_mesh_a_hair_outside(case, root):
+    """A body's mesh file whose top nodes lie 4e-13 above the grid's top (its coordinates written in
+    fewer digits than the grid's): refused by `check`, as the coupler would refuse it at start-up."""
+    import meshio
+    import numpy as np
+
+    pts = np.array([[0.45, 0.0, 0.0], [0.55, 0.0, 0.0], [0.55, 0.01 + 4e-13, 0.0], [0.45, 0.01 + 4e-13, 0.0]])
+    meshio.write(case / "block.vtu", meshio.Mesh(pts, [("quad", np.array([[0, 1, 2, 3]]))]))
+    (case / "case.toml").write_text(COUPLED.replace(
+        "mesh = { box = { lower = [0.45, 0.0], upper = [0.55, 0.01], cells = [2, 1] } }", 'mesh = { file = "block.vtu" }'))
+
+
 def _toml_path_fifo(case, root):  # `immerse check x.toml` on a FIFO given by its own name
     os.mkfifo(case / "named.toml")
 
@@ -247,6 +259,8 @@ BAD_INPUTS = [
         edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nstiffness = 1e9')),
     Bad("coupling_body_outside_grid", "lagrange.bodies[0].mesh.box", "inside the background grid",
         edit(COUPLED, "upper = [0.55, 0.01]", "upper = [1.55, 0.01]")),
+    Bad("coupling_mesh_file_a_hair_outside_grid", "lagrange.bodies[0].mesh.file = 'block.vtu'",
+        "inside the background grid", make=_coupled_mesh_a_hair_outside),
     Bad("coupling_without_background", "ale", "needs the background grid",
         STEEL_BAR_HEAD + 'mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = [10, 1, 1] } }\n'
         + '[coupling]\nmethod = "multiplier"\n'),

@@ -111,6 +111,19 @@ def test_face_pairs_are_the_face_adjacent_cut_zones():
     assert ops3.pairs.tolist() == [list(p) for p in brute]
 
 
+def test_face_pairs_across_a_periodic_face():
+    """Zones 0 and 3 of a row of 4 are neighbours only when x is periodic; with 2 layers the wrap is
+    the ordinary neighbour already (no second pair)."""
+    from orchestrator.coupling.operator_rows import face_pair_rows
+
+    zones = np.array([0, 3, 4], np.int64)  # (0, 0), (3, 0), (0, 1) of 4 x 4
+    cells = np.array([4, 4], np.int64)
+    assert face_pair_rows(zones, cells, np.array([0, 0], np.uint8)).tolist() == [[0, 2]]
+    assert face_pair_rows(zones, cells, np.array([1, 0], np.uint8)).tolist() == [[0, 1], [0, 2]]
+    two = np.array([2, 2], np.int64)
+    assert face_pair_rows(np.array([0, 1], np.int64), two, np.array([1, 1], np.uint8)).tolist() == [[0, 1]]
+
+
 def test_zones_of_negligible_area_get_no_multiplier():
     g = Grid.make([0.0, 0.0], [1.0, 1.0], [4, 4])
     nodes = np.stack([np.linspace(0, 1, 5), np.full(5, 0.3)], axis=1)
