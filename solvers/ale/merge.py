@@ -48,6 +48,7 @@ def _split(n, strides):
     j = r // strides[1]
     return i, j, r - j * strides[1]
 
+
 @njit(cache=True)
 def _corners(z, zs, ns, dim, out):
     i, j, k = _split(z, zs)
@@ -61,18 +62,24 @@ def _corners(z, zs, ns, dim, out):
         nc += 1
     return nc
 
+
+@njit(cache=True, inline="always")
+def _zone_around(i, j, k, c, zs, dim):
+    """Zone c (0 .. 2^dim - 1) of the 2^dim around node (i, j, k): offset -1 + bit d of c along d."""
+    zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
+    return (i - 1 + (c & 1)) * zs[0] + (j - 1 + ((c >> 1) & 1)) * zs[1] + zk * zs[2]
+
+
 @njit(cache=True)
 def _node_mass(n, M, zact, zs, ns, dim):
     """The gather's nodal mass (hydro.gather_*: 2^-dim sum of the active zones' masses)."""
     i, j, k = _split(n, ns)
     s = 0.0
     for c in range(1 << dim):
-        zi = i - 1 + (c & 1)
-        zj = j - 1 + ((c >> 1) & 1)
-        zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
-        z = zi * zs[0] + zj * zs[1] + zk * zs[2]
+        z = _zone_around(i, j, k, c, zs, dim)
         s += zact[z] * M[z]
     return s / (1 << dim)
+
 
 @njit(cache=True)
 def merge_velocities(un, ugr, m0, m1, v, tot, owned):
@@ -111,6 +118,7 @@ def merge_velocities(un, ugr, m0, m1, v, tot, owned):
             for d in range(dim):
                 ke1[a] += 0.5 * m1[a] * v[n, d] * v[n, d]
     return ke1
+
 
 def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
     """Per group (keys: this rank's sorted group ids) the sum of the rows (one per owned node: its
@@ -298,10 +306,7 @@ def merge_nodes(near, code, Vg, M, dM, zact, v, owned, zs, ns, dim, gdims, goff,
         dm = 0.0
         g = -1
         for c in range(1 << dim):
-            zi = i - 1 + (c & 1)
-            zj = j - 1 + ((c >> 1) & 1)
-            zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
-            z = zi * zs[0] + zj * zs[1] + zk * zs[2]
+            z = _zone_around(i, j, k, c, zs, dim)
             dm += zact[z] * dM[z]
             if code[z] >= 0.0:
                 gz = _gid(_target(z, code, zs), zs, gdims, goff, gper)
