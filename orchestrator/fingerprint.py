@@ -12,7 +12,9 @@ far and how often the run goes and writes (``run.end_time``, ``run.max_steps``,
 ``run.output_interval``, ``run.checkpoint_interval``, ``run.diagnostics_every``), the rank counts
 (``ranks``: both solvers restart on another rank count) and the case's own check (``check``: it
 only reads the results). Everything else (dimension, dt_scale, materials, meshes, initial state,
-boundaries, solver options) makes another case.
+boundaries, solver options) makes another case.  Keys that start with ``_`` hold what the checks
+derived from the case's files (a mesh file's bounding box): left out, the files' digests stand for
+them.
 """
 from __future__ import annotations
 
@@ -47,8 +49,8 @@ def _canonical(value: Any) -> Any:
     """Plain JSON values; a Path (a file the case reads) becomes the digest of its bytes."""
     if isinstance(value, Path):
         return {"file_sha256": file_digest(value)} if value.is_file() else {"missing_file": value.name}
-    if isinstance(value, Mapping):
-        return {str(k): _canonical(v) for k, v in value.items()}
+    if isinstance(value, Mapping):  # ("_" keys: what the checks derived from the files: their digests count)
+        return {str(k): _canonical(v) for k, v in value.items() if not str(k).startswith("_")}
     if isinstance(value, (list, tuple)):
         return [_canonical(v) for v in value]
     if isinstance(value, float):

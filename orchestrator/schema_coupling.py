@@ -82,7 +82,7 @@ def check_files(case: dict, data: dict) -> None:
         return
     dim = int(case["run"]["dimension"])
     for i, body in enumerate(case.get("lagrange", {}).get("bodies", [])):
-        ext = body.get("extent")
+        ext = body.get("_extent")
         if "file" in body["mesh"] and ext is not None:
             _inside_grid(case, data, i, "file", (ext["lower"], ext["upper"]), dim)
 

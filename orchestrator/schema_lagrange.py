@@ -290,7 +290,7 @@ def check_mesh_files(case: dict, data: dict) -> None:
     for key, raw, body in files:
         check_path_inside(key, raw, body["mesh"]["file"], case["case_dir"])
     for key, raw, body in files:
-        body["size"], body["extent"] = _check_mesh_file(key, raw, body["mesh"]["file"], dim)
+        body["size"], body["_extent"] = _check_mesh_file(key, raw, body["mesh"]["file"], dim)
 
 
 _CELL_TYPE = {2: "quad", 3: "hexahedron"}
