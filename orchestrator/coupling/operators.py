@@ -23,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from solvers.sorted_ids import sorted_unique
+
 MIN_AREA_FRACTION = 1e-12
 """A zone whose cut area is at most this fraction of a full cut (`Operators.full_area`) gets no
 multiplier: a line through a grid vertex leaves zero-length pieces in the zones it touches, and a
@@ -111,7 +113,7 @@ class Operators:
 
         # background operator: every corner of every cut zone (corner ids ascend with c: x fastest)
         corners = np.asarray(grid.zone_nodes(zones), dtype=np.int64).reshape(nz, 2**dim)
-        bnodes = np.unique(corners)
+        bnodes = sorted_unique(corners)
         Bb = sp.csr_matrix((bw[keep_zone].ravel(), np.searchsorted(bnodes, corners).ravel(),
                             np.arange(nz + 1, dtype=np.int64) * 2**dim), shape=(nz, bnodes.size))
         # foreground operator: the rows of the kept zones

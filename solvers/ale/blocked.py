@@ -88,6 +88,7 @@ from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, z
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_totals, merge_members, merge_nodes,
                                merge_targets, merge_velocities, zone_gids)
 from solvers.ale.remap import set_positions
+from solvers.sorted_ids import sorted_unique
 from solvers import elements as _elements
 from solvers.elements import hex_bvectors, quad_bvectors
 
@@ -224,7 +225,7 @@ class Blocked:
             self.A_body = A
         else:
             self.A_body = None
-        c = np.unique(np.concatenate(named))
+        c = sorted_unique(np.concatenate(named))
         self._body_cand = c[B.real_zone[c]]
         self.cut_rows = np.flatnonzero(cm)
         self.n_cut = int(cut.size)
@@ -232,7 +233,14 @@ class Blocked:
         self._cut_velocity = np.asarray(vel).reshape(-1, B.dim)[cm]
         nodes = np.zeros(0, np.int64) if geometry.nodes is None else geometry.nodes
         self.nodes = gi.nodes(nodes)  # (local index, real here, owned here) of the requested nodes
-        return np.maximum(np.where(B.real_zone, b, 0.0), self.b_static)
+        # the real zones' fractions (ghosts 0) with the static obstacles' (the larger)
+        if not hasattr(self, "_real_f"):
+            self._real_f = B.real_zone.astype(np.float64)
+            self._has_static = bool(np.any(self.b_static > 0.0))
+        out = np.multiply(b, self._real_f)
+        if self._has_static:
+            np.maximum(out, self.b_static, out=out)
+        return out
 
     # ---- coupled bodies: the interface of the Lagrange step --------------------------------------
     def cut_forces(self, s) -> np.ndarray:
@@ -533,7 +541,7 @@ class Blocked:
         owned = B.owned.astype(np.uint8)
         un, m0, m1, ngid, part = merge_nodes(np.flatnonzero(member & self._layer1), code, Vg, s.M, dM, B.zact, s.v,
                                              owned, B.zs, B.ns, dim, gdims, goff, self._gper)
-        keys = np.unique(np.concatenate([ngid, mgid]))
+        keys = sorted_unique(np.concatenate([ngid, mgid]))
         comm = dec.comm if dec.parallel else None
         nid = self._node_gid(B, un)
         # (collective: every rank takes part in both sums, with or without groups)
