@@ -23,8 +23,6 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from solvers.sorted_ids import sorted_unique
-
 MIN_AREA_FRACTION = 1e-12
 """A zone whose cut area is at most this fraction of a full cut (`Operators.full_area`) gets no
 multiplier: a line through a grid vertex leaves zero-length pieces in the zones it touches, and a
@@ -94,6 +92,7 @@ class Operators:
         # per zone (pieces arrive sorted by zone): cut area, area vector, B^b row (one weight per
         # corner) and B^f row (sorted surface nodes) -- one pass of a kernel over the points
         from orchestrator.coupling.operator_rows import face_pair_rows, zone_rows  # (numba: only when building)
+        from solvers.sorted_ids import sorted_unique  # (validating a case imports no solver module)
 
         all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = zone_rows(
             pzone, parea, pnormal, np.asarray(pieces.qpiece, dtype=np.int64), np.asarray(pieces.qw, dtype=float),
