@@ -124,27 +124,28 @@ class GlobalIndex:
                   np.asarray(B.zs, np.int64), out)
         return out
 
+    def _local(self, ids, extent, lo, hi, strides):
+        """(padded index, mask) of global ids on the lattice ``extent`` whose block-local ijk lies in
+        [lo, hi) per axis (index 0 where outside): one pass of ``local_index``."""
+        B = self.block
+        ids = np.ascontiguousarray(ids, dtype=np.int64).reshape(-1)
+        out = np.empty(ids.size, np.int64)
+        inside = np.empty(ids.size, np.bool_)
+        local_index(ids, np.asarray(extent, np.int64), np.asarray(B.offset, np.int64), np.asarray(lo, np.int64),
+                    np.asarray(hi, np.int64), np.asarray(strides, np.int64), GHOST, out, inside)
+        return out, inside
+
     def zones(self, ids, ghosts: int = 0):
         """(local padded zone index, mask: a real zone of this block -- or, with ``ghosts`` = k,
         a zone of the first k ghost layers too) of global zone ids."""
         B = self.block
-        ijk = self._split(ids, self.cells)
-        loc = ijk[:, : self.dim] - B.offset
         g = int(ghosts)
-        inside = np.all((loc >= -g) & (loc < B.n + g), axis=1)
-        pad = np.zeros((ids.size, 3), np.int64)
-        pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
-        return pad @ B.zs, inside
+        return self._local(ids, self.cells, np.full(self.dim, -g), B.n + g, B.zs)
 
     def nodes(self, ids):
         """(local padded node index, mask: a real node of this block, mask: owned here)."""
         B = self.block
-        ijk = self._split(ids, self.cells + 1)
-        loc = ijk[:, : self.dim] - B.offset
-        inside = np.all((loc >= 0) & (loc <= B.n), axis=1)
-        pad = np.zeros((ids.size, 3), np.int64)
-        pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
-        n = pad @ B.ns
+        n, inside = self._local(ids, self.cells + 1, np.zeros(self.dim, np.int64), B.n + 1, B.ns)
         return n, inside, inside & B.owned[n]
 
     def faces(self, d, ids):
@@ -153,14 +154,30 @@ class GlobalIndex:
         B = self.block
         ext = self.cells.copy()
         ext[d] += 1
-        ijk = self._split(ids, ext)
-        loc = ijk[:, : self.dim] - B.offset
         hi = B.n.copy()
         hi[d] += 1
-        inside = np.all((loc >= 0) & (loc < hi), axis=1)
-        pad = np.zeros((ids.size, 3), np.int64)
-        pad[:, : self.dim] = np.where(inside[:, None], loc + GHOST, 0)
-        return pad @ B.zs, inside
+        return self._local(ids, ext, np.zeros(self.dim, np.int64), hi, B.zs)
+
+
+@njit(cache=True)
+def local_index(ids, extent, offset, lo, hi, strides, ghost, out, inside):
+    """For each global id on the lattice ``extent`` (x fastest): its padded index on this block
+    (sum over the axes of (ijk - offset + ghost) * stride) and whether its local ijk = ijk - offset
+    lies in [lo, hi) on every axis (index 0 where not)."""
+    dim = extent.size
+    for a in range(ids.size):
+        r = ids[a]
+        idx = 0
+        ok = True
+        for d in range(dim):
+            q = r % extent[d]
+            r //= extent[d]
+            loc = q - offset[d]
+            if loc < lo[d] or loc >= hi[d]:
+                ok = False
+            idx += (loc + ghost) * strides[d]
+        inside[a] = ok
+        out[a] = idx if ok else 0
 
 
 @njit(cache=True)
