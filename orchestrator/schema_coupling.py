@@ -8,7 +8,7 @@ with its defaults filled in, e.g. ``{method: "multiplier", condition: "tied" | "
 Cross-field rules: a coupled case needs the background (``[ale]``, Eulerian mode: the bodies move
 through the fixed grid) and bodies (``[[lagrange.bodies]]``); every body made from a box or a
 quarter cylinder lies inside the grid's box, and every mesh file's nodes (read by [lagrange]'s file
-check), by the coupler's own rule (``Grid.outside``);
+check), by the coupler's own rule (``Grid.snap``, ``Grid.beyond``);
 one gas material in the background (several materials or void beside coupled bodies: not yet).
 """
 from __future__ import annotations
@@ -88,8 +88,8 @@ def check_files(case: dict, data: dict) -> None:
 
 
 def _inside_grid(case, data, i, kind, box, dim) -> None:
-    """Body i's box (lower, upper) inside the grid's box by the coupler's rule (Grid.outside: the
-    coordinates within a few ulps of a grid plane lie on it), or one line naming the body's mesh."""
+    """Body i's box (lower, upper) inside the grid's box by the coupler's rule (Grid.snap, Grid.beyond:
+    the coordinates within a few ulps of a grid plane lie on it), or one line naming the body's mesh."""
     import numpy as np
 
     from orchestrator.coupling.grid import Grid
@@ -97,10 +97,9 @@ def _inside_grid(case, data, i, kind, box, dim) -> None:
     g = case["ale"]["grid"]
     grid = Grid(g["lower"], g["upper"], g["cells"])
     corners = np.array([box[0][:dim], box[1][:dim]], dtype=np.float64)
-    out = grid.outside(corners)
-    if out.any():
-        xs = grid.snap(corners)
-        d = int(np.flatnonzero((xs[0] < grid.lower) | (xs[1] > grid.upper))[0])
+    bad = grid.beyond(grid.snap(corners)).any(axis=0)
+    if bad.any():
+        d = int(np.flatnonzero(bad)[0])
         body = case["lagrange"]["bodies"][i]
         raise CaseError(format_key(["lagrange", "bodies", i, "mesh", kind]),
                         data["lagrange"]["bodies"][i]["mesh"][kind],

@@ -26,8 +26,9 @@ the inner zone.  Why this rule keeps everything exact: it is the limit of the bo
 by epsilon -> 0, whose surface lies strictly inside the outward zone, and the volume fractions and
 face coverages of the dilated body tend to those of the body.  Positions are compared with the
 canonical grid planes of grid.py; node coordinates within ``SNAP_ULPS`` ulps (of the grid's
-coordinate scale) of a plane are first moved onto it, so a body face meshed at ``x = 0.3`` lies on
-the plane whichever way the mesh generator rounded it (the volume changes by O(eps)).
+coordinate scale) of a plane are first moved onto it (``Grid.snap``), so a body face meshed at
+``x = 0.3`` lies on the plane whichever way the mesh generator rounded it (the volume changes by
+O(eps)).
 
 Quadrature (degrees of exactness)
 ---------------------------------
@@ -704,12 +705,6 @@ def _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv):
 
 
 # ------------------------------------------------------------------------------ public API
-def snap_to_planes(grid: Grid, x) -> np.ndarray:
-    """Copy of node positions x (nn, dim) with coordinates within ``SNAP_ULPS`` ulps (of the grid's
-    coordinate scale) of a canonical grid plane moved onto it (``Grid.snap``)."""
-    return grid.snap(x)
-
-
 def _check_inputs(grid: Grid, x, facets, body):
     dim = grid.dim
     x = np.asarray(x, dtype=np.float64)
@@ -738,10 +733,10 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
     against the zones of the grid; see the module docstring for the rules and the quadrature."""
     dim = grid.dim
     x, facets, body = _check_inputs(grid, x, facets, body)
-    xs = snap_to_planes(grid, x)
+    xs = grid.snap(x)
     used = np.zeros(x.shape[0], dtype=bool)
     used[facets.reshape(-1)] = True
-    outside = used & np.any((xs < grid.lower) | (xs > grid.upper), axis=1)  # (Grid.outside's rule)
+    outside = used & grid.beyond(xs).any(axis=1)
     if outside.any():
         bad = np.any(outside[facets], axis=1)
         b = int(body[bad].min())

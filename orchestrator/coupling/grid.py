@@ -113,11 +113,11 @@ class Grid:
             xs[near, d] = X[k[near]]
         return xs
 
-    def outside(self, x) -> np.ndarray:
-        """(nn,) mask of the node positions x (nn, dim) outside the grid's box once snapped (the rule
-        the coupler's geometry applies to a body's surface nodes)."""
-        xs = self.snap(np.asarray(x, dtype=np.float64).reshape(-1, self.dim))
-        return np.any((xs < self.lower) | (xs > self.upper), axis=1)
+    def beyond(self, xs) -> np.ndarray:
+        """(nn, dim) mask of the snapped node positions xs (``snap``) beyond the grid's box along each
+        axis: the rule the coupler's geometry applies to a body's surface nodes and the case check to
+        a body's mesh."""
+        return (xs < self.lower) | (xs > self.upper)
 
     # --- ids -------------------------------------------------------------------------------------
     @staticmethod

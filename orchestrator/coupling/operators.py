@@ -110,7 +110,8 @@ class Operators:
         live = prow >= 0
         normal, fallback = _slip_normals(avec, area, prow[live], parea[live], pnormal[live])
 
-        # background operator: every corner of every cut zone (corner ids ascend with c: x fastest)
+        # background operator: every corner of every cut zone, in corner order c (the ids ascend with
+        # c, x fastest, except where a periodic axis wraps the last layer's upper corners to plane 0)
         corners = np.asarray(grid.zone_nodes(zones), dtype=np.int64).reshape(nz, 2**dim)
         bnodes = sorted_unique(corners)
         Bb = sp.csr_matrix((bw[keep_zone].ravel(), np.searchsorted(bnodes, corners).ravel(),
