@@ -159,3 +159,68 @@ def face_pair_rows(zones, cells, periodic):
         res[a, 0] = out[o[a], 0]
         res[a, 1] = out[o[a], 1]
     return res
+
+
+@njit(cache=True)
+def corner_columns(zones, cells, periodic):
+    """B^b's columns: the sorted distinct corner nodes of the sorted zone ids (``bnodes``) and, per
+    zone and corner c (offset (c & 1, c >> 1 & 1, c >> 2 & 1)), the column of its node (nz, 2^dim);
+    node ids as ``grid.Grid.zone_nodes`` (wrapped on periodic axes).
+
+    Without a wrap each corner's list over the sorted zones is itself sorted (node id = the zone's
+    lower node + a fixed offset), so a 2^dim-way merge gives the distinct nodes and the columns in
+    one pass (``np.unique`` + ``searchsorted`` over the corners cost ~0.25 ms per thousand zones, every
+    step); a wrapped corner list takes a sort."""
+    nz = zones.size
+    dim = cells.size
+    nc = 1 << dim
+    node = np.empty((nz, nc), np.int64)
+    ijk = np.empty(dim, np.int64)
+    for r in range(nz):
+        rest = zones[r]
+        for d in range(dim):
+            ijk[d] = rest % cells[d]
+            rest //= cells[d]
+        for c in range(nc):
+            v = 0
+            for d in range(dim - 1, -1, -1):
+                k = ijk[d] + ((c >> d) & 1)
+                if periodic[d] != 0 and k == cells[d]:
+                    k = 0
+                v = v * (cells[d] + 1) + k
+            node[r, c] = v
+    col = np.empty((nz, nc), np.int64)
+    merged = True
+    for c in range(nc):
+        for r in range(1, nz):
+            if node[r, c] < node[r - 1, c]:
+                merged = False
+    if merged:
+        out = np.empty(nz * nc, np.int64)
+        head = np.zeros(nc, np.int64)
+        m = 0
+        while True:
+            best = -1
+            for c in range(nc):
+                if head[c] < nz and (best < 0 or node[head[c], c] < node[head[best], best]):
+                    best = c
+            if best < 0:
+                break
+            v = node[head[best], best]
+            if m == 0 or out[m - 1] != v:
+                out[m] = v
+                m += 1
+            col[head[best], best] = m - 1
+            head[best] += 1
+        return out[:m].copy(), col
+    flat = node.ravel()
+    o = np.argsort(flat)
+    out = np.empty(flat.size, np.int64)
+    m = 0
+    for t in range(flat.size):
+        v = flat[o[t]]
+        if m == 0 or out[m - 1] != v:
+            out[m] = v
+            m += 1
+        col[o[t] // nc, o[t] % nc] = m - 1
+    return out[:m].copy(), col

@@ -77,8 +77,8 @@ class Operators:
     def build(cls, grid, pieces, facets, n_surface_nodes: int) -> "Operators":
         """Assemble B^b, B^f, areas, normals and zone pairs from the clipped surface.
 
-        grid: `grid.Grid` (uses dim, cells, zone_volume, zone_nodes); pieces: `geometry.Pieces`;
-        facets: (n_facets, nv) surface node ids of every facet (the rows `pieces.facet` refers to);
+        grid: `grid.Grid` (uses dim, cells, zone_volume, periodic; corner node ids as its zone_nodes);
+        pieces: `geometry.Pieces`; facets: (n_facets, nv) surface node ids of every facet (the rows `pieces.facet` refers to);
         n_surface_nodes: number of columns of B^f."""
         dim = int(grid.dim)
         volume = float(grid.zone_volume)
@@ -91,8 +91,7 @@ class Operators:
 
         # per zone (pieces arrive sorted by zone): cut area, area vector, B^b row (one weight per
         # corner) and B^f row (sorted surface nodes) -- one pass of a kernel over the points
-        from orchestrator.coupling.operator_rows import face_pair_rows, zone_rows  # (numba: only when building)
-        from solvers.sorted_ids import sorted_unique  # (validating a case imports no solver module)
+        from orchestrator.coupling.operator_rows import corner_columns, face_pair_rows, zone_rows  # (numba: only when building)
 
         all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = zone_rows(
             pzone, parea, pnormal, np.asarray(pieces.qpiece, dtype=np.int64), np.asarray(pieces.qw, dtype=float),
@@ -112,9 +111,11 @@ class Operators:
 
         # background operator: every corner of every cut zone, in corner order c (the ids ascend with
         # c, x fastest, except where a periodic axis wraps the last layer's upper corners to plane 0)
-        corners = np.asarray(grid.zone_nodes(zones), dtype=np.int64).reshape(nz, 2**dim)
-        bnodes = sorted_unique(corners)
-        Bb = sp.csr_matrix((bw[keep_zone].ravel(), np.searchsorted(bnodes, corners).ravel(),
+        per = getattr(grid, "periodic", None)
+        per = np.zeros(dim, np.uint8) if per is None else np.asarray(per, dtype=np.uint8)
+        cells = np.asarray(grid.cells, dtype=np.int64)
+        bnodes, columns = corner_columns(zones, cells, per)
+        Bb = sp.csr_matrix((bw[keep_zone].ravel(), columns.ravel(),
                             np.arange(nz + 1, dtype=np.int64) * 2**dim), shape=(nz, bnodes.size))
         # foreground operator: the rows of the kept zones
         nk = np.diff(fptr)[keep_zone]
@@ -122,9 +123,7 @@ class Operators:
         Bf = sp.csr_matrix((fval[sel], fcol[sel], np.concatenate([[0], np.cumsum(nk)]).astype(np.int64)),
                            shape=(nz, int(n_surface_nodes)))
 
-        per = getattr(grid, "periodic", None)
-        per = np.zeros(dim, np.uint8) if per is None else np.asarray(per, dtype=np.uint8)
-        pairs = face_pair_rows(zones, np.asarray(grid.cells, dtype=np.int64), per)
+        pairs = face_pair_rows(zones, cells, per)
         return cls(zones=zones, bnodes=bnodes, Bb=Bb, Bf=Bf, area=area, avec=avec, normal=normal,
                    fallback=fallback, pairs=pairs, full_area=full_area, width=width)
 

@@ -640,3 +640,61 @@ def test_coverage_runs_and_listed_values_are_the_full_lists(name):
         assert not np.any(inner.ravel()[ids] & (val[:, 0] != 1.0))
         f[ids] = val[:, 0]
         assert np.array_equal(np.flatnonzero(f), fids) and np.array_equal(f[fids], cov[:, 0])
+
+
+def test_2d_segment_clipper_equals_the_generic_kernel():
+    """clip_surface's 2-D kernel (_clip_segments_2d, scalars) gives the generic kernel's pieces and
+    points bit for bit: random segments, segments on grid planes (both directions), along them,
+    through nodes, degenerate ones, and one crossing many zones."""
+    from orchestrator.coupling import geometry as G
+
+    grid = Grid([0.0, -1.0], [1.0, 1.0], [9, 13])
+    X0, X1 = grid.planes(0), grid.planes(1)
+    rng = np.random.default_rng(5)
+    pts = [rng.uniform([0, -1], [1, 1], (40, 2)),
+           np.array([[X0[3], -0.5], [X0[3], 0.7], [0.2, X1[4]], [0.9, X1[4]], [X0[2], X1[2]], [X0[5], X1[9]],
+                     [0.4, 0.4], [0.4, 0.4], [0.0, -1.0], [1.0, 1.0], [X0[0], 0.2], [X0[0], -0.3]])]
+    x = np.concatenate(pts)
+    n = x.shape[0]
+    segs = np.concatenate([rng.integers(0, n, (60, 2)), np.arange(40, n).reshape(-1, 2),
+                           np.arange(40, n).reshape(-1, 2)[:, ::-1]]).astype(np.int64)
+    planes = G._planes(grid)
+    generic = G._clip_kernel(x, segs, planes, grid.cells.astype(np.int64), G._GAUSS2_T, G._TRI_BARY, G._TRI_W)
+    special = G._clip_segments_2d(x, segs, X0, X1, G._GAUSS2_T)
+    assert generic[0].size > 150  # pieces
+    for a, b in zip(generic, special):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_stable_order_and_by_id_equal_the_numpy_references():
+    """_stable_order = np.argsort(kind="mergesort") (already sorted keys, keys sorted within rows, any
+    keys); _by_id = np.unique with the values scattered by the inverse (sorted or not)."""
+    from orchestrator.coupling import geometry as G
+
+    rng = np.random.default_rng(7)
+    n_rows, n_pos = 11, 9
+    for trial in range(6):
+        npc = 200
+        body = rng.integers(0, 3, npc).astype(np.int64)
+        row = rng.integers(0, n_rows, npc)
+        pos = rng.integers(0, n_pos, npc)
+        key = (body * n_rows + row) * n_pos + pos
+        if trial % 3 == 0:
+            key = np.sort(key)
+        elif trial % 3 == 1:   # sorted by position within (body, row) but rows interleaved
+            o = np.lexsort((pos, row * 0 + rng.integers(0, 5, npc)))
+            key, body = key[o], body[o]
+        np.testing.assert_array_equal(G._stable_order(key, body, n_rows, n_pos), np.argsort(key, kind="mergesort"))
+        ids = rng.integers(0, 50, npc)
+        ids = np.sort(ids) if trial % 2 else ids
+        bodies = rng.integers(0, 2, npc)
+        pairs = np.unique(ids * 2 + bodies, return_index=True)[1]   # one value per (id, body)
+        if trial % 2 == 0:
+            pairs = rng.permutation(pairs)
+        ids, bodies, vals = ids[pairs], bodies[pairs], rng.random(pairs.size)
+        u, inv = np.unique(ids, return_inverse=True)
+        ref = np.zeros((u.size, 2))
+        ref[inv, bodies] = vals
+        got_u, got = G._by_id(ids, bodies, vals, 2)
+        np.testing.assert_array_equal(got_u, u)
+        np.testing.assert_array_equal(got, ref)

@@ -161,3 +161,23 @@ def test_straight_cut_of_the_conditioning_study_matches_the_stand_in_clipper():
     x_in = np.clip((np.array([0.0, 1.0]) - z0) / slope, 0.0, 1.0) if slope else np.array([0.0, 1.0])
     assert ops.area.sum() == pytest.approx(np.sqrt(1 + slope**2) * abs(np.diff(x_in)[0]), rel=1e-13)
     assert np.abs(_row_sums(ops.Bb) - ops.area).max() < 1e-16 and np.abs(_row_sums(ops.Bf) - ops.area).max() < 1e-16
+
+
+@pytest.mark.parametrize("periodic", [(), (0,), (0, 1)], ids=["walls", "periodic_x", "periodic_xy"])
+@pytest.mark.parametrize("cells", [(7, 5), (4, 3, 5)], ids=["2d", "3d"])
+def test_corner_columns_are_the_distinct_zone_nodes(cells, periodic):
+    """B^b's columns from the merge kernel: bnodes = the distinct corner nodes of Grid.zone_nodes
+    (wrapped on periodic axes: the kernel's sort fallback), bnodes[column] = the corner's node."""
+    from orchestrator.coupling.grid import Grid as RealGrid
+    from orchestrator.coupling.operator_rows import corner_columns
+
+    dim = len(cells)
+    grid = RealGrid(np.zeros(dim), np.ones(dim), cells, periodic)
+    rng = np.random.default_rng(3)
+    per = np.asarray(grid.periodic, np.uint8)
+    for size in (0, 1, 9, grid.n_zones):
+        zones = np.sort(rng.choice(grid.n_zones, size, replace=False)).astype(np.int64)
+        nodes = grid.zone_nodes(zones)
+        bnodes, columns = corner_columns(zones, grid.cells, per)
+        np.testing.assert_array_equal(bnodes, np.unique(nodes))
+        np.testing.assert_array_equal(bnodes[columns], nodes.reshape(columns.shape))
