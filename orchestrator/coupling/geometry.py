@@ -926,10 +926,7 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
         e_part = np.repeat(np.arange(2), facets.shape[0])
     else:
         elems, e_facet, e_part = facets, np.arange(facets.shape[0]), np.zeros(facets.shape[0], np.int64)
-    nmax = int(grid.cells.max())
-    planes = np.zeros((dim, nmax + 1))
-    for d in range(dim):
-        planes[d, : grid.cells[d] + 1] = grid.planes(d)
+    planes = _planes(grid)
     if dim == 2:
         pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = _clip_segments_2d(
             np.ascontiguousarray(xs), np.ascontiguousarray(elems), planes[0, : grid.cells[0] + 1],
@@ -964,7 +961,11 @@ def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
 
 
 def _planes(grid: Grid) -> np.ndarray:
-    """(dim, max n + 1) the grid planes of every axis (padded with zeros)."""
+    """(dim, max n + 1) the grid planes of every axis (padded with zeros): grid.Grid's table, or built
+    for a grid-like object without one."""
+    table = getattr(grid, "plane_table", None)
+    if table is not None:
+        return table
     out = np.zeros((grid.dim, int(grid.cells.max()) + 1))
     for e in range(grid.dim):
         out[e, : grid.cells[e] + 1] = grid.planes(e)

@@ -21,6 +21,7 @@ exactly on plane 3 (``0 + 3 * 0.1`` would not), and the end planes are ``lower``
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,14 +99,24 @@ class Grid:
         x[-1] = self.upper[d]   # lower + (upper - lower) may round away from upper
         return x
 
+    @functools.cached_property
+    def plane_table(self) -> np.ndarray:
+        """(dim, max n + 1) read-only: row d holds ``planes(d)``, padded with zeros (the form the
+        geometry kernels take; computed once, the coupler asks every step)."""
+        out = np.zeros((self.dim, int(self.cells.max()) + 1))
+        for d in range(self.dim):
+            out[d, : self.cells[d] + 1] = self.planes(d)
+        out.setflags(write=False)
+        return out
+
     def snap(self, x) -> np.ndarray:
         """Copy of node positions x (nn, dim) with coordinates within ``SNAP_ULPS`` ulps (of the
         grid's coordinate scale) of a canonical grid plane moved onto it."""
         xs = np.array(x, dtype=np.float64)
         eps = np.finfo(np.float64).eps
         for d in range(self.dim):
-            X = self.planes(d)
             n = int(self.cells[d])
+            X = self.plane_table[d, : n + 1]
             k = np.clip(np.rint((xs[:, d] - self.lower[d]) / (self.upper[d] - self.lower[d]) * n), 0, n)
             k = k.astype(np.int64)
             tol = SNAP_ULPS * eps * max(abs(self.lower[d]), abs(self.upper[d]))
