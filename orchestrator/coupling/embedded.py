@@ -38,6 +38,7 @@ import numpy as np
 from orchestrator.coupling import variants
 from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
+from orchestrator.coupling.operator_rows import transpose_product
 from orchestrator.coupling.operators import Operators
 
 
@@ -190,7 +191,7 @@ class EmbeddedCoupling:
         R = background[nb * (dim + 1):].reshape(nc, dim)
         # the fluid's load on the body: -R_e over Gamma_e, consistent nodal forces B^f_eA / A_e
         area = np.where(ops.area > 0.0, ops.area, 1.0)
-        F = -(ops.Bf.T @ (R / area[:, None]))
+        F = -transpose_product(ops.Bf.indptr, ops.Bf.indices, ops.Bf.data, R / area[:, None], self.ns)
         load = dt_avg * F
         self.m_solve = self._solve_masses(ops)
         v_f = vstar_f + load * self.free / self.mass[:, None]

@@ -113,15 +113,15 @@ class Grid:
         """Copy of node positions x (nn, dim) with coordinates within ``SNAP_ULPS`` ulps (of the
         grid's coordinate scale) of a canonical grid plane moved onto it."""
         xs = np.array(x, dtype=np.float64)
+        if xs.ndim != 2 or xs.shape[1] != self.dim:   # (every axis at once below, ~3x cheaper per step)
+            raise GridError(f"node positions must have shape (nn, {self.dim}), got {xs.shape}")
         eps = np.finfo(np.float64).eps
-        for d in range(self.dim):
-            n = int(self.cells[d])
-            X = self.plane_table[d, : n + 1]
-            k = np.clip(np.rint((xs[:, d] - self.lower[d]) / (self.upper[d] - self.lower[d]) * n), 0, n)
-            k = k.astype(np.int64)
-            tol = SNAP_ULPS * eps * max(abs(self.lower[d]), abs(self.upper[d]))
-            near = np.abs(xs[:, d] - X[k]) <= tol
-            xs[near, d] = X[k[near]]
+        n = self.cells
+        k = np.clip(np.rint((xs - self.lower) / (self.upper - self.lower) * n), 0, n).astype(np.int64)
+        X = self.plane_table[np.arange(self.dim), k]
+        tol = SNAP_ULPS * eps * np.maximum(np.abs(self.lower), np.abs(self.upper))
+        near = np.abs(xs - X) <= tol
+        xs[near] = X[near]
         return xs
 
     def beyond(self, xs) -> np.ndarray:

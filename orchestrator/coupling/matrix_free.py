@@ -363,19 +363,20 @@ def solve(ops, m_b, m_f, v_b, v_f, dt: float, condition: str, alpha: float, beta
             x0[hit] = wl[pos[hit]]
     Bb, Bf = ops.Bb, ops.Bf
     check_masses(ops, m_b, m_f)
+    # (scipy keeps int32 indices; the kernels take int64: converted once for both calls)
+    bp, bi = Bb.indptr.astype(np.int64), Bb.indices.astype(np.int64)
+    fp, fi = Bf.indptr.astype(np.int64), Bf.indices.astype(np.int64)
+    normal = np.ascontiguousarray(ops.normal)
     x, it, rel, active, bw, inv_mb, diag_c, pi, pj, pw, failed = _solve_kernel(
-        Bb.indptr.astype(np.int64), Bb.indices.astype(np.int64), Bb.data, m_b, Bf.indptr.astype(np.int64),
-        Bf.indices.astype(np.int64), Bf.data, m_f, np.ascontiguousarray(ops.area), float(ops.full_area),
-        np.ascontiguousarray(ops.normal), slip, np.ascontiguousarray(ops.pairs, dtype=np.int64).reshape(-1, 2),
+        bp, bi, Bb.data, m_b, fp, fi, Bf.data, m_f, np.ascontiguousarray(ops.area), float(ops.full_area),
+        normal, slip, np.ascontiguousarray(ops.pairs, dtype=np.int64).reshape(-1, 2),
         float(alpha), float(beta), float(dt), v_b, v_f, x0, float(rtol), int(max_iter))
     if failed:
         raise MultiplierSolveError(
             f"multiplier solve: no convergence in {max_iter} CG iterations (relative residual "
             f"{rel:.3e} > tolerance {rtol:.1e}) on {int(active.sum())} cut zones; H is too ill "
             f"conditioned: raise coupling.beta or lower coupling.alpha")
-    ib, jf, diss = _impulses(x, active, slip, np.ascontiguousarray(ops.normal), Bb.indptr.astype(np.int64),
-                             Bb.indices.astype(np.int64), bw, Bf.indptr.astype(np.int64),
-                             Bf.indices.astype(np.int64), Bf.data, float(dt), m_b.size, m_f.size, diag_c, pi,
-                             pj, pw)
+    ib, jf, diss = _impulses(x, active, slip, normal, bp, bi, bw, fp, fi, Bf.data, float(dt), m_b.size, m_f.size,
+                             diag_c, pi, pj, pw)
     return Solution(zones=ops.zones, lam=x[:, 0] if slip else x, impulse_b=ib, impulse_f=jf, iterations=int(it),
                     residual=float(rel), dissipation=float(diss))

@@ -224,3 +224,72 @@ def corner_columns(zones, cells, periodic):
             m += 1
         col[o[t] // nc, o[t] % nc] = m - 1
     return out[:m].copy(), col
+
+
+@njit(cache=True)
+def kept_rows(zones, zarea, zavec, bw, fptr, fcol, fval, prow, min_area, fallback_ratio):
+    """``zone_rows``'s rows of area above ``min_area`` (the others get no multiplier): their zone ids,
+    areas, area vectors, B^b weights, B^f CSR and each piece's row (-1 if dropped); and the unit
+    normal ``avec / |avec|`` with the zones where ``|avec| < fallback_ratio A_e`` flagged (their normal is
+    left 0 for ``operators._fallback_normals`` to set).  One pass instead of ~20 numpy calls, every step."""
+    nall, dim = zavec.shape
+    nc = bw.shape[1]
+    row_of = np.full(nall, -1, np.int64)
+    nz = 0
+    nnz = 0
+    for r in range(nall):
+        if zarea[r] > min_area:
+            row_of[r] = nz
+            nz += 1
+            nnz += fptr[r + 1] - fptr[r]
+    kz = np.empty(nz, np.int64)
+    area = np.empty(nz)
+    avec = np.empty((nz, dim))
+    w = np.empty((nz, nc))
+    normal = np.zeros((nz, dim))
+    fallback = np.zeros(nz, np.bool_)
+    kptr = np.zeros(nz + 1, np.int64)
+    kcol = np.empty(nnz, np.int64)
+    kval = np.empty(nnz)
+    t = 0
+    for r in range(nall):
+        e = row_of[r]
+        if e < 0:
+            continue
+        kz[e] = zones[r]
+        area[e] = zarea[r]
+        length = 0.0
+        for d in range(dim):
+            avec[e, d] = zavec[r, d]
+            length += zavec[r, d] * zavec[r, d]
+        length = np.sqrt(length)
+        if length < fallback_ratio * zarea[r]:
+            fallback[e] = True
+        else:
+            for d in range(dim):
+                normal[e, d] = zavec[r, d] / length
+        for c in range(nc):
+            w[e, c] = bw[r, c]
+        for k in range(fptr[r], fptr[r + 1]):
+            kcol[t] = fcol[k]
+            kval[t] = fval[k]
+            t += 1
+        kptr[e + 1] = t
+    krow = np.empty(prow.size, np.int64)
+    for p in range(prow.size):
+        krow[p] = row_of[prow[p]]
+    return kz, area, avec, w, normal, fallback, kptr, kcol, kval, krow
+
+
+@njit(cache=True)
+def transpose_product(indptr, indices, data, x, ncols):
+    """``B.T @ x`` for a CSR ``B`` (indptr, indices, data) with ``ncols`` columns and a dense x
+    (nrows, k): rows in order, each entry added to its column's row of the result -- scipy's order
+    for ``csr.T @ x`` (its CSC product), without building the transpose (~15 us per call)."""
+    out = np.zeros((ncols, x.shape[1]))
+    for e in range(indptr.size - 1):
+        for q in range(indptr[e], indptr[e + 1]):
+            j = indices[q]
+            for a in range(x.shape[1]):
+                out[j, a] += data[q] * x[e, a]
+    return out

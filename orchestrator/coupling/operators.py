@@ -78,8 +78,8 @@ class Operators:
         """Assemble B^b, B^f, areas, normals and zone pairs from the clipped surface.
 
         grid: `grid.Grid` (uses dim, cells, zone_volume, periodic; corner node ids as its zone_nodes);
-        pieces: `geometry.Pieces`; facets: (n_facets, nv) surface node ids of every facet (the rows `pieces.facet` refers to);
-        n_surface_nodes: number of columns of B^f."""
+        pieces: `geometry.Pieces`; facets: (n_facets, nv) surface node ids of every facet (the rows
+        `pieces.facet` refers to); n_surface_nodes: number of columns of B^f."""
         dim = int(grid.dim)
         volume = float(grid.zone_volume)
         full_area = volume ** ((dim - 1) / dim)
@@ -91,23 +91,21 @@ class Operators:
 
         # per zone (pieces arrive sorted by zone): cut area, area vector, B^b row (one weight per
         # corner) and B^f row (sorted surface nodes) -- one pass of a kernel over the points
-        from orchestrator.coupling.operator_rows import corner_columns, face_pair_rows, zone_rows  # (numba: only when building)
+        from orchestrator.coupling.operator_rows import (  # (numba: only when building)
+            corner_columns, face_pair_rows, kept_rows, zone_rows)
 
         all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = zone_rows(
             pzone, parea, pnormal, np.asarray(pieces.qpiece, dtype=np.int64), np.asarray(pieces.qw, dtype=float),
             np.ascontiguousarray(np.asarray(pieces.qb, dtype=float).reshape(-1, 2**dim)),
             np.ascontiguousarray(pieces.qf, dtype=float), np.asarray(pieces.facet, dtype=np.int64), facets)
-        # zones of (numerically) zero area are dropped
-        keep_zone = zarea > MIN_AREA_FRACTION * full_area
-        zones = all_zones[keep_zone]
-        row_of = np.full(all_zones.size, -1, dtype=np.int64)
-        row_of[keep_zone] = np.arange(zones.size)
-        prow = row_of[prow_all]  # row of each piece, -1 if dropped
+        # zones of (numerically) zero area are dropped; the unit normals (the fallback ones below)
+        zones, area, avec, bw, normal, fallback, fptr, fcol, fval, prow = kept_rows(
+            all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all, MIN_AREA_FRACTION * full_area,
+            NORMAL_FALLBACK_RATIO)
         nz = zones.size
-        area = zarea[keep_zone]
-        avec = zavec[keep_zone]
-        live = prow >= 0
-        normal, fallback = _slip_normals(avec, area, prow[live], parea[live], pnormal[live])
+        if fallback.any():
+            live = prow >= 0
+            _fallback_normals(normal, fallback, avec, prow[live], parea[live], pnormal[live])
 
         # background operator: every corner of every cut zone, in corner order c (the ids ascend with
         # c, x fastest, except where a periodic axis wraps the last layer's upper corners to plane 0)
@@ -115,21 +113,18 @@ class Operators:
         per = np.zeros(dim, np.uint8) if per is None else np.asarray(per, dtype=np.uint8)
         cells = np.asarray(grid.cells, dtype=np.int64)
         bnodes, columns = corner_columns(zones, cells, per)
-        Bb = sp.csr_matrix((bw[keep_zone].ravel(), columns.ravel(),
-                            np.arange(nz + 1, dtype=np.int64) * 2**dim), shape=(nz, bnodes.size))
-        # foreground operator: the rows of the kept zones
-        nk = np.diff(fptr)[keep_zone]
-        sel = np.repeat(fptr[:-1][keep_zone], nk) + (np.arange(int(nk.sum())) - np.repeat(np.cumsum(nk) - nk, nk))
-        Bf = sp.csr_matrix((fval[sel], fcol[sel], np.concatenate([[0], np.cumsum(nk)]).astype(np.int64)),
-                           shape=(nz, int(n_surface_nodes)))
+        Bb = sp.csr_matrix((bw.ravel(), columns.ravel(), np.arange(nz + 1, dtype=np.int64) * 2**dim),
+                           shape=(nz, bnodes.size))
+        Bf = sp.csr_matrix((fval, fcol, fptr), shape=(nz, int(n_surface_nodes)))
 
         pairs = face_pair_rows(zones, cells, per)
         return cls(zones=zones, bnodes=bnodes, Bb=Bb, Bf=Bf, area=area, avec=avec, normal=normal,
                    fallback=fallback, pairs=pairs, full_area=full_area, width=width)
 
 
-def _slip_normals(avec, area, prow, parea, pnormal):
-    """n_e = avec_e/|avec_e|, or for zones where |avec_e| < NORMAL_FALLBACK_RATIO A_e the fallback.
+def _fallback_normals(normal, fallback, avec, prow, parea, pnormal):
+    """Set ``normal`` of the zones flagged in ``fallback`` (|avec_e| < NORMAL_FALLBACK_RATIO A_e; the
+    others hold n_e = avec_e/|avec_e| from ``operator_rows.kept_rows``).
 
     The fallback is the area-weighted mean of the piece normals taken as *directions* (axes, sign
     ignored): the eigenvector of the largest eigenvalue of T_e = Σ_p a_p n_p n_p^T.  The plain
@@ -138,20 +133,13 @@ def _slip_normals(avec, area, prow, parea, pnormal):
     fluid must not flow on either side.  Its sign follows avec_e (or, if that is exactly
     perpendicular, makes the largest component positive) so it is deterministic."""
     nz, dim = avec.shape
-    length = np.sqrt((avec**2).sum(axis=1))
-    fallback = length < NORMAL_FALLBACK_RATIO * area
-    normal = np.zeros_like(avec)
-    ok = ~fallback
-    normal[ok] = avec[ok] / length[ok, None]
-    if fallback.any():
-        rows_fb = np.flatnonzero(fallback)
-        sel = fallback[prow]
-        T = np.zeros((nz, dim, dim))
-        np.add.at(T, prow[sel], parea[sel, None, None] * pnormal[sel, :, None] * pnormal[sel, None, :])
-        _, vecs = np.linalg.eigh(T[rows_fb])
-        axis = vecs[:, :, -1]  # eigh sorts eigenvalues ascending: last = largest
-        s = (axis * avec[rows_fb]).sum(axis=1)
-        big = axis[np.arange(rows_fb.size), np.abs(axis).argmax(axis=1)]
-        sign = np.where(s != 0.0, np.sign(s), np.sign(big))
-        normal[rows_fb] = axis * sign[:, None]
-    return normal, fallback
+    rows_fb = np.flatnonzero(fallback)
+    sel = fallback[prow]
+    T = np.zeros((nz, dim, dim))
+    np.add.at(T, prow[sel], parea[sel, None, None] * pnormal[sel, :, None] * pnormal[sel, None, :])
+    _, vecs = np.linalg.eigh(T[rows_fb])
+    axis = vecs[:, :, -1]  # eigh sorts eigenvalues ascending: last = largest
+    s = (axis * avec[rows_fb]).sum(axis=1)
+    big = axis[np.arange(rows_fb.size), np.abs(axis).argmax(axis=1)]
+    sign = np.where(s != 0.0, np.sign(s), np.sign(big))
+    normal[rows_fb] = axis * sign[:, None]
