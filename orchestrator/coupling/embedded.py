@@ -98,20 +98,15 @@ def behind_surface(ops: Operators, grid: Grid, pieces) -> Operators:
     nz, nc = ops.zones.size, 2**dim
     # (Operators.build gives every row all 2^dim corners in corner order; the kernel places them from
     # the zone's position, not from the node ids, which wrap on a periodic axis)
-    data = ops.Bb.data.reshape(nz, nc).copy()
-    keep = behind_rows(data, ops.zones, np.asarray(grid.cells, np.int64), np.asarray(grid.lower, float),
-                       np.asarray(grid.h, float), np.ascontiguousarray(ops.normal), ops.area,
-                       np.asarray(pieces.zone, np.int64), np.asarray(pieces.area, float),
-                       np.ascontiguousarray(pieces.centroid, dtype=float)).astype(bool)
-    # the kept entries, in row order (a CSR with no stored zeros; each row keeps its sorted columns).
-    # The arrays are swapped into a shallow copy of the matrix: scipy's constructor with its format
-    # checks costs ~50 us, every step, more than the rest of this function
-    nk = keep.sum(axis=1)
+    kd, ki, kp = behind_rows(ops.Bb.data.reshape(nz, nc), ops.Bb.indices.reshape(nz, nc), ops.zones,
+                             grid.cells, grid.lower, grid.h, np.ascontiguousarray(ops.normal), ops.area,
+                             np.asarray(pieces.zone, np.int64), np.asarray(pieces.area, float),
+                             np.ascontiguousarray(pieces.centroid, dtype=float))
+    # the arrays are swapped into a shallow copy of the matrix: scipy's constructor with its format
+    # checks costs more than the rest of this function, every step (the kept entries of a row keep
+    # their sorted columns, so the matrix's cached format flags still hold)
     new = copy.copy(ops.Bb)
-    new.data = data[keep]
-    new.indices = ops.Bb.indices.reshape(nz, nc)[keep]
-    new.indptr = np.zeros(nz + 1, dtype=ops.Bb.indptr.dtype)
-    np.cumsum(nk, out=new.indptr[1:])
+    new.data, new.indices, new.indptr = kd, ki, kp.astype(ops.Bb.indptr.dtype)
     return dataclasses.replace(ops, Bb=new)
 
 

@@ -881,6 +881,10 @@ def _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv):
 
 
 # ------------------------------------------------------------------------------ public API
+_SORT_KEY_LIMIT = 2.0**62
+"""_sorted_pieces sorts by one int64 key below this bound, by four stable sorts above it."""
+
+
 def _check_inputs(grid: Grid, x, facets, body):
     dim = grid.dim
     x = np.asarray(x, dtype=np.float64)
@@ -935,15 +939,72 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
         pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = _clip_kernel(
             np.ascontiguousarray(xs), np.ascontiguousarray(elems), planes, grid.cells.astype(np.int64),
             _GAUSS2_T, _TRI_BARY, _TRI_W)
-    facet = e_facet[pe]
-    part = e_part[pe]
-    order = np.lexsort((part, facet, body[facet], pz))
-    zone = pz[order]
-    qp, qw, qpiece, qf, qb = _gather_points(order, pq0, pqn, qx, qw, ql, part,
-                                            grid.zone_ijk(zone).reshape(-1, dim), planes, facets.shape[1])
-    return Pieces(zone=zone, body=body[facet[order]], facet=facet[order], area=pa[order],
-                  normal=enormal[pe[order]], centroid=pc[order], qp=qp, qw=qw, qpiece=qpiece,
-                  qf=qf, qb=qb)
+    zone, pbody, facet, area, normal, centroid, qp, qw, qpiece, qf, qb = _sorted_pieces(
+        pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal, e_facet.astype(np.int64), e_part.astype(np.int64), body,
+        grid.cells.astype(np.int64), planes, facets.shape[1], _SORT_KEY_LIMIT)
+    return Pieces(zone=zone, body=pbody, facet=facet, area=area, normal=normal, centroid=centroid, qp=qp, qw=qw,
+                  qpiece=qpiece, qf=qf, qb=qb)
+
+
+@njit(cache=True)
+def _sorted_pieces(pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal, e_facet, e_part, body, cells, planes, nv,
+                   key_limit):
+    """The clipped pieces in the canonical order (zone, body, facet, part: np.lexsort's), with their
+    quadrature points (``_gather_points``), in one kernel.  A piece is one (zone, facet, part): a
+    convex polygon clipped by a box is one polygon, so the order is that of the unique key
+    ((zone nb + body) nf + facet) 2 + part; a key that could overflow takes four stable sorts."""
+    n = pz.size
+    dim = cells.size
+    nb = 1
+    nf = 1
+    for p in range(n):
+        f = e_facet[pe[p]]
+        nb = max(nb, body[f] + 1)
+        nf = max(nf, f + 1)
+    nzones = 1
+    for d in range(dim):
+        nzones *= cells[d]
+    if float(nzones) * nb * nf * 2.0 < key_limit:
+        key = np.empty(n, np.int64)
+        for p in range(n):
+            f = e_facet[pe[p]]
+            key[p] = ((pz[p] * nb + body[f]) * nf + f) * 2 + e_part[pe[p]]
+        order = np.argsort(key)
+    else:
+        order = np.arange(n)
+        col = np.empty(n, np.int64)
+        for c in range(4):   # least significant first, each stable
+            for t in range(n):
+                p = order[t]
+                f = e_facet[pe[p]]
+                col[t] = e_part[pe[p]] if c == 0 else (f if c == 1 else (body[f] if c == 2 else pz[p]))
+            order = order[np.argsort(col, kind="mergesort")]
+    zone = np.empty(n, np.int64)
+    pbody = np.empty(n, np.int64)
+    facet = np.empty(n, np.int64)
+    area = np.empty(n)
+    normal = np.empty((n, enormal.shape[1]))
+    centroid = np.empty((n, pc.shape[1]))
+    zijk = np.empty((n, dim), np.int64)
+    part = np.empty(n, np.int64)
+    for p in range(pe.size):
+        part[p] = e_part[pe[p]]
+    for t in range(n):
+        p = order[t]
+        zone[t] = pz[p]
+        f = e_facet[pe[p]]
+        facet[t] = f
+        pbody[t] = body[f]
+        area[t] = pa[p]
+        for d in range(dim):
+            normal[t, d] = enormal[pe[p], d]
+            centroid[t, d] = pc[p, d]
+        rest = pz[p]
+        for d in range(dim):
+            zijk[t, d] = rest % cells[d]
+            rest //= cells[d]
+    qp, qw2, qpiece, qf, qb = _gather_points(order, pq0, pqn, qx, qw, ql, part, zijk, planes, nv)
+    return zone, pbody, facet, area, normal, centroid, qp, qw2, qpiece, qf, qb
 
 
 def _row_coverage(grid: Grid, pieces: Pieces, n_bodies: int, d: int):
@@ -1032,16 +1093,58 @@ def coverage(grid: Grid, pieces: Pieces, n_bodies: int) -> Coverage:
     """Blocked fractions and face coverages of the clipped bodies (1), (2) with the interior as runs:
     one scan of the pieces per axis, work linear in the number of pieces."""
     dim = grid.dim
-    faces = []
+    if pieces.body.size and pieces.body.max() >= n_bodies:
+        raise GeometryError(f"pieces name body {int(pieces.body.max())} but n_bodies = {n_bodies}")
+    zones, frac, start, length, rb, fid, fval, foff = _coverage_kernel(
+        np.ascontiguousarray(pieces.zone, dtype=np.int64), np.ascontiguousarray(pieces.body, dtype=np.int64),
+        np.ascontiguousarray(pieces.normal, dtype=np.float64), np.ascontiguousarray(pieces.centroid, dtype=np.float64),
+        np.ascontiguousarray(pieces.area, dtype=np.float64), grid.cells.astype(np.int64), _planes(grid), _SNAP,
+        int(n_bodies))
+    faces = tuple((fid[foff[d]:foff[d + 1]], fval[foff[d]:foff[d + 1]]) for d in range(dim))
+    return Coverage(zones, frac, start, length, rb, faces)
+
+
+@njit(cache=True)
+def _coverage_kernel(zone, body, normal, centroid, area, cells, planes, snap, n_bodies):
+    """``coverage`` in one call (one kernel dispatch instead of a dozen calls per step): per axis the
+    scan of ``_axis_coverage`` and the faces by id; the zones by id and the runs (as zone ids, sorted
+    stably) from the x scan.  Face lists concatenated over the axes, ``foff`` their offsets."""
+    dim = cells.size
+    fids = []
+    fvals = []
+    zones = np.zeros(0, np.int64)
+    frac = np.zeros((0, n_bodies))
+    start = np.zeros(0, np.int64)
+    length = np.zeros(0, np.int64)
+    rbody = np.zeros(0, np.int64)
     for d in range(dim):
-        (zid, zb, zv), (fid, fb, fv), runs = _row_coverage(grid, pieces, n_bodies, d)
-        faces.append(_by_id(fid, fb, fv, n_bodies))
+        zid, zb, zv, fid, fb, fv, rb, first, ln = _axis_coverage(
+            zone, body, np.ascontiguousarray(normal[:, d]), np.ascontiguousarray(centroid[:, d]), area, cells,
+            planes, d, snap)
+        fu, fo = _by_id_kernel(fid, fb, fv, n_bodies)
+        fids.append(fu)
+        fvals.append(fo)
         if d == 0:
-            zones, frac = _by_id(zid, zb, zv, n_bodies)
-            rb, first, length = runs
-    start = grid.zone_ids(first) if length.size else np.zeros(0, np.int64)
-    o = np.argsort(start, kind="stable")
-    return Coverage(zones, frac, start[o].astype(np.int64), length[o].astype(np.int64), rb[o], tuple(faces))
+            zones, frac = _by_id_kernel(zid, zb, zv, n_bodies)
+            ids = np.empty(ln.size, np.int64)
+            for t in range(ln.size):
+                v = 0
+                for e in range(dim - 1, -1, -1):
+                    v = v * cells[e] + first[t, e]
+                ids[t] = v
+            o = np.argsort(ids, kind="mergesort")
+            start = ids[o]
+            length = ln[o]
+            rbody = rb[o]
+    foff = np.zeros(dim + 1, np.int64)
+    for d in range(dim):
+        foff[d + 1] = foff[d] + fids[d].size
+    fid_all = np.empty(foff[dim], np.int64)
+    fval_all = np.empty((foff[dim], n_bodies))
+    for d in range(dim):
+        fid_all[foff[d]:foff[d + 1]] = fids[d]
+        fval_all[foff[d]:foff[d + 1], :] = fvals[d]
+    return zones, frac, start, length, rbody, fid_all, fval_all, foff
 
 
 def blocked_fractions(grid: Grid, pieces: Pieces, n_bodies: int):

@@ -89,35 +89,27 @@ class Operators:
         parea = np.asarray(pieces.area, dtype=float)
         pnormal = np.asarray(pieces.normal, dtype=float).reshape(-1, dim)
 
-        # per zone (pieces arrive sorted by zone): cut area, area vector, B^b row (one weight per
-        # corner) and B^f row (sorted surface nodes) -- one pass of a kernel over the points
-        from orchestrator.coupling.operator_rows import (  # (numba: only when building)
-            corner_columns, face_pair_rows, kept_rows, zone_rows)
+        from orchestrator.coupling.operator_rows import operator_arrays  # (numba: only when building)
 
-        all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all = zone_rows(
+        per = getattr(grid, "periodic", None)
+        per = np.zeros(dim, np.uint8) if per is None else np.asarray(per, dtype=np.uint8)
+        # one kernel: per zone (pieces arrive sorted by zone) the cut area, area vector, B^b row (one
+        # weight per corner) and B^f row (sorted surface nodes); zones of (numerically) zero area
+        # dropped; the unit normals (the fallback ones below); the background columns: every corner of
+        # every cut zone, in corner order c (the ids ascend with c, x fastest, except where a periodic
+        # axis wraps the last layer's upper corners to plane 0); the face-adjacent zone pairs
+        zones, area, avec, bw, normal, fallback, fptr, fcol, fval, prow, bnodes, columns, pairs = operator_arrays(
             pzone, parea, pnormal, np.asarray(pieces.qpiece, dtype=np.int64), np.asarray(pieces.qw, dtype=float),
             np.ascontiguousarray(np.asarray(pieces.qb, dtype=float).reshape(-1, 2**dim)),
-            np.ascontiguousarray(pieces.qf, dtype=float), np.asarray(pieces.facet, dtype=np.int64), facets)
-        # zones of (numerically) zero area are dropped; the unit normals (the fallback ones below)
-        zones, area, avec, bw, normal, fallback, fptr, fcol, fval, prow = kept_rows(
-            all_zones, zarea, zavec, bw, fptr, fcol, fval, prow_all, MIN_AREA_FRACTION * full_area,
-            NORMAL_FALLBACK_RATIO)
+            np.ascontiguousarray(pieces.qf, dtype=float), np.asarray(pieces.facet, dtype=np.int64), facets,
+            MIN_AREA_FRACTION * full_area, NORMAL_FALLBACK_RATIO, np.asarray(grid.cells, dtype=np.int64), per)
         nz = zones.size
         if fallback.any():
             live = prow >= 0
             _fallback_normals(normal, fallback, avec, prow[live], parea[live], pnormal[live])
-
-        # background operator: every corner of every cut zone, in corner order c (the ids ascend with
-        # c, x fastest, except where a periodic axis wraps the last layer's upper corners to plane 0)
-        per = getattr(grid, "periodic", None)
-        per = np.zeros(dim, np.uint8) if per is None else np.asarray(per, dtype=np.uint8)
-        cells = np.asarray(grid.cells, dtype=np.int64)
-        bnodes, columns = corner_columns(zones, cells, per)
         Bb = sp.csr_matrix((bw.ravel(), columns.ravel(), np.arange(nz + 1, dtype=np.int64) * 2**dim),
                            shape=(nz, bnodes.size))
         Bf = sp.csr_matrix((fval, fcol, fptr), shape=(nz, int(n_surface_nodes)))
-
-        pairs = face_pair_rows(zones, cells, per)
         return cls(zones=zones, bnodes=bnodes, Bb=Bb, Bf=Bf, area=area, avec=avec, normal=normal,
                    fallback=fallback, pairs=pairs, full_area=full_area, width=width)
 
