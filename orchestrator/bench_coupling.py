@@ -214,7 +214,9 @@ COST_STAGES = (("clip", "clip_surface"), ("coverage", "coverage: fractions and f
 
 def coupler_cost(quick: bool) -> tuple[list, list]:
     sizes = (100, 300, 1000) if quick else (100, 300, 1000, 3000, 10000)
-    rows = [coupler_step_cost(n, repeats=3 if quick or n > 3000 else 5) for n in sizes]
+    # the same measuring time per size (~2e4 facet-steps): a small surface's step takes well under a
+    # millisecond, and the median of five of them is mostly the machine's noise
+    rows = [coupler_step_cost(n, repeats=max(3, (2000 if quick else 20000) // n)) for n in sizes]
     results = []
     for row in rows:
         n = row["facets"]

@@ -141,13 +141,13 @@ def check_masses(ops: Operators, m_b: np.ndarray, m_f: np.ndarray) -> np.ndarray
         raise ValueError(f"m_b has shape {m_b.shape}; one mass per background node {ops.bnodes.shape} expected")
     if m_f.shape != (ops.Bf.shape[1],):
         raise ValueError(f"m_f has shape {m_f.shape}; one mass per surface node ({ops.Bf.shape[1]},) expected")
-    if not (np.all(np.isfinite(m_b)) and np.all(m_b >= 0.0)):
-        bad_b = float(m_b[~(m_b >= 0.0) | ~np.isfinite(m_b)][0])
+    if not np.all((m_b >= 0.0) & (m_b < np.inf)):   # (NaN fails both)
+        bad_b = float(m_b[~((m_b >= 0.0) & (m_b < np.inf))][0])
         raise ValueError(f"background mass {bad_b!r}: masses must be finite and >= 0")
     touched_f = np.zeros(m_f.size, bool)
     touched_f[ops.Bf.indices] = True
     bad = touched_f & ~(m_f > 0.0)
-    if bad.any() or np.any(np.isnan(m_f)):
+    if bad.any() or np.isnan(m_f).any():
         i = int(np.flatnonzero(bad | np.isnan(m_f))[0])
         raise ValueError(f"surface node {i} has mass {float(m_f[i])!r}: a surface node on the interface "
                          f"needs a mass > 0 (inf: immovable)")

@@ -221,7 +221,8 @@ class Multiplier(CouplingMethod):
         sol = matrix_free.solve(ops, m_b, m_f, v_b, v_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
                                 beta=float(self.cfg["beta"]), warm=(state.zones, state.lam))
         lam = sol.lam.reshape(ops.n_zones, -1)
-        state.load_state({"zones": ops.zones, "lam": lam, "gap": np.zeros((ops.n_zones, lam.shape[1]))})
+        # (consistent by construction: set directly, load_state's checks are for arrays read back)
+        state.zones, state.lam, state.gap = ops.zones, lam, np.zeros((ops.n_zones, lam.shape[1]))
         return StepResult(sol.impulse_b, sol.impulse_f,
                           {"iterations": sol.iterations, "residual": sol.residual,
                            "interface_dissipation": sol.dissipation})
