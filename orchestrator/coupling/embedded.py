@@ -38,7 +38,7 @@ import numpy as np
 from orchestrator.coupling import variants
 from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
-from orchestrator.coupling.operator_rows import transpose_product
+from orchestrator.coupling.operator_rows import row_means, transpose_product
 from orchestrator.coupling.operators import Operators
 
 
@@ -164,14 +164,13 @@ class EmbeddedCoupling:
 
         pieces = clip_surface(self.grid, self.x, self.facets, self.body)
         cov = coverage(self.grid, pieces, self.n_bodies)
-        # (bodies do not overlap: sums of disjoint parts)
-        total = np.minimum(cov.fractions.sum(axis=1), 1.0)
-        faces = tuple((ids, np.minimum(c.sum(axis=1), 1.0)) for ids, c in cov.faces)
+        total = cov.total   # (bodies do not overlap: sums of disjoint parts)
+        faces = tuple((ids, t) for (ids, _), t in zip(cov.faces, cov.face_totals))
         inner = facing_the_grid(self.grid, pieces)
         self.ops = behind_surface(Operators.build(self.grid, inner, self.facets, self.ns), self.grid, inner)
         self.pieces = pieces
-        area = np.where(self.ops.area > 0.0, self.ops.area, 1.0)[:, None]
-        velocity = (self.ops.Bf @ self.v) / area  # the surface's mean velocity per cut zone
+        Bf = self.ops.Bf
+        velocity = row_means(Bf.indptr, Bf.indices, Bf.data, self.v, self.ops.area)  # the surface's, per cut zone
         return BodyGeometry(cov.zones, total, faces, self.ops.zones, self.ops.bnodes, velocity, cov.run_start,
                             cov.run_length)
 
@@ -222,18 +221,18 @@ class EmbeddedCoupling:
     def background_correction(self, x_new: np.ndarray, v_new: np.ndarray) -> np.ndarray:
         """Step 3: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean velocity_e (nc, dim)] for
         the background; advances the surface state and the diagnostics."""
-        ops = self.ops
+        ops, Bf = self.ops, self.ops.Bf
+        v_new = np.asarray(v_new, dtype=np.float64).reshape(-1, self.dim)
         vbar = 0.5 * (self.v + v_new)
-        area = np.where(ops.area > 0.0, ops.area, 1.0)[:, None]
-        v_half_e = (ops.Bf @ v_new) / area
-        v_bar_e = (ops.Bf @ vbar) / area
+        v_half_e = row_means(Bf.indptr, Bf.indices, Bf.data, np.ascontiguousarray(v_new), ops.area)
+        v_bar_e = row_means(Bf.indptr, Bf.indices, Bf.data, vbar, ops.area)
         work = float(np.sum(self.imp_f * vbar))
         self.last.work_f = work
         self.momentum_f += self.last.momentum_f
         self.work_f += work
         self.dissipation += self.last.dissipation
         self.x = np.asarray(x_new, dtype=np.float64).reshape(-1, self.dim).copy()
-        self.v = np.asarray(v_new, dtype=np.float64).reshape(-1, self.dim).copy()
+        self.v = v_new.copy()
         return np.concatenate([self.imp_b.ravel(), v_half_e.ravel(), v_bar_e.ravel()])
 
     # ---- diagnostics and checkpoints ---------------------------------------------------------------

@@ -1087,6 +1087,8 @@ class Coverage:
     run_length: np.ndarray
     run_body: np.ndarray
     faces: tuple
+    total: np.ndarray | None = None       # (nz,) min(Σ_bodies fractions, 1)
+    face_totals: tuple | None = None      # per axis (nf,) min(Σ_bodies covered, 1)
 
 
 def coverage(grid: Grid, pieces: Pieces, n_bodies: int) -> Coverage:
@@ -1101,7 +1103,21 @@ def coverage(grid: Grid, pieces: Pieces, n_bodies: int) -> Coverage:
         np.ascontiguousarray(pieces.area, dtype=np.float64), grid.cells.astype(np.int64), _planes(grid), _SNAP,
         int(n_bodies))
     faces = tuple((fid[foff[d]:foff[d + 1]], fval[foff[d]:foff[d + 1]]) for d in range(dim))
-    return Coverage(zones, frac, start, length, rb, faces)
+    return Coverage(zones, frac, start, length, rb, faces, _capped_sums(frac),
+                    tuple(_capped_sums(v) for _, v in faces))
+
+
+@njit(cache=True)
+def _capped_sums(values):
+    """min(sum over the bodies, 1) per row of (n, n_bodies) (bodies do not overlap: sums of disjoint
+    parts, capped against round-off)."""
+    out = np.empty(values.shape[0])
+    for i in range(values.shape[0]):
+        s = 0.0
+        for b in range(values.shape[1]):
+            s += values[i, b]
+        out[i] = min(s, 1.0)
+    return out
 
 
 @njit(cache=True)
