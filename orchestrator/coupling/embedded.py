@@ -38,7 +38,7 @@ import numpy as np
 from orchestrator.coupling import variants
 from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
-from orchestrator.coupling.operator_rows import row_means, transpose_product
+from orchestrator.coupling.operator_rows import on_grid_boundary, row_means, transpose_product
 from orchestrator.coupling.operators import Operators
 
 
@@ -57,13 +57,9 @@ def facing_the_grid(grid: Grid, pieces):
     """The pieces that face gas: a body face lying on the grid's boundary and facing out of it (a
     plate's base on the floor, an end on a periodic or open face) borders no gas -- it counts for the
     fractions, but a multiplier there would tie the gas nodes at its edge to the body."""
-    on = np.zeros(pieces.zone.size, bool)
-    for d in range(grid.dim):
-        tol = 1e-9 * grid.h[d]
-        c, n = pieces.centroid[:, d], pieces.normal[:, d]
-        on |= (np.abs(c - grid.lower[d]) <= tol) & (n < -0.5)
-        on |= (np.abs(c - grid.upper[d]) <= tol) & (n > 0.5)
-    if not on.any():
+    on, count = on_grid_boundary(np.ascontiguousarray(pieces.centroid), np.ascontiguousarray(pieces.normal),
+                                 grid.lower, grid.upper, grid.h)
+    if count == 0:
         return pieces
     keep = np.flatnonzero(~on)
     qkeep = np.isin(pieces.qpiece, keep)

@@ -914,10 +914,13 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
     dim = grid.dim
     x, facets, body = _check_inputs(grid, x, facets, body)
     xs = grid.snap(x)
-    used = np.zeros(x.shape[0], dtype=bool)
-    used[facets.reshape(-1)] = True
-    outside = used & grid.beyond(xs).any(axis=1)
-    if outside.any():
+    beyond = grid.beyond(xs)
+    outside = None
+    if beyond.any():   # (only then: which of those nodes a facet uses)
+        used = np.zeros(x.shape[0], dtype=bool)
+        used[facets.reshape(-1)] = True
+        outside = used & beyond.any(axis=1)
+    if outside is not None and outside.any():
         bad = np.any(outside[facets], axis=1)
         b = int(body[bad].min())
         nodes = facets[bad & (body == b)].reshape(-1)

@@ -339,3 +339,22 @@ def row_means(indptr, indices, data, v, area):
         for a in range(v.shape[1]):
             out[e, a] /= a_e
     return out
+
+
+@njit(cache=True)
+def on_grid_boundary(centroid, normal, lower, upper, h):
+    """``embedded.facing_the_grid``'s test per piece: its centroid on a boundary plane of the grid
+    (within 1e-9 of a zone width) and its normal pointing out of the grid there (component beyond
+    0.5).  Returns (mask, count)."""
+    n, dim = centroid.shape
+    on = np.zeros(n, np.bool_)
+    count = 0
+    for p in range(n):
+        for d in range(dim):
+            tol = 1e-9 * h[d]
+            c = centroid[p, d]
+            if (abs(c - lower[d]) <= tol and normal[p, d] < -0.5) or (abs(c - upper[d]) <= tol and normal[p, d] > 0.5):
+                on[p] = True
+        if on[p]:
+            count += 1
+    return on, count
