@@ -183,8 +183,10 @@ def _items_text(schema: Mapping) -> str:
     return f"must have at most {hi} item{'s' if hi != 1 else ''}"
 
 
-def _schema_error_to_case_error(err: ValidationError) -> CaseError:
-    path = list(err.absolute_path)
+def _schema_error_to_case_error(err: ValidationError, prefix: tuple = ()) -> CaseError:
+    """One line for a schema error; ``prefix``: the path of the validated instance in the case file
+    (a fragment validated on its own, such as a check kind's ``[check] params``)."""
+    path = list(prefix) + list(err.absolute_path)
     schema = err.schema if isinstance(err.schema, Mapping) else {}
     when = schema.get("x-when")
     suffix = f" ({when})" if when else ""
@@ -493,10 +495,16 @@ def _check(case: dict, data: dict) -> None:
     if case["check"] is not None:
         from orchestrator.checks import CHECKS  # lazy: the registry imports numpy etc.
 
+        from orchestrator.checks import PARAMS
+
         kind = case["check"]["kind"]
         if kind not in CHECKS:
             raise CaseError("check.kind", kind, "unknown check kind; registered: "
                             + ", ".join(sorted(CHECKS)))
+        # the kind's params: unknown keys, types, ranges, what it needs (before anything runs)
+        err = best_match(_VALIDATOR(PARAMS[kind]).iter_errors(data["check"].get("params", {})), key=_relevance)
+        if err is not None:
+            raise _schema_error_to_case_error(err, ("check", "params"))
 
     # data files last: reading them may be slow
     for t in schema_registry.tables():

@@ -11,12 +11,26 @@ from typing import Callable
 
 import numpy as np
 
+from orchestrator.schema_parts import number, table, vector
+
 CHECKS: dict[str, Callable] = {}
+PARAMS: dict[str, dict] = {}
+"""Each kind's ``[check] params`` schema (a table: unknown keys, types and ranges are refused when the
+case is checked, before anything runs -- not by a KeyError after the run)."""
+
+AXIS = {"type": "string", "enum": ["x", "y", "z"]}
+STATE3 = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3,
+          "x-allowed": "must be [density, velocity, pressure] (3 numbers)"}
+WINDOW = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+          "x-allowed": "must be [lower, upper] (2 numbers, m)"}
 
 
-def register_check(name: str):
+def register_check(name: str, params: dict | None = None):
+    """Register check ``name``; ``params``: the properties of its ``[check] params`` table (with
+    ``required``: a ``schema_parts.table``), None for a kind that takes none."""
     def deco(fn):
         CHECKS[name] = fn
+        PARAMS[name] = params if params is not None else table({})
         return fn
 
     return deco
@@ -50,7 +64,9 @@ def _cell_centroids(out: Path, role: str, index: int):
     return points[cells].mean(axis=1), points, point_data, cell_data
 
 
-@register_check("bar_wave")
+@register_check("bar_wave", params=table(
+    {"until_time": number("s", exclusiveMinimum=0), "expected_amplitude": number("Pa")},
+    required=("expected_amplitude",)))
 def bar_wave(case, out, history, params):
     """A bar along x struck at x=0: front position (half-amplitude crossing of sigma_xx) over time
     gives the wave speed; the mean stress behind the front gives the amplitude."""
@@ -155,7 +171,12 @@ def _plateau(x, a, lo, hi, margin, stat="mean"):
     return float(np.median(a[sel]) if stat == "median" else a[sel].mean())
 
 
-@register_check("riemann")
+@register_check("riemann", params=table(
+    {"axis": AXIS, "x0": number("m"), "left": STATE3, "right": STATE3, "gamma_left": number(exclusiveMinimum=1),
+     "gamma_right": number(exclusiveMinimum=1), "p_inf_left": number("Pa", minimum=0),
+     "p_inf_right": number("Pa", minimum=0), "plateau": {"type": "string", "enum": ["mean", "median"]},
+     "interface_material": {"type": "string", "minLength": 1}},
+    required=("x0", "left", "right", "gamma_left")))
 def riemann(case, out, history, params):
     """1-D Riemann problem on a grid, against the exact solution (stiffened gas, ideal gas = p_inf 0):
     star-state plateaus (zones more than 4 cells inside the waves that bound them), the mean and the
@@ -233,7 +254,10 @@ def riemann(case, out, history, params):
     return vals
 
 
-@register_check("sedov")
+@register_check("sedov", params=table(
+    {"symmetry_factor": number(exclusiveMinimum=0), "geometry": {"type": "integer", "enum": [1, 2, 3]},
+     "rho0": number("kg/m^3", exclusiveMinimum=0), "gamma": number(exclusiveMinimum=1), "centre": vector("m")},
+    required=("rho0", "gamma")))
 def sedov(case, out, history, params):
     """Point blast: shock radius (outer half-height of the density jump, zones binned by radius from
     `centre`) against the Kamm & Timmes semi-analytic solution; E0 of the full-space problem is the
@@ -296,7 +320,12 @@ def positivity(case, out, history, params):
     return {"invalid_values": float(bad), "min_density": rho_min, "min_specific_internal_energy": e_min}
 
 
-@register_check("reflected_shock")
+@register_check("reflected_shock", params=table(
+    {"axis": AXIS, "gamma": number(exclusiveMinimum=1), "mach": number(exclusiveMinimum=1),
+     "ahead": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+               "x-allowed": "must be [density, pressure] (2 numbers)"},
+     "p_inf": number("Pa", minimum=0), "x_shock0": number("m"), "x_wall": number("m")},
+    required=("gamma", "mach", "ahead", "x_shock0", "x_wall")))
 def reflected_shock(case, out, history, params):
     """A planar shock of Mach `mach` into gas at rest (`ahead` = [rho, p]), started at `x_shock0`,
     reflected by a wall at `x_wall` (a conforming wall or an immersed one: an obstacle beyond it),
@@ -342,7 +371,8 @@ def reflected_shock(case, out, history, params):
     return vals
 
 
-@register_check("piston")
+@register_check("piston", params=table(
+    {"piston_velocity": number("m/s", exclusiveMinimum=0), "x_face": number("m"), "axis": AXIS}))
 def piston(case, out, history, params):
     """A piston face (ale.boundaries, { piston = { velocity } }, Lagrangian mode) driving a shock into
     the fluid at rest of the first region, against the exact Rankine-Hugoniot solution
@@ -390,7 +420,9 @@ def piston(case, out, history, params):
     return vals
 
 
-@register_check("advected_shape")
+@register_check("advected_shape", params=table(
+    {"material": {"type": "string", "minLength": 1}, "lower": vector("m"), "upper": vector("m")},
+    required=("material", "lower", "upper")))
 def advected_shape(case, out, history, params):
     """A box of one material carried through a periodic grid for whole periods: the volume of every
     material against its initial value (largest relative drift over the run), and the area (volume)
@@ -424,7 +456,8 @@ def advected_shape(case, out, history, params):
     return vals
 
 
-@register_check("embedded_piston")
+@register_check("embedded_piston", params=table(
+    {"axis": AXIS, "gap": number("zone widths", minimum=0), "span": number("m", exclusiveMinimum=0)}))
 def embedded_piston(case, out, history, params):
     """A free body (the Lagrangian solver's) immersed in a 1-D flow along `axis` (a piston between
     two gases): at the last output, the body's centre (mean node position) and velocity (mean node
@@ -460,7 +493,10 @@ def embedded_piston(case, out, history, params):
     return vals
 
 
-@register_check("acoustic_transmission")
+@register_check("acoustic_transmission", params=table(
+    {"incident": number("Pa"), "ambient": number("Pa"), "axis": AXIS, "reflected_window": WINDOW,
+     "transmitted_window": WINDOW},
+    required=("incident", "reflected_window", "transmitted_window")))
 def acoustic_transmission(case, out, history, params):
     """A plane pressure pulse of amplitude `incident` (Pa above `ambient`) in the background fluid,
     reflected from and transmitted into an immersed body at normal incidence along `axis`: at the last
@@ -494,7 +530,9 @@ def acoustic_transmission(case, out, history, params):
     return vals
 
 
-@register_check("uniform_flow")
+@register_check("uniform_flow", params=table(
+    {"velocity": vector("m/s"), "normal": vector(None), "min_open": number(exclusiveMinimum=0, maximum=1)},
+    required=("velocity", "normal")))
 def uniform_flow(case, out, history, params):
     """A uniform flow `velocity` (m/s) that the bodies should leave undisturbed (a slip wall along
     it): at the last output, over the background's nodes whose zones are on average at least

@@ -210,6 +210,21 @@ BAD_INPUTS = [
     Bad("grid_lower_minus_inf", "ale.grid.lower[0] = -inf", "finite", edit(ALE2D, "lower = [0.0, 0.0]", "lower = [-inf, 0.0]")),
     Bad("region_pressure_nan", "ale.regions[1].pressure = nan", "finite", edit(ALE2D, "pressure = 0.1", "pressure = nan")),
     Bad("check_params_nan", "check.params.x0 = nan", "finite", ALE2D + '[check]\nkind = "riemann"\nparams = { x0 = nan }\n'),
+    # [check] params: each kind's own table (refused at check time, not by a KeyError after the run)
+    Bad("check_params_unknown_key", "check.params.x_0 = 0.5", "unknown key",
+        ALE2D + '[check]\nkind = "riemann"\nparams = { x_0 = 0.5, left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1], '
+        'gamma_left = 1.4 }\n'),
+    Bad("check_params_missing", "check.params.gamma_left", "required key missing",
+        ALE2D + '[check]\nkind = "riemann"\nparams = { x0 = 0.5, left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1] }\n'),
+    Bad("check_params_bad_axis", "check.params.axis = 'w'", "one of: 'x', 'y', 'z'",
+        ALE2D + '[check]\nkind = "embedded_piston"\nparams = { axis = "w" }\n'),
+    Bad("check_params_state_length", "check.params.left = [1.0, 0.0]", "[density, velocity, pressure]",
+        ALE2D + '[check]\nkind = "riemann"\nparams = { x0 = 0.5, left = [1.0, 0.0], right = [0.125, 0.0, 0.1], '
+        'gamma_left = 1.4 }\n'),
+    Bad("check_params_range", "check.params.gamma = 1", "> 1",
+        ALE2D + '[check]\nkind = "sedov"\nparams = { rho0 = 1.0, gamma = 1 }\n'),
+    Bad("check_params_for_a_kind_without", "check.params.axis = 'x'", "unknown key; allowed: (none)",
+        ALE2D + '[check]\nkind = "positivity"\nparams = { axis = "x" }\n'),
     # -- finite but absurd --
     Bad("output_interval_1e-300", "run.output_interval = 1e-300", "more than 1,000,000",
         edit(ALE2D, "end_time = 0.2", "end_time = 0.2\noutput_interval = 1e-300")),

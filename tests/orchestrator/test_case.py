@@ -82,7 +82,7 @@ def test_box3d_loads_with_values_and_defaults():
     assert b[3]["normal"] == [0.0, 0.0, 1.0]
 
     assert case["check"]["kind"] == "momentum"
-    assert case["check"]["params"]["samples"] == [1, 2, 3]
+    assert case["check"]["params"] == {}   # (momentum takes none: checks.PARAMS)
     assert case["check"]["metrics"] == {"total_momentum_z": {"reference": -1.0,
                                                              "tolerance": 0.01}}
 
@@ -412,7 +412,7 @@ def test_schema_is_draft_2020_12_and_closed():
     ("normal = [0.0, 0.0, 1.0]", "normal = [0.0, nan, 1.0]", "boundaries[3].normal[1]"),
     ("velocity = { y = 0.0 }", "velocity = { y = -inf }", "boundaries[2].velocity.y"),
     ("tolerance = 0.01", "tolerance = inf", "check.metrics.total_momentum_z.tolerance"),
-    ("samples = [1, 2, 3]", "samples = [1, 2, nan]", "check.params.samples[2]"),
+    ("reference = -1.0", "reference = nan", "check.metrics.total_momentum_z.reference"),
 ])
 def test_non_finite_numbers_are_refused_anywhere(tmp_path, old, new, key):
     with pytest.raises(CaseError) as ei:
@@ -427,11 +427,15 @@ def test_a_key_may_allow_non_finite_numbers(tmp_path, monkeypatch):
     d = _edited(tmp_path, "tolerance = 0.01", "tolerance = 0.01\nreference_max = inf")
     with pytest.raises(CaseError):
         load_case(d)  # unknown key first (the schema runs before the finite rule)
-    d = _edited(tmp_path / "b", "samples = [1, 2, 3]", "samples = [1, 2, inf]")
-    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("check.params.samples[]",))
-    assert load_case(d)["check"]["params"]["samples"][2] == float("inf")
-    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("check.params.*",))
-    with pytest.raises(CaseError):  # '*' is one table key, not an index
+    d = _edited(tmp_path / "b", "reference = -1.0", "reference = inf")
+    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("check.metrics.*.reference",))
+    assert load_case(d)["check"]["metrics"]["total_momentum_z"]["reference"] == float("inf")
+    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("check.*.reference",))
+    with pytest.raises(CaseError):  # '*' is one table key, not a path
+        load_case(d)
+    d = _edited(tmp_path / "c", "normal = [0.0, 0.0, 1.0]", "normal = [0.0, inf, 1.0]")
+    monkeypatch.setattr(C, "NON_FINITE_KEYS", ("boundaries[].normal",))
+    with pytest.raises(CaseError):  # '[]' is an index only where it is written
         load_case(d)
 
 
@@ -558,3 +562,26 @@ def test_body_sizes(tmp_path):
     case = load_case(VALID / "box3d")
     assert [b["size"] for b in case["lagrange"]["bodies"]] == [{"elements": 32, "nodes": 3 * 3 * 9},
                                                                {"elements": 4, "nodes": 3 * 3 * 2}]
+
+
+def test_every_check_kind_has_a_closed_params_schema():
+    """[check] params are each kind's own table (orchestrator.checks.PARAMS): valid Draft 2020-12,
+    closed (unknown keys refused), and every shipped case's params pass it."""
+    import tomllib
+
+    import jsonschema
+
+    from orchestrator.checks import CHECKS, PARAMS
+
+    assert set(PARAMS) == set(CHECKS)
+    for kind, schema in PARAMS.items():
+        jsonschema.Draft202012Validator.check_schema(schema)
+        assert schema["additionalProperties"] is False, kind
+    root = Path(__file__).resolve().parents[2] / "cases"
+    seen = set()
+    for toml in sorted(root.glob("*/case.toml")):
+        check = tomllib.loads(toml.read_text()).get("check")
+        if check:
+            jsonschema.validate(check.get("params", {}), PARAMS[check["kind"]])
+            seen.add(check["kind"])
+    assert len(seen) >= 10   # the shipped cases use most kinds (measured: 13)
