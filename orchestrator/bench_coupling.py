@@ -176,7 +176,7 @@ def coupler_step_cost(n: int, repeats: int) -> dict:
     clock = _Clock()
     samples = defaultdict(list)
     with contextlib.ExitStack() as stack:
-        for key, attr in (("clip", "clip_surface"), ("coverage", "coverage"), ("behind", "behind_surface")):
+        for key, attr in (("clip", "clip_surface"), ("coverage", "coverage")):
             stack.enter_context(mock.patch.object(embedded, attr, clock.wrap(key, getattr(embedded, attr))))
         stack.enter_context(mock.patch.object(embedded, "Operators",
                                               type("TimedOperators", (), {"build": staticmethod(
@@ -202,14 +202,13 @@ def coupler_step_cost(n: int, repeats: int) -> dict:
                 samples[k].append(v)
             samples["iterations"].append(c.last.iterations)
     med = {k: float(np.median(v)) for k, v in samples.items()}
-    med["operators"] += med.pop("behind", 0.0)  # B^b restricted behind the surface: part of the operators
     return {"facets": n, "cells": [cells, cells], "cut_zones": int(c.ops.zones.size),
             "blocked_zones": int(body.zones.size),
             "pieces": int(c.pieces.zone.size), "repeats": repeats, **med}
 
 
 COST_STAGES = (("clip", "clip_surface"), ("coverage", "coverage: fractions and face coverages (interior as runs)"),
-               ("operators", "Operators.build + behind_surface"), ("solve", "multiplier solve"))
+               ("operators", "Operators.build"), ("solve", "multiplier solve"))
 
 
 def coupler_cost(quick: bool) -> tuple[list, list]:

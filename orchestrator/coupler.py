@@ -143,6 +143,7 @@ class Coupler:
             raise RuntimeError(f"{e} at step {self.step}, t = {self.t + dt:.6g} s") from None
         P.send(bg, geometry.pack(c.dim), 0, P.TAG_GEOMETRY)
         self.dt_prev = dt
+        self.dt_max = max(getattr(self, "dt_max", 0.0), dt)
         if self.step == 1 or (dt > c.stable_limit and not getattr(self, "_warned_limit", False)):
             if np.isfinite(c.stable_limit):
                 self.log(f"coupling {c.method.NAME}: its explicit stable-step limit is {c.stable_limit:.6g} s; "
@@ -186,7 +187,8 @@ class Coupler:
                 f"coupling method {c.method.NAME!r} is unstable at step {self.step}, t = {self.t:.6g} s: "
                 f"the interface gave fluid and bodies {work:.6g} J, more than {self.UNSTABLE_WORK:.0%} of "
                 f"their initial energy {self._energy0:.6g} J; its explicit stable-step limit is {lim}, the "
-                f"step used {self.dt_prev:.6g} s")
+                f"step used {self.dt_prev:.6g} s (the largest so far {getattr(self, 'dt_max', self.dt_prev):.6g} s: "
+                f"a growing oscillation shortens the solvers' steps)")
 
     def _coupled_energy(self) -> float:
         """Total energy of the background plus the bodies' kinetic energy, from their last replies."""

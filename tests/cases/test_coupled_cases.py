@@ -192,13 +192,13 @@ def _penalty_case(tmp_path, stiffness, end_time=0.05):
     return case
 
 
-@pytest.mark.parametrize("stiffness, step_1", [(2e3, False), (1e7, True)])
+@pytest.mark.parametrize("stiffness, step_1", [(1e4, False), (1e7, True)])
 def test_penalty_beyond_its_stable_step_is_stopped_naming_the_limit(tmp_path, stiffness, step_1):
     """A penalty spring whose explicit limit lies below the solvers' step: stopped, non-zero exit, the
-    message naming the method, its limit and the step used; far beyond (k = 1e7 Pa/m: limit 6.5e-6 s
-    against a 5.9e-4 s step) at the first step, just beyond (k = 2e3: 3.3e-4 s against 5.9e-4 s) when
-    the interface has given more than 1 % of the energy (measured at step 11). (The limit is a bound:
-    k = 1e3, limit 4.6e-4 s against 6.0e-4 s, runs stably.)"""
+    message naming the method, its limit and the step used; far beyond (k = 1e7 Pa/m: limit 1.0e-5 s
+    against a 5.9e-4 s step) at the first step, beyond (k = 1e4: 2.7e-4 s against 5.9e-4 s) when the
+    interface has given more than 1 % of the energy (measured at step 6). (k = 2e3, limit 7.3e-4 s
+    above the 5.9e-4 s step, runs stably.)"""
     import re
 
     r = immerse("run", _penalty_case(tmp_path, stiffness), "--out", tmp_path / "out")
@@ -206,7 +206,7 @@ def test_penalty_beyond_its_stable_step_is_stopped_naming_the_limit(tmp_path, st
     line = [ln for ln in r.stderr.splitlines() if ln.startswith("immerse: run failed")][0]
     assert "coupling method 'penalty' is unstable" in line, line
     limit = float(re.search(r"stable-step limit (?:is )?([0-9.e+-]+) s", line).group(1))
-    used = float(re.search(r"step (?:used )?([0-9.e+-]+) s is more|step used ([0-9.e+-]+) s", line).group(
+    used = float(re.search(r"step (?:used )?([0-9.e+-]+) s is more|largest so far ([0-9.e+-]+) s", line).group(
         1 if step_1 else 2))
     assert limit < used, line
     assert ("at step 1," in line) == step_1, line
@@ -289,36 +289,45 @@ def test_plate_in_shock_3d_runs_with_coupled_balances(tmp_path):
 
 def test_acoustic_transmission(tmp_path):
     """A 1 MPa pulse in water onto an immersed elastic block, Z2/Z1 = 2.70: reflected and transmitted
-    amplitudes against (Z2-Z1)/(Z1+Z2) and 2 Z2/(Z1+Z2) (measured errors 1.9e-3 and 1.9e-4)."""
+    amplitudes against (Z2-Z1)/(Z1+Z2) and 2 Z2/(Z1+Z2) (measured errors 2.1e-3 and 3.8e-4)."""
     s = run(CASES / "acoustic_transmission", tmp_path / "out")
     assert_check_passed(s)
     coupled_balances(s)
 
 
-def test_acoustic_transmission_into_a_lower_impedance_solid(tmp_path):
-    """The same pulse onto a light, stiff block (rho = 500, E = 2e9: c2 = 2000 m/s, Z2 = 1e6 < Z1):
-    the reflection is a rarefaction, R = -0.193504, T = 0.806496 (measured errors 6.5e-3 and 3.4e-3;
-    the transmitted plateau at t = 0.36 ms lies at 0.78 .. 0.98 m)."""
+@pytest.mark.parametrize("youngs, window, tol_r, tol_t", [
+    # E = 2e9: c2 = 2000 m/s, Z2 = 1e6; the transmitted plateau at t = 0.36 ms lies at 0.78 .. 0.98 m
+    # (measured errors 1.2e-4, 1.4e-3; 6.5e-3, 3.4e-3 with B^b behind the surface only)
+    (2.0e9, "[0.80, 0.96]", 5e-4, 5e-3),
+    # E = 5e8: c2 = 1000 m/s, Z2 = 5e5 (Z1/Z2 = 3): the water's stiffness on a light body's surface; at
+    # the default dt_scale 0.9 it oscillated with period two steps while B^b held only the corners
+    # behind the surface (stopped at step 161), stable with every corner (measured 1.1e-3, 3.3e-4)
+    (5.0e8, "[0.712, 0.77]", 4e-3, 1.5e-3),
+], ids=["stiff", "soft"])
+def test_acoustic_transmission_into_a_lower_impedance_solid(tmp_path, youngs, window, tol_r, tol_t):
+    """The same pulse onto a light block (rho = 500): the reflection is a rarefaction,
+    R = (Z2-Z1)/(Z1+Z2), T = 2 Z2/(Z1+Z2)."""
     case = tmp_path / "light"
     shutil.copytree(CASES / "acoustic_transmission", case, ignore=shutil.ignore_patterns("out"))
     p = case / "case.toml"
     p.write_text(p.read_text().replace("density = 4000.0", "density = 500.0")
-                 .replace("youngs_modulus = 4.0e9", "youngs_modulus = 2.0e9")
-                 .replace("transmitted_window = [0.712, 0.77]", "transmitted_window = [0.80, 0.96]"))
+                 .replace("youngs_modulus = 4.0e9", f"youngs_modulus = {youngs!r}")
+                 .replace("transmitted_window = [0.712, 0.77]", f"transmitted_window = {window}"))
     out = tmp_path / "out"
     r = immerse("run", case, "--out", out)
     assert r.returncode in (0, 1), r.stdout + r.stderr  # (the case's references are for the heavy block)
     m = json.loads((out / "summary.json").read_text())["check"]["metrics"]
-    z1, z2 = 1000.0 * (2.19e9 / 1000.0) ** 0.5, 500.0 * 2000.0
+    z1, z2 = 1000.0 * (2.19e9 / 1000.0) ** 0.5, (500.0 * youngs) ** 0.5
     R, T = (z2 - z1) / (z1 + z2), 2.0 * z2 / (z1 + z2)
-    assert abs(m["reflection"]["value"] / R - 1.0) < 2e-2, m["reflection"]["value"]
-    assert abs(m["transmission"]["value"] / T - 1.0) < 1e-2, m["transmission"]["value"]
+    assert abs(m["reflection"]["value"] / R - 1.0) < tol_r, m["reflection"]["value"]
+    assert abs(m["transmission"]["value"] / T - 1.0) < tol_t, m["transmission"]["value"]
+    assert m["momentum_balance_rel"]["passed"] and m["energy_balance_rel"]["passed"], m
 
 
 def test_oblique_slip_wall(tmp_path):
     """Mach 0.5 along a wall inclined 30 degrees that crosses the periodic box's faces: the case's
-    check (normal velocity 1.26e-2 of the flow speed and deviation 2.45e-2 measured, against
-    tolerances 3e-2 / 5e-2: the issue's 1e-3 is not met yet, see its case.toml) and the gas's
+    check (normal velocity 7.7e-3 of the flow speed and deviation 2.1e-2 measured, against
+    tolerances 2e-2 / 5e-2: the issue's 1e-3 is not met yet, see its case.toml) and the gas's
     balances at round-off (measured mass 1.4e-14, momentum 1.5e-14, energy 5e-15: the small-zone
     merge's groups across the periodic faces are seen whole from both sides)."""
     s = run(CASES / "oblique_slip_wall", tmp_path / "out")
