@@ -467,6 +467,22 @@ def _segment_range(ax, bx, X, nd):
     return i0, min(max(i1, i0), n - 1)
 
 
+@njit(cache=True, inline="always")
+def _split_at(pd, po, pt, qd, qo, qt, X):
+    """A segment p -> q strictly across the plane x_d = X (ends given as their coordinate along d,
+    the other coordinate and the segment parameter t): (the part below the plane, the part above),
+    each (d, o, t) of its two ends in the segment's direction; the cut vertex gets x_d = X exactly and
+    interpolates the rest (``_cut_segment``)."""
+    sp = pd - X
+    sq = qd - X
+    t = sp / (sp - sq)
+    ro = po + t * (qo - po)
+    rt = pt + t * (qt - pt)
+    if sp < 0.0:
+        return (pd, po, pt, X, ro, rt), (X, ro, rt, qd, qo, qt)
+    return (X, ro, rt, qd, qo, qt), (pd, po, pt, X, ro, rt)
+
+
 @njit(cache=True)
 def _clip_segments_2d(xs, elems, X0, X1, gauss_t):
     """_clip_kernel for 2-D segments, the same operations on scalars: the generic kernel's level
@@ -506,36 +522,16 @@ def _clip_segments_2d(xs, elems, X0, X1, gauss_t):
         ax, ay, at, bx, by, bt = px, py, 0.0, qx_, qy_, 1.0
         i0, i1 = _segment_range(ax, bx, X0, n0)
         for i in range(i0, i1 + 1):
-            if i < i1:   # split off the part below plane i+1 (_cut_segment along x)
-                Xp = X0[i + 1]
-                sp = ax - Xp
-                sq = bx - Xp
-                t = sp / (sp - sq)
-                ry = ay + t * (by - ay)
-                rt = at + t * (bt - at)
-                if sp < 0.0:
-                    sx0, sy0, st0, sx1, sy1, st1 = ax, ay, at, Xp, ry, rt
-                    ax, ay, at = Xp, ry, rt
-                else:
-                    sx0, sy0, st0, sx1, sy1, st1 = Xp, ry, rt, bx, by, bt
-                    bx, by, bt = Xp, ry, rt
+            if i < i1:   # split off the part below plane i+1; the rest stays the remainder
+                (sx0, sy0, st0, sx1, sy1, st1), (ax, ay, at, bx, by, bt) = _split_at(
+                    ax, ay, at, bx, by, bt, X0[i + 1])
             else:
                 sx0, sy0, st0, sx1, sy1, st1 = ax, ay, at, bx, by, bt
             j0, j1 = _segment_range(sy0, sy1, X1, n1)
             for j in range(j0, j1 + 1):
-                if j < j1:   # along y
-                    Yp = X1[j + 1]
-                    sp = sy0 - Yp
-                    sq = sy1 - Yp
-                    t = sp / (sp - sq)
-                    rx = sx0 + t * (sx1 - sx0)
-                    rt = st0 + t * (st1 - st0)
-                    if sp < 0.0:
-                        cx0, cy0, ct0, cx1, cy1, ct1 = sx0, sy0, st0, rx, Yp, rt
-                        sx0, sy0, st0 = rx, Yp, rt
-                    else:
-                        cx0, cy0, ct0, cx1, cy1, ct1 = rx, Yp, rt, sx1, sy1, st1
-                        sx1, sy1, st1 = rx, Yp, rt
+                if j < j1:   # along y (the helper's first coordinate is the cut axis)
+                    (cy0, cx0, ct0, cy1, cx1, ct1), (sy0, sx0, st0, sy1, sx1, st1) = _split_at(
+                        sy0, sx0, st0, sy1, sx1, st1, X1[j + 1])
                 else:
                     cx0, cy0, ct0, cx1, cy1, ct1 = sx0, sy0, st0, sx1, sy1, st1
                 dx = cx1 - cx0

@@ -84,6 +84,14 @@ HEX_MSH = ("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n8\n1 0 0 0\n2 0.01 0 0
 BASES = {"ALE2D": ALE2D, "ALE3D": ALE3D, "MIXED": MIXED, "OBSTACLE": OBSTACLE, "BAR": BAR, "FILEBAR": FILEBAR}
 
 
+SOD_STATES = "left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1]"
+
+
+def _check_table(kind: str, params: str) -> str:
+    """The 2-D background case with a [check] of ``kind`` and the given params (TOML inline)."""
+    return ALE2D + f'[check]\nkind = "{kind}"\nparams = {{ {params} }}\n'
+
+
 def edit(base: str, old: str, new: str) -> str:
     assert old in base, old
     return base.replace(old, new, 1)
@@ -212,19 +220,16 @@ BAD_INPUTS = [
     Bad("check_params_nan", "check.params.x0 = nan", "finite", ALE2D + '[check]\nkind = "riemann"\nparams = { x0 = nan }\n'),
     # [check] params: each kind's own table (refused at check time, not by a KeyError after the run)
     Bad("check_params_unknown_key", "check.params.x_0 = 0.5", "unknown key",
-        ALE2D + '[check]\nkind = "riemann"\nparams = { x_0 = 0.5, left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1], '
-        'gamma_left = 1.4 }\n'),
+        _check_table("riemann", f"x_0 = 0.5, {SOD_STATES}, gamma_left = 1.4")),
     Bad("check_params_missing", "check.params.gamma_left", "required key missing",
-        ALE2D + '[check]\nkind = "riemann"\nparams = { x0 = 0.5, left = [1.0, 0.0, 1.0], right = [0.125, 0.0, 0.1] }\n'),
+        _check_table("riemann", f"x0 = 0.5, {SOD_STATES}")),
     Bad("check_params_bad_axis", "check.params.axis = 'w'", "one of: 'x', 'y', 'z'",
-        ALE2D + '[check]\nkind = "embedded_piston"\nparams = { axis = "w" }\n'),
+        _check_table("embedded_piston", 'axis = "w"')),
     Bad("check_params_state_length", "check.params.left = [1.0, 0.0]", "[density, velocity, pressure]",
-        ALE2D + '[check]\nkind = "riemann"\nparams = { x0 = 0.5, left = [1.0, 0.0], right = [0.125, 0.0, 0.1], '
-        'gamma_left = 1.4 }\n'),
-    Bad("check_params_range", "check.params.gamma = 1", "> 1",
-        ALE2D + '[check]\nkind = "sedov"\nparams = { rho0 = 1.0, gamma = 1 }\n'),
+        _check_table("riemann", "x0 = 0.5, left = [1.0, 0.0], right = [0.125, 0.0, 0.1], gamma_left = 1.4")),
+    Bad("check_params_range", "check.params.gamma = 1", "> 1", _check_table("sedov", "rho0 = 1.0, gamma = 1")),
     Bad("check_params_for_a_kind_without", "check.params.axis = 'x'", "unknown key; allowed: (none)",
-        ALE2D + '[check]\nkind = "positivity"\nparams = { axis = "x" }\n'),
+        _check_table("positivity", 'axis = "x"')),
     # -- finite but absurd --
     Bad("output_interval_1e-300", "run.output_interval = 1e-300", "more than 1,000,000",
         edit(ALE2D, "end_time = 0.2", "end_time = 0.2\noutput_interval = 1e-300")),
