@@ -89,9 +89,9 @@ def test_ten_thousand_steps_at_the_uncoupled_step_with_slivers(tmp_path):
     """The multiplier method at the solvers' own explicit step (dt_scale 0.9 of the smaller of the
     gas's and the plate's limits, never reduced by the coupling) for 10^4 steps, with the plate's
     faces 1e-7 zone widths inside zones (open fractions 1e-7 there) and a pressure pulse ringing in
-    the walled box: no failure, the gas's energy stays within 1 % (measured -1.5e-3: what the
+    the walled box: no failure, the gas's energy stays within 1 % (measured -2.9e-3: what the
     interface and the small-zone merges dissipate), its balances at round-off (measured 5e-15 and
-    3e-14), the step never below half its first value (measured 0.89)."""
+    1.3e-14), the step never below half its first value (measured 0.89)."""
     h = 1.0 / 20
     eps = 1e-7 * h
     # plate faces at y = 0.5 -+ (h - eps): 1e-7 of zones 9 and 10 open next to each face
@@ -121,3 +121,39 @@ def test_ten_thousand_steps_at_the_uncoupled_step_with_slivers(tmp_path):
     assert abs(d["total_energy"] / e0 - 1.0) < 1e-2, d["total_energy"] / e0
     # the step is the solvers' own: never below half its first value (a pulse, no collapse)
     assert min(dts) > 0.5 * dts[0], (min(dts), dts[0])
+
+
+def test_ten_thousand_steps_of_a_light_body_in_water(tmp_path):
+    """A light, soft block in water (cases/acoustic_transmission with rho 500, E 5e8: Z1/Z2 = 3, the
+    water's rho c^2 = 2.2e9 Pa on a surface mass of density 500) struck by the 1 MPa pulse, which then
+    rings in the walled column, 10^4 steps at dt_scale 0.9 of the solvers' own limits: the velocity
+    stays at the waves' (max 1.36 m/s measured: the transmitted 1.01 m/s and its reflections), the
+    energy of gas and body does not grow (measured -11 %: the pulse's dissipation over ~13 crossings),
+    the step stays (measured 0.999 of the first).  With B^b held to the corners behind the surface
+    the interface oscillated with period two steps from the pulse's arrival (stopped at step 161)."""
+    import shutil
+
+    from tests.conftest import CASES
+
+    shutil.copytree(CASES / "acoustic_transmission", tmp_path / "light", ignore=shutil.ignore_patterns("out"))
+    p = tmp_path / "light" / "case.toml"
+    p.write_text(p.read_text().replace("density = 4000.0", "density = 500.0")
+                 .replace("youngs_modulus = 4.0e9", "youngs_modulus = 5.0e8"))
+    r = InProcess(load_case(tmp_path / "light"))
+    a, lag = r.ale, r.lag
+
+    def energy():
+        d = lag.diagnostics()
+        return a.diagnostics()["total_energy"] + d["kinetic_energy"] + d["stress_power_energy"]
+
+    e0, vmax, dts = energy(), 0.0, []
+    for _ in range(10_000):
+        limit = min(lag.stable_dt(), a.stable_dt())
+        dts.append(limit)
+        r.advance(0.9 * limit)
+        vmax = max(vmax, float(np.abs(a.v).max()))
+    rel = energy() / e0 - 1.0
+    print(f"light body, 10^4 steps: max |v| {vmax:.4f} m/s, energy {rel:.3e} rel, step {min(dts) / dts[0]:.4f}")
+    assert vmax < 1.6, vmax
+    assert rel < 1e-3, rel
+    assert min(dts) > 0.95 * dts[0], (min(dts), dts[0])
