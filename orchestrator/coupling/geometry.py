@@ -153,7 +153,6 @@ def _axis_range(poly, nv, d, X, nd):
     """Zones [i0, i1] along d that a polygon covers with positive extent.  A polygon at constant
     coordinate (perpendicular to d) lies in one zone: on a grid plane the one on its outward side
     (normal component nd), at the grid boundary the inner one."""
-    n = X.size - 1
     mn = poly[0, d]
     mx = mn
     for v in range(1, nv):
@@ -161,11 +160,19 @@ def _axis_range(poly, nv, d, X, nd):
             mn = poly[v, d]
         if poly[v, d] > mx:
             mx = poly[v, d]
+    return _extent_range(mn, mx, X, nd)
+
+
+@njit(cache=True, inline="always")
+def _extent_range(mn, mx, X, nd):
+    """Zones [i0, i1] along an axis with planes X that the extent [mn, mx] covers with positive
+    length; a zero extent lies in one zone: on a grid plane the one on the outward side (normal
+    component nd), at the grid boundary the inner one."""
+    n = X.size - 1
     if mn == mx:
-        k = _locate(X, mn)
-        z = k
-        if X[k] == mn and nd < 0.0:
-            z = k - 1
+        z = _locate(X, mn)
+        if X[z] == mn and nd < 0.0:
+            z = z - 1
         z = min(max(z, 0), n - 1)
         return z, z
     i0 = min(_locate(X, mn), n - 1)
@@ -240,15 +247,6 @@ def _grow2(a, n):
     out = np.empty((n, a.shape[1]), a.dtype)
     out[: a.shape[0], :] = a
     return out
-
-
-@njit(cache=True, inline="always")
-def _copy_rows(buf, la, sa, lb, sb, n):
-    """buf[lb, sb, :n] = buf[la, sa, :n] element by element (a slice assignment between views of one
-    array makes numba copy through a temporary it allocates: once per piece)."""
-    for v in range(n):
-        for a in range(buf.shape[3]):
-            buf[lb, sb, v, a] = buf[la, sa, v, a]
 
 
 @njit(cache=True)
@@ -343,17 +341,17 @@ def _clip_kernel(xs, elems, planes, cells, gauss_t, tri_bary, tri_w):
                     nlo, nhi = _cut_polygon(buf[lvl, 0], nrem[lvl], lvl, X[i + 1], buf[lvl, 1], buf[lvl, 2])
                 else:
                     nlo, nhi = _cut_segment(buf[lvl, 0], lvl, X[i + 1], buf[lvl, 1], buf[lvl, 2])
-                _copy_rows(buf, lvl, 2, lvl, 0, nhi)
+                buf[lvl, 0, :nhi, :] = buf[lvl, 2, :nhi, :]
                 nrem[lvl] = nhi
                 npc[lvl] = nlo
             else:
-                _copy_rows(buf, lvl, 0, lvl, 1, nrem[lvl])
+                buf[lvl, 1, : nrem[lvl], :] = buf[lvl, 0, : nrem[lvl], :]
                 npc[lvl] = nrem[lvl]
             if npc[lvl] < minv:
                 continue
             if lvl < D - 1:
                 nxt = lvl + 1
-                _copy_rows(buf, lvl, 1, nxt, 0, npc[lvl])
+                buf[nxt, 0, : npc[lvl], :] = buf[lvl, 1, : npc[lvl], :]
                 nrem[nxt] = npc[lvl]
                 j0, j1 = _axis_range(buf[nxt, 0], nrem[nxt], nxt, planes[nxt, : cells[nxt] + 1], nrm[nxt])
                 icur[nxt] = j0
@@ -448,25 +446,6 @@ def _clip_kernel(xs, elems, planes, cells, gauss_t, tri_bary, tri_w):
             qx[:nq], qw[:nq], ql[:nq], normals)
 
 
-@njit(cache=True)
-def _segment_range(ax, bx, X, nd):
-    """_axis_range for a segment with end coordinates ax, bx along the axis."""
-    n = X.size - 1
-    mn = min(ax, bx)
-    mx = max(ax, bx)
-    if mn == mx:
-        z = _locate(X, mn)
-        if X[z] == mn and nd < 0.0:
-            z = z - 1
-        z = min(max(z, 0), n - 1)
-        return z, z
-    i0 = min(_locate(X, mn), n - 1)
-    i1 = _locate(X, mx)
-    if i1 > 0 and X[i1] >= mx:
-        i1 -= 1
-    return i0, min(max(i1, i0), n - 1)
-
-
 @njit(cache=True, inline="always")
 def _split_at(pd, po, pt, qd, qo, qt, X):
     """A segment p -> q strictly across the plane x_d = X (ends given as their coordinate along d,
@@ -520,14 +499,14 @@ def _clip_segments_2d(xs, elems, X0, X1, gauss_t):
         normals[el, 1] = n1
         # the remainder along x: (ax, ay, at) -> (bx, by, bt); t the segment parameter
         ax, ay, at, bx, by, bt = px, py, 0.0, qx_, qy_, 1.0
-        i0, i1 = _segment_range(ax, bx, X0, n0)
+        i0, i1 = _extent_range(min(ax, bx), max(ax, bx), X0, n0)
         for i in range(i0, i1 + 1):
             if i < i1:   # split off the part below plane i+1; the rest stays the remainder
                 (sx0, sy0, st0, sx1, sy1, st1), (ax, ay, at, bx, by, bt) = _split_at(
                     ax, ay, at, bx, by, bt, X0[i + 1])
             else:
                 sx0, sy0, st0, sx1, sy1, st1 = ax, ay, at, bx, by, bt
-            j0, j1 = _segment_range(sy0, sy1, X1, n1)
+            j0, j1 = _extent_range(min(sy0, sy1), max(sy0, sy1), X1, n1)
             for j in range(j0, j1 + 1):
                 if j < j1:   # along y (the helper's first coordinate is the cut axis)
                     (cy0, cx0, ct0, cy1, cx1, ct1), (sy0, sx0, st0, sy1, sx1, st1) = _split_at(
