@@ -457,13 +457,15 @@ def advected_shape(case, out, history, params):
 
 
 @register_check("embedded_piston", params=table(
-    {"axis": AXIS, "gap": number("zone widths", minimum=0), "span": number("m", exclusiveMinimum=0)}))
+    {"axis": AXIS, "gap": number("zone widths", minimum=0), "span": number("m", exclusiveMinimum=0),
+     "span_left": number("m", exclusiveMinimum=0), "span_right": number("m", exclusiveMinimum=0)}))
 def embedded_piston(case, out, history, params):
     """A free body (the Lagrangian solver's) immersed in a 1-D flow along `axis` (a piston between
     two gases): at the last output, the body's centre (mean node position) and velocity (mean node
     velocity) along the axis, and the pressure of the gas on each side (mean over the zones between
-    `gap` and `span` from the body's faces, cut zones excluded), against `centre`, `velocity` and
-    `pressure` (the exact solution's, given in the case)."""
+    `gap` and `span` from the body's faces, cut zones excluded; `span_left` / `span_right` where the
+    uniform regions either side differ in width), against `centre`, `velocity` and `pressure` (the
+    exact solution's, given in the case)."""
     from orchestrator import output
 
     axis = "xyz".index(params.get("axis", "x"))
@@ -476,9 +478,10 @@ def embedded_piston(case, out, history, params):
     g = case["ale"]["grid"]
     h = (g["upper"][axis] - g["lower"][axis]) / g["cells"][axis]
     gap, span = float(params.get("gap", 3.0)) * h, float(params.get("span", 0.05))
+    span_l, span_r = float(params.get("span_left", span)), float(params.get("span_right", span))
     xs, p = prof["x"], prof["p"]
-    left = (xs < lo - gap) & (xs > lo - span)
-    right = (xs > hi + gap) & (xs < hi + span)
+    left = (xs < lo - gap) & (xs > lo - span_l)
+    right = (xs > hi + gap) & (xs < hi + span_r)
     vals = {
         "centre": float(x.mean()),
         "velocity": float(pd["velocity"][:, axis].mean()),
@@ -571,7 +574,9 @@ def coupled_balances(case, out, history, params):
     """A coupled run's bookkeeping: the largest |balance| of every solver and of the coupling over
     the run (`<role>.<Q>_balance_rel` -> metric `<Q>_balance_rel`, the largest over the roles), the
     interface work relative to the initial energy of gas + bodies (`interface_work_rel`), and the gas
-    mass left in zones a body fills at the last output (`covered_gas_mass`, kg)."""
+    mass left in zones a body fills at the last output (`covered_gas_mass`, kg); with several
+    background materials, the largest relative change of one material's mass over the run
+    (`material_mass_balance_rel`: every material is conserved on its own in a closed box)."""
     from orchestrator import output
 
     vals: dict = {}
@@ -579,6 +584,10 @@ def coupled_balances(case, out, history, params):
         if key.endswith("_balance_rel") and len(a):
             name = key.split(".", 1)[1]
             vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
+    masses = [np.asarray(a, dtype=np.float64) for key, a in history.items()
+              if key.startswith("ale.mass_") and not key.endswith("_rel") and len(a) and a[0] > 0.0]
+    if len(masses) > 1:
+        vals["material_mass_balance_rel"] = max(float(np.max(np.abs(a / a[0] - 1.0))) for a in masses)
     e0 = 0.0
     for key in ("ale.total_energy", "lagrange.kinetic_energy", "lagrange.stress_power_energy"):
         if key in history and len(history[key]):

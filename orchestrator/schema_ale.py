@@ -222,7 +222,7 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
 
 
 def _check_mixed(ale: dict, raw: dict) -> None:
-    """Several materials per zone (or void): Eulerian mode, no obstacles or inflow faces yet."""
+    """Several materials per zone (or void): Eulerian mode, no inflow faces yet."""
     used = list(dict.fromkeys(r["material"] for r in ale["regions"]))
     voids = [m for m in used if ale["materials"][m]["eos"] == "void"]
     if len(used) == 1 and not voids:
@@ -233,8 +233,6 @@ def _check_mixed(ale: dict, raw: dict) -> None:
     what = "several materials" if len(used) > 1 else "a void material"
     if ale["mode"] != "eulerian":
         raise CaseError("ale.mode", raw.get("mode"), f"{what} in ale.regions need mode = \"eulerian\"")
-    if raw.get("obstacles"):
-        raise CaseError("ale.obstacles", raw["obstacles"], f"not supported yet with {what} in ale.regions")
     for f, face in ale["boundaries"].items():
         if isinstance(face, dict) and "inflow" in face:
             raise CaseError(format_key(["ale", "boundaries", f]), raw["boundaries"][f],

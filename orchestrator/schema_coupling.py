@@ -9,7 +9,7 @@ Cross-field rules: a coupled case needs the background (``[ale]``, Eulerian mode
 through the fixed grid) and bodies (``[[lagrange.bodies]]``); every body made from a box or a
 quarter cylinder lies inside the grid's box, and every mesh file's nodes (read by [lagrange]'s file
 check), by the coupler's own rule (``Grid.snap``, ``Grid.beyond``);
-one gas material in the background (several materials or void beside coupled bodies: not yet).
+several materials (or void) in the background beside the bodies (mixed.py with blocked.py).
 """
 from __future__ import annotations
 
@@ -57,12 +57,6 @@ def check(case: dict, data: dict) -> None:
     bodies = case.get("lagrange", {}).get("bodies", [])
     if not bodies:
         raise CaseError("lagrange.bodies", MISSING, "a [coupling] case needs at least one body ([[lagrange.bodies]])")
-    from solvers.ale.points import several_materials
-
-    if several_materials(case["ale"]):
-        raise CaseError("ale.regions", data["ale"]["regions"],
-                        "one gas material with [coupling] (several materials or void beside coupled "
-                        "bodies are not supported yet)")
     mode = case["ale"].get("mode", "eulerian")
     if mode != "eulerian":
         raise CaseError("ale.mode", data["ale"].get("mode", mode),

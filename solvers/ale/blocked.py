@@ -85,8 +85,9 @@ from solvers.ale.boundary import constrain as _constrain_kernel
 from solvers.ale.grid import GHOST
 from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
-from solvers.ale.merge import (PHI_MERGE, _group_sums, group_totals, merge_members, merge_nodes,
-                               merge_targets, merge_velocities, zone_gids)
+from solvers.ale.merge import (PHI_MERGE, _group_sums, group_material_totals, group_totals, member_materials,
+                               merge_members, merge_nodes, merge_targets, merge_velocities, zone_gids)
+from solvers.ale.mixed import fit_open_volumes
 from solvers.ale.remap import set_positions
 from solvers.sorted_ids import sorted_unique
 from solvers import elements as _elements
@@ -410,13 +411,35 @@ class Blocked:
         s.rho[sol] = 0.0
         s.e[sol] = 0.0
 
+    def initial_state_mixed(self, s) -> None:
+        """Several materials (mixed.py), after their initial volumes and masses on the whole zone
+        volume V = VE: every material's volume and mass scaled by the open fraction (densities and
+        the relaxed pressures unchanged); solid zones get no material and no state."""
+        self.VE = s.V.copy()
+        mm, real = s.mm, s.block.real_zone
+        mm.vol[real] *= self.phi[real, None]
+        mm.mass[real] *= self.phi[real, None]
+        sol = self.solid.astype(bool) & real
+        mm.vol[sol] = 0.0
+        mm.mass[sol] = 0.0
+        mm.ener[sol] = 0.0
+        s.M[real] = mm.mass[real].sum(axis=1)
+        s.e[sol] = 0.0
+        s.rho[real] = np.divide(s.M[real], self.phi[real] * self.VE[real], out=np.zeros(int(real.sum())),
+                                where=self.phi[real] > 0.0)
+
     def eos(self, s) -> None:
-        """rho = M / (phi V), EOS at e + de_h of the real zones (massless zones: no state)."""
+        """rho = M / (phi V), EOS at e + de_h of the real zones (massless zones: no state); several
+        materials: their states on the open volumes (mixed.Materials.update_eos)."""
         if s._initialising:
             sol = self.solid.astype(bool) & s.block.real_zone
             if np.any(s.e[sol] != 0.0):
                 z = int(np.flatnonzero(sol & (s.e != 0.0))[0])
                 raise ValueError(f"an energy source lies in the fully blocked ALE zone {s.block.zone_ijk(z)}")
+        if s.mm is not None:
+            s.mm.update_eos(s, V=self.phi * self.VE)
+            s.q[s.M == 0.0] = 0.0
+            return
         bad = open_eos(s.eos_code, s.eos_par, s.M, s.e, s.de_h, self.phi, self.VE, s.rho, s.p, s.c, s.q,
                        s.zr[0], s.zr[1], s.block.zs)
         if bad >= 0:
@@ -461,6 +484,9 @@ class Blocked:
             self.SB[self._sb_zones] = 0.0
             self._sb_zones = np.zeros(0, np.int64)
         _sync(s)
+        if s.mm is not None:  # share the open volume's change over the materials (mixed.py)
+            s.mm.lagrange_step(s)
+            self._no_shift_in_swept_zones(s)
         s._fill_remap_zones()
         order = range(dim) if s.parity == 0 else range(dim - 1, -1, -1)
         for d in order:
@@ -468,9 +494,28 @@ class Blocked:
         set_positions(s.x, B.X)
         if b_new is not None:
             self._apply_new_fractions(s, b_new)
+        if s.mm is not None:  # the materials onto the (new) open volumes, then pressure relaxation
+            fit_open_volumes(s.mm.vol, self.phi * self.VE, self._real_zone(s))
+            s.mm.relax_pressures(s)
         s.parity ^= 1
         s._pending_remap = False
         s._dt_stable = s._forces(midstep=False, advect=True, eos=True)
+
+    def _real_zone(self, s) -> np.ndarray:
+        if not hasattr(self, "_real_u8"):
+            self._real_u8 = s.block.real_zone.astype(np.uint8)
+        return self._real_u8
+
+    def _no_shift_in_swept_zones(self, s) -> None:
+        """Several materials: no half-step EOS shift in a cut zone whose open volume the step swept
+        away or changed by more than half (as lagrangian_open_volumes does for the zone's)."""
+        z = self.cut
+        if not z.size:
+            return
+        v0 = self.phi[z] * self.VE[z]
+        vn = s.V[z]
+        big = (np.abs(vn - v0) > 0.5 * v0) | ~(vn > 1e-9 * self.VE[z] * (1.0 + 1e-12))
+        s.mm.deh[z[big]] = 0.0
 
     def _apply_new_fractions(self, s, b_new) -> None:
         """Open fractions of the remapped state: rho = M / (phi_new V).  Collective (ghost fills)."""
@@ -526,6 +571,11 @@ class Blocked:
         Mg, Eg, Vg = np.zeros(B.nzones), np.zeros(B.nzones), np.zeros(B.nzones)
         group_totals(donors, code, s.M, s.e, self.phi, self._VE_uniform, self._real, B.zs, zdims, Mg, Eg, Vg)
         s.bc.fill_zones([Mg, Eg, Vg])
+        mm = s.mm
+        if mm is not None:  # several materials: the groups' totals of every material too
+            Vk, Mk, Ek = (np.zeros((B.nzones, mm.nm)) for _ in range(3))
+            group_material_totals(donors, code, mm.vol, mm.mass, mm.ener, self._real, B.zs, zdims, Vk, Mk, Ek)
+            s.bc.fill_zones([Vk, Mk, Ek])
         Vg[usable == 0] = 0.0
         member = ((code >= 0.0) | (Vg > 0.0)) & (usable != 0)
         members = np.flatnonzero(member & B.real_zone)
@@ -555,7 +605,11 @@ class Blocked:
         # the real members' new state; the ghosts are refilled with the zone state (_forces)
         g = np.searchsorted(keys, mgid)
         s.M[members] += dM[members]
-        s.e[members] = en + (tot[g, dim + 2] - ke1[g]) / mg
+        de = (tot[g, dim + 2] - ke1[g]) / mg
+        s.e[members] = en + de
+        if mm is not None:
+            member_materials(members, code, self.phi, self._VE_uniform, Vg, Vk, Mk, Ek, de, mm.code, mm.par,
+                             B.zs, mm.vol, mm.mass, mm.ener)
         return -1
 
     @staticmethod

@@ -30,6 +30,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from solvers.ale.eos import pressure
+from solvers.ale.mixed import equilibrium_volumes
+
 PHI_MERGE = 0.5
 """A zone a coupled body cuts to an open fraction below this (or a fully covered zone that still
 holds material, or one the remap left with negative mass) shares its content with its most open
@@ -260,6 +263,79 @@ def group_totals(donors, code, M, e, phi, VE, real, zs, zdims, Mg, Eg, Vg):
         Mg[t] += M[z]
         Eg[t] += M[z] * e[z]
         Vg[t] += phi[z] * VE[z]
+
+
+@njit(cache=True)
+def group_material_totals(donors, code, vol, mass, ener, real, zs, zdims, Vk, Mk, Ek):
+    """Several materials per zone (mixed.py): each real target's group totals per material k (zone x
+    material arrays, 0 elsewhere) of the volume, mass and internal energy, summed as group_totals."""
+    nm = vol.shape[1]
+    started = np.zeros(vol.shape[0], np.uint8)
+    for a in range(donors.size):
+        z = donors[a]
+        zi, zj, zk = _split(z, zs)
+        c = int(code[z])
+        ti = zi + c % 5 - 2
+        tj = zj + (c // 5) % 5 - 2
+        tk = zk + c // 25 - 2
+        if ti < 0 or ti >= zdims[0] or tj < 0 or tj >= zdims[1] or tk < 0 or tk >= zdims[2]:
+            continue
+        t = ti * zs[0] + tj * zs[1] + tk * zs[2]
+        if not real[t]:
+            continue
+        if not started[t]:
+            started[t] = 1
+            for m in range(nm):
+                Vk[t, m] = vol[t, m]
+                Mk[t, m] = mass[t, m]
+                Ek[t, m] = mass[t, m] * ener[t, m]
+        for m in range(nm):
+            Vk[t, m] += vol[z, m]
+            Mk[t, m] += mass[z, m]
+            Ek[t, m] += mass[z, m] * ener[z, m]
+
+
+@njit(cache=True)
+def member_materials(members, code, phi, VE, Vg, Vk, Mk, Ek, de, mcode, mpar, zs, vol, mass, ener):
+    """Several materials per zone: every real member takes its group's composition (the volume
+    fractions, densities and specific energies of the materials) on its open volume, its share
+    phi VE / Vg of each material's mass; ``de``: the member's specific energy change beyond its
+    group's mean (the kinetic energy the merge released, merge_velocities), added to every
+    material (the zone's energy stays sum_k mass_k ener_k).  The composition is the pressure
+    equilibrium of the group's masses and energies on its open volume Vg (mixed.equilibrium_volumes):
+    the volumes the donors carry are not to be trusted (their open
+    volume changed by O(1) of itself within the step), a stiff trace expanded with its zone would
+    have no valid state.  Where that has no solution (void in the group), the carried volumes."""
+    nm = vol.shape[1]
+    comp = np.empty(nm)
+    vraw = np.empty(nm)
+    mk = np.empty(nm)
+    ek = np.empty(nm)
+    for a in range(members.size):
+        z = members[a]
+        t = z if code[z] < 0.0 else _target(z, code, zs)
+        vz = phi[z] * VE[z]
+        w = vz / Vg[t]
+        vs = 0.0
+        for m in range(nm):
+            vs += Vk[t, m]
+            vraw[m] = Vk[t, m]
+            mk[m] = Mk[t, m]
+            ek[m] = Ek[t, m] / Mk[t, m] if Mk[t, m] > 0.0 else 0.0
+        # (the start: the pressure of the material with the most volume, from the group's totals
+        # alone, which every rank holds bit for bit, so any number of ranks gives the same bits)
+        big = 0
+        for m in range(nm):
+            if vraw[m] > vraw[big]:
+                big = m
+        p0 = pressure(mcode[big], mpar[big], mk[big] / vraw[big], ek[big]) if mk[big] > 0.0 else 0.0
+        if not equilibrium_volumes(mcode, mpar, mk, ek, vraw, Vg[t], p0, comp):
+            for m in range(nm):
+                comp[m] = Vk[t, m] * (Vg[t] / vs) if vs > 0.0 else 0.0
+        for m in range(nm):
+            vol[z, m] = comp[m] * w
+            mass[z, m] = Mk[t, m] * w
+            ener[z, m] = Ek[t, m] / Mk[t, m] + de[a] if Mk[t, m] > 0.0 else 0.0
 
 
 @njit(cache=True)

@@ -18,7 +18,7 @@ One step (solver.py calls these in this order)
 2. Lagrange step, :func:`lagrange_split`: the zone's volume change ``dV`` is shared in proportion
    to the materials' compressibilities, ``dV_k = dV (vol_k / K_k) / sum_j (vol_j / K_j)`` with
    ``K = rho c^2`` (equal pressure changes: a zone in pressure equilibrium stays in it; equal strain
-   for traces, or if a material would lose half its volume); with void, compression closes the void
+   for traces, or if a material would lose half its volume or more than double it); with void, compression closes the void
    first, expansion is shared by equal strain (a material cannot fill void faster than its own
    strain; a gas disc in void with all the expansion given to its 20 % share of a rim zone
    over-expanded to a negative EOS energy within two steps).  The zone's compatible energy change ``dE = M e_new -
@@ -49,6 +49,8 @@ D. J. Benson, "Volume of fluid interface reconstruction methods for multi-materi
 Appl. Mech. Rev. 55 (2002) (nested dissection); the seed's "Time Splitting ALE" step.
 """
 from __future__ import annotations
+
+import math
 
 import numpy as np
 from numba import njit
@@ -152,6 +154,10 @@ def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs)
                     vold += vol[z, m]
                     if code[m] == VOID:
                         vvoid += vol[z, m]
+                if not (vold > 0.0):  # no material volume (a solid or emptied open zone)
+                    for m in range(nm):
+                        deh[z, m] = 0.0
+                    continue
                 dv = V[z] - vold
                 vmat = vold - vvoid
                 if not (M[z] > 0.0 and vmat > 0.0):  # void only
@@ -187,7 +193,11 @@ def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs)
                     for m in range(nm):
                         if code[m] != VOID and cm[z, m] > 0.0 and mass[z, m] > 0.0:
                             dvk[m] = rest * (vol[z, m] * vol[z, m] / (mass[z, m] * cm[z, m] * cm[z, m])) / asum
-                            if vol[z, m] + dvk[m] < 0.5 * vol[z, m]:
+                            # (no material may lose half its volume or more than double it in
+                            # one step: a trace of gas in water takes the larger part of an
+                            # expansion by this rule, and a cut zone's open volume changes by O(1)
+                            # of itself per step as a coupled body moves, blocked.py)
+                            if vol[z, m] + dvk[m] < 0.5 * vol[z, m] or vol[z, m] + dvk[m] > 2.0 * vol[z, m]:
                                 equal = True
                 if equal:
                     for m in range(nm):
@@ -286,10 +296,18 @@ def cumulative_fractions(vol, FC):
 
 
 @njit(cache=True)
-def sweep_fluxes(vol, mass, ener, code, FC, rho, e, M, V, SV, F, ES, VF, MF, EF, d, s, h, zlo, zhi, zs):
+def sweep_fluxes(vol, mass, ener, code, FC, rho, e, M, V, SV, F, ES, VF, MF, EF, solid, d, s, h, zlo, zhi,
+                 zs):
     """Material volume, mass and energy fluxes (VF, MF, EF: (nz, nm), + towards +d) of the lower
     d-faces of the zones in range, and the zone totals F (mass) and ES (face specific energy) that
-    the nodal part of the sweep and the boundary balances use."""
+    the nodal part of the sweep and the boundary balances use.
+
+    ``solid``: None, or per zone nonzero for a fully blocked zone (blocked.py: SV are then the
+    aperture-scaled face volumes, V the open volumes).  As in remap.sweep_fluxes: a closed face or an
+    upwind zone without volume carries nothing, a solid neighbour of a pure upwind zone is a wall
+    ghost (a copy of it: zero one-sided slope), and a face never sweeps more than the upwind zone's
+    volume (its share of it when its other face carries material out too): a moving body swept
+    the zone's open part past the face within the step, the rest of the swept volume is body."""
     nm = vol.shape[1]
     dim = h.shape[0]
     tk = np.empty(nm)
@@ -310,29 +328,42 @@ def sweep_fluxes(vol, mass, ener, code, FC, rho, e, M, V, SV, F, ES, VF, MF, EF,
                     u = z
                     sg = -0.5
                     upper = False
-                if sv == 0.0:
-                    F[z] = 0.0
-                    ES[z] = e[u]
-                    continue
                 vu = 0.0
                 for m in range(nm):
                     vu += vol[u, m]
+                if sv == 0.0 or (solid is not None and not (vu > 0.0)):
+                    F[z] = 0.0
+                    ES[z] = e[u]
+                    continue
+                capped = False
+                if solid is not None:  # positivity (docstring)
+                    so = SV[u] if sv > 0.0 else SV[z + s]
+                    out = -so if sv > 0.0 else so
+                    cap = vu if not (out > 0.0) else vu * abs(sv) / (abs(sv) + out)
+                    if abs(sv) > cap:
+                        sv = cap if sv > 0.0 else -cap
+                        capped = True
                 # the one material of the donor, if it is pure
                 pure = -1
                 for m in range(nm):
                     if vol[u, m] >= (1.0 - PURE) * vu:
                         pure = m
                 if pure >= 0:
-                    same = (vol[u - s, pure] >= (1.0 - PURE) * (vol[u - s, :].sum())
-                            and vol[u + s, pure] >= (1.0 - PURE) * (vol[u + s, :].sum()))
+                    lo_wall = solid is not None and solid[u - s] != 0
+                    hi_wall = solid is not None and solid[u + s] != 0
+                    same = ((lo_wall or vol[u - s, pure] >= (1.0 - PURE) * (vol[u - s, :].sum()))
+                            and (hi_wall or vol[u + s, pure] >= (1.0 - PURE) * (vol[u + s, :].sum())))
                     VF[z, pure] = sv
                     if code[pure] == VOID:
                         F[z] = 0.0
                         ES[z] = 0.0
                         continue
-                    if same:  # second order, as remap.sweep_fluxes
-                        f, es = face_flux(sv, sg, rho[u], rho[u - s], rho[u + s], e[u], e[u - s], e[u + s],
-                                          V[u], M[u])
+                    if same and not capped:  # second order, as remap.sweep_fluxes
+                        rl = rho[u] if lo_wall else rho[u - s]
+                        rh = rho[u] if hi_wall else rho[u + s]
+                        el = e[u] if lo_wall else e[u - s]
+                        eh = e[u] if hi_wall else e[u + s]
+                        f, es = face_flux(sv, sg, rho[u], rl, rh, e[u], el, eh, V[u], M[u])
                     else:
                         f = sv * mass[u, pure] / vol[u, pure]
                         es = ener[u, pure]
@@ -432,7 +463,121 @@ def sweep_zones(vol, mass, ener, VF, MF, EF, M, V, rho, e, F, ES, SV, s, zlo, zh
                 vz = V[z] + SV[z] - SV[z + s]
                 V[z] = vz
                 M[z] = Mz
-                rho[z] = Mz / vz
+                rho[z] = Mz / vz if vz > 0.0 else 0.0  # (a solid zone: no volume, no material)
+
+
+@njit(cache=True)
+def density_at_pressure(code, par, P, e, r0):
+    """rho > 0 with p(rho, e) = P (every EOS here has p increasing in rho at fixed e where its state
+    is valid), by Newton from r0 safeguarded by bisection in the bracket found so far; NaN when
+    there is none (P below the EOS's limit, or an energy no density brings to P)."""
+    lo = 0.0
+    hi = math.inf
+    r = r0 if (r0 > 0.0 and r0 < math.inf) else 1.0
+    for _ in range(200):
+        p = _eos.pressure(code, par, r, e)
+        if not math.isfinite(p):
+            return np.nan
+        f = p - P
+        if f == 0.0:
+            return r
+        if f > 0.0:
+            hi = r
+        else:
+            lo = r
+        dp, _ = _eos.derivatives(code, par, r, e)
+        rn = r - f / dp if dp > 0.0 else -1.0
+        if not (rn > lo and rn < hi):
+            rn = 2.0 * r if hi == math.inf else (0.5 * r if lo == 0.0 else math.sqrt(lo * hi))
+        if abs(rn - r) <= 1e-14 * r:
+            return rn
+        r = rn
+    return np.nan
+
+
+@njit(cache=True)
+def equilibrium_volumes(code, par, mass, ener, vraw, V, P0, out):
+    """Volumes ``out`` (nm,) of materials with masses ``mass`` and specific energies ``ener`` that
+    fill ``V`` at one common pressure (the mixture's equilibrium: sum_k m_k / rho_k(P, e_k) = V, a
+    decreasing function of P, solved by Newton safeguarded by bisection from P0); ``guess``: densities
+    to start from.  Used where a zone's material volumes carry no information (the small cut zones a
+    merge joins: their open volume changed by O(1) of itself within the step, mass and energy are
+    conserved, the volumes are not); ``vraw``: their volumes as carried (first density guesses).
+    Returns False (out untouched) with void present or when no pressure fits every material."""
+    nm = mass.shape[0]
+    rk = np.empty(nm)
+    for m in range(nm):
+        if code[m] == VOID and vraw[m] > 0.0:
+            return False
+        rk[m] = mass[m] / vraw[m] if vraw[m] > 0.0 else 1.0
+    plo = -math.inf
+    phi_ = math.inf
+    P = P0 if math.isfinite(P0) else 0.0
+    for _ in range(200):
+        g = -V
+        dg = 0.0
+        ok = True
+        for m in range(nm):
+            if not mass[m] > 0.0 or code[m] == VOID:
+                continue
+            r = density_at_pressure(code[m], par[m], P, ener[m], rk[m])
+            if not (r > 0.0):
+                ok = False
+                break
+            rk[m] = r
+            dp, _ = _eos.derivatives(code[m], par[m], r, ener[m])
+            g += mass[m] / r
+            dg -= mass[m] / (r * r * dp)
+        if ok and abs(g) <= 1e-13 * V:
+            break
+        if not ok or g > 0.0:  # P too low (a material has no density there, or too much volume)
+            plo = P
+        else:
+            phi_ = P
+        Pn = P - g / dg if (ok and dg < 0.0) else math.nan
+        if not (Pn > plo and Pn < phi_):
+            step = abs(P) if abs(P) > 1.0 else 1.0
+            if phi_ == math.inf:
+                Pn = P + step
+            elif plo == -math.inf:
+                Pn = P - step
+            else:
+                Pn = 0.5 * (plo + phi_)
+        if Pn == P:
+            break
+        P = Pn
+    else:
+        return False
+    if not ok:
+        return False
+    tot = 0.0
+    for m in range(nm):
+        tot += mass[m] / rk[m] if (mass[m] > 0.0 and code[m] != VOID) else 0.0
+    for m in range(nm):
+        out[m] = (mass[m] / rk[m]) * (V / tot) if (mass[m] > 0.0 and code[m] != VOID) else 0.0
+    return True
+
+
+@njit(cache=True)
+def fit_open_volumes(vol, Vopen, real):
+    """Blocked fractions (blocked.py): scale the material volumes of every real zone to its open
+    volume ``Vopen = phi VE`` (the zone's composition kept).  The remap brings the material onto the
+    open volumes of the fractions it started with, a coupled body's new fractions then open or close
+    part of the zone (single material: rho = M / (phi_new V)); a face that swept more than its upwind
+    zone held was capped (mixed.sweep_fluxes), so its downwind zone holds less volume than its
+    Lagrangian open volume says.  A zone without material volume stays empty (it fills through its
+    faces); a solid zone holds none."""
+    nz, nm = vol.shape
+    for z in range(nz):
+        if not real[z]:
+            continue
+        vz = 0.0
+        for m in range(nm):
+            vz += vol[z, m]
+        if vz > 0.0:
+            r = Vopen[z] / vz
+            for m in range(nm):
+                vol[z, m] *= r
 
 
 @njit(cache=True)
@@ -576,9 +721,12 @@ class Materials:
     def fill(self, s) -> None:
         s.bc.fill_zones([self.vol, self.mass, self.ener, self.deh])
 
-    def update_eos(self, s) -> None:
+    def update_eos(self, s, V=None) -> None:
+        """Material and zone states; ``V``: the zones' volumes for rho = M / V (blocked.py: the open
+        volumes; default the solver's V)."""
         bad, k = zone_eos(self.vol, self.mass, self.ener, self.deh, self.pm, self.cm, self.code, self.par,
-                          s.M, s.V, s.rho, s.p, s.c, s.e, s.de_h, s.zr[0], s.zr[1], s.block.zs)
+                          s.M, s.V if V is None else V, s.rho, s.p, s.c, s.e, s.de_h, s.zr[0], s.zr[1],
+                          s.block.zs)
         if bad >= 0:
             self._bad_state(s, bad, k)
 
@@ -610,16 +758,19 @@ class Materials:
         faces, conservative update."""
         B = s.block
         st = int(B.zs[d])
+        blk = s._blk  # blocked fractions: the aperture-scaled face volumes, solid zones as walls
+        sv = s.SV[d] if blk is None else blk.ASV[d]
+        solid = None if blk is None else blk.solid
         if self.nm > 1:
             cumulative_fractions(self.vol, self.FC)
         lo, hi = s.zr[0].copy(), s.zr[1].copy()
         hi[d] += 1
-        sweep_fluxes(self.vol, self.mass, self.ener, self.code, self.FC, s.rho, s.e, s.M, s.V, s.SV[d],
-                     s.F, s.ES, self.VF, self.MF, self.EF, d, st, self.h, lo, hi, B.zs)
+        sweep_fluxes(self.vol, self.mass, self.ener, self.code, self.FC, s.rho, s.e, s.M, s.V, sv,
+                     s.F, s.ES, self.VF, self.MF, self.EF, solid, d, st, self.h, lo, hi, B.zs)
         s.bc.fill_zones([s.F, s.ES, self.VF, self.MF, self.EF], face_dir=d)
         s._boundary_fluxes(d)
         sweep_zones(self.vol, self.mass, self.ener, self.VF, self.MF, self.EF, s.M, s.V, s.rho, s.e, s.F, s.ES,
-                    s.SV[d], st, s.zr[0], s.zr[1], B.zs)
+                    sv, st, s.zr[0], s.zr[1], B.zs)
 
     # ---- output ----------------------------------------------------------------------------------
     def fractions(self) -> np.ndarray:
@@ -662,7 +813,8 @@ def _flush():
     from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([_present, zone_eos, lagrange_split, relax, cumulative_fractions, sweep_fluxes,
-                       sweep_zones, add_energy], [_eos.__file__, plic.__file__, _r.__file__],
+                       sweep_zones, density_at_pressure, equilibrium_volumes, fit_open_volumes,
+                       add_energy], [_eos.__file__, plic.__file__, _r.__file__],
                       "mixed.deps.sha256")
 
 

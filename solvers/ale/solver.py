@@ -237,8 +237,6 @@ class AleSolver:
         if config.get("obstacles") or self.coupled:
             if self.mode != "eulerian":
                 raise ValueError("obstacles and coupled bodies (blocked volume fractions) need mode = 'eulerian'")
-            if self.coupled and self.mm is not None:
-                raise ValueError("coupled bodies with several ALE materials (or void) are not supported yet")
             from solvers.ale.blocked import Blocked
             self._blk = Blocked(self, config.get("obstacles"))
             if self.coupled:
@@ -254,8 +252,6 @@ class AleSolver:
         """Several materials per zone: what this increment covers."""
         if self.mode != "eulerian":
             raise ValueError("several materials (or void) in the ALE regions need mode = 'eulerian'")
-        if config.get("obstacles"):
-            raise ValueError("obstacles with several ALE materials (or void) are not supported yet")
         if self.block.inflow:
             raise ValueError("inflow faces with several ALE materials (or void) are not supported yet")
 
@@ -333,6 +329,8 @@ class AleSolver:
         self.M[:] = 1.0
         self._pass(self.z1, 0)
         self.mm.set_initial(self)
+        if self._blk is not None:  # material in the open volume only
+            self._blk.initial_state_mixed(self)
         for src in cfg.get("energy_sources", []) or []:
             e0 = self.e.copy()
             self._deposit_energy(float(src["energy"]), np.asarray(src["at"], dtype=np.float64))
@@ -678,8 +676,6 @@ class AleSolver:
                 raise ValueError("blocked volume fractions need mode = 'eulerian'")
             return
         if self._blk is None and blocked is not None and blocked.blocks_anything():
-            if self.mm is not None:
-                raise ValueError("blocked volume fractions with several ALE materials are not supported yet")
             from solvers.ale.blocked import Blocked
             self._blk = Blocked(self)
         if self._blk is not None:

@@ -284,10 +284,6 @@ BAD_INPUTS = [
     Bad("coupling_without_background", "ale", "needs the background grid",
         STEEL_BAR_HEAD + 'mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = [10, 1, 1] } }\n'
         + '[coupling]\nmethod = "multiplier"\n'),
-    Bad("coupling_with_two_gases", "ale.regions", "one gas material",
-        edit(edit(COUPLED, 'materials.gas = { eos = "ideal_gas", gamma = 1.4 }',
-                  'materials.gas = { eos = "ideal_gas", gamma = 1.4 }\nmaterials.air = { eos = "ideal_gas", gamma = 1.3 }'),
-             '{ material = "gas", region = "x > 0.5"', '{ material = "air", region = "x > 0.5"')),
     Bad("coupling_lagrangian_background", "ale.mode = 'lagrangian'", "'eulerian'",
         edit(COUPLED, "[ale]", '[ale]\nmode = "lagrangian"')),
     # -- files that are not regular, too big, or not text --

@@ -421,7 +421,6 @@ def test_output_has_material_fields():
 
 @pytest.mark.parametrize("change, match", [
     ({"mode": "lagrangian"}, "mode = 'eulerian'"),
-    ({"obstacles": [{"region": "x < 0.1", "subsamples": 1}]}, "obstacles"),
 ])
 def test_unsupported_combinations(change, match):
     cfg = water_air_config(n=20)
