@@ -98,7 +98,7 @@ def _is_bad(s0, s1, s2, s3, s4, s5):
 
 @njit(cache=True)
 def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut):
     ne = conn.shape[0]
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -301,12 +301,18 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             f[nd, 0] += fe[i, 0]
             f[nd, 1] += fe[i, 1]
             f[nd, 2] += fe[i, 2]
+        r = cut_row[e]
+        if r >= 0:  # an element at a partition cut: its corner forces for the ordered shared sums
+            for i in range(8):
+                fe_cut[r, i, 0] = fe[i, 0]
+                fe_cut[r, i, 1] = fe[i, 1]
+                fe_cut[r, i, 2] = fe[i, 2]
     return dt_min, -1
 
 
 @njit(cache=True)
 def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut):
     ne = conn.shape[0]
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
@@ -457,12 +463,17 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             nd = conn[e, i]
             f[nd, 0] += fe[i, 0]
             f[nd, 1] += fe[i, 1]
+        r = cut_row[e]
+        if r >= 0:  # an element at a partition cut: its corner forces for the ordered shared sums
+            for i in range(4):
+                fe_cut[r, i, 0] = fe[i, 0]
+                fe_cut[r, i, 1] = fe[i, 1]
     return dt_min, -1
 
 
 @njit(cache=True)
-def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
-                   eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
+                       eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut):
     """Stress update n-1 -> n, internal + hourglass forces at x^n, stable step.
 
     Parameters
@@ -477,6 +488,9 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
     sig (ne, 6), eps_p, temp, e_int, q_out (ne,) : state, updated in place
     hg_coef, q_lin, q_quad : hourglass and bulk-viscosity coefficients
     f : (nn, dim) nodal forces, internal contributions are ADDED (M a = f)
+    cut_row : (ne,) int64 row of fe_cut for an element at a partition cut, -1 elsewhere;
+    fe_cut : (ncut, nen, dim) the corner forces of those elements (written): the solver sums them
+    into its shared nodes in global element order, so any partition gives the one-rank bits
 
     Returns ``(dt_min, bad)``: the smallest element stable step and the first
     element with non-positive volume (at x^n or at the mid-step configuration),
@@ -485,15 +499,24 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
     """
     if x.shape[1] == 3:
         return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
-                           mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f)
+                           mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut)
     return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
-                        mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f)
+                        mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut)
+
+
+@njit(cache=True)
+def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
+                   eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
+    """element_forces_cut without partition cuts (one rank, kernel tests)."""
+    return element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
+                              eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f,
+                              np.full(conn.shape[0], -1, np.int64), np.zeros((0, conn.shape[1], x.shape[1])))
 
 
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _forces_hex, _forces_quad, element_forces],
+    flush_stale_cache([reference_gradients, _is_bad, _forces_hex, _forces_quad, element_forces_cut, element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
 
 

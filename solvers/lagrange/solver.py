@@ -9,7 +9,8 @@ work of dt_avg f^n + R on the mean velocity (v^{n-1/2} + v^{n+1/2})/2, summed in
 forces) and W_ext (reactions and coupling impulses). The stress-power internal energy of the elements
 is reported beside it as an independent check.
 
-Runs on the ranks of `comm` with an element partition; forces and masses on shared nodes are summed.
+Runs on the ranks of `comm` with an element partition; forces and masses on shared nodes are summed
+in the one-rank order (shared_sums.py).
 
 The embedded-mesh coupling sees the bodies through their exterior surface (`surface()`): the surface
 nodes' positions and velocities gathered in one canonical order on every rank (`surface_state`), and
@@ -28,6 +29,7 @@ from solvers.lagrange import kernels, materials, nodal
 from solvers.lagrange.boundary import BoundaryConditions
 from solvers.lagrange.mesh import body_mesh, cell_volumes, concatenate
 from solvers.lagrange.partition import partition
+from solvers.lagrange.shared_sums import OrderedSharedSums
 from solvers.lagrange.surface import exterior_facets
 
 
@@ -107,8 +109,19 @@ class LagrangeSolver:
         rho0 = self.mat_par[self.mat_id, materials.P_RHO]
         self.mass_e = rho0 * self.vol0
         node_mass = np.zeros(nn)
-        np.add.at(node_mass, self.conn.ravel(), np.repeat(self.mass_e / self.conn.shape[1], self.conn.shape[1]))
-        self.mass = self.sum_shared(node_mass)
+        nen = self.conn.shape[1]
+        corner_mass = np.repeat(self.mass_e / nen, nen)
+        np.add.at(node_mass, self.conn.ravel(), corner_mass)
+        # nodes on partition cuts: contributions added in the one-rank order (shared_sums.py)
+        self._cut = OrderedSharedSums(comm, part, nen) if comm.size > 1 else None
+        self._cut_row = self._cut.row if self._cut else np.full(ne, -1, np.int64)
+        self._fe_cut = self._cut.buffer(dim) if self._cut else np.zeros((0, nen, dim))
+        if self._cut:
+            cm = self._cut.buffer(1)
+            rows = self._cut.row >= 0
+            cm[self._cut.row[rows], :, 0] = corner_mass.reshape(-1, nen)[rows]
+            self._cut.sum_into(cm, node_mass)
+        self.mass = node_mass
         self.inv_mass = 1.0 / self.mass
 
         # initial velocity per body, evaluated at each node of that body (expressions in x, y, z)
@@ -161,19 +174,6 @@ class LagrangeSolver:
         self.l0 = self.angular_momentum()
 
     # ---- parallel sums -------------------------------------------------------------------------
-    def sum_shared(self, a: np.ndarray) -> np.ndarray:
-        """Sum the contributions of all ranks on nodes that lie on a partition cut (in place)."""
-        if self.comm.size == 1:
-            return a
-        p = self.part
-        buf = np.zeros((len(p.shared_global),) + a.shape[1:])
-        buf[p.shared_slot] = a[p.shared_local]
-        from mpi4py import MPI
-
-        self.comm.Allreduce(MPI.IN_PLACE, buf, op=MPI.SUM)
-        a[p.shared_local] = buf[p.shared_slot]
-        return a
-
     def _allsum(self, a):
         """Global sum of per-node quantities, counting each shared node once."""
         a = np.asarray(a, dtype=np.float64)
@@ -188,10 +188,10 @@ class LagrangeSolver:
     # ---- the step --------------------------------------------------------------------------------
     def _forces(self, dt_prev: float) -> float:
         self.f[:] = 0.0
-        dt_min, bad = kernels.element_forces(
+        dt_min, bad = kernels.element_forces_cut(
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
-            self.hg, self.q_lin, self.q_quad, self.f,
+            self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
         )
         if bad >= 0:
             gid = int(self.part.cells[bad])
@@ -201,7 +201,8 @@ class LagrangeSolver:
                 f"(body {self.body_names[b]!r}, its element {gid - int(self._body_first_cell[b])}; "
                 f"volume or stress not finite/positive)"
             )
-        self.sum_shared(self.f)
+        if self._cut:  # the cut nodes' forces in the one-rank order (shared_sums.py)
+            self._cut.sum_into(self._fe_cut, self.f)
         return self._min(dt_min)
 
     def _min(self, value: float) -> float:
