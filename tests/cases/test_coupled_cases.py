@@ -217,17 +217,18 @@ def test_water_air_box_body(tmp_path):
     coupled_balances(s)
 
 
-def test_water_air_box_on_two_background_ranks_equals_one(tmp_path):
-    """Several materials in the small cut zones' merge across the ranks' cut (the block moved onto the
-    cut at x = 0.5; the groups' material totals handed to the ghost layers like the zone totals): the
-    background on 2 ranks equals 1 rank bit for bit.  (The body stays on one rank: with this block
-    on 2 ranks its velocities differ from the one-rank run's by one ulp from step 4 on, with one
-    water material as well, and the difference grows to 1e-5 of the velocities within 200 steps.)"""
+def test_water_air_box_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
+    """Several materials in the small cut zones' merge across the background ranks' cut (the block
+    moved onto the cut at x = 0.5; the groups' material totals handed to the ghost layers like the
+    zone totals) and the block on 2 ranks (its cut nodes' sums in the one-rank order,
+    solvers/lagrange/shared_sums.py): 2 + 2 ranks equal 1 + 1 bit for bit.  (With each rank's partial
+    sums added, the block's velocities differed by one ulp from step 4 and the difference grew to
+    1e-5 of the velocities within 200 steps, with one water material as well.)"""
     case = _water_air_box(tmp_path, 1.0e-3)
     p = case / "case.toml"
     p.write_text(p.read_text().replace("lower = [0.2, 0.2], upper = [0.4, 0.3]", "lower = [0.42, 0.2], upper = [0.62, 0.3]"))
     outs = {}
-    for ranks in (("ale=1", "lagrange=1"), ("ale=2", "lagrange=1")):
+    for ranks in (("ale=1", "lagrange=1"), ("ale=2", "lagrange=2")):
         out = tmp_path / "_".join(ranks)
         r = immerse("run", case, "--out", out, "--ranks", *ranks, "--oversubscribe")
         assert r.returncode == 0, r.stdout + r.stderr
