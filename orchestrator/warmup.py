@@ -62,7 +62,7 @@ def _single(dim: int, eos: str, mode: str, q: str, boundaries: str = "", extra: 
             + f" velocity = [{vel}] }} ]\n" + extra)
 
 
-def _mixed(dim: int, eos: tuple[str, ...], q: str, void: bool = False, boundaries: str = "") -> str:
+def _mixed(dim: int, eos: tuple[str, ...], q: str, void: bool = False, boundaries: str = "", extra: str = "") -> str:
     mats = "".join(f"materials.m{i} = {_EOS[e]}\n" for i, e in enumerate(eos))
     regions = [f'{{ material = "m0", density = {_STATE[eos[0]][0]}, pressure = {_STATE[eos[0]][1]} }}']
     cuts = ["x > 0.45", "y > 0.3"]
@@ -73,7 +73,7 @@ def _mixed(dim: int, eos: tuple[str, ...], q: str, void: bool = False, boundarie
         mats += 'materials.vacuum = { eos = "void" }\n'
         regions.append('{ material = "vacuum", region = "x > 0.6 and x < 0.8" }')
     return ((_RUN2 if dim == 2 else _RUN3) + '[ale]\nmode = "eulerian"\n' + _grid(dim) + boundaries
-            + f'viscosity = {{ kind = "{q}" }}\nfraction_samples = 3\n' + mats
+            + f'viscosity = {{ kind = "{q}" }}\nfraction_samples = 3\n' + extra + mats
             + "regions = [\n  " + ",\n  ".join(regions) + " ]\n")
 
 
@@ -157,17 +157,21 @@ def cases() -> dict[str, str]:
             out[f"ale_{dim}d_{q}_mixed2"] = _mixed(dim, ("stiffened_gas", "ideal_gas"), q)
             out[f"ale_{dim}d_{q}_mixed3_void"] = _mixed(dim, ("ideal_gas", "jwl", "tait"), q, void=True,
                                                          boundaries=_faces(dim, x_upper='"outflow"'))
+            out[f"ale_{dim}d_{q}_mixed2_obstacle"] = _mixed(
+                dim, ("stiffened_gas", "ideal_gas"), q, extra='obstacles = [ { region = "x > 0.75", subsamples = 2 } ]\n')
             out[f"ale_{dim}d_{q}_mixed2_periodic"] = _mixed(
                 dim, ("ideal_gas", "ideal_gas"), q,
                 boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
     out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
     for dim in (2, 3):  # the embedded-mesh coupling: a body moving through the grid
         out[f"coupled_{dim}d"] = _coupled(dim)
+        out[f"coupled_{dim}d_mixed"] = _coupled(dim, mixed=True)
     return out
 
 
-def _coupled(dim: int) -> str:
-    """A small elastic block moving through gas at rest, tied by the multipliers."""
+def _coupled(dim: int, mixed: bool = False) -> str:
+    """A small elastic block moving through gas at rest, tied by the multipliers (mixed: two gases,
+    their interface through the block and the zones it cuts)."""
     if dim == 2:
         grid = "grid = { lower = [0.0, 0.0], upper = [1.0, 0.5], cells = [8, 4] }\n"
         box = "{ lower = [0.3, 0.1], upper = [0.55, 0.35], cells = [2, 2] }"
@@ -178,7 +182,10 @@ def _coupled(dim: int) -> str:
         vel = "[2.0, 0.5, 0.2]"
     return ((_RUN2 if dim == 2 else _RUN3) + '[ale]\nmode = "eulerian"\n' + grid
             + "materials.gas = " + _EOS["ideal_gas"] + "\n"
-            + 'regions = [ { material = "gas", density = 1.0, pressure = 1.0 } ]\n'
+            + ('materials.gas2 = { eos = "ideal_gas", gamma = 1.67 }\n'
+               'regions = [ { material = "gas", density = 1.0, pressure = 1.0 },\n'
+               '  { material = "gas2", region = "y > 0.2", density = 0.5, pressure = 1.0 } ]\n' if mixed else
+               'regions = [ { material = "gas", density = 1.0, pressure = 1.0 } ]\n')
             + '[materials.solid]\nmodel = "linear_elastic"\ndensity = 2.0\nyoungs_modulus = 50.0\n'
             + "poisson_ratio = 0.3\n"
             + f'[[lagrange.bodies]]\nname = "block"\nmaterial = "solid"\nmesh = {{ box = {box} }}\n'
