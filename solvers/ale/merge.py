@@ -240,21 +240,29 @@ def merge_targets(cand, M, phi, b, usable, zs, dim, phi_merge, code):
     return -1
 
 
+@njit(cache=True, inline="always")
+def _real_target(z, code, real, zs, zdims):
+    """Donor z's target if it lies in this block and is real there (its group totals are summed
+    where the target is real), else -1."""
+    zi, zj, zk = _split(z, zs)
+    c = int(code[z])
+    ti = zi + c % 5 - 2
+    tj = zj + (c // 5) % 5 - 2
+    tk = zk + c // 25 - 2
+    if ti < 0 or ti >= zdims[0] or tj < 0 or tj >= zdims[1] or tk < 0 or tk >= zdims[2]:
+        return -1
+    t = ti * zs[0] + tj * zs[1] + tk * zs[2]
+    return t if real[t] else -1
+
+
 @njit(cache=True)
 def group_totals(donors, code, M, e, phi, VE, real, zs, zdims, Mg, Eg, Vg):
     """Mass, internal energy and open volume of the group of every real target (zone-shaped, 0
     elsewhere): the target's own, then its donors' in the order given (global id)."""
     for a in range(donors.size):
         z = donors[a]
-        zi, zj, zk = _split(z, zs)
-        c = int(code[z])
-        ti = zi + c % 5 - 2
-        tj = zj + (c // 5) % 5 - 2
-        tk = zk + c // 25 - 2
-        if ti < 0 or ti >= zdims[0] or tj < 0 or tj >= zdims[1] or tk < 0 or tk >= zdims[2]:
-            continue
-        t = ti * zs[0] + tj * zs[1] + tk * zs[2]
-        if not real[t]:
+        t = _real_target(z, code, real, zs, zdims)
+        if t < 0:
             continue
         if Vg[t] == 0.0:
             Mg[t] = M[t]
@@ -273,15 +281,8 @@ def group_material_totals(donors, code, vol, mass, ener, real, zs, zdims, Vk, Mk
     started = np.zeros(vol.shape[0], np.uint8)
     for a in range(donors.size):
         z = donors[a]
-        zi, zj, zk = _split(z, zs)
-        c = int(code[z])
-        ti = zi + c % 5 - 2
-        tj = zj + (c // 5) % 5 - 2
-        tk = zk + c // 25 - 2
-        if ti < 0 or ti >= zdims[0] or tj < 0 or tj >= zdims[1] or tk < 0 or tk >= zdims[2]:
-            continue
-        t = ti * zs[0] + tj * zs[1] + tk * zs[2]
-        if not real[t]:
+        t = _real_target(z, code, real, zs, zdims)
+        if t < 0:
             continue
         if not started[t]:
             started[t] = 1
