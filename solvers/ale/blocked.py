@@ -141,6 +141,7 @@ class Blocked:
         self.wall_comp = np.zeros(0, np.int64)
         self._wall_vel = np.zeros(0)  # immersed walls are at rest (normal velocity 0)
         self.VE = s.V.copy()  # geometric volumes of the fixed grid (initial_state sets them at start-up)
+        self._real = B.real_zone.astype(np.uint8)
         self.ASV = np.zeros((B.dim, B.nzones))
         self._no_inflow = (np.zeros(0, np.int64), np.zeros((0, B.dim)))
         self._R = np.zeros(B.dim)
@@ -297,6 +298,7 @@ class Blocked:
         if n_open[0] == 0.0:
             raise ValueError("the obstacles block every zone of the ALE grid")
         self.phi = phi
+        self._vopen = None
         self.solid = (phi <= 0.0).astype(np.uint8)
         if self.A_body is None:
             # min-model apertures of the fractions
@@ -341,7 +343,6 @@ class Blocked:
         self._wall_nodes(s)
         self.is_cut = np.zeros(B.nzones, np.uint8)
         self._prev_cut = np.zeros(0, np.int64)
-        self._real = B.real_zone.astype(np.uint8)
 
     def _min_apertures(self, s, phi) -> np.ndarray:
         """Min-model face apertures: a face is as open as the less open of its two zones."""
@@ -404,6 +405,7 @@ class Blocked:
         """After the initial geometry: V is the geometric zone volume; M = rho phi V; solid zones
         get no material and no state."""
         self.VE = s.V.copy()
+        self._vopen = None
         real = s.block.real_zone
         s.M[real] *= self.phi[real]
         sol = self.solid.astype(bool)
@@ -416,6 +418,7 @@ class Blocked:
         volume V = VE: every material's volume and mass scaled by the open fraction (densities and
         the relaxed pressures unchanged); solid zones get no material and no state."""
         self.VE = s.V.copy()
+        self._vopen = None
         mm, real = s.mm, s.block.real_zone
         mm.vol[real] *= self.phi[real, None]
         mm.mass[real] *= self.phi[real, None]
@@ -428,6 +431,13 @@ class Blocked:
         s.rho[real] = np.divide(s.M[real], self.phi[real] * self.VE[real], out=np.zeros(int(real.sum())),
                                 where=self.phi[real] > 0.0)
 
+    def open_volumes(self) -> np.ndarray:
+        """phi VE of every zone (several materials: their volumes' sum), kept until the fractions or
+        the zone volumes change."""
+        if self._vopen is None:
+            self._vopen = self.phi * self.VE
+        return self._vopen
+
     def eos(self, s) -> None:
         """rho = M / (phi V), EOS at e + de_h of the real zones (massless zones: no state); several
         materials: their states on the open volumes (mixed.Materials.update_eos)."""
@@ -437,7 +447,7 @@ class Blocked:
                 z = int(np.flatnonzero(sol & (s.e != 0.0))[0])
                 raise ValueError(f"an energy source lies in the fully blocked ALE zone {s.block.zone_ijk(z)}")
         if s.mm is not None:
-            s.mm.update_eos(s, V=self.phi * self.VE)
+            s.mm.update_eos(s, V=self.open_volumes())
             s.q[s.M == 0.0] = 0.0
             return
         bad = open_eos(s.eos_code, s.eos_par, s.M, s.e, s.de_h, self.phi, self.VE, s.rho, s.p, s.c, s.q,
@@ -495,27 +505,24 @@ class Blocked:
         if b_new is not None:
             self._apply_new_fractions(s, b_new)
         if s.mm is not None:  # the materials onto the (new) open volumes, then pressure relaxation
-            fit_open_volumes(s.mm.vol, self.phi * self.VE, self._real_zone(s))
+            fit_open_volumes(s.mm.vol, self.open_volumes(), self._real)
             s.mm.relax_pressures(s)
         s.parity ^= 1
         s._pending_remap = False
         s._dt_stable = s._forces(midstep=False, advect=True, eos=True)
 
-    def _real_zone(self, s) -> np.ndarray:
-        if not hasattr(self, "_real_u8"):
-            self._real_u8 = s.block.real_zone.astype(np.uint8)
-        return self._real_u8
-
     def _no_shift_in_swept_zones(self, s) -> None:
-        """Several materials: no half-step EOS shift in a cut zone whose open volume the step swept
-        away or changed by more than half (as lagrangian_open_volumes does for the zone's)."""
-        z = self.cut
-        if not z.size:
+        """Several materials: no half-step EOS shift in a body's cut zone (the zones flagged for
+        lagrangian_open_volumes: the previous fractions' cut zones) whose open volume the step swept
+        away (left at the sliver 1e-9 VE) or changed by more than half, as that kernel does for the
+        zone's own shift."""
+        z = getattr(self, "_prev_cut", None)
+        if z is None or not z.size:
             return
         v0 = self.phi[z] * self.VE[z]
         vn = s.V[z]
-        big = (np.abs(vn - v0) > 0.5 * v0) | ~(vn > 1e-9 * self.VE[z] * (1.0 + 1e-12))
-        s.mm.deh[z[big]] = 0.0
+        swept = vn <= 1e-9 * self.VE[z]
+        s.mm.deh[z[swept | (np.abs(vn - v0) > 0.5 * v0)]] = 0.0
 
     def _apply_new_fractions(self, s, b_new) -> None:
         """Open fractions of the remapped state: rho = M / (phi_new V).  Collective (ghost fills)."""
