@@ -250,6 +250,13 @@ def _grow2(a, n):
 
 
 @njit(cache=True)
+def _grow_pieces(pz, pe, pa, pc, pq0, pqn, n):
+    """The per-piece arrays of the clippers (zone, element, area, centroid, first quadrature point,
+    point count) grown to n rows."""
+    return _grow1(pz, n), _grow1(pe, n), _grow1(pa, n), _grow2(pc, n), _grow1(pq0, n), _grow1(pqn, n)
+
+
+@njit(cache=True)
 def _clip_kernel(xs, elems, planes, cells, gauss_t, tri_bary, tri_w):
     """Clip every element (2-D segment / 3-D triangle) against the zones.
 
@@ -362,13 +369,7 @@ def _clip_kernel(xs, elems, planes, cells, gauss_t, tri_bary, tri_w):
             P = buf[lvl, 1]
             m = npc[lvl]
             if npieces == pz.size:
-                cap2 = 2 * pz.size
-                pz = _grow1(pz, cap2)
-                pe = _grow1(pe, cap2)
-                pa = _grow1(pa, cap2)
-                pc = _grow2(pc, cap2)
-                pq0 = _grow1(pq0, cap2)
-                pqn = _grow1(pqn, cap2)
+                pz, pe, pa, pc, pq0, pqn = _grow_pieces(pz, pe, pa, pc, pq0, pqn, 2 * pz.size)
             need = nq + (6 * (m - 2) if D == 3 else 2)
             if need > qw.size:
                 qcap2 = max(2 * qw.size, need)
@@ -520,12 +521,7 @@ def _clip_segments_2d(xs, elems, X0, X1, gauss_t):
                     continue
                 if npieces == pz.size:
                     c2 = 2 * pz.size
-                    pz = _grow1(pz, c2)
-                    pe = _grow1(pe, c2)
-                    pa = _grow1(pa, c2)
-                    pc = _grow2(pc, c2)
-                    pq0 = _grow1(pq0, c2)
-                    pqn = _grow1(pqn, c2)
+                    pz, pe, pa, pc, pq0, pqn = _grow_pieces(pz, pe, pa, pc, pq0, pqn, c2)
                     qx = _grow2(qx, ng * c2)
                     qw = _grow1(qw, ng * c2)
                     ql = _grow2(ql, ng * c2)
