@@ -18,8 +18,8 @@ One step (solver.py calls these in this order)
 2. Lagrange step, :func:`lagrange_split`: the zone's volume change ``dV`` is shared in proportion
    to the materials' compressibilities, ``dV_k = dV (vol_k / K_k) / sum_j (vol_j / K_j)`` with
    ``K = rho c^2`` (equal pressure changes: a zone in pressure equilibrium stays in it; equal strain
-   for traces, or if a material would lose half its volume or more than double it); with void, compression closes the void
-   first, expansion is shared by equal strain (a material cannot fill void faster than its own
+   for traces, or if a material would lose half its volume or more than double it); with void,
+   compression closes the void first, expansion is shared by equal strain (a material cannot fill void faster than its own
    strain; a gas disc in void with all the expansion given to its 20 % share of a rim zone
    over-expanded to a negative EOS energy within two steps).  The zone's compatible energy change ``dE = M e_new -
    sum_k mass_k ener_k`` is shared in proportion to each material's work, ``w_k = (p_k + q) dV_k /
@@ -499,8 +499,7 @@ def density_at_pressure(code, par, P, e, r0):
 def equilibrium_volumes(code, par, mass, ener, vraw, V, P0, out):
     """Volumes ``out`` (nm,) of materials with masses ``mass`` and specific energies ``ener`` that
     fill ``V`` at one common pressure (the mixture's equilibrium: sum_k m_k / rho_k(P, e_k) = V, a
-    decreasing function of P, solved by Newton safeguarded by bisection from P0); ``guess``: densities
-    to start from.  Used where a zone's material volumes carry no information (the small cut zones a
+    decreasing function of P, solved by Newton safeguarded by bisection from P0).  Used where a zone's material volumes carry no information (the small cut zones a
     merge joins: their open volume changed by O(1) of itself within the step, mass and energy are
     conserved, the volumes are not); ``vraw``: their volumes as carried (first density guesses).
     Returns False (out untouched) with void present or when no pressure fits every material."""
@@ -510,8 +509,8 @@ def equilibrium_volumes(code, par, mass, ener, vraw, V, P0, out):
         if code[m] == VOID and vraw[m] > 0.0:
             return False
         rk[m] = mass[m] / vraw[m] if vraw[m] > 0.0 else 1.0
-    plo = -math.inf
-    phi_ = math.inf
+    p_lo = -math.inf
+    p_hi = math.inf
     P = P0 if math.isfinite(P0) else 0.0
     for _ in range(200):
         g = -V
@@ -531,18 +530,18 @@ def equilibrium_volumes(code, par, mass, ener, vraw, V, P0, out):
         if ok and abs(g) <= 1e-13 * V:
             break
         if not ok or g > 0.0:  # P too low (a material has no density there, or too much volume)
-            plo = P
+            p_lo = P
         else:
-            phi_ = P
+            p_hi = P
         Pn = P - g / dg if (ok and dg < 0.0) else math.nan
-        if not (Pn > plo and Pn < phi_):
+        if not (Pn > p_lo and Pn < p_hi):
             step = abs(P) if abs(P) > 1.0 else 1.0
-            if phi_ == math.inf:
+            if p_hi == math.inf:
                 Pn = P + step
-            elif plo == -math.inf:
+            elif p_lo == -math.inf:
                 Pn = P - step
             else:
-                Pn = 0.5 * (plo + phi_)
+                Pn = 0.5 * (p_lo + p_hi)
         if Pn == P:
             break
         P = Pn
