@@ -171,6 +171,9 @@ class Block:
                 s2[d] = G + n3[d]
                 own[tuple(s2)] = False
         self.owned = own.ravel()
+        real = np.zeros(self.ndims, bool)
+        real[sl] = True
+        self.real_node = real.ravel()
         self.real_zone = np.zeros(self.zdims, bool)
         self.real_zone[tuple(slice(int(a), int(b)) for a, b in zip(*self.zreal))] = True
         self.real_zone = self.real_zone.ravel()

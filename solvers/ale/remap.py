@@ -160,6 +160,26 @@ def face_flux(sv, sg, ru, rl, rh, eu, el, eh, Vu, Mu):
     return f, eu + sg * de * (1.0 - fm)
 
 
+@njit(cache=True, inline="always")
+def upwind_face_flux(sv, sg, u, s, rho, e, V, M, solid):
+    """face_flux of a face with upwind zone u (stride s) from the zone state rho, e, V, M; a solid
+    neighbour of u (``solid`` array, or None) is a wall ghost: a copy of u (zero one-sided slope)."""
+    ru = rho[u]
+    rl = rho[u - s]
+    rh = rho[u + s]
+    eu = e[u]
+    el = e[u - s]
+    eh = e[u + s]
+    if solid is not None:
+        if solid[u - s]:
+            rl = ru
+            el = eu
+        if solid[u + s]:
+            rh = ru
+            eh = eu
+    return face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
+
+
 @njit(cache=True)
 def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
     """Mass flux F and face energy e* of the lower faces (stride s) of the zones in range.
@@ -185,20 +205,7 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                     F[z] = 0.0
                     ES[z] = e[u]
                     continue
-                ru = rho[u]
-                rl = rho[u - s]
-                rh = rho[u + s]
-                eu = e[u]
-                el = e[u - s]
-                eh = e[u + s]
-                if solid is not None:
-                    if solid[u - s]:
-                        rl = ru
-                        el = eu
-                    if solid[u + s]:
-                        rh = ru
-                        eh = eu
-                f, es = face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
+                f, es = upwind_face_flux(sv, sg, u, s, rho, e, V, M, solid)
                 if solid is not None:
                     # a face sweeping more than the upwind zone holds: a moving body swept that
                     # zone's open part past the face within the step (its swept volume is body,
@@ -209,7 +216,7 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                     cap = M[u] if not (out > 0.0) else M[u] * abs(sv) / (abs(sv) + out)
                     if abs(f) > cap:
                         f = cap if f > 0.0 else -cap
-                        es = eu
+                        es = e[u]
                 F[z] = f
                 ES[z] = es
 
@@ -340,19 +347,24 @@ def sweep_dual(F, zact, solid, v, m, PHI, VS, d, nlo, nhi, zs, ns):
 
 
 @njit(cache=True)
-def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless):
+def sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless, hold=None, P=None, KF=None, IN=None):
     """Nodal momentum update of one sweep, new lumped masses and the kinetic-energy defect dK.
 
     ``massless``: nodes may be left without mass (inside an obstacle, blocked.py, or in void,
-    mixed.py): such a node gets v = 0, dK = 0."""
+    mixed.py): such a node gets v = 0, dK = 0.  ``hold`` (uint8 per node, or None): nodes whose
+    update waits for the last sweep (blocked.py: the nodes of a body's cut zones, whose mass may pass
+    through zero in between): their momentum P and kinetic-energy flux KF accumulate, their velocity
+    stays (the upwind velocity of their dual faces), their mass follows the zones'; P holds the
+    momentum the fluxes bring relative to that velocity, sum phi (v_upwind - v) (a uniform velocity
+    brings none, to the bit); IN their inflow volume (mass) summed over the sweeps."""
     if massless:  # (the flag is a constant in each inlined copy: no test per node without it)
-        _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, True)
+        _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, True, hold, P, KF, IN)
     else:
-        _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, False)
+        _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, False, hold, P, KF, IN)
 
 
 @njit(cache=True, inline="always")
-def _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless):
+def _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless, hold, P, KF, IN):
     dim = v.shape[1]
     nsd = ns[d]
     for i in range(nlo[0], nhi[0]):
@@ -366,6 +378,19 @@ def _sweep_nodes(v, m, M, zact, PHI, VS, dK, d, nlo, nhi, zs, ns, massless):
                 else:
                     z0, z1, z2, z3 = zones_around_node_2d(i, j, zs)
                     mn = 0.25 * _t4(zact[z0] * M[z0], zact[z1] * M[z1], zact[z2] * M[z2], zact[z3] * M[z3])
+                if hold is not None and hold[n] != 0:
+                    pl = PHI[n]
+                    ph = PHI[n + nsd]
+                    for c in range(dim):
+                        sl = VS[n, c]
+                        sh = VS[n + nsd, c]
+                        vc = v[n, c]  # (its velocity before the remap: held)
+                        P[n, c] += pl * (sl - vc) - ph * (sh - vc)
+                        KF[n] += pl * sl * sl - ph * sh * sh
+                    IN[n] += max(pl, 0.0) + max(-ph, 0.0)
+                    dK[n] = 0.0
+                    m[n] = mn
+                    continue
                 if massless and not (mn > 0.0):
                     for c in range(dim):
                         v[n, c] = 0.0

@@ -733,6 +733,8 @@ class AleSolver:
             lo, hi = self.zr[0].copy(), self.zr[1].copy()
             hi[d] += 1
             remap.sweep_fluxes(self.rho, self.e, self.M, self.V, sv, self.F, self.ES, solid, s, lo, hi, B.zs)
+            if blk is not None:  # a body's cut zones: their faces' fluxes from the Lagrangian state
+                blk.cut_face_fluxes(self, d)
             self.bc.fill_zones([self.F, self.ES], face_dir=d)
             self._boundary_fluxes(d)
             remap.sweep_zones(self.rho, self.e, self.M, self.V, sv, self.F, self.ES, solid, s,
@@ -745,8 +747,12 @@ class AleSolver:
         bn = self._open_nodes
         if bn.size:
             m0, v0 = self.m[bn].copy(), self.v[bn].copy()
-        remap.sweep_nodes(self.v, self.m, self.M, B.zact, self.PHI, self.VS, self.dK, d,
-                          self.nr[0], self.nr[1], B.zs, B.ns, massless)
+        if blk is not None and blk.hold is not None:  # (a body's cut zones: their nodes at the end)
+            remap.sweep_nodes(self.v, self.m, self.M, B.zact, self.PHI, self.VS, self.dK, d,
+                              self.nr[0], self.nr[1], B.zs, B.ns, massless, *blk.hold)
+        else:
+            remap.sweep_nodes(self.v, self.m, self.M, B.zact, self.PHI, self.VS, self.dK, d,
+                              self.nr[0], self.nr[1], B.zs, B.ns, massless)
         if bn.size:
             self._open_node_terms(d, m0, v0)
         e0 = self.e.copy() if self.mm is not None else None
@@ -942,6 +948,8 @@ class AleSolver:
             out += [(f"material_{k}", getattr(self.mm, k)) for k in self.mm.FIELDS + ("pm", "cm")]
         if self._blk is not None:
             out.append(("blocked_fraction", self._blk.b))
+            if self._blk.A_body is not None:  # (the small cut zones' merged state: blocked.py)
+                out.append(("small_cut_state", self._blk.small_state_array()))
         return out
 
     def _layout(self, a: np.ndarray):
@@ -1014,10 +1022,11 @@ class AleSolver:
             if not np.array_equal(h.attrs["cells"], self.block.cells):
                 raise ValueError(f"checkpoint {path} is for a grid of {list(h.attrs['cells'])} cells")
             for k, a in self._checkpoint_arrays():
-                if k != "blocked_fraction":
+                if k not in ("blocked_fraction", "small_cut_state"):
                     window(h, k, a)
             # blocked fractions (static obstacles and coupler) of the checkpointed state, if any
             b = window(h, "blocked_fraction", np.zeros(B.nzones)) if "blocked_fraction" in h else None
+            small = window(h, "small_cut_state", np.zeros((B.nzones, 2))) if "small_cut_state" in h else None
             for k in self.VECTORS:
                 setattr(self, k, h[k][...].copy())
             for k in self.SCALARS:
@@ -1043,3 +1052,5 @@ class AleSolver:
                 from solvers.ale.blocked import Blocked
                 self._blk = Blocked(self)
             self._blk.set_fractions(self, b)
+            if small is not None:
+                self._blk.set_small_state(small)
