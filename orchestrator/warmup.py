@@ -166,12 +166,14 @@ def cases() -> dict[str, str]:
     for dim in (2, 3):  # the embedded-mesh coupling: a body moving through the grid
         out[f"coupled_{dim}d"] = _coupled(dim)
         out[f"coupled_{dim}d_mixed"] = _coupled(dim, mixed=True)
+        out[f"coupled_{dim}d_still"] = _coupled(dim, still=True)  # (a body at rest: blocked.py's held path)
     return out
 
 
-def _coupled(dim: int, mixed: bool = False) -> str:
+def _coupled(dim: int, mixed: bool = False, still: bool = False) -> str:
     """A small elastic block moving through gas at rest, tied by the multipliers (mixed: two gases,
-    their interface through the block and the zones it cuts)."""
+    their interface through the block and the zones it cuts; still: the block at rest in a gas flow,
+    so that its cut zones take the unsplit fluxes and held nodes of solvers/ale/blocked.py)."""
     if dim == 2:
         grid = "grid = { lower = [0.0, 0.0], upper = [1.0, 0.5], cells = [8, 4] }\n"
         box = "{ lower = [0.3, 0.1], upper = [0.55, 0.35], cells = [2, 2] }"
@@ -180,16 +182,21 @@ def _coupled(dim: int, mixed: bool = False) -> str:
         grid = "grid = { lower = [0.0, 0.0, 0.0], upper = [1.0, 0.5, 0.5], cells = [8, 4, 4] }\n"
         box = "{ lower = [0.3, 0.1, 0.1], upper = [0.55, 0.35, 0.35], cells = [2, 2, 2] }"
         vel = "[2.0, 0.5, 0.2]"
+    gas = "density = 1.0, pressure = 1.0"
+    if still:  # (the gas flows past the block, which stays at rest: its cut zones' fluxes and nodes)
+        gas += ", velocity = [" + ", ".join(["0.5"] + ["0.2"] * (dim - 1)) + "]"
+        vel = "[" + ", ".join(["0.0"] * dim) + "]"
     return ((_RUN2 if dim == 2 else _RUN3) + '[ale]\nmode = "eulerian"\n' + grid
             + "materials.gas = " + _EOS["ideal_gas"] + "\n"
             + ('materials.gas2 = { eos = "ideal_gas", gamma = 1.67 }\n'
                'regions = [ { material = "gas", density = 1.0, pressure = 1.0 },\n'
                '  { material = "gas2", region = "y > 0.2", density = 0.5, pressure = 1.0 } ]\n' if mixed else
-               'regions = [ { material = "gas", density = 1.0, pressure = 1.0 } ]\n')
+               f'regions = [ {{ material = "gas", {gas} }} ]\n')
             + '[materials.solid]\nmodel = "linear_elastic"\ndensity = 2.0\nyoungs_modulus = 50.0\n'
             + "poisson_ratio = 0.3\n"
             + f'[[lagrange.bodies]]\nname = "block"\nmaterial = "solid"\nmesh = {{ box = {box} }}\n'
             + f"initial_velocity = {vel}\n"
+            + ('[[boundaries]]\ntype = "fixed"\nregion = "x > -1"\n' if still else "")
             + '[coupling]\nmethod = "multiplier"\ncondition = "slip"\n')
 
 

@@ -102,7 +102,7 @@ from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, z
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_material_totals, group_totals, member_materials,
                                merge_members, merge_nodes, merge_targets, merge_velocities, zone_gids)
 from solvers.ale.mixed import fit_open_volumes
-from solvers.ale.remap import set_positions, upwind_face_flux
+from solvers.ale.remap import face_flux, set_positions
 from solvers.sorted_ids import sorted_unique
 from solvers import elements as _elements
 from solvers.elements import hex_bvectors, quad_bvectors
@@ -189,6 +189,7 @@ class Blocked:
         self._lag, self._lag_on = None, False  # (the Lagrangian state of the remap: cut_face_fluxes)
         self._hold, self.hold = None, None  # (the held nodes of the remap: _hold_nodes)
         self._cutf, self._cutz = None, np.zeros(0, np.int64)  # (cut flags with their ghost images)
+        self._near_real = None
         self._still = self._static = np.zeros(0, np.int64)  # (cut zones of a surface at rest: body_terms)
         self._FX = self._EX = None  # (their faces' fluxes and face energies per direction: cut_face_fluxes)
         self._small = (np.zeros(0, np.int64), np.zeros(0), np.zeros(0))  # (small cut zones' merged state)
@@ -547,13 +548,13 @@ class Blocked:
             if self._FX is None:
                 self._FX = np.zeros((dim, B.nzones))
                 self._EX = np.zeros((dim, B.nzones))
+            self._hold_nodes(s)  # (also the zones' flags with their ghost images: _cutz)
             rhoL, eL, ML, VL = self._lag
-            for d in range(dim):
-                cut_face_fluxes(self._static, int(B.zs[d]), d, self.ASV, rhoL, eL, ML, VL, self.VE, self.solid,
-                                self._FX[d], self._EX[d], B.zs)
+            for d in range(dim):  # (every face of a real zone a flagged zone has: the same on each rank)
+                cut_face_fluxes(self._cutz, int(B.zs[d]), d, self.ASV, rhoL, eL, ML, VL, self.VE, self.solid,
+                                self._FX[d], self._EX[d], B.zs, self._real)
             for _ in range(2):  # (capping a zone's outflow lowers its neighbours' inflow: twice)
                 cap_cut_outflow(self._static, ML, self._FX, B.zs)
-            self._hold_nodes(s)
         else:
             self._lag_on = False
             self.hold = None
@@ -625,7 +626,18 @@ class Blocked:
         self._cutf[self._cutz] = 0.0
         self._cutf[self._static] = 1.0
         s.bc.fill_zones([self._cutf])
+        if self._near_real is None:  # the real zones and their first ghost layer (faces and corner
+            # nodes of these stay inside the padded arrays with their stencils)
+            r = B.real_zone.reshape(B.zdims)
+            near = r.copy()
+            for d in range(B.dim):
+                near[tuple(slice(1, None) if a == d else slice(None) for a in range(3))] |= \
+                    r[tuple(slice(None, -1) if a == d else slice(None) for a in range(3))]
+                near[tuple(slice(None, -1) if a == d else slice(None) for a in range(3))] |= \
+                    r[tuple(slice(1, None) if a == d else slice(None) for a in range(3))]
+            self._near_real = near.ravel()
         self._cutz = np.flatnonzero(self._cutf)
+        self._cutz = self._cutz[self._near_real[self._cutz]]
         hn = np.unique((B._zone_to_node(self._cutz)[:, None] + B.corner_offsets()[None, :]).ravel())
         self._hn_all = hn  # (with the ghost copies: merge_light_nodes)
         hn = hn[B.real_node[hn]]
@@ -642,7 +654,7 @@ class Blocked:
         """The fluxes of sweep d through the faces of a body's cut zones, from the Lagrangian state
         (kernel cut_face_fluxes): called by the solver's sweep after its own face fluxes."""
         if self._lag_on:
-            copy_cut_face_fluxes(self._static, int(s.block.zs[d]), d, self._FX, self._EX, s.F, s.ES)
+            copy_cut_face_fluxes(self._cutz, int(s.block.zs[d]), d, self._FX, self._EX, s.F, s.ES, self._real)
 
     def _no_shift_in_swept_zones(self, s) -> None:
         """Several materials: no half-step EOS shift in a body's cut zone (the zones flagged for
@@ -878,7 +890,7 @@ def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, z
 
 
 @njit(cache=True)
-def cut_face_fluxes(cut, s, d, ASV, rhoL, eL, ML, VL, VE, solid, F, ES, zs):
+def cut_face_fluxes(cut, s, d, ASV, rhoL, eL, ML, VL, VE, solid, F, ES, zs, real):
     """Mass flux F and face energy ES of sweep d (stride s) through both d-faces of every cut zone,
     from the Lagrangian state (rho, e, M, V before the first sweep) instead of the sweep's
     intermediate state.
@@ -897,6 +909,8 @@ def cut_face_fluxes(cut, s, d, ASV, rhoL, eL, ML, VL, VE, solid, F, ES, zs):
     for t in range(cut.size):
         for o in range(2):
             f = cut[t] + o * s
+            if real[f] == 0 and real[f - s] == 0:  # (only the faces of real zones; ``cut`` has ghosts)
+                continue
             sv = ASV[d, f]
             if sv > 0.0:
                 u = f - s
@@ -904,16 +918,28 @@ def cut_face_fluxes(cut, s, d, ASV, rhoL, eL, ML, VL, VE, solid, F, ES, zs):
             else:
                 u = f
                 sg = -0.5
+            if not (VL[u] > 0.0) and real[u] == 0:  # (a ghost zone without a volume here, e.g.
+                F[f] = np.nan  # beyond a wall: the face keeps the sweep's own flux, copy_cut_face_fluxes)
+                continue
             if sv == 0.0 or not (ML[u] > 0.0):
                 F[f] = 0.0
                 ES[f] = eL[u]
                 continue
-            fl, es = upwind_face_flux(sv, sg, u, s, rhoL, eL, VL, ML, solid)
+            ru, rl, rh = rhoL[u], rhoL[u - s], rhoL[u + s]
+            eu, el, eh = eL[u], eL[u - s], eL[u + s]
+            if solid[u - s]:  # (a solid neighbour is a wall ghost, as in remap.sweep_fluxes)
+                rl = ru
+                el = eu
+            if solid[u + s]:
+                rh = ru
+                eh = eu
+            fl, es = face_flux(sv, sg, ru, rl, rh, eu, el, eh, VL[u], ML[u])
             if VL[u] <= 1e-9 * VE[u]:
                 out = 0.0
                 for a in range(dim):
                     out += max(ASV[a, u + zs[a]], 0.0) + max(-ASV[a, u], 0.0)
-                cap = ML[u] * abs(sv) / out
+                # (out > 0 unless u is a ghost zone whose outer faces this rank has no swept volume for)
+                cap = ML[u] * abs(sv) / out if out > 0.0 else abs(fl)
                 if abs(fl) > cap:
                     fl = cap if fl > 0.0 else -cap
                     es = eL[u]
@@ -942,6 +968,10 @@ def cap_cut_outflow(cut, ML, FX, zs):
         for d in range(dim):
             lo = FX[d, z]
             hi = FX[d, z + zs[d]]
+            if np.isnan(lo):  # (a face left to the sweep: cut_face_fluxes)
+                lo = 0.0
+            if np.isnan(hi):
+                hi = 0.0
             if lo > 0.0:
                 fin += lo
             else:
@@ -961,12 +991,14 @@ def cap_cut_outflow(cut, ML, FX, zs):
 
 
 @njit(cache=True)
-def copy_cut_face_fluxes(cut, s, d, FX, EX, F, ES):
+def copy_cut_face_fluxes(cut, s, d, FX, EX, F, ES, real):
     """The sweep-d fluxes of both d-faces of every zone of ``cut`` (cut_face_fluxes, capped) into the
-    sweep's face arrays."""
+    sweep's face arrays (the faces of real zones)."""
     for t in range(cut.size):
         for o in range(2):
             f = cut[t] + o * s
+            if (real[f] == 0 and real[f - s] == 0) or np.isnan(FX[d, f]):
+                continue
             F[f] = FX[d, f]
             ES[f] = EX[d, f]
 

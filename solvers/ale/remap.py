@@ -160,26 +160,6 @@ def face_flux(sv, sg, ru, rl, rh, eu, el, eh, Vu, Mu):
     return f, eu + sg * de * (1.0 - fm)
 
 
-@njit(cache=True, inline="always")
-def upwind_face_flux(sv, sg, u, s, rho, e, V, M, solid):
-    """face_flux of a face with upwind zone u (stride s) from the zone state rho, e, V, M; a solid
-    neighbour of u (``solid`` array, or None) is a wall ghost: a copy of u (zero one-sided slope)."""
-    ru = rho[u]
-    rl = rho[u - s]
-    rh = rho[u + s]
-    eu = e[u]
-    el = e[u - s]
-    eh = e[u + s]
-    if solid is not None:
-        if solid[u - s]:
-            rl = ru
-            el = eu
-        if solid[u + s]:
-            rh = ru
-            eh = eu
-    return face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
-
-
 @njit(cache=True)
 def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
     """Mass flux F and face energy e* of the lower faces (stride s) of the zones in range.
@@ -205,7 +185,20 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                     F[z] = 0.0
                     ES[z] = e[u]
                     continue
-                f, es = upwind_face_flux(sv, sg, u, s, rho, e, V, M, solid)
+                ru = rho[u]
+                rl = rho[u - s]
+                rh = rho[u + s]
+                eu = e[u]
+                el = e[u - s]
+                eh = e[u + s]
+                if solid is not None:
+                    if solid[u - s]:
+                        rl = ru
+                        el = eu
+                    if solid[u + s]:
+                        rh = ru
+                        eh = eu
+                f, es = face_flux(sv, sg, ru, rl, rh, eu, el, eh, V[u], M[u])
                 if solid is not None:
                     # a face sweeping more than the upwind zone holds: a moving body swept that
                     # zone's open part past the face within the step (its swept volume is body,
@@ -216,7 +209,7 @@ def sweep_fluxes(rho, e, M, V, SV, F, ES, solid, s, zlo, zhi, zs):
                     cap = M[u] if not (out > 0.0) else M[u] * abs(sv) / (abs(sv) + out)
                     if abs(f) > cap:
                         f = cap if f > 0.0 else -cap
-                        es = e[u]
+                        es = eu
                 F[z] = f
                 ES[z] = es
 
