@@ -100,7 +100,8 @@ from solvers.ale.grid import GHOST
 from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_material_totals, group_totals, member_materials,
-                               merge_members, merge_nodes, merge_targets, merge_velocities, zone_gids)
+                               merge_members, merge_nodes, merge_targets, merge_velocities, zone_gids, _split,
+                               _zone_around)
 from solvers.ale.mixed import fit_open_volumes
 from solvers.ale.remap import face_flux, set_positions
 from solvers.sorted_ids import sorted_unique
@@ -563,13 +564,13 @@ class Blocked:
             s._sweep(d)  # (the remap kernels with this object's face volumes, solid flags, massless zones)
         if self._lag_on:  # the held nodes' velocities and kinetic-energy defects, once
             s.bc.fill_nodes_scalar(self._IN)  # (s.m: filled by the last sweep)
-            light_node_targets(self._hn, self._IN, s.m, s.nr[0], s.nr[1], B.ns, dim, self._lcode)
+            light_node_targets(self._hn, self._IN, s.m, B.ns, dim, self._lcode)
             s.bc.fill_nodes_scalar(self._lcode)
             finish_held_nodes(self._hn, self._P, self._KF, s.m, s.v, self._vL, self._mL, s.e, s.M, self._lcode,
                               B.zs, B.ns)
             s.bc.fill_nodes_vector(s.v)
             s.bc.fill_nodes_scalar(self._KF)  # (a light node's kinetic energy in: merge_light_nodes)
-            merge_light_nodes(self._hn_all, self._lcode, self._KF, s.m, s.v, s.e, s.M, s.nr[0], s.nr[1],
+            merge_light_nodes(self._hn_all, self._lcode, self._KF, s.m, s.v, s.e, s.M, B.real_node,
                               B.zs, B.ns, dim)
             s.bc.fill_nodes_vector(s.v)
             s.bc.fill_zones([s.e], s._inflow_values("energy"))
@@ -1011,14 +1012,10 @@ def _deposit_node(n, dk, m, e, M, zs, ns, dim):
     nothing for a node without positive mass)."""
     if not (m[n] > 0.0):
         return
-    i = n // ns[0]
-    r = n - i * ns[0]
-    j = r // ns[1]
-    k = r - j * ns[1]
+    i, j, k = _split(n, ns)
     nc = 1 << dim
     for c in range(nc):
-        zk = k - 1 + ((c >> 2) & 1) if dim == 3 else 0
-        z = (i - 1 + (c & 1)) * zs[0] + (j - 1 + ((c >> 1) & 1)) * zs[1] + zk * zs[2]
+        z = _zone_around(i, j, k, c, zs, dim)
         if M[z] != 0.0:
             e[z] += dk / (nc * m[n])
 
@@ -1033,7 +1030,6 @@ def finish_held_nodes(hn, P, KF, m, v, vL, mL, e, M, code, zs, ns):
     light_node_targets) deposits nothing: its kinetic energy in, mL |vL|^2 + KF, is left in KF for
     merge_light_nodes (its v = vL + P / m need not be bounded, nor its defect)."""
     dim = v.shape[1]
-    nc = 1 << dim
     for a in range(hn.size):
         n = hn[a]
         k0 = 0.0
@@ -1049,8 +1045,16 @@ def finish_held_nodes(hn, P, KF, m, v, vL, mL, e, M, code, zs, ns):
         _deposit_node(n, dk, m, e, M, zs, ns, dim)
 
 
+@njit(cache=True, inline="always")
+def _neighbour(n, o, ns, dim):
+    """Node o (0 .. 3^dim - 1) of the 3^dim around node n (itself included): offset o % 3 - 1 along x,
+    (o // 3) % 3 - 1 along y, (o // 9) % 3 - 1 along z."""
+    dk = (o // 9) % 3 - 1 if dim == 3 else 0
+    return n + (o % 3 - 1) * ns[0] + ((o // 3) % 3 - 1) * ns[1] + dk * ns[2]
+
+
 @njit(cache=True)
-def light_node_targets(hn, IN, m, nlo, nhi, ns, dim, code):
+def light_node_targets(hn, IN, m, ns, dim, code):
     """Which held nodes merge and into whom (decided where the node is real): a node whose inflow IN
     over the remap exceeds the mass it ends with has no convex update -- v = vL + sum phi_in (v_in -
     vL) / m weights its inflows by phi_in / m > 1 (a node of a sliver and covered zones with the
@@ -1060,24 +1064,13 @@ def light_node_targets(hn, IN, m, nlo, nhi, ns, dim, code):
     nb = 3 ** dim
     for a in range(hn.size):
         n = hn[a]
-        i = n // ns[0]
-        r = n - i * ns[0]
-        j = r // ns[1]
-        k = r - j * ns[1]
-        if i < nlo[0] or i >= nhi[0] or j < nlo[1] or j >= nhi[1] or (dim == 3 and (k < nlo[2] or k >= nhi[2])):
-            continue
         if not (IN[n] > m[n]):  # (a node the sweeps left with negative mass included)
             continue
         best = -1
         mb = 0.0
         for o in range(nb):
-            di = o % 3 - 1
-            dj = (o // 3) % 3 - 1
-            dk = (o // 9) % 3 - 1 if dim == 3 else 0
-            if di == 0 and dj == 0 and dk == 0:
-                continue
-            t = n + di * ns[0] + dj * ns[1] + dk * ns[2]
-            if IN[t] > m[t]:
+            t = _neighbour(n, o, ns, dim)
+            if t == n or IN[t] > m[t]:
                 continue
             if m[t] > mb:
                 mb = m[t]
@@ -1086,14 +1079,12 @@ def light_node_targets(hn, IN, m, nlo, nhi, ns, dim, code):
 
 
 @njit(cache=True)
-def merge_light_nodes(hn, code, K2, m, v, e, M, nlo, nhi, zs, ns, dim):
+def merge_light_nodes(hn, code, K2, m, v, e, M, real_node, zs, ns, dim):
     """The light nodes (light_node_targets' code, filled to the ghost layers) and their targets:
     one velocity per group, sum m v / sum m (momentum conserved), and the kinetic-energy defect --
     the target's m |v|^2 and the light nodes' energy in K2 = mL |vL|^2 + KF (finish_held_nodes), less
     the group's after, halved -- to the internal energy of the target's zones (as finish_held_nodes
     deposits)."""
-    nb = 3 ** dim
-    nc = 1 << dim
     tg = np.full(hn.size, -1, np.int64)
     q = 0
     for a in range(hn.size):
@@ -1101,10 +1092,7 @@ def merge_light_nodes(hn, code, K2, m, v, e, M, nlo, nhi, zs, ns, dim):
         c = int(code[n])
         if c < 0:
             continue
-        di = c % 3 - 1
-        dj = (c // 3) % 3 - 1
-        dk = (c // 9) % 3 - 1 if dim == 3 else 0
-        tg[a] = n + di * ns[0] + dj * ns[1] + dk * ns[2]
+        tg[a] = _neighbour(n, c, ns, dim)
         q += 1
     if q == 0:
         return
@@ -1133,14 +1121,8 @@ def merge_light_nodes(hn, code, K2, m, v, e, M, nlo, nhi, zs, ns, dim):
             if tg[a] == t:
                 for c in range(dim):
                     v[hn[a], c] = P[c]
-        dK = 0.5 * (k0 - k1)
-        i = t // ns[0]
-        r = t - i * ns[0]
-        j = r // ns[1]
-        k = r - j * ns[1]
-        if i < nlo[0] or i >= nhi[0] or j < nlo[1] or j >= nhi[1] or (dim == 3 and (k < nlo[2] or k >= nhi[2])):
-            continue  # (a ghost target: its real copy deposits, here or on its owner)
-        _deposit_node(t, dK, m, e, M, zs, ns, dim)
+        if real_node[t]:  # (a ghost target: its real copy deposits, here or on its owner)
+            _deposit_node(t, 0.5 * (k0 - k1), m, e, M, zs, ns, dim)
 
 
 @njit(cache=True, inline="always")
@@ -1288,13 +1270,15 @@ def corner_force_sum(fc, zones, out):
 
 def _flush():
     from solvers.ale import hydro as _h
+    from solvers.ale import merge as _merge
     from solvers.ale import remap as _remap
     from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([open_eos, lagrangian_open_volumes, _aperture, apertures_2d, apertures_3d, corner_force_sum,
                        cut_face_fluxes, cap_cut_outflow, copy_cut_face_fluxes, finish_held_nodes, light_node_targets,
                        merge_light_nodes],
-                      [_eos.__file__, _elements.__file__, _h.__file__, _remap.__file__], "blocked.deps.sha256")
+                      [_eos.__file__, _elements.__file__, _h.__file__, _merge.__file__, _remap.__file__],
+                      "blocked.deps.sha256")
 
 
 _flush()
