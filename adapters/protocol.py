@@ -95,6 +95,33 @@ def report_failure(out_dir: Path, role: str, rank: int, message: str) -> None:
         print(f"immerse: {line}", file=sys.stderr, flush=True)
 
 
+UNSTABLE_COUPLING = "coupling_beyond_limit.txt"
+"""While a coupling method's step is beyond its own explicit stable-step limit, the coupler keeps a
+one-line note of it here: a solver that then fails (a zone inverted by the growing oscillation,
+before the coupler's energy check sees it) failed because of the coupling, and the launcher says so."""
+
+
+def note_unstable_coupling(out_dir: Path, line: str | None) -> None:
+    """Write (``line``) or remove (None) the coupler's note that its step is beyond the coupling's
+    stable-step limit; atomic, so the launcher never reads half a line."""
+    d = run_dir(out_dir)
+    path = d / UNSTABLE_COUPLING
+    if line is None:
+        path.unlink(missing_ok=True)
+        return
+    d.mkdir(parents=True, exist_ok=True)
+    tmp = d / f".{UNSTABLE_COUPLING}.tmp"
+    tmp.write_text(line.replace("\n", " ") + "\n")
+    os.replace(tmp, path)
+
+
+def unstable_coupling_note(out_dir: Path) -> str | None:
+    try:
+        return (run_dir(out_dir) / UNSTABLE_COUPLING).read_text().strip() or None
+    except OSError:
+        return None
+
+
 def install_fault_handler(out_dir: Path, role: str, rank: int) -> None:
     """An uncaught exception on any rank: report it by role and rank, then bring the whole job down."""
 

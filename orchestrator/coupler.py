@@ -142,6 +142,7 @@ class Coupler:
         except GeometryError as e:  # a body left the background grid: say when
             raise RuntimeError(f"{e} at step {self.step}, t = {self.t + dt:.6g} s") from None
         P.send(bg, geometry.pack(c.dim), 0, P.TAG_GEOMETRY)
+        self._note_stability(dt)
         self.dt_prev = dt
         self.dt_max = max(getattr(self, "dt_max", 0.0), dt)
         if self.step == 1 or (dt > c.stable_limit and not getattr(self, "_warned_limit", False)):
@@ -149,6 +150,33 @@ class Coupler:
                 self.log(f"coupling {c.method.NAME}: its explicit stable-step limit is {c.stable_limit:.6g} s; "
                          f"step {self.step} used {dt:.6g} s" + (" (beyond it: unstable)" if dt > c.stable_limit else ""))
                 self._warned_limit = dt > c.stable_limit
+
+    STILL_UNSTABLE_STEPS = 20
+    """Steps within its limit after which an oscillation that grew while the step was beyond it no
+    longer counts as the cause of a solver's failure (within the limit it stops growing, but it does
+    not decay: the spring is undamped)."""
+
+    def _note_stability(self, dt: float) -> None:
+        """Keep the launcher's note (protocol.note_unstable_coupling) while the step is beyond the
+        coupling's explicit stable-step limit, and STILL_UNSTABLE_STEPS steps after. Between 1 and 2
+        times the limit an unstable spring grows by a factor rho^2 per step (|rho| + 1/|rho| =
+        (w dt)^2 - 2 for central differences: about 20 at 1.3 times the limit), fast enough to
+        invert a zone next to the surface before the interface work reaches UNSTABLE_WORK, and the
+        growing oscillation shortens the solvers' steps below the limit as it goes; the solver that
+        fails then is named after the coupling. Written only on the way in and out: no cost per step."""
+        c = self.coupling
+        if dt > c.stable_limit:
+            if getattr(self, "_beyond_since", None) is None:
+                self._beyond_since = self.step
+                P.note_unstable_coupling(self.out, (
+                    f"coupling method {c.method.NAME!r} is unstable: from step {self.step}, t = {self.t:.6g} s "
+                    f"its step {dt:.6g} s is beyond its explicit stable-step limit {c.stable_limit:.6g} s (a "
+                    f"stiffer spring needs a smaller step: lower its stiffness, or run.dt_scale)"))
+            self._last_beyond = self.step
+        elif (getattr(self, "_beyond_since", None) is not None
+              and self.step - self._last_beyond >= self.STILL_UNSTABLE_STEPS):
+            self._beyond_since = None
+            P.note_unstable_coupling(self.out, None)
 
     def _coupling_record(self) -> np.ndarray:
         """The coupler's diagnostics row: the exchange totals, and the coupled balances: momentum

@@ -360,6 +360,10 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         why = f"{silent[0]} died first (killed by a signal or exited without a message); then: " + "; ".join(reports)
     elif reports:
         why = "; ".join(reports)
+        unstable = P.unstable_coupling_note(out)
+        if unstable and not any(rep.startswith("coupler rank") for rep in reports):
+            # a solver failed while the coupling's step was beyond its own limit: that is the cause
+            why = f"{unstable}; then: {why}"
     elif failed:
         why = f"{failed[0]} died first (killed by a signal or exited without a message)"
     else:
