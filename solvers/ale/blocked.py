@@ -637,8 +637,12 @@ class Blocked:
                 near[tuple(slice(None, -1) if a == d else slice(None) for a in range(3))] |= \
                     r[tuple(slice(1, None) if a == d else slice(None) for a in range(3))]
             self._near_real = near.ravel()
-        self._cutz = np.flatnonzero(self._cutf)
-        self._cutz = self._cutz[self._near_real[self._cutz]]
+            # (the first ghost layer: the fill writes there; the real zones are the flags we set)
+            self._ghost_near = np.flatnonzero(self._near_real & (B.real_zone == 0))
+        # sparse: the flagged real zones and the flagged zones of the first ghost layer, in
+        # increasing order (as a whole-grid flatnonzero gave them), never a scan of the grid
+        g = self._ghost_near
+        self._cutz = np.union1d(self._static[B.real_zone[self._static] != 0], g[self._cutf[g] != 0.0])
         hn = np.unique((B._zone_to_node(self._cutz)[:, None] + B.corner_offsets()[None, :]).ravel())
         self._hn_all = hn  # (with the ghost copies: merge_light_nodes)
         hn = hn[B.real_node[hn]]
