@@ -20,6 +20,16 @@ charts written beside it.
     0.5 m: it reaches the plate at 0.24 ms; its reflections and the outflow stay clear of the plate
     until the end) to 0.7 ms, every 0.05 ms.
 
+`immerse bench plate_convergence_3d`
+    cases/plate_in_shock_3d (to its end time, 3 ms) on its half z >= 0.2 m: the plate (z 0.1 .. 0.3)
+    and the tube (z 0 .. 0.4) are symmetric about that plane, so the gas gets a wall there (a slip
+    wall is the symmetry plane of inviscid flow) and the plate's nodes on it the `symmetry` condition:
+    the same solution at half the zones.  Zone widths 25, 12.5, 6.25 mm (64 x 24 x 8 .. 256 x 96 x 32
+    zones), the plate 2 x 12 x 4 .. 8 x 48 x 16 elements (1.6, 3.2, 6.4 zones thick); the tip node
+    at the top of the plate's mid-plane on the symmetry plane.  The same rows and chart as the 2-D
+    study (plate_convergence_3d.png).
+    --quick: the cropped tube x in [0.4, 0.9] m, the shock starting at 0.5 m, to 0.7 ms every 0.05 ms.
+
 `immerse bench penalty_sweep`
     cases/embedded_piston_sod with `method = "penalty"` and `stiffness = k` (Pa/m) over k = 0.1 ..
     1e5, and the multiplier method (the case as it is) as the reference line; 20 output steps per
@@ -50,6 +60,16 @@ Measured (full runs, 2-core VM shared with other jobs, one simulation at a time,
     layer shed at the plate's tip rolls up finer with every refinement and sucks harder on its lee
     side; the plate itself is resolved.)  Coupled momentum balance <= 1.8e-15 on all meshes.  Wall
     (stepping) 5.3, 15.7, 49, 240 s.
+  plate_convergence_3d (~5.5 min, 2026-11-26): tip deflection at 3 ms 2.882, 2.251, 2.124 mm (h = 25,
+    12.5, 6.25 mm).  Successive differences, largest over time, 0.631 and 0.133 mm: ratio 4.73
+    (observed order 2.24; at the end -0.631 and -0.127 mm, ratio 4.97, order 2.31, monotone;
+    Richardson 2.092 mm, the finest mesh 1.5 % above it).  The meshes part late here too (largest
+    differences up to 0.75 ms 0.026 and 0.010 mm).  --quick (to 0.7 ms): 0.308, 0.247, 0.226 mm;
+    differences 0.060 and 0.021 mm, ratio 2.85 (order 1.51, monotone).  Coupled momentum balance
+    <= 9.6e-16 on all meshes.  Wall (stepping) 2.8, 22, 287 s (786k zones, 349 steps).  Unlike the
+    2-D plate the coarsest mesh already converges: the 3-D plate is 40 mm thick, 1.6 zones of 25 mm,
+    where the 2-D plate's 30 mm is 1.5 zones of 20 mm, the thinnest the method holds (README
+    "Coupled bodies"), and the 3-D tip's flow goes round the plate's side edges as well.
   penalty_sweep (~2.5 min), t = 0.2 s, the solvers' step 5.97e-4 s: stable for k = 0.1 .. 1e3
     Pa/m, 360 steps each (the penalty never cuts the step); k = 2e3 stopped at step 11 by the
     energy check (limit 3.28e-4 s, step 5.89e-4 s); 1e4 and 1e5 stopped at step 1 (limits 2.54e-4
@@ -163,17 +183,18 @@ def plate_text(factor: float, quick: bool, plate_factor: float | None = None) ->
     return text, params
 
 
-def tip_history(out: Path) -> tuple[np.ndarray, np.ndarray, list]:
-    """Times and the tip node's x displacement at every Lagrangian output step; the node's
-    initial position."""
+def tip_history(out: Path, tip_at=PLATE_TIP) -> tuple[np.ndarray, np.ndarray, list]:
+    """Times and the x displacement of the node nearest ``tip_at`` at every Lagrangian output step;
+    the node's initial position."""
     from orchestrator import output
 
     steps = output.read_steps(out, "lagrange")
     x0 = output.read_step(out, "lagrange", steps[0][2])[0]
-    tip = int(np.argmin(np.linalg.norm(x0[:, :2] - PLATE_TIP, axis=1)))
+    tip_at = np.asarray(tip_at, dtype=float)
+    tip = int(np.argmin(np.linalg.norm(x0[:, :tip_at.size] - tip_at, axis=1)))
     t = np.array([s[0] for s in steps])
     dx = np.array([output.read_step(out, "lagrange", s[2])[0][tip, 0] - x0[tip, 0] for s in steps])
-    return t, dx, x0[tip, :2].tolist()
+    return t, dx, x0[tip, :tip_at.size].tolist()
 
 
 def plate_meshes(quick: bool) -> tuple[list, list]:
@@ -185,17 +206,18 @@ def plate_meshes(quick: bool) -> tuple[list, list]:
     return [(0.5, 0.5), (1.0, 1.0), (2.0, 2.0), (4.0, 4.0)], [(2.0, 1.0), (1.0, 2.0)]
 
 
-def plate_runs(quick: bool) -> tuple[list[dict], list[dict]]:
-    series, split = plate_meshes(quick)
+def plate_runs(quick: bool, case: str = PLATE) -> tuple[list[dict], list[dict]]:
+    series, split = plate_meshes(quick) if case == PLATE else plate3d_meshes(quick)
+    text_of, tip_at = (plate_text, PLATE_TIP) if case == PLATE else (plate3d_text, PLATE3D_TIP)
     done = []
     with tempfile.TemporaryDirectory() as tmp:
         for factor, pf in series + split:
-            text, params = plate_text(factor, quick, pf)
+            text, params = text_of(factor, quick, pf)
             r = _run(text, Path(tmp) / f"plate_{factor:g}_{pf:g}")
             if r["rc"] != 0:
-                raise RuntimeError(f"{PLATE} at {params['grid_cells']} zones, plate {params['plate_cells']} "
+                raise RuntimeError(f"{case} at {params['grid_cells']} zones, plate {params['plate_cells']} "
                                    f"failed: {r['message']}")
-            t, dx, tip = tip_history(r["out"])
+            t, dx, tip = tip_history(r["out"], tip_at)
             s = r["summary"]
             done.append({**params, "tip_node_m": tip, "times_s": t, "tip_dx_m": dx,
                          "steps": s["steps"], "wall_time_s": s["wall_time_s"],
@@ -209,7 +231,7 @@ def _label(r: dict) -> str:
             f"plate {r['plate_cells'][0]} × {r['plate_cells'][1]}")
 
 
-def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
+def plate_study(runs: list[dict], split: list[dict] = (), name: str = PLATE) -> list[dict]:
     """Result rows: per mesh its history; per pair of successive meshes their differences (the finer
     history interpolated onto the coarser's output times, which are the same ones): largest over
     time, root mean square over time, at the end; for every two successive pairs the ratio of their
@@ -222,7 +244,7 @@ def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
             "tip_node_m", "steps", "wall_time_s", "launcher_wall_s", "momentum_balance_rel")
     results = []
     for r in runs:
-        results.append({"name": PLATE, "metric": "tip_deflection_final", "value": float(r["tip_dx_m"][-1] * 1e3),
+        results.append({"name": name, "metric": "tip_deflection_final", "value": float(r["tip_dx_m"][-1] * 1e3),
                         "unit": "mm", "params": {**{k: r[k] for k in keys}, "times_s": r["times_s"].tolist(),
                                                  "tip_dx_mm": (r["tip_dx_m"] * 1e3).tolist()}})
     t = runs[0]["times_s"]
@@ -238,18 +260,18 @@ def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
         # (the largest difference up to a quarter, a half, ... of the end time: when the meshes part)
         until = [[float(q * t[-1]), float(np.abs(d[t <= q * t[-1] * (1 + 1e-9)]).max() * 1e3)]
                  for q in (0.25, 0.5, 0.75, 1.0)]
-        results.append({"name": PLATE, "metric": "tip_difference_max_over_time", "value": diffs[-1]["max"] * 1e3,
+        results.append({"name": name, "metric": "tip_difference_max_over_time", "value": diffs[-1]["max"] * 1e3,
                         "unit": "mm", "params": {**pair, "at_time_s": float(t[int(np.argmax(np.abs(d)))]),
                                                  "max_until_s_mm": until}})
-        results.append({"name": PLATE, "metric": "tip_difference_rms_over_time", "value": diffs[-1]["rms"] * 1e3,
+        results.append({"name": name, "metric": "tip_difference_rms_over_time", "value": diffs[-1]["rms"] * 1e3,
                         "unit": "mm", "params": {**pair, "times": int(t.size)}})
-        results.append({"name": PLATE, "metric": "tip_difference_final", "value": diffs[-1]["final"] * 1e3,
+        results.append({"name": name, "metric": "tip_difference_final", "value": diffs[-1]["final"] * 1e3,
                         "unit": "mm", "params": {**pair, "time_s": float(t[-1]), "of": "finer minus coarser"}})
     for i, (d1, d2) in enumerate(zip(diffs, diffs[1:])):
         widths = d1["pair"]["zone_widths_m"] + d2["pair"]["zone_widths_m"][1:]
         for key in ("max", "rms"):
             ratio = d1[key] / d2[key] if d2[key] > 0 else float("inf")
-            results.append({"name": PLATE, "metric": f"convergence_ratio_{key}_over_time", "value": ratio, "unit": "",
+            results.append({"name": name, "metric": f"convergence_ratio_{key}_over_time", "value": ratio, "unit": "",
                             "params": {"of": "difference(coarse, middle) / difference(middle, fine)",
                                        "zone_widths_m": widths, "refinement_ratio": REFINE,
                                        "converging": bool(d2[key] < d1[key]),
@@ -259,7 +281,7 @@ def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
         order = float(np.log(abs(ratio)) / np.log(REFINE)) if 0 < abs(ratio) < np.inf else None
         behaviour = "monotone" if ratio > 1 else "oscillating" if ratio < -1 else "not converging"
         estimate = abs(d2["final"]) / (REFINE**order - 1.0) if behaviour == "monotone" else abs(d2["final"])
-        results.append({"name": PLATE, "metric": "convergence_ratio_final", "value": ratio, "unit": "",
+        results.append({"name": name, "metric": "convergence_ratio_final", "value": ratio, "unit": "",
                         "params": {"of": "(u_middle - u_coarse) / (u_fine - u_middle) at the end",
                                    "zone_widths_m": widths, "time_s": float(t[-1]), "refinement_ratio": REFINE,
                                    "observed_order": order, "behaviour": behaviour,
@@ -267,7 +289,7 @@ def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
                                    "finest_error_estimate_mm": estimate * 1e3}})
         if behaviour == "monotone":
             extrap = u[i + 2][-1] + d2["final"] / (REFINE**order - 1.0)
-            results.append({"name": PLATE, "metric": "tip_deflection_final_richardson", "value": float(extrap * 1e3),
+            results.append({"name": name, "metric": "tip_deflection_final_richardson", "value": float(extrap * 1e3),
                             "unit": "mm", "params": {"observed_order": order, "time_s": float(t[-1]),
                                                      "zone_widths_m": widths,
                                                      "of": "u_fine + (u_fine - u_middle) / (2^p - 1)"}})
@@ -275,7 +297,7 @@ def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
     for r in split:
         d = np.interp(t, r["times_s"], r["tip_dx_m"]) - base[1]
         what = "background" if r["factor"] != r["plate_factor"] and r["factor"] != 1.0 else "plate"
-        results.append({"name": PLATE, "metric": f"tip_difference_{what}_refined_alone", "value": float(d[-1] * 1e3),
+        results.append({"name": name, "metric": f"tip_difference_{what}_refined_alone", "value": float(d[-1] * 1e3),
                         "unit": "mm", "params": {**{k: r[k] for k in keys}, "of": "this run minus the middle mesh",
                                                  "max_over_time_mm": float(np.abs(d).max() * 1e3),
                                                  "times_s": r["times_s"].tolist(),
@@ -283,7 +305,7 @@ def plate_study(runs: list[dict], split: list[dict] = ()) -> list[dict]:
     return results
 
 
-def _draw_plate(runs, split, path: Path, quick: bool) -> None:
+def _draw_plate(runs, split, path: Path, quick: bool, name: str = PLATE) -> None:
     plt, fig, (ax, bx) = _figure(2)
     for r, lw in zip(runs, (1.0, 1.4, 1.8, 2.2)):
         ax.plot(r["times_s"] * 1e3, r["tip_dx_m"] * 1e3, "-", lw=lw, label=_label(r))
@@ -304,7 +326,9 @@ def _draw_plate(runs, split, path: Path, quick: bool) -> None:
     bx.grid(True, alpha=0.3)
     bx.legend(fontsize=7, loc="upper left")
     where = "--quick: cropped tube x ∈ [0.4, 0.9] m" if quick else "the case's tube 1.6 × 0.6 m"
-    fig.suptitle(f"cases/{PLATE}: tip deflection of the clamped plate struck by a Mach 1.2 shock, meshes "
+    if name != PLATE:
+        where += " × 0.2 m, its half z ≥ 0.2 m (symmetry plane)"
+    fig.suptitle(f"cases/{name}: tip deflection of the clamped plate struck by a Mach 1.2 shock, meshes "
                  f"refined together by 2\n({where}; multiplier coupling, slip; split: one of the two refined alone)",
                  fontsize=9)
     fig.tight_layout()
@@ -320,6 +344,61 @@ def bench_plate_convergence(out: Path, quick: bool = False) -> Path:
     doc = {"results": plate_study(runs, split), "machine": machine()}
     out.write_text(json.dumps(doc, indent=2))
     _draw_plate(runs, split, out.parent / "plate_convergence.png", quick)
+    return out
+
+
+# ---- 1b. plate_in_shock_3d: the same study in 3-D, on the half the plate's mid-plane cuts off --------
+PLATE3D = "plate_in_shock_3d"
+PLATE3D_GRID = "grid = { lower = [0.0, 0.0, 0.0], upper = [1.6, 0.6, 0.4], cells = [64, 24, 16] }"
+PLATE3D_MESH = "mesh = { box = { lower = [0.6, 0.0, 0.1], upper = [0.64, 0.3, 0.3], cells = [2, 12, 8] } }"
+PLATE3D_TIP = np.array([0.62, 0.3, 0.2])  # m: the top of the plate's mid-plane, on the symmetry plane
+PLATE3D_MID_Z = 0.2  # m: the plate (z 0.1 .. 0.3) and the tube (z 0 .. 0.4) are symmetric about it
+
+
+def plate3d_text(factor: float, quick: bool, plate_factor: float | None = None) -> tuple[str, dict]:
+    """cases/plate_in_shock_3d at ``factor`` x its zone count per direction (zone width 25 mm /
+    factor, the plate 2 x 12 x 8 elements per half times ``plate_factor``), on the half z >= 0.2 m:
+    the plate and the tube are symmetric about that plane, the gas's wall there is its symmetry
+    plane (a slip wall, inviscid) and the plate's nodes on it get the `symmetry` condition (no z
+    motion): the same solution at half the zones."""
+    text = (CASES / PLATE3D / "case.toml").read_text()
+    pf = factor if plate_factor is None else plate_factor
+    h = 0.025 / factor
+    lower, upper, x_shock = ((0.4, 0.0, 0.2), (0.9, 0.6, 0.4), 0.5) if quick else ((0.0, 0.0, 0.2), (1.6, 0.6, 0.4), 0.3)
+    cells = [(hi - lo) / h for lo, hi in zip(lower, upper)]
+    if any(abs(n - round(n)) > 1e-9 for n in cells):
+        raise RuntimeError(f"{PLATE3D}: the tube {lower} .. {upper} m is not a whole number of zones of {h} m")
+    cells = [round(n) for n in cells]
+    plate = [round(2 * pf), round(12 * pf), round(4 * pf)]
+    end, every = (0.7e-3, 0.05e-3) if quick else (3.0e-3, 0.1e-3)
+    text = _replace(text, PLATE3D_GRID, f"grid = {{ lower = {list(lower)}, upper = {list(upper)}, cells = {cells} }}",
+                    PLATE3D)
+    text = _replace(text, PLATE3D_MESH, f"mesh = {{ box = {{ lower = [0.6, 0.0, {PLATE3D_MID_Z}], upper = [0.64, 0.3, 0.3], "
+                                        f"cells = {plate} }} }}", PLATE3D)
+    text = _replace(text, "end_time = 3.0e-3", f"end_time = {end!r}", PLATE3D)
+    text = _replace(text, "output_interval = 1.0e-3", f"output_interval = {every!r}", PLATE3D)
+    if quick:
+        text = _replace(text, 'region = "x > 0.3"', f'region = "x > {x_shock}"', PLATE3D)
+    text += f'\n[[boundaries]]\ntype = "symmetry"\naxis = "z"\nat = {PLATE3D_MID_Z}\n'
+    params = {"factor": factor, "plate_factor": pf, "zone_width_m": h, "grid_cells": cells,
+              "grid_lower_m": list(lower), "grid_upper_m": list(upper), "plate_cells": plate,
+              "end_time_s": end, "output_interval_s": every, "shock_arrival_s": (0.6 - x_shock) / SHOCK_SPEED}
+    return text, params
+
+
+def plate3d_meshes(quick: bool) -> tuple[list, list]:
+    """Zone widths 25, 12.5, 6.25 mm (the plate 1.6, 3.2, 6.4 zones thick), both refined together."""
+    return [(1.0, 1.0), (2.0, 2.0), (4.0, 4.0)], []
+
+
+@bench("plate_convergence_3d")
+def bench_plate_convergence_3d(out: Path, quick: bool = False) -> Path:
+    out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    runs, split = plate_runs(quick, PLATE3D)
+    doc = {"results": plate_study(runs, split, PLATE3D), "machine": machine()}
+    out.write_text(json.dumps(doc, indent=2))
+    _draw_plate(runs, split, out.parent / "plate_convergence_3d.png", quick, PLATE3D)
     return out
 
 

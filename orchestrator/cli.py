@@ -5,7 +5,7 @@
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
   immerse bench NAME [--out FILE] [--quick]   NAME: lagrange, taylor, ale, sod, advect, memory, output, coupling,
-                                              plate_convergence, penalty_sweep
+                                              plate_convergence, plate_convergence_3d, penalty_sweep
 
 Bad input: one line naming the key, the value and what is allowed; exit code 2; nothing launched,
 nothing written.
