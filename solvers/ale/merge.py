@@ -1,11 +1,14 @@
 """Small cut zones of moving bodies: the conservative merge after the remap (``Blocked._merge``).
 
 A zone a coupled body cuts to a small open fraction, or covers while it still holds material, hands
-its content to a face neighbour (``PHI_MERGE``): the target's group (the target and its donors)
-shares one density and one specific energy, in proportion to the open volumes.  Nodal momentum is
-conserved (a node keeps its velocity when its mass falls and hands the momentum of the lost mass to
-the nodes of its group that gain), and the kinetic energy the exchange removes becomes the group's
-internal energy (total energy conserved).
+its content to a face neighbour (``PHI_MERGE``), and a zone the body uncovered within the step
+(open, still empty: the remap's apertures are the start of the step's) takes its share from one
+with material: the target's group (the target and its donors) shares one density and one specific
+energy, in proportion to the open volumes.  Nodal momentum is conserved (a node keeps its velocity
+when its mass falls and hands the momentum of the lost mass to the nodes that gain); groups that
+share a node pool their nodes' momentum together (``group_components``: one group's zones may
+release at a node what another's gain at the next), and the kinetic energy the exchange removes
+becomes the internal energy of those groups (total energy conserved).
 
 Who merges into whom is decided where the zone is real, from the zones within two of it (the
 neighbours' open fractions and whether they merge themselves), and handed to the ghost layers of the
@@ -18,8 +21,9 @@ two zones out picks its target among zones the block does not hold).
 
 The rule: a donor merges into the open, usable neighbour that does not merge itself, the most open
 one (ties to the first in axis order, lower side first); if all its open neighbours merge, into the
-target of the most open of them (two zones away); a zone whose open neighbours and their targets
-all merge (a pocket of small zones, rare) keeps its content if it is open and holds positive mass,
+target of the most open of them (two zones away); an empty zone only into one with material (a
+void behind a body stays empty); a zone whose open neighbours and their targets all merge (a pocket
+of small zones, rare) keeps its content (or stays empty) if it is open and holds no negative mass,
 and is an error otherwise (a covered zone with material and nowhere to pass it: the caller names
 it).  Groups are keyed by their target's global zone id (periodic images share it), and every sum
 over a group's nodes is taken by the nodes' owners and added in (group, node) order
@@ -123,6 +127,77 @@ def merge_velocities(un, ugr, m0, m1, v, tot, owned):
     return ke1
 
 
+@njit(cache=True)
+def node_group_edges(un, code, Vg, zs, ns, dim, gdims, goff, gper):
+    """(k, 2) pairs (the node's group, another group one of its zones belongs to) of the nodes
+    ``un`` whose zones belong to more than one group (merge_nodes' rule: a donor's group is its
+    target's, a target's its own)."""
+    out = np.empty((un.size * (1 << dim), 2), np.int64)
+    gz = np.empty(1 << dim, np.int64)
+    q = 0
+    for a in range(un.size):
+        i, j, k = _split(un[a], ns)
+        ng = 0
+        g = -1
+        for c in range(1 << dim):
+            z = _zone_around(i, j, k, c, zs, dim)
+            if code[z] >= 0.0:
+                gz[ng] = _gid(_target(z, code, zs), zs, gdims, goff, gper)
+            elif Vg[z] > 0.0:
+                gz[ng] = _gid(z, zs, gdims, goff, gper)
+            else:
+                continue
+            if g < 0 or gz[ng] < g:
+                g = gz[ng]
+            ng += 1
+        for b in range(ng):
+            if gz[b] != g:
+                out[q, 0] = g
+                out[q, 1] = gz[b]
+                q += 1
+    return out[:q]
+
+
+def group_components(comm, edges, gids, masses):
+    """Groups that share a node act as one in the node update: the mass one group's zones release
+    at a node may be what another's gain at the next, and pooled apart each would hand its nodes the
+    other's momentum at the wrong velocity (a body moving with a uniform flow left it 6 % off where
+    the group of a sliver along its side met the group of the zone its back uncovered).  Returns
+    (component of every group id in ``edges`` / ``gids`` as a dict-like pair of sorted arrays
+    (ids, component = the smallest id in it), and the component's mass from the groups' masses
+    ``masses`` (of the groups ``gids`` whose target is real here), summed in group-id order: the
+    same bits on every rank."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    e = edges.astype(np.float64).ravel()
+    gm = np.column_stack([gids.astype(np.float64), masses]).ravel()
+    if comm is not None:
+        from mpi4py import MPI
+
+        def gather(a):
+            counts = np.zeros(comm.size, dtype=np.int64)
+            comm.Allgather(np.array([a.size], dtype=np.int64), counts)
+            allv = np.empty(int(counts.sum()))
+            comm.Allgatherv(a, [allv, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
+            return allv
+        e, gm = gather(e), gather(gm)
+    e = e.reshape(-1, 2).astype(np.int64)
+    gm = gm.reshape(-1, 2)
+    ids = np.unique(np.concatenate([e.ravel(), gm[:, 0].astype(np.int64)]))
+    a, b = np.searchsorted(ids, e[:, 0]), np.searchsorted(ids, e[:, 1])
+    graph = coo_matrix((np.ones(a.size), (a, b)), shape=(ids.size, ids.size))
+    _, label = connected_components(graph, directed=False)
+    first = np.full(label.max() + 1 if label.size else 0, np.iinfo(np.int64).max, np.int64)
+    np.minimum.at(first, label, ids)
+    comp = first[label]
+    # the components' masses: each group's once (a target real on two ranks: periodic images), in id order
+    gid_m, keep = np.unique(gm[:, 0].astype(np.int64), return_index=True)
+    cm = np.zeros(first.size)
+    np.add.at(cm, label[np.searchsorted(ids, gid_m)], gm[keep, 1])  # (unbuffered: in id order)
+    return ids, comp, cm[label]
+
+
 def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
     """Per group (keys: this rank's sorted group ids) the sum of the rows (one per owned node: its
     group id, global node id, values) of every rank, added in the order of (group id, node id): the
@@ -182,20 +257,30 @@ def zone_gids(zones, zs, gdims, goff, gper):
 
 @njit(cache=True, inline="always")
 def _is_donor(z, M, phi, b, usable, phi_merge):
-    return usable[z] != 0 and b[z] > 0.0 and M[z] != 0.0 and (phi[z] < phi_merge or M[z] < 0.0)
+    """A zone a body covers in part that must share with a neighbour: small (phi < phi_merge) with
+    material, left with negative mass, or open and empty -- uncovered by a body that moved on within
+    the step: its faces were closed at the start of the step (the remap's apertures), so the gas that
+    followed the body piled up in the neighbour behind it (1 + u dt / h of its density), and the
+    group's one density puts it where the body left room."""
+    if usable[z] == 0 or not (b[z] > 0.0):
+        return False
+    if M[z] == 0.0:
+        return phi[z] > 0.0
+    return phi[z] < phi_merge or M[z] < 0.0
 
 
 @njit(cache=True)
-def _best(z, M, phi, b, usable, zs, dim, phi_merge):
-    """The face neighbour zone z would merge into (module docstring), or -1: open and usable; one
-    that does not merge itself before one that does, then the most open; ties to the first."""
+def _best(z, M, phi, b, usable, zs, dim, phi_merge, filled=False):
+    """The face neighbour zone z would merge into (module docstring), or -1: open and usable (and
+    holding material if ``filled``: an empty zone takes its content from a neighbour with some);
+    one that does not merge itself before one that does, then the most open; ties to the first."""
     best = -1
     bphi = 0.0
     bkeep = False
     for d in range(dim):
         for sgn in (-1, 1):
             nb = z + sgn * zs[d]
-            if usable[nb] == 0 or not (phi[nb] > 0.0):
+            if usable[nb] == 0 or not (phi[nb] > 0.0) or (filled and not (M[nb] > 0.0)):
                 continue
             keep = not _is_donor(nb, M, phi, b, usable, phi_merge)
             if best < 0 or (keep and not bkeep) or (keep == bkeep and phi[nb] > bphi):
@@ -224,14 +309,17 @@ def merge_targets(cand, M, phi, b, usable, zs, dim, phi_merge, code):
         z = cand[t]
         if not _is_donor(z, M, phi, b, usable, phi_merge):
             continue
-        y = _best(z, M, phi, b, usable, zs, dim, phi_merge)
+        empty = M[z] == 0.0
+        y = _best(z, M, phi, b, usable, zs, dim, phi_merge, empty)
         if y < 0:
+            if empty:
+                continue  # open and empty, no neighbour with material (a void behind a body): stays empty
             return z
         if _is_donor(y, M, phi, b, usable, phi_merge):
-            w = _best(y, M, phi, b, usable, zs, dim, phi_merge)
+            w = _best(y, M, phi, b, usable, zs, dim, phi_merge, empty)
             if w < 0 or _is_donor(w, M, phi, b, usable, phi_merge):
-                if phi[z] > 0.0 and M[z] > 0.0:
-                    continue  # a pocket of small zones: this one keeps its content
+                if phi[z] > 0.0 and M[z] >= 0.0:
+                    continue  # a pocket of small zones: this one keeps its content (or stays empty)
                 return z
             y = w
         zi, zj, zk = _split(z, zs)

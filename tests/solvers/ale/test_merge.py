@@ -40,17 +40,40 @@ def offset(code, c):
 
 def test_a_sliver_merges_into_its_most_open_neighbour_that_does_not_merge():
     """(1, 1) at 0.01 beside (0, 1) at 0.3 (a donor itself), (2, 1) at 0.9 and (1, 2) fully open:
-    into (1, 2), the most open; beside a donor at 0.4 and an empty zone at 0.2, into the empty one."""
+    into (1, 2), the most open; beside a donor at 0.4 and an empty void zone at 0.2 (not cut by a
+    body: b = 0, so not a donor), into the void one."""
     phi, b, M, usable = block({(1, 1): 0.01, (0, 1): 0.3, (2, 1): 0.9, (1, 0): 0.0})
     bad, code = targets(phi, b, M, usable, [(1, 1), (0, 1), (2, 1)])
     assert bad == -1 and offset(code, (1, 1)) == (0, 1)
     assert offset(code, (0, 1)) != (1, 0)  # (0, 1) does not pick the sliver
     assert code[z(2, 1)] == -1.0  # 0.9 >= PHI_MERGE: not a donor
-    # (1, 2) at 0.4 with material (a donor), (2, 1) at 0.2 empty (does not merge): into (2, 1)
+    # (1, 2) at 0.4 with material (a donor), (2, 1) at 0.2 empty and no body there (does not merge):
+    # into (2, 1)
     phi, b, M, usable = block({(1, 1): 0.01, (0, 1): 0.0, (2, 1): 0.2, (1, 0): 0.0, (1, 2): 0.4})
     M[z(2, 1)] = 0.0
+    b[z(2, 1)] = 0.0
     bad, code = targets(phi, b, M, usable, [(1, 1)])
     assert bad == -1 and offset(code, (1, 1)) == (1, 0)
+
+
+def test_a_zone_a_body_uncovered_takes_gas_from_a_neighbour_with_some():
+    """(1, 1) open 0.3 by a body that moved on, still empty (M = 0): a donor, into its most open
+    neighbour with material, (1, 2) at 1.0, not the empty (0, 1) at 1.0 (a void behind the body, b
+    0) nor (2, 1) at 0.6 (less open); with only empty neighbours it stays empty (no code, no error);
+    the same zone closed (phi 0, M = 0) is no donor."""
+    phi, b, M, usable = block({(1, 1): 0.3, (2, 1): 0.6, (1, 0): 0.0})
+    M[z(1, 1)] = 0.0
+    M[z(0, 1)] = 0.0
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and offset(code, (1, 1)) == (0, 1)
+    M[z(1, 2)] = 0.0
+    M[z(2, 1)] = 0.0
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and code[z(1, 1)] == -1.0
+    phi, b, M, usable = block({(1, 1): 0.0})
+    M[z(1, 1)] = 0.0
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and code[z(1, 1)] == -1.0
 
 
 def test_a_donor_whose_open_neighbours_all_merge_passes_its_content_two_zones_on():
@@ -94,3 +117,14 @@ def test_group_totals_are_the_targets_own_and_its_donors():
     assert Mg[t] == M[t] + M[z(1, 1)] and Vg[t] == phi[t] + phi[z(1, 1)]
     assert Eg[t] == M[t] * e[t] + M[z(1, 1)] * e[z(1, 1)]
     assert np.count_nonzero(Vg) == 1
+
+
+def test_groups_that_share_a_node_are_one_component():
+    """Edges (a node's group, another group at that node): groups 3-7 and 7-9 join, 20 stays alone;
+    each group's component is its smallest id, its mass the sum of the groups' masses; one rank."""
+    from solvers.ale.merge import group_components
+
+    ids, comp, mass = group_components(None, np.array([[3, 7], [7, 9]], np.int64),
+                                       np.array([3, 7, 9, 20], np.int64), np.array([1.0, 2.0, 4.0, 8.0]))
+    assert ids.tolist() == [3, 7, 9, 20] and comp.tolist() == [3, 3, 3, 20]
+    assert mass.tolist() == [7.0, 7.0, 7.0, 8.0]
