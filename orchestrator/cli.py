@@ -137,7 +137,9 @@ def cmd_bench(args) -> int:
 
     if args.name not in bench.BENCHES:
         return _fail(f"bench NAME = {args.name!r}: allowed: {', '.join(sorted(bench.BENCHES))}")
-    path = bench.BENCHES[args.name](out=Path(args.out or f"bench-{args.name}.json"), quick=args.quick)
+    out = Path(args.out or f"bench-{args.name}.json")
+    out.parent.mkdir(parents=True, exist_ok=True)  # (every bench writes its JSON and charts there)
+    path = bench.BENCHES[args.name](out=out, quick=args.quick)
     print(path)
     return 0
 
