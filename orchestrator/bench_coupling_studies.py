@@ -49,7 +49,15 @@ charts written beside it.
     they stay inside the star states), k = 10, 1e3, 1e5.
 
 Measured (full runs, 2-core VM shared with other jobs, one simulation at a time, 2026-11-24):
-  plate_convergence (~7 min): tip deflection at 4 ms 9.75, 10.22, 11.90, 12.84 mm (h = 20, 10, 5,
+  plate_convergence, again on 2026-11-26 after the zones a moving surface uncovers took their gas
+    from a neighbour (~2 min): tip deflection at 4 ms 9.37, 9.44, 11.41, 12.54 mm; differences
+    largest over time 1.02, 1.97, 1.13 mm; the finest three converge monotonically (ratio 1.75,
+    order 0.81, Richardson 14.05 mm), the coarsest pair still does not (0.52): at h = 20 mm the 30 mm
+    plate is 1.5 zones thick, the thinnest the method holds (README "Coupled bodies"); the background
+    refined alone moves the tip by +1.74 mm, the plate alone by +0.22 mm.  --quick (0.7 ms): 0.299,
+    0.283, 0.283 mm, differences 0.016 and 0.0035 mm, ratio 4.5 (order 2.2, monotone; it was 1.97,
+    order 0.98, oscillating).  Wall (stepping) 1.5, 4.2, 15, 77 s.
+  plate_convergence (~7 min), 2026-11-24: tip deflection at 4 ms 9.75, 10.22, 11.90, 12.84 mm (h = 20, 10, 5,
     2.5 mm).  Successive differences, largest over time: 0.65, 1.67, 0.95 mm (at the end: +0.47,
     +1.67, +0.95).  The first ratio (20/10/5 mm) is 0.39: NOT converging there; the finer one
     (10/5/2.5 mm) 1.76 (observed order 0.82, monotone; Richardson: 14.1 mm at 4 ms, the 2.5 mm mesh
@@ -60,13 +68,14 @@ Measured (full runs, 2-core VM shared with other jobs, one simulation at a time,
     layer shed at the plate's tip rolls up finer with every refinement and sucks harder on its lee
     side; the plate itself is resolved.)  Coupled momentum balance <= 1.8e-15 on all meshes.  Wall
     (stepping) 5.3, 15.7, 49, 240 s.
-  plate_convergence_3d (~5.5 min, 2026-11-26): tip deflection at 3 ms 2.882, 2.251, 2.124 mm (h = 25,
-    12.5, 6.25 mm).  Successive differences, largest over time, 0.631 and 0.133 mm: ratio 4.73
-    (observed order 2.24; at the end -0.631 and -0.127 mm, ratio 4.97, order 2.31, monotone;
-    Richardson 2.092 mm, the finest mesh 1.5 % above it).  The meshes part late here too (largest
-    differences up to 0.75 ms 0.026 and 0.010 mm).  --quick (to 0.7 ms): 0.308, 0.247, 0.226 mm;
-    differences 0.060 and 0.021 mm, ratio 2.85 (order 1.51, monotone).  Coupled momentum balance
-    <= 9.6e-16 on all meshes.  Wall (stepping) 2.8, 22, 287 s (786k zones, 349 steps).  Unlike the
+  plate_convergence_3d (~5.5 min, 2026-11-26, after the zones a moving surface uncovers took their
+    gas from a neighbour): tip deflection at 3 ms 2.913, 2.253, 2.126 mm (h = 25, 12.5, 6.25 mm).
+    Successive differences, largest over time, 0.660 and 0.133 mm: ratio 4.97 (observed order 2.31;
+    at the end -0.660 and -0.127 mm, ratio 5.21, order 2.38, monotone; Richardson 2.096 mm, the
+    finest mesh 1.4 % above it).  (Before that change: 2.882, 2.251, 2.124 mm, order 2.24.)
+    --quick (to 0.7 ms): 0.309, 0.247, 0.227 mm; differences 0.062 and 0.021 mm, ratio 2.98 (order
+    1.57, monotone).  Coupled momentum balance <= 9.5e-16 on all meshes.  Wall (stepping) 2.7, 22,
+    286 s (786k zones, 347 steps).  Unlike the
     2-D plate the coarsest mesh already converges: the 3-D plate is 40 mm thick, 1.6 zones of 25 mm,
     where the 2-D plate's 30 mm is 1.5 zones of 20 mm, the thinnest the method holds (README
     "Coupled bodies"), and the 3-D tip's flow goes round the plate's side edges as well.
