@@ -218,8 +218,8 @@ def plate_meshes(quick: bool) -> tuple[list, list]:
 
 
 def plate_runs(quick: bool, case: str = PLATE) -> tuple[list[dict], list[dict]]:
-    series, split = plate_meshes(quick) if case == PLATE else plate3d_meshes(quick)
-    text_of, tip_at = (plate_text, PLATE_TIP) if case == PLATE else (plate3d_text, PLATE3D_TIP)
+    meshes, text_of, tip_at = PLATE_STUDIES[case]
+    series, split = meshes(quick)
     done = []
     with tempfile.TemporaryDirectory() as tmp:
         for factor, pf in series + split:
@@ -347,15 +347,20 @@ def _draw_plate(runs, split, path: Path, quick: bool, name: str = PLATE) -> None
     plt.close(fig)
 
 
-@bench("plate_convergence")
-def bench_plate_convergence(out: Path, quick: bool = False) -> Path:
+def _plate_bench(out: Path, quick: bool, case: str, chart: str) -> Path:
+    """Run one plate study, write its JSON to ``out`` and its chart beside it."""
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    runs, split = plate_runs(quick)
-    doc = {"results": plate_study(runs, split), "machine": machine()}
+    runs, split = plate_runs(quick, case)
+    doc = {"results": plate_study(runs, split, case), "machine": machine()}
     out.write_text(json.dumps(doc, indent=2))
-    _draw_plate(runs, split, out.parent / "plate_convergence.png", quick)
+    _draw_plate(runs, split, out.parent / chart, quick, case)
     return out
+
+
+@bench("plate_convergence")
+def bench_plate_convergence(out: Path, quick: bool = False) -> Path:
+    return _plate_bench(out, quick, PLATE, "plate_convergence.png")
 
 
 # ---- 1b. plate_in_shock_3d: the same study in 3-D, on the half the plate's mid-plane cuts off --------
@@ -375,7 +380,8 @@ def plate3d_text(factor: float, quick: bool, plate_factor: float | None = None) 
     text = (CASES / PLATE3D / "case.toml").read_text()
     pf = factor if plate_factor is None else plate_factor
     h = 0.025 / factor
-    lower, upper, x_shock = ((0.4, 0.0, 0.2), (0.9, 0.6, 0.4), 0.5) if quick else ((0.0, 0.0, 0.2), (1.6, 0.6, 0.4), 0.3)
+    lower, upper, x_shock = (((0.4, 0.0, 0.2), (0.9, 0.6, 0.4), 0.5) if quick
+                             else ((0.0, 0.0, 0.2), (1.6, 0.6, 0.4), 0.3))
     cells = [(hi - lo) / h for lo, hi in zip(lower, upper)]
     if any(abs(n - round(n)) > 1e-9 for n in cells):
         raise RuntimeError(f"{PLATE3D}: the tube {lower} .. {upper} m is not a whole number of zones of {h} m")
@@ -384,8 +390,8 @@ def plate3d_text(factor: float, quick: bool, plate_factor: float | None = None) 
     end, every = (0.7e-3, 0.05e-3) if quick else (3.0e-3, 0.1e-3)
     text = _replace(text, PLATE3D_GRID, f"grid = {{ lower = {list(lower)}, upper = {list(upper)}, cells = {cells} }}",
                     PLATE3D)
-    text = _replace(text, PLATE3D_MESH, f"mesh = {{ box = {{ lower = [0.6, 0.0, {PLATE3D_MID_Z}], upper = [0.64, 0.3, 0.3], "
-                                        f"cells = {plate} }} }}", PLATE3D)
+    text = _replace(text, PLATE3D_MESH, f"mesh = {{ box = {{ lower = [0.6, 0.0, {PLATE3D_MID_Z}], "
+                                        f"upper = [0.64, 0.3, 0.3], cells = {plate} }} }}", PLATE3D)
     text = _replace(text, "end_time = 3.0e-3", f"end_time = {end!r}", PLATE3D)
     text = _replace(text, "output_interval = 1.0e-3", f"output_interval = {every!r}", PLATE3D)
     if quick:
@@ -402,15 +408,13 @@ def plate3d_meshes(quick: bool) -> tuple[list, list]:
     return [(1.0, 1.0), (2.0, 2.0), (4.0, 4.0)], []
 
 
+PLATE_STUDIES = {PLATE: (plate_meshes, plate_text, PLATE_TIP), PLATE3D: (plate3d_meshes, plate3d_text, PLATE3D_TIP)}
+"""Per plate case: its mesh series, its TOML at a refinement, the point its tip node is nearest."""
+
+
 @bench("plate_convergence_3d")
 def bench_plate_convergence_3d(out: Path, quick: bool = False) -> Path:
-    out = Path(out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    runs, split = plate_runs(quick, PLATE3D)
-    doc = {"results": plate_study(runs, split, PLATE3D), "machine": machine()}
-    out.write_text(json.dumps(doc, indent=2))
-    _draw_plate(runs, split, out.parent / "plate_convergence_3d.png", quick, PLATE3D)
-    return out
+    return _plate_bench(out, quick, PLATE3D, "plate_convergence_3d.png")
 
 
 # ---- 2. penalty stiffness sweep on the embedded piston -------------------------------------------

@@ -60,8 +60,9 @@ zone a body uncovers within the step has its faces closed in that step's remap a
 empty: it takes its share of a neighbour's gas in the merge instead.  The remap's face volumes take
 the apertures at mid-step where a surface stays inside the face over the step
 (``mid_face_volumes``: the open part the gas crosses varies linearly there), so the remap brings a
-cut zone onto its new open volume, not the old plus the surface's swept volume.  The coupler's fractions (``AleSolver.remap(blocked)``: one value
-per zone of the whole grid, output order) combine with the static obstacles by the larger value.
+cut zone onto its new open volume, not the old plus the surface's swept volume.  The coupler's
+fractions (``AleSolver.remap(blocked)``: one value per zone of the whole grid, output order)
+combine with the static obstacles by the larger value.
 The cut zones of a coupled body whose surface stood still over the step (one material; the
 switch is per zone, from the surface velocities of ``body_terms``, and collective) remap differently
 in two ways (``remap``): (1) every
@@ -104,7 +105,7 @@ from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_components, group_material_totals, group_totals,
                                member_materials, merge_members, merge_nodes, merge_targets, merge_velocities,
-                               node_group_edges, zone_gids, _split, _zone_around)
+                               zone_gids, _split, _zone_around)
 from solvers.ale.mixed import fit_open_volumes
 from solvers.ale.remap import face_flux, set_positions
 from solvers.sorted_ids import sorted_unique
@@ -770,14 +771,12 @@ class Blocked:
         s.bc.fill_zones([dM])
         dM[usable == 0] = 0.0
         owned = B.owned.astype(np.uint8)
-        un, m0, m1, ngid, part = merge_nodes(np.flatnonzero(member & self._layer1), code, Vg, s.M, dM, B.zact, s.v,
-                                             owned, B.zs, B.ns, dim, gdims, goff, self._gper)
+        un, m0, m1, ngid, part, edges = merge_nodes(np.flatnonzero(member & self._layer1), code, Vg, s.M, dM,
+                                                    B.zact, s.v, owned, B.zs, B.ns, dim, gdims, goff, self._gper)
         comm = dec.comm if dec.parallel else None
         # groups that share a node pool their nodes' momentum together (merge.group_components)
         targets = (code[members] < 0.0) & (Vg[members] > 0.0)
-        cids, comp, cmass = group_components(
-            comm, node_group_edges(un, code, Vg, B.zs, B.ns, dim, gdims, goff, self._gper),
-            mgid[targets], Mg[members[targets]])
+        cids, comp, cmass = group_components(comm, edges, mgid[targets], Mg[members[targets]])
         ngid = comp[np.searchsorted(cids, ngid)]
         at = np.searchsorted(cids, mgid)
         mgid, mg = comp[at], cmass[at]

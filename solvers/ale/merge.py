@@ -127,37 +127,6 @@ def merge_velocities(un, ugr, m0, m1, v, tot, owned):
     return ke1
 
 
-@njit(cache=True)
-def node_group_edges(un, code, Vg, zs, ns, dim, gdims, goff, gper):
-    """(k, 2) pairs (the node's group, another group one of its zones belongs to) of the nodes
-    ``un`` whose zones belong to more than one group (merge_nodes' rule: a donor's group is its
-    target's, a target's its own)."""
-    out = np.empty((un.size * (1 << dim), 2), np.int64)
-    gz = np.empty(1 << dim, np.int64)
-    q = 0
-    for a in range(un.size):
-        i, j, k = _split(un[a], ns)
-        ng = 0
-        g = -1
-        for c in range(1 << dim):
-            z = _zone_around(i, j, k, c, zs, dim)
-            if code[z] >= 0.0:
-                gz[ng] = _gid(_target(z, code, zs), zs, gdims, goff, gper)
-            elif Vg[z] > 0.0:
-                gz[ng] = _gid(z, zs, gdims, goff, gper)
-            else:
-                continue
-            if g < 0 or gz[ng] < g:
-                g = gz[ng]
-            ng += 1
-        for b in range(ng):
-            if gz[b] != g:
-                out[q, 0] = g
-                out[q, 1] = gz[b]
-                q += 1
-    return out[:q]
-
-
 def group_components(comm, edges, gids, masses):
     """Groups that share a node act as one in the node update: the mass one group's zones release
     at a node may be what another's gain at the next, and pooled apart each would hand its nodes the
@@ -170,20 +139,8 @@ def group_components(comm, edges, gids, masses):
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    e = edges.astype(np.float64).ravel()
-    gm = np.column_stack([gids.astype(np.float64), masses]).ravel()
-    if comm is not None:
-        from mpi4py import MPI
-
-        def gather(a):
-            counts = np.zeros(comm.size, dtype=np.int64)
-            comm.Allgather(np.array([a.size], dtype=np.int64), counts)
-            allv = np.empty(int(counts.sum()))
-            comm.Allgatherv(a, [allv, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
-            return allv
-        e, gm = gather(e), gather(gm)
-    e = e.reshape(-1, 2).astype(np.int64)
-    gm = gm.reshape(-1, 2)
+    e = _allgather(comm, edges.astype(np.float64)).reshape(-1, 2).astype(np.int64)
+    gm = _allgather(comm, np.column_stack([gids.astype(np.float64), masses])).reshape(-1, 2)
     ids = np.unique(np.concatenate([e.ravel(), gm[:, 0].astype(np.int64)]))
     a, b = np.searchsorted(ids, e[:, 0]), np.searchsorted(ids, e[:, 1])
     graph = coo_matrix((np.ones(a.size), (a, b)), shape=(ids.size, ids.size))
@@ -191,11 +148,25 @@ def group_components(comm, edges, gids, masses):
     first = np.full(label.max() + 1 if label.size else 0, np.iinfo(np.int64).max, np.int64)
     np.minimum.at(first, label, ids)
     comp = first[label]
-    # the components' masses: each group's once (a target real on two ranks: periodic images), in id order
+    # the components' masses: each group's once, in id order
     gid_m, keep = np.unique(gm[:, 0].astype(np.int64), return_index=True)
     cm = np.zeros(first.size)
     np.add.at(cm, label[np.searchsorted(ids, gid_m)], gm[keep, 1])  # (unbuffered: in id order)
     return ids, comp, cm[label]
+
+
+def _allgather(comm, a) -> np.ndarray:
+    """Every rank's float64 array ``a`` concatenated in rank order, flat (comm None: ``a`` itself)."""
+    a = np.ascontiguousarray(a, dtype=np.float64).ravel()
+    if comm is None:
+        return a
+    from mpi4py import MPI
+
+    counts = np.zeros(comm.size, dtype=np.int64)
+    comm.Allgather(np.array([a.size], dtype=np.int64), counts)
+    out = np.empty(int(counts.sum()))
+    comm.Allgatherv(a, [out, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
+    return out
 
 
 def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
@@ -204,14 +175,7 @@ def _group_sums(comm, keys, row_key, row_node, rows) -> np.ndarray:
     same numbers in the same order whatever the ranks (float64 buffers; comm None: one rank)."""
     k = rows.shape[1]
     mine = np.hstack([row_key[:, None].astype(np.float64), row_node[:, None].astype(np.float64), rows])
-    if comm is not None:
-        from mpi4py import MPI
-
-        counts = np.zeros(comm.size, dtype=np.int64)
-        comm.Allgather(np.array([mine.size], dtype=np.int64), counts)
-        allrows = np.empty(int(counts.sum()))
-        comm.Allgatherv(mine.ravel(), [allrows, counts, np.concatenate([[0], np.cumsum(counts)[:-1]]), MPI.DOUBLE])
-        mine = allrows.reshape(-1, k + 2)
+    mine = _allgather(comm, mine).reshape(-1, k + 2)
     order = np.lexsort((mine[:, 1], mine[:, 0]))
     return _ordered_sums(keys.astype(np.int64), mine[order, 0].astype(np.int64), mine[order, 2:].copy())
 
@@ -447,8 +411,9 @@ def merge_members(members, code, M, phi, VE, Mg, Eg, Vg, zs, gdims, goff, gper, 
 @njit(cache=True)
 def merge_nodes(near, code, Vg, M, dM, zact, v, owned, zs, ns, dim, gdims, goff, gper):
     """The owned nodes of the member zones ``near`` (real or first ghost layer): their masses before
-    and after (m0, m1), their group (the lowest target id among their zones' groups) and their rows
-    [pool (dim), gain, mass after, kinetic energy before, mass released] to be summed by group."""
+    and after (m0, m1), their group (the lowest target id among their zones' groups), their rows
+    [pool (dim), gain, mass after, kinetic energy before, mass released] to be summed by group, and
+    (k, 2) pairs (a node's group, another group one of its zones belongs to) for group_components."""
     corners = np.empty(8, np.int64)
     nodes = np.empty(near.size * (1 << dim), np.int64)
     q = 0
@@ -464,23 +429,33 @@ def merge_nodes(near, code, Vg, M, dM, zact, v, owned, zs, ns, dim, gdims, goff,
     m1 = np.empty(nu)
     ngid = np.empty(nu, np.int64)
     part = np.zeros((nu, dim + 4))
+    edges = np.empty((nu * (1 << dim), 2), np.int64)
+    ne = 0
+    gz = np.empty(1 << dim, np.int64)
     for a in range(nu):
         n = un[a]
         m0[a] = _node_mass(n, M, zact, zs, ns, dim)
         i, j, k = _split(n, ns)
         dm = 0.0
         g = -1
+        ng = 0
         for c in range(1 << dim):
             z = _zone_around(i, j, k, c, zs, dim)
             dm += zact[z] * dM[z]
             if code[z] >= 0.0:
-                gz = _gid(_target(z, code, zs), zs, gdims, goff, gper)
+                gz[ng] = _gid(_target(z, code, zs), zs, gdims, goff, gper)
             elif Vg[z] > 0.0:
-                gz = _gid(z, zs, gdims, goff, gper)
+                gz[ng] = _gid(z, zs, gdims, goff, gper)
             else:
                 continue
-            if g < 0 or gz < g:
-                g = gz
+            if g < 0 or gz[ng] < g:
+                g = gz[ng]
+            ng += 1
+        for b in range(ng):
+            if gz[b] != g:
+                edges[ne, 0] = g
+                edges[ne, 1] = gz[b]
+                ne += 1
         m1[a] = m0[a] + dm / (1 << dim)
         ngid[a] = g
         for d in range(dim):
@@ -503,4 +478,4 @@ def merge_nodes(near, code, Vg, M, dM, zact, v, owned, zs, ns, dim, gdims, goff,
             part[a, dim] += m1[a] - m0[a]
         if m1[a] > 0.0:
             part[a, dim + 1] += m1[a]
-    return un, m0, m1, ngid, part
+    return un, m0, m1, ngid, part, edges[:ne]
