@@ -1,9 +1,12 @@
-"""`immerse` command line: check, run, view, bench.
+"""`immerse` command line: check, run, view, campaign, report, bench.
 
   immerse check CASE [--ranks ROLE=N ...] [MACHINE]   validate only (case, meshes, expressions, resources)
   immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [MACHINE]
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
+  immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--retry-failed] [--only AXIS=L1,L2]
+      runs a matrix of cases x parameters (orchestrator/campaign), then campaign.csv/.h5 and the report
+  immerse report OUT                           rebuilds a campaign's report from OUT/campaign.h5
   immerse bench NAME [--out FILE] [--quick]   NAME: lagrange, taylor, ale, sod, advect, memory, output, coupling,
                                               plate_convergence, plate_convergence_3d, penalty_sweep
 
@@ -144,6 +147,34 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_campaign(args) -> int:
+    from orchestrator.campaign import run_campaign
+    from orchestrator.case import CaseError
+
+    only = {}
+    for item in args.only or []:
+        axis, sep, levels = item.partition("=")
+        if not sep or not axis or not levels:
+            return _fail(f"--only {item!r}: expected AXIS=LEVEL[,LEVEL...], e.g. zones=100,200")
+        only[axis] = levels.split(",")
+    try:
+        return run_campaign(args.campaign, args.out, engine=args.engine, retry_failed=args.retry_failed,
+                            only=only or None)
+    except CaseError as e:
+        return _fail(str(e))
+
+
+def cmd_report(args) -> int:
+    from orchestrator.campaign.report import write_report
+
+    out = Path(args.out)
+    if not (out / "campaign.h5").is_file():
+        return _fail(f"OUT = {str(out)!r}: no campaign.h5 there (run `immerse campaign` first)")
+    for p in write_report(out):
+        print(p)
+    return 0
+
+
 class _Parser(argparse.ArgumentParser):
     """Command-line errors are bad input too: one line, exit 2 (argparse prints usage + error)."""
 
@@ -175,6 +206,20 @@ def main(argv=None) -> int:
     p.add_argument("--field", nargs="*")
     p.add_argument("--step", nargs="*")
     p.set_defaults(func=cmd_view)
+    p = sub.add_parser("campaign", help="run a validation campaign (cases x parameters) and its report")
+    p.add_argument("campaign", help="the campaign file (or a directory holding campaign.toml)")
+    p.add_argument("--out", help="output directory (default: CAMPAIGN_DIR/out); an interrupted "
+                                 "campaign continues there")
+    p.add_argument("--engine", choices=("local", "slurm"), default="local",
+                   help="local: child processes on this machine (default); slurm: one sbatch job array")
+    p.add_argument("--retry-failed", action="store_true",
+                   help="run again the runs that failed, were unstable or timed out")
+    p.add_argument("--only", nargs="*", metavar="AXIS=LEVELS",
+                   help="run only these levels of an axis, e.g. zones=100,200 (a reduced matrix)")
+    p.set_defaults(func=cmd_campaign)
+    p = sub.add_parser("report", help="rebuild a campaign's report from its stored results")
+    p.add_argument("out")
+    p.set_defaults(func=cmd_report)
     p = sub.add_parser("bench", help="run a benchmark, write bench-NAME.json")
     p.add_argument("name")
     p.add_argument("--out")

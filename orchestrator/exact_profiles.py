@@ -132,6 +132,55 @@ def _reflected_shock(case: dict, params: dict, t: float) -> ExactProfile:
     return ExactProfile(_axis(params), "exact (reflected shock)", sample)
 
 
+def riemann_wall_solution(params: dict):
+    """(exact Riemann solution, exact reflection of its right-going shock) of a `riemann_wall` check:
+    the shock tube of a `riemann` check closed on the right by a wall at `x_wall`, the right state at
+    rest. The shock that reaches the wall reflects as a plane shock into the gas behind it
+    (Rankine-Hugoniot, solvers.ale.exact.reflected_shock); the solution is exact until the reflected
+    shock meets the contact."""
+    import math
+
+    ex = riemann_solution(params)
+    speeds = ex.speeds()
+    if "right_shock" not in speeds:
+        raise ValueError("riemann_wall: the Riemann problem has no right-going shock to reflect")
+    rho_r, u_r, p_r = (float(v) for v in params["right"])
+    if u_r != 0.0:
+        raise ValueError(f"riemann_wall: the right state must be at rest (u = {u_r:g})")
+    g = float(params.get("gamma_right", params["gamma_left"]))
+    p_inf = float(params.get("p_inf_right", 0.0))
+    c = math.sqrt(g * (p_r + p_inf) / rho_r)
+    return ex, reflected_shock_solution({"ahead": (rho_r, p_r), "gamma": g, "p_inf": p_inf,
+                                         "mach": speeds["right_shock"] / c})
+
+
+def riemann_wall_sample(params: dict, x, t: float):
+    """(rho, u, p) of the `riemann_wall` solution at positions x < x_wall, time t; ValueError once
+    the reflected shock has reached the contact (no simple exact solution after that)."""
+    ex, refl = riemann_wall_solution(params)
+    x0, x_wall = float(params["x0"]), float(params["x_wall"])
+    x = np.asarray(x, np.float64)
+    rho, u, p, _ = ex.sample(x, t, x0)
+    kind, xs = refl.shock_position(t, x0, x_wall)
+    if kind == "reflected":
+        if xs <= ex.waves(t, x0)["contact"]:
+            raise ValueError(f"riemann_wall: at t = {t:.6g} the reflected shock has reached the contact")
+        beyond = x > xs
+        rho, u, p = rho.copy(), u.copy(), p.copy()
+        rho[beyond], u[beyond], p[beyond] = refl.rho5, 0.0, refl.p5
+    return rho, u, p
+
+
+@register_profile("riemann_wall")
+def _riemann_wall(case: dict, params: dict, t: float) -> ExactProfile:
+    def sample(x):
+        rho, u, p = riemann_wall_sample(params, x, t)
+        beyond = np.asarray(x) > float(params["x_wall"])  # no gas there: nothing to draw
+        return {k: np.where(beyond, np.nan, a) for k, a in (("density", rho), ("velocity", u), ("pressure", p))}
+
+    return ExactProfile(_axis(params), "exact (Riemann, shock reflected by the wall)", sample)
+
+
 @register_profile("bar_wave")
 def _bar_wave(case: dict, params: dict, t: float) -> ExactProfile:
     """A bar along x struck at x = 0 (the bar_wave check): the elastic 1-D bar wave, front at c t with

@@ -197,10 +197,11 @@ def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
     proc.wait()
 
 
-def _dies_with_launcher():
-    """preexec_fn for mpiexec: the kernel sends it SIGKILL when the launcher dies, even by SIGKILL,
-    and its proxies then end the ranks (mpiexec's death ends the job, see end_job). Linux only; the
-    signal follows the launcher *thread* that started the job, which waits for the job's end."""
+def dies_with_parent(sig: int = signal.SIGKILL):
+    """preexec_fn for mpiexec: the kernel sends it ``sig`` (SIGKILL) when the launcher dies, even by
+    SIGKILL, and its proxies then end the ranks (mpiexec's death ends the job, see end_job). Linux
+    only; the signal follows the launcher *thread* that started the job, which waits for the job's
+    end. A campaign uses it with SIGTERM for its `immerse run`s, which then end their jobs in order."""
     import ctypes
 
     try:
@@ -211,7 +212,7 @@ def _dies_with_launcher():
     pr_set_pdeathsig = 1
 
     def arm() -> None:  # in the child, between fork and exec: one libc call, no Python locks
-        prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+        prctl(pr_set_pdeathsig, int(sig), 0, 0, 0)
         if os.getppid() != launcher:  # the launcher died before the line above
             os._exit(1)
 
@@ -316,7 +317,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     if stop.signum is not None:
         return JobResult(128 + stop.signum, f"interrupted by {signal.Signals(stop.signum).name} before "
                                             "the job started", stop.signum)
-    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=_dies_with_launcher())
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=dies_with_parent())
     watch = RankWatch(out)
     failed: list[str] = []
     died_first: list[str] = []  # ranks seen dead before any rank reported an error

@@ -1,0 +1,100 @@
+"""Campaign files: validation (one line naming the key), expansion into runs, case keys set by path."""
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from orchestrator.campaign.spec import load_campaign, parse_key, set_key
+from orchestrator.campaign.toml_write import dumps
+from orchestrator.case import CaseError
+
+REPO = Path(__file__).resolve().parents[3]
+SHOCK = REPO / "cases" / "campaigns" / "shock_tube_conforming_vs_immersed"
+
+
+def _write(tmp_path, text: str) -> Path:
+    p = tmp_path / "campaign.toml"
+    p.write_text(text.replace("@SHOCK", str(SHOCK)))
+    return p
+
+
+BASE = '''
+name = "t"
+[axes.zones]
+values = [100, 200]
+"ale.grid.cells" = [[100, 1], [200, 1]]
+[[series]]
+name = "conforming"
+case = "@SHOCK/conforming"
+[[series]]
+name = "mid"
+case = "@SHOCK/immersed"
+set = { "coupling.condition" = "tied" }
+[series.axes.zones]
+"lagrange.bodies[0].mesh.box.lower" = [[0.905, 0.0], [0.9025, 0.0]]
+'''
+
+
+def test_the_matrix_expands_into_series_times_levels_with_the_keys_set(tmp_path):
+    camp = load_campaign(_write(tmp_path, BASE))
+    assert [r.name for r in camp.runs] == ["conforming-zones100", "conforming-zones200", "mid-zones100", "mid-zones200"]
+    mid = camp.runs[3]
+    assert mid.levels == {"zones": 200}
+    assert mid.data["ale"]["grid"]["cells"] == [200, 1]
+    assert mid.data["lagrange"]["bodies"][0]["mesh"]["box"]["lower"] == [0.9025, 0.0]
+    assert mid.data["coupling"]["condition"] == "tied"
+    assert camp.runs[0].ranks == {"ale": 1} and mid.ranks == {"ale": 1, "lagrange": 1}
+    assert camp.runs[0].data["ale"]["grid"]["cells"] == [100, 1]
+
+
+@pytest.mark.parametrize("edit, key, allowed", [
+    (lambda t: t.replace('name = "t"', 'name = "t"\nspeed = 3'), "speed", "unknown key"),
+    (lambda t: t.replace('values = [100, 200]', 'values = [100, 200, 400]'), 'axes.zones."ale.grid.cells"',
+     "must have 3 items"),
+    (lambda t: t.replace('case = "@SHOCK/conforming"', 'case = "nowhere"'), "series[0].case", "must be a case directory"),
+    (lambda t: t.replace('"coupling.condition" = "tied"', '"coupling.condition" = "glued"'),
+     "run mid-zones100: coupling.condition", "must be one of"),
+    (lambda t: t.replace('"ale.grid.cells" = [[100, 1], [200, 1]]', '"ale.grid.cells" = [[100, 1], [0, 1]]'),
+     "run conforming-zones200: ale.grid.cells", ""),
+    (lambda t: t.replace('"lagrange.bodies[0]', '"lagrange.bodies[3]'), "axes", "has 1 entries, no [3]"),
+    (lambda t: t.replace('name = "mid"', 'name = "conforming"'), "series[1].name", "must differ"),
+    (lambda t: t + '[report]\nresolution = "cells"\n', "report.resolution", "must name an axis"),
+    (lambda t: t.replace("[axes.zones]", "[axes.zones\n"), "campaign.toml", "TOML syntax error"),
+])
+def test_a_bad_campaign_is_one_line_naming_the_key(tmp_path, edit, key, allowed):
+    with pytest.raises(CaseError) as e:
+        load_campaign(_write(tmp_path, edit(BASE)))
+    msg = str(e.value)
+    assert "\n" not in msg and msg.startswith(key), msg
+    assert allowed in msg, msg
+
+
+def test_bad_campaign_through_the_cli_exits_2_and_writes_nothing(tmp_path, run_immerse):
+    p = _write(tmp_path, BASE.replace('"coupling.condition" = "tied"', '"coupling.condition" = "glued"'))
+    out = tmp_path / "out"
+    r = run_immerse("campaign", p, "--out", out)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.count("\n") == 1 and "coupling.condition = 'glued'" in r.stderr, r.stderr
+    assert not out.exists()
+
+
+def test_keys_by_path_with_indices():
+    assert parse_key("lagrange.bodies[0].mesh.box") == ["lagrange", "bodies", 0, "mesh", "box"]
+    assert parse_key("lagrange.bodies.0.mesh") == ["lagrange", "bodies", 0, "mesh"]
+    d = {"lagrange": {"bodies": [{"mesh": {}}]}}
+    set_key(d, "lagrange.bodies.0.mesh.file", "m.msh")
+    set_key(d, "ranks.ale", 2)  # a missing table is created
+    assert d == {"lagrange": {"bodies": [{"mesh": {"file": "m.msh"}}]}, "ranks": {"ale": 2}}
+    with pytest.raises(KeyError, match="no entry"):
+        set_key(d, "lagrange.bodies[1]", {})
+
+
+def test_every_shipped_case_survives_the_toml_writer():
+    """A run's case.toml is the base case read by tomllib and written back: nothing may change."""
+    files = sorted((REPO / "cases").rglob("case.toml"))
+    assert len(files) > 20
+    for f in files:
+        data = tomllib.loads(f.read_text())
+        assert tomllib.loads(dumps(data)) == data, f
