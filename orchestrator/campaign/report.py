@@ -280,14 +280,16 @@ def _html(spec, sections) -> str:
              "<style>body{font-family:sans-serif;max-width:1000px;margin:2em auto;padding:0 1em}"
              "figure{margin:1.5em 0}img{max-width:100%}figcaption{font-size:90%;color:#333}"
              "table{border-collapse:collapse;font-size:85%;margin:1em 0}"
-             "td,th{border:1px solid #bbb;padding:2px 6px;text-align:left}</style></head><body>",
+             "td,th{border:1px solid #bbb;padding:2px 6px;text-align:left}"
+             "figure.pic{display:inline-block;width:47%;vertical-align:top;margin:0.5em 1%}</style></head><body>",
              f"<h1>Campaign {e(spec['name'])}</h1>"]
     if spec.get("description"):
         parts.append(f"<p>{e(spec['description'].strip())}</p>")
     for sec in sections:
         parts.append(f"<h2>{e(sec['chart'])}</h2>")
         for name, caption in sec["figures"]:
-            parts.append(f"<figure><img src=\"figures/{e(name)}\" alt=\"{e(caption)}\">"
+            cls = " class=\"pic\"" if name.startswith("picture_") else ""  # pictures two a row
+            parts.append(f"<figure{cls}><img src=\"figures/{e(name)}\" alt=\"{e(caption)}\">"
                          f"<figcaption>{e(caption)}</figcaption></figure>")
         for title, head, body in sec["tables"]:
             parts.append(f"<h3>{e(title)}</h3><table><tr>" + "".join(f"<th>{e(h)}</th>" for h in head) + "</tr>")
