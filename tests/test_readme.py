@@ -49,7 +49,7 @@ def _parse(argv: list[str], monkeypatch) -> SimpleNamespace:
         seen["args"] = args
         return 0
 
-    for name in ("cmd_check", "cmd_run", "cmd_view", "cmd_bench"):
+    for name in ("cmd_check", "cmd_run", "cmd_view", "cmd_bench", "cmd_campaign", "cmd_report"):
         monkeypatch.setattr(cli, name, record)
     assert cli.main(argv) == 0
     return seen["args"]
@@ -57,7 +57,7 @@ def _parse(argv: list[str], monkeypatch) -> SimpleNamespace:
 
 def test_readme_has_the_commands():
     verbs = {c[1] for c in IMMERSE}
-    assert verbs == {"check", "run", "view", "bench"}
+    assert verbs == {"check", "run", "view", "bench", "campaign", "report"}
     assert [c[:2] for c in commands("make")] == [["make", "demo"], ["make", "test"]]
 
 
@@ -89,6 +89,14 @@ def test_every_immerse_command_parses_and_names_what_exists(monkeypatch):
             assert args.out in outputs, f"{line}: views an output no README run writes"
         if cmd[1] == "bench":
             assert args.name in bench.BENCHES, line
+        if cmd[1] == "campaign":
+            camp = REPO / args.campaign
+            assert (camp / "campaign.toml").is_file() or camp.is_file(), line
+            out = args.out or str(Path(args.campaign) / "out")
+            assert not Path(out).is_absolute(), f"{line}: an output path of this machine"
+            outputs[out] = args.campaign
+        if cmd[1] == "report":
+            assert args.out in outputs, f"{line}: reports on an output no README campaign writes"
 
 
 @pytest.mark.parametrize("cmd", [c for c in IMMERSE if c[1] == "check"], ids=lambda c: " ".join(c))

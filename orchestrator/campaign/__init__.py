@@ -29,9 +29,9 @@ def spec_dict(camp) -> dict:
             "runs": [r.name for r in camp.runs]}
 
 
-def _line(i: int, n: int, run, res: dict | None) -> str:
+def _line(i: int, n: int, run, res: dict | None, note: str | None = None) -> str:
     if res is None:
-        return f"[{i}/{n}] {run.name}: ended without a result (interrupted); runs again next time"
+        return f"[{i}/{n}] {run.name}: {note or 'ended without a result (interrupted)'}; runs again next time"
     s = res.get("summary") or {}
     text = f"[{i}/{n}] {run.name}: {res['status']}"
     if s:
@@ -61,7 +61,8 @@ def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = Fal
         d, is_done = rundir.prepare_run(out, run)
         res = rundir.read_result(d) if is_done else None
         if is_done and retry_failed and res and res["status"] not in ("passed", "check_failed"):
-            d, is_done = _forget(d, out, run)
+            (d / "result.json").unlink(missing_ok=True)
+            is_done = False
         if is_done:
             done += 1
         else:
@@ -71,9 +72,9 @@ def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = Fal
           f"(engine {engine}) -> {out}", flush=True)
     count = [done]
 
-    def on_done(run, d):
+    def on_done(run, d, note=None):
         count[0] += 1
-        print(_line(count[0], n, run, rundir.read_result(d)), flush=True)
+        print(_line(count[0], n, run, rundir.read_result(d), note), flush=True)
 
     started = time.monotonic()
     rc = 0
@@ -83,9 +84,13 @@ def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = Fal
 
             run_local(pending, camp.timeout_s, cores_here(), on_done)
         else:
-            from orchestrator.campaign.slurm import run_slurm
+            from orchestrator.campaign.slurm import SlurmError, run_slurm
 
-            run_slurm(camp, out, pending, on_done)
+            try:
+                run_slurm(camp, out, pending, on_done)
+            except SlurmError as e:
+                print(f"immerse: campaign {camp.name}: {e}", file=sys.stderr)
+                rc = 1
     except KeyboardInterrupt as e:
         signum = e.args[0] if e.args else 2
         print(f"immerse: campaign interrupted ({'SIGTERM' if signum == 15 else 'SIGINT'}); finished "
@@ -108,7 +113,3 @@ def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = Fal
           + f" in {time.monotonic() - started:.1f} s -> {out / 'campaign.csv'}", flush=True)
     return rc
 
-
-def _forget(d: Path, out: Path, run):
-    (d / "result.json").unlink(missing_ok=True)
-    return d, False
