@@ -51,13 +51,23 @@ def join(role: str, roles: list[str]) -> Placement:
     return Placement(role, roles, world, comm, inter)
 
 
+LAUNCH_HOST_ENV = "IMMERSE_LAUNCH_HOST"
+"""The host of the launcher (set by orchestrator.launch for every rank)."""
+
+
 def run_dir(out_dir: Path) -> Path:
     """Run-control files (pids, error reports) that `immerse run` watches."""
     return Path(out_dir) / ".run"
 
 
 def register_process(out_dir: Path, role: str, rank: int) -> None:
-    """Record pid -> (role, rank) so the launcher can name a rank that dies without a word (SIGKILL)."""
+    """Record pid -> (role, rank) so the launcher can name a rank that dies without a word (SIGKILL).
+    Only a process on the launcher's host records itself: a pid names a process on one host only
+    (a rank on another node of a Slurm allocation is watched by mpiexec)."""
+    import socket
+
+    if os.environ.get(LAUNCH_HOST_ENV, socket.gethostname()) != socket.gethostname():
+        return
     d = run_dir(out_dir) / "pids"
     d.mkdir(parents=True, exist_ok=True)
     tmp = d / f".{os.getpid()}.tmp"

@@ -1,7 +1,7 @@
 """`immerse` command line: check, run, view, campaign, report, bench.
 
   immerse check CASE [--ranks ROLE=N ...] [MACHINE]   validate only (case, meshes, expressions, resources)
-  immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [MACHINE]
+  immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [--engine local|slurm] [MACHINE]
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
   immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--retry-failed] [--only AXIS=L1,L2]
@@ -100,22 +100,36 @@ def cmd_run(args) -> int:
     from orchestrator import outdir
     from orchestrator.restart import RestartError
 
+    if args.engine == "slurm":
+        from orchestrator.slurm_run import submit_run
+
+        try:
+            return submit_run(args, case, ranks)
+        except (RestartError, outdir.OutDirError) as e:
+            return _fail(str(e))
+
     out = Path(args.out) if args.out is not None else Path(case["case_dir"]) / "out"
     try:
         rc = run_job(case, out, ranks, args.restart, replace=args.replace)
     except (RestartError, outdir.OutDirError) as e:
         return _fail(str(e))
     if rc == 0:
-        import json
-
-        s = json.loads((out / "summary.json").read_text())
-        line = f"{s['case']}: {s['steps']} steps in {s['wall_time_s']:.2f} s -> {out}"
-        if "check" in s:
-            line += f"; check {'passed' if s['check']['passed'] else 'FAILED'}"
+        line, passed = summary_line(out)
         print(line)
-        if "check" in s and not s["check"]["passed"]:
+        if not passed:
             return 1
     return rc
+
+
+def summary_line(out: Path) -> tuple[str, bool]:
+    """The line a finished run ends with, and whether its check (if any) passed."""
+    import json
+
+    s = json.loads((out / "summary.json").read_text())
+    line = f"{s['case']}: {s['steps']} steps in {s['wall_time_s']:.2f} s -> {out}"
+    if "check" in s:
+        line += f"; check {'passed' if s['check']['passed'] else 'FAILED'}"
+    return line, s.get("check", {}).get("passed", True)
 
 
 def cmd_view(args) -> int:
@@ -199,6 +213,9 @@ def main(argv=None) -> int:
     p.add_argument("--replace", action="store_true",
                    help="replace an earlier output of this case in OUT: deletes only the files immerse "
                         "wrote there")
+    p.add_argument("--engine", choices=("local", "slurm"), default="local",
+                   help="local: run here (default); slurm: submit one batch job whose mpiexec spans its "
+                        "allocation, and follow it")
     _add_machine_flags(p)
     p.set_defaults(func=cmd_run)
     p = sub.add_parser("view", help="render PNG pictures of a run's output")

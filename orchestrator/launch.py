@@ -16,6 +16,7 @@ import contextlib
 import os
 import select
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -308,6 +309,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     env.setdefault("OMP_NUM_THREADS", "1")
     env.setdefault("OPENBLAS_NUM_THREADS", "1")
     env["PYTHONUNBUFFERED"] = "1"
+    env[P.LAUNCH_HOST_ENV] = socket.gethostname()  # only ranks on this host record their pids
     if sys.stderr.isatty():
         env["IMMERSE_TTY"] = "1"
     else:

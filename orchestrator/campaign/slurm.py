@@ -22,42 +22,20 @@ from __future__ import annotations
 import json
 import math
 import shlex
-import shutil
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
 
-POLL_S = 1.0
-FINAL_STATES = {"COMPLETED", "FAILED", "CANCELLED", "TIMEOUT", "NODE_FAIL", "OUT_OF_MEMORY",
-                "PREEMPTED", "BOOT_FAIL", "DEADLINE", "REVOKED"}
-
-
-class SlurmError(RuntimeError):
-    pass
-
-
-def _cmd(*args: str, check: bool = True, timeout: float = 60) -> subprocess.CompletedProcess:
-    exe = shutil.which(args[0]) or shutil.which(args[0], path="/usr/bin:/usr/sbin:/usr/local/bin")
-    if exe is None:
-        raise SlurmError(f"{args[0]} not found: --engine slurm needs Slurm's commands on PATH")
-    r = subprocess.run([exe, *args[1:]], capture_output=True, text=True, timeout=timeout)
-    if check and r.returncode != 0:
-        raise SlurmError(f"{' '.join(args[:2])} failed (exit {r.returncode}): "
-                         f"{' '.join((r.stderr or r.stdout).split())[:300]}")
-    return r
-
-
-def node_cpus() -> int | None:
-    """CPUs of the largest node of the cluster (sinfo), None if unknown."""
-    try:
-        r = _cmd("sinfo", "-h", "-o", "%c", check=False)
-    except (SlurmError, subprocess.TimeoutExpired):
-        return None
-    vals = [int(v.rstrip("+")) for v in r.stdout.split() if v.rstrip("+").isdigit()]
-    return max(vals) if vals else None
-
+from orchestrator.slurm_commands import (  # noqa: F401  (SlurmError: what run_slurm raises)
+    FINAL_STATES,
+    POLL_S,
+    SlurmError,
+    command,
+    final_states,
+    node_cpus,
+    queued_tasks,
+)
 
 def script_text(name: str, out: Path, runs_file: Path, n: int, cpus: int, timeout: float | None) -> str:
     q = shlex.quote
@@ -81,48 +59,6 @@ def script_text(name: str, out: Path, runs_file: Path, n: int, cpus: int, timeou
     return "\n".join(lines) + "\n"
 
 
-def queued_tasks(job: str) -> dict[int, str] | None:
-    """{array task id: state} of the job's tasks still in the queue; None if squeue failed."""
-    try:
-        r = _cmd("squeue", "-h", "-r", "-j", job, "-o", "%i %T", check=False)
-    except (SlurmError, subprocess.TimeoutExpired):
-        return None
-    if r.returncode != 0:
-        # a job slurmctld no longer knows at all: nothing of it is queued
-        return {} if "Invalid job id" in r.stderr else None
-    tasks = {}
-    for line in r.stdout.splitlines():
-        parts = line.split()
-        if len(parts) == 2 and "_" in parts[0]:
-            tid = parts[0].split("_", 1)[1]
-            if tid.isdigit():
-                tasks[int(tid)] = parts[1]
-    return tasks
-
-
-def final_states(job: str) -> dict[int, tuple[str, str]]:
-    """{array task id: (state, exit code)} of the job's finished tasks: scontrol (while slurmctld
-    keeps the job, MinJobAge), else sacct (where accounting runs)."""
-    states: dict[int, tuple[str, str]] = {}
-    try:
-        r = _cmd("scontrol", "-o", "show", "job", job, check=False)
-        for line in r.stdout.splitlines():
-            f = dict(kv.split("=", 1) for kv in line.split() if "=" in kv)
-            tid = f.get("ArrayTaskId", "")
-            if tid.isdigit():
-                states[int(tid)] = (f.get("JobState", "?"), f.get("ExitCode", "?"))
-        if states:
-            return states
-        r = _cmd("sacct", "-n", "-P", "-X", "-j", job, "-o", "JobID,State,ExitCode", check=False)
-        for line in r.stdout.splitlines():
-            parts = line.split("|")
-            if len(parts) == 3 and "_" in parts[0] and parts[0].split("_", 1)[1].isdigit():
-                states[int(parts[0].split("_", 1)[1])] = (parts[1].split()[0], parts[2])
-    except (SlurmError, subprocess.TimeoutExpired):
-        pass
-    return states
-
-
 def _cancel_previous(out: Path) -> None:
     rec = out / "slurm" / "job.json"
     try:
@@ -133,7 +69,7 @@ def _cancel_previous(out: Path) -> None:
     if q:
         print(f"campaign: cancelling slurm job {job} of an earlier start ({len(q)} tasks still queued)",
               flush=True)
-        _cmd("scancel", job, check=False)
+        command("scancel", job, check=False)
         deadline = time.monotonic() + 60
         while queued_tasks(job) and time.monotonic() < deadline:
             time.sleep(POLL_S)
@@ -156,7 +92,7 @@ def run_slurm(camp, out: Path, pending: list, on_done) -> None:
     cpus = max(run_weight(r, cap) for r, _ in pending)
     script = sdir / f"campaign_{k}.sbatch"
     atomic_write(script, script_text(camp.name, out, runs_file, len(pending), cpus, camp.timeout_s))
-    r = _cmd("sbatch", "--parsable", str(script))
+    r = command("sbatch", "--parsable", str(script))
     job = r.stdout.strip().split(";")[0]
     if not job.isdigit():
         raise SlurmError(f"sbatch printed {r.stdout.strip()!r}, not a job id")
@@ -195,7 +131,7 @@ def run_slurm(camp, out: Path, pending: list, on_done) -> None:
                                     f"without a result; see {sdir.name}/task_{job}_{i}.out")
             time.sleep(POLL_S)
     except KeyboardInterrupt as e:
-        _cmd("scancel", job, check=False)
+        command("scancel", job, check=False)
         raise KeyboardInterrupt(*(e.args or (int(signal.SIGINT),))) from None
     finally:
         signal.signal(signal.SIGTERM, old)
