@@ -143,16 +143,18 @@ def _chart_map(spec, chart, names, rows, path: Path) -> list[dict]:
     notes = []
     for i, name in enumerate(names):
         for j, lv in enumerate(levels):
-            rs = [r for r in rows if r["series"] == name and (axis is None or r.get(f"level.{axis}") == lv)]
+            # (a series that does not vary the map's axis: its runs fill the whole row)
+            rs = [r for r in rows if r["series"] == name
+                  and (axis is None or r.get(f"level.{axis}") in (lv, None))]
             worst = max((_WORST.index(r["status"]) for r in rs), default=0)
             grid[i, j] = worst
             notes += [{"series": name, "level": lv, "run": r["run"], "status": r["status"],
                        "message": r.get("message", "")} for r in rs
-                      if r["status"] not in ("passed",)]
+                      if r["status"] not in ("passed",) and all(n["run"] != r["run"] for n in notes)]
     cmap = ListedColormap([STATUS_COLOURS[s] for s in _WORST])
     fig, ax = plt.subplots(figsize=(max(4.5, 1.0 + 0.9 * len(levels)), 1.6 + 0.45 * len(names)))
     ax.imshow(grid, cmap=cmap, vmin=-0.5, vmax=len(_WORST) - 0.5, aspect="auto")
-    ax.set_xticks(range(len(levels)), [str(v) for v in levels])
+    ax.set_xticks(range(len(levels)), [f"{v:g}" if isinstance(v, float) else str(v) for v in levels])
     ax.set_yticks(range(len(names)), names)
     ax.set_xlabel(spec["report"].get("map_label") or (f"{axis}" if axis else ""))
     ax.set_title(f"{chart}: stability map")

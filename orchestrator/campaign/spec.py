@@ -67,6 +67,8 @@ SCHEMA = {
                     "case": {"type": "string", "minLength": 1},
                     "chart": _NAME,
                     "error": {"type": "string", "minLength": 1},
+                    "vary": {"type": "array", "items": {"type": "string"}, "uniqueItems": True,
+                             "x-allowed": "must be an array of axis names (the axes this series runs over)"},
                     "set": _KEYS,
                     "axes": {"type": "object", "additionalProperties": _SERIES_AXIS},
                 },
@@ -81,6 +83,7 @@ SCHEMA = {
                 "resolution": {"type": "string", "minLength": 1},
                 "resolution_label": {"type": "string", "minLength": 1},
                 "map": {"type": "string", "minLength": 1},
+                "map_label": {"type": "string", "minLength": 1},
                 "picture": {"type": "string", "minLength": 1,
                             "x-allowed": "must be the name of an output field (density, pressure, ...)"},
             },
@@ -229,7 +232,7 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
     for i, s in enumerate(data["series"]):
         if names.index(s["name"]) != i:
             raise CaseError(format_key(["series", i, "name"]), s["name"], "series names must differ")
-    n_runs = len(data["series"]) * _product(len(v) for v in axes.values())
+    n_runs = sum(_product(len(axes[a]) for a in s.get("vary", axes) if a in axes) for s in data["series"])
     if n_runs > MAX_RUNS:
         raise CaseError("axes", f"{n_runs} runs", f"a campaign may have at most {MAX_RUNS} runs")
 
@@ -251,12 +254,22 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
                 if len(vals) != len(axes[aname]):
                     raise CaseError(format_key(["series", si, "axes", aname, key]), vals,
                                     f"must have {len(axes[aname])} items, one per level of axes.{aname}.values")
-        for combo in itertools.product(*(range(len(v)) for v in axes.values())):
-            levels = {a: axes[a][k] for a, k in zip(axes, combo)}
+        vary = s.get("vary", list(axes))
+        for a in vary:
+            if a not in axes:
+                raise CaseError(format_key(["series", si, "vary"]), a,
+                                f"no such axis; axes: {', '.join(axes) or '(none)'}")
+        for aname in extra:
+            if aname not in vary:
+                raise CaseError(format_key(["series", si, "axes", aname]), MISSING,
+                                f"the series does not vary axis {aname!r} (vary = {vary})")
+        used = {a: t for a, t in data.get("axes", {}).items() if a in vary}
+        for combo in itertools.product(*(range(len(axes[a])) for a in used)):
+            levels = {a: axes[a][k] for a, k in zip(used, combo)}
             if only and any(a in only and _level_text(v) not in only[a] for a, v in levels.items()):
                 continue
             settings = dict(s.get("set", {}))
-            for (aname, a), k in zip(data.get("axes", {}).items(), combo):
+            for (aname, a), k in zip(used.items(), combo):
                 for key, vals in a.items():
                     if key != "values":
                         settings[key] = vals[k]

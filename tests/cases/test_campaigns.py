@@ -47,3 +47,59 @@ def test_shock_tube_immersed_walls_converge_at_the_conforming_order(tmp_path, ru
     for png in ("shock_tube_conforming_vs_immersed_cost.png", "shock_tube_conforming_vs_immersed_order.png",
                 "shock_tube_conforming_vs_immersed_stability.png"):
         assert (out / "figures" / png).stat().st_size > 10_000
+
+
+@pytest.mark.timeout(600)
+def test_ale_resolution_3d_costs_far_more_for_the_same_sedov_error(tmp_path, run_immerse):
+    """Sedov in 2-D (30^2, 60^2) and 3-D (10^3, 20^3), the two coarser levels of the campaign. Measured
+    shock radius errors: 2-D 1.52e-2, 1.25e-2; 3-D 8.23e-2, 2.68e-2 (full campaign: 6.5e-3 at 120^2
+    in 4.3 s, 1.43e-2 at 40^3 in 22.5 s). Asserted: the error falls with the grid in both dimensions,
+    and the 3-D run at refinement 2 is still less accurate than the coarsest 2-D run while costing
+    more than five times its zone-cycles (measured 8.8x: 121 steps x 8000 zones against 122 x 900)."""
+    out = tmp_path / "out"
+    r = run_immerse("campaign", CAMPAIGNS / "ale_resolution_2d_3d", "--out", out, "--only", "refinement=1,2")
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = {x["run"]: x for x in _rows(out)}
+    e = {k: float(x["error"]) for k, x in rows.items()}
+    assert e["2-D_cylindrical-refinement2"] < e["2-D_cylindrical-refinement1"] < 0.02, e
+    assert e["3-D_spherical-refinement2"] < 0.5 * e["3-D_spherical-refinement1"], e
+    assert e["3-D_spherical-refinement2"] > e["2-D_cylindrical-refinement1"], e
+    zc = {k: int(x["steps"]) * (8000 if "3-D" in k and k.endswith("2") else 900) for k, x in rows.items()}
+    assert zc["3-D_spherical-refinement2"] > 5 * zc["2-D_cylindrical-refinement1"], zc
+
+
+@pytest.mark.timeout(600)
+def test_taylor_bar_impact_diameter_converges_towards_the_measured_one(tmp_path, run_immerse):
+    """3 and 6 cells across the radius. Measured: impact diameter 10.77 and 11.15 mm against 11.185 mm
+    (errors 3.68 % and 0.30 %), final length 26.56 and 26.51 mm against 26.54 mm (0.09 %, 0.12 %).
+    Asserted: the diameter error falls more than tenfold (measured 12x) and stays under 1 % on the
+    finer mesh; the length within 0.2 % on both."""
+    out = tmp_path / "out"
+    r = run_immerse("campaign", CAMPAIGNS / "taylor_bar_convergence", "--out", out, "--only", "radial_cells=3,6")
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = {int(x["level.radial_cells"]): x for x in _rows(out)}
+    d = {n: float(x["error"]) for n, x in rows.items()}
+    assert d[6] < d[3] / 10 and d[6] < 0.01, d
+    for x in rows.values():
+        assert float(x["metric.final_length.rel_error"]) < 2e-3, x["metric.final_length.rel_error"]
+
+
+@pytest.mark.timeout(600)
+def test_coupling_methods_multiplier_most_accurate_penalty_stopped_beyond_its_limit(tmp_path, run_immerse):
+    """The embedded piston with the multipliers, Nitsche and the penalty at 10 and 1e4 Pa/m. Measured:
+    shocked-face pressure error 2.8e-5 (multiplier), 2.7e-5 (Nitsche), 6.9e-5 (penalty 10 Pa/m); the
+    penalty at 1e4 Pa/m stopped at step 6 (limit 2.9e-4 s, step 5.9e-4 s). Asserted: every stable run
+    within 1e-4 of p*; the multiplier's error below 0.7 x the penalty's (measured 0.41); the stiff
+    penalty 'unstable' with the coupler's message naming the method and its limit, on the map."""
+    out = tmp_path / "out"
+    r = run_immerse("campaign", CAMPAIGNS / "coupling_methods", "--out", out, "--only", "stiffness=10,10000")
+    assert r.returncode == 0, r.stdout + r.stderr
+    rows = {x["run"]: x for x in _rows(out)}
+    assert set(rows) == {"multiplier", "nitsche", "penalty-stiffness10", "penalty-stiffness10000"}
+    e = {k: float(x["error"]) for k, x in rows.items() if x["status"] == "passed"}
+    assert set(e) == {"multiplier", "nitsche", "penalty-stiffness10"} and max(e.values()) < 1e-4, e
+    assert e["multiplier"] < 0.7 * e["penalty-stiffness10"], e
+    bad = rows["penalty-stiffness10000"]
+    assert bad["status"] == "unstable", bad
+    assert "coupling method 'penalty' is unstable" in bad["message"] and "stable-step limit" in bad["message"]
+    assert "coupling method &#x27;penalty&#x27; is unstable" in (out / "report.html").read_text()

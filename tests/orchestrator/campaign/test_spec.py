@@ -49,6 +49,18 @@ def test_the_matrix_expands_into_series_times_levels_with_the_keys_set(tmp_path)
     assert camp.runs[0].data["ale"]["grid"]["cells"] == [100, 1]
 
 
+def test_a_series_runs_over_the_axes_it_varies_only(tmp_path):
+    text = BASE.replace('name = "mid"', 'name = "mid"\nvary = []').replace(
+        '[series.axes.zones]\n"lagrange.bodies[0].mesh.box.lower" = [[0.905, 0.0], [0.9025, 0.0]]\n', "")
+    camp = load_campaign(_write(tmp_path, text))
+    assert [r.name for r in camp.runs] == ["conforming-zones100", "conforming-zones200", "mid"]
+    assert camp.runs[2].levels == {} and camp.runs[2].data["ale"]["grid"]["cells"] == [400, 1]
+    with pytest.raises(CaseError, match=r"^series\[1\]\.vary = 'cells': no such axis"):
+        load_campaign(_write(tmp_path, text.replace("vary = []", 'vary = ["cells"]')))
+    with pytest.raises(CaseError, match=r"^series\[1\]\.axes\.zones = <missing>: the series does not vary"):
+        load_campaign(_write(tmp_path, BASE.replace('name = "mid"', 'name = "mid"\nvary = []')))
+
+
 @pytest.mark.parametrize("edit, key, allowed", [
     (lambda t: t.replace('name = "t"', 'name = "t"\nspeed = 3'), "speed", "unknown key"),
     (lambda t: t.replace('values = [100, 200]', 'values = [100, 200, 400]'), 'axes.zones."ale.grid.cells"',
