@@ -45,7 +45,7 @@ RUN = table(
     {
         "dimension": {"type": "integer", "enum": [2, 3]},
         "end_time": number("s", exclusiveMinimum=0),
-        "dt_scale": number(None, exclusiveMinimum=0, maximum=1),
+        "dt_scale": number(None, exclusiveMinimum=0, maximum=4),
         "output_interval": number("s", exclusiveMinimum=0),
         "checkpoint_interval": number("s", exclusiveMinimum=0),
         "max_steps": integer("steps", minimum=1),

@@ -367,6 +367,9 @@ class Coupler:
         wall0 = _time.perf_counter()
         self.first_step_s = None
         self.log(f"case {self.case['name']}: solvers {', '.join(self.roles)}; end time {self.end_time:g} s")
+        if self.dt_scale > 1.0:
+            self.log(f"warning: run.dt_scale = {self.dt_scale:g} > 1: every step is beyond the solvers' "
+                     "stable (Courant) limit (a stability study); a failure is reported as that")
         if self.out_index == 0:
             self.write_output()
         self.next_output_t = self._next_multiple(self.output_interval)

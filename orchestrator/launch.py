@@ -367,6 +367,10 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         if unstable and not any(rep.startswith("coupler rank") for rep in reports):
             # a solver failed while the coupling's step was beyond its own limit: that is the cause
             why = f"{unstable}; then: {why}"
+        elif case["run"].get("dt_scale", 0.9) > 1.0:
+            # the case asked for steps beyond the solvers' own stable limit (a stability study)
+            why = (f"unstable: run.dt_scale = {case['run']['dt_scale']:g} > 1 took steps beyond the "
+                   f"solvers' stable (Courant) limit; then: {why}")
     elif failed:
         why = f"{failed[0]} died first (killed by a signal or exited without a message)"
     else:

@@ -32,7 +32,8 @@ STATUSES = {
 }
 INSTABILITY = re.compile(
     r"unstable|instabilit|beyond (?:its|the) stable|stable (?:time )?step|courant|energy grow|"
-    r"invert|negative (?:volume|jacobian|density|energy)|non-finite|vacuum|cavitat|tangled",
+    r"invert|negative (?:internal )?(?:volume|jacobian|density|energy)|non-positive|non-finite|vacuum|"
+    r"cavitat|tangled",
     re.IGNORECASE)
 """Words of the detectors' messages that name an instability (the map's 'unstable detected')."""
 

@@ -84,6 +84,21 @@ _REASONS = {
 }
 
 
+def _bad_state_cause(rho: float, e: float, c: float) -> str:
+    """What an invalid zone state says about its cause (the message names it: a campaign's stability
+    map reads it)."""
+    import math
+
+    if not (math.isfinite(rho) and math.isfinite(e)):
+        return "invalid thermodynamic state: non-finite density or energy"
+    if rho <= 0.0:
+        return "invalid thermodynamic state: non-positive density"
+    if e < 0.0:
+        return ("invalid thermodynamic state: negative internal energy (the zone's kinetic energy exceeds "
+                "its total: a near-vacuum expansion, or a step beyond the stable limit)")
+    return "invalid thermodynamic state: sound speed not real (c^2 <= 0: the EOS beyond its range)"
+
+
 class SolverError(RuntimeError):
     """A physical failure (tangled zone, invalid EOS state) naming the zone, step, time and state."""
 
@@ -485,7 +500,10 @@ class AleSolver:
             state = (f"rho={self.rho[bad]:.6g} kg/m^3, e={self.e[bad]:.6g} J/kg (EOS at "
                      f"{self.e[bad] + self.de_h[bad]:.6g}), p={self.p[bad]:.6g} Pa, c={self.c[bad]:.6g} m/s, "
                      f"q={self.q[bad]:.6g} Pa, V={self.V[bad]:.6g}, M={self.M[bad]:.6g} kg")
-            self._fail(f"ALE zone {ijk}: {_REASONS.get(reason, 'failure')}{what} at step {self.step}, "
+            why = _REASONS.get(reason, "failure")
+            if reason == hydro.BAD_STATE:
+                why = _bad_state_cause(self.rho[bad], self.e[bad] + self.de_h[bad], self.c[bad])
+            self._fail(f"ALE zone {ijk}: {why}{what} at step {self.step}, "
                        f"t={self.time:.6g} s; state {state}; material {self.material!r} "
                        f"{_eos.describe(self.eos_code, self.eos_par)}")
         return float(dt_min)

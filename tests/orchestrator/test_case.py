@@ -255,7 +255,8 @@ def _edited(tmp_path, old, new, base="box3d"):
 @pytest.mark.parametrize("old, new, key, fragment", [
     ("[lagrange]\n", "[lagrange]\nhourglas = 0.1\n", "lagrange.hourglas", "unknown key"),
     ("hourglass = 0.05", "hourglass = 0.2", "lagrange.hourglass", "must be >= 0 and <= 0.125"),
-    ("dt_scale = 0.8", "dt_scale = 0", "run.dt_scale", "must be > 0 and <= 1"),
+    ("dt_scale = 0.8", "dt_scale = 0", "run.dt_scale", "must be > 0 and <= 4"),
+    ("dt_scale = 0.8", "dt_scale = 4.5", "run.dt_scale", "must be > 0 and <= 4"),
     ("dimension = 3", "dimension = 3.5", "run.dimension", "integer"),
     ("dimension = 3", 'dimension = "3"', "run.dimension", "must be an integer"),
     ("[materials.rubber]", '[materials."my rubber"]', 'materials."my rubber"', "invalid name"),
