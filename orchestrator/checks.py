@@ -632,7 +632,9 @@ def coupled_balances(case, out, history, params):
     """A coupled run's bookkeeping: the largest |balance| of every solver and of the coupling over
     the run (`<role>.<Q>_balance_rel` -> metric `<Q>_balance_rel`, the largest over the roles), the
     interface work relative to the initial energy of gas + bodies (`interface_work_rel`), and the gas
-    mass left in zones a body fills at the last output (`covered_gas_mass`, kg); with several
+    mass left in zones a body fills at the last output (`covered_gas_mass`, kg), cond(H) of the
+    multiplier system and the multipliers' zone-to-zone spread (`cond_H`, `lambda_oscillation_max`,
+    `lambda_oscillation`: orchestrator.coupling.embedded.multiplier_oscillation); with several
     background materials, the largest relative change of one material's mass over the run
     (`material_mass_balance_rel`: every material is conserved on its own in a closed box)."""
     from orchestrator import output
@@ -661,4 +663,10 @@ def coupled_balances(case, out, history, params):
         full = cd["blocked_fraction"] >= 1.0 - 1e-12
         # (density there is 0 when the zone holds nothing: the check's reference is exactly 0)
         vals["covered_gas_mass"] = float(np.sum(cd["density"][full]) * zone_volume)
+    # the multiplier system's conditioning (first step) and the multipliers' zone-to-zone spread
+    # (the largest over the run, and at the end): what the stabilisation is for
+    for key in ("cond_H", "lambda_oscillation_max", "lambda_oscillation"):
+        a = history.get(f"coupling.{key}")
+        if a is not None and len(a) and np.isfinite(a[-1]):
+            vals[key] = float(a[-1])
     return vals

@@ -161,12 +161,16 @@ def collect(out: Path, spec: dict, names: list[str] | None = None) -> list[dict]
     return rows
 
 
-def read_h5(path: Path) -> tuple[dict, list[dict]]:
-    """(campaign spec, rows) from a campaign.h5."""
+def read_h5(path: Path, summaries: bool = False):
+    """(campaign spec, rows) from a campaign.h5; with ``summaries``, also each row's summary.json
+    (None for a run without one)."""
     import h5py
 
     with h5py.File(path, "r") as f:
         spec = json.loads(f["campaign"].attrs["json"])
         found = [(d["run"], d["result"]) for d in (json.loads(g.attrs["json"]) for g in f["runs"].values())]
     found.sort(key=lambda mr: mr[0].get("index", 0))
-    return spec, [row_of(m, r) for m, r in found]
+    rows = [row_of(m, r) for m, r in found]
+    if summaries:
+        return spec, rows, [(r or {}).get("summary") for _, r in found]
+    return spec, rows

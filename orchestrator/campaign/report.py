@@ -129,6 +129,33 @@ def _chart_order(spec, chart, names, rows, path: Path) -> dict[str, float] | Non
     return orders
 
 
+def _chart_value(spec, chart, names, rows, found, value, label, path: Path) -> bool:
+    """A further quantity of the report (`plots`) against the resolution axis, one series per method."""
+    import matplotlib.pyplot as plt
+
+    from orchestrator.campaign.collect import error_of
+
+    axis = spec["report"].get("resolution")
+    if not axis:
+        return False
+    fig, ax = plt.subplots(figsize=(6.4, 4.6))
+    for k, name in enumerate(names):
+        rs = [(r, s) for r, s in zip(rows, found) if r["series"] == name and r["status"] in ("passed", "check_failed")]
+        n = np.array([_float(r.get(f"level.{axis}")) for r, _ in rs])
+        v = np.array([error_of(s, value) for _, s in rs])
+        ok = np.isfinite(n) & np.isfinite(v) & (v > 0) & (n > 0)
+        ax.loglog(n[ok], v[ok], marker=_MARKERS[k % len(_MARKERS)], linestyle="-", label=name)
+    ax.set_xlabel(spec["report"].get("resolution_label") or f"{axis} (resolution)")
+    ax.set_ylabel(label)
+    ax.set_title(f"{chart}: {value}")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return True
+
+
 _WORST = ["not_run", "passed", "check_failed", "timeout", "unstable", "failed"]
 
 
@@ -208,7 +235,7 @@ def write_report(out: Path) -> list[Path]:
     from orchestrator.campaign.collect import read_h5
 
     out = Path(out)
-    spec, rows = read_h5(out / "campaign.h5")
+    spec, rows, summaries = read_h5(out / "campaign.h5", summaries=True)
     figdir = out / "figures"
     figdir.mkdir(exist_ok=True)
     ref = spec["report"].get("reference", "the cases' own check references")
@@ -230,6 +257,12 @@ def write_report(out: Path) -> list[Path]:
                                    f"(least squares, log-log). Reference: {ref}."))
             sec["tables"].append(("Observed order per series", ["series", "order"],
                                   [[k, f"{v:.3f}" if v == v else "-"] for k, v in orders.items()]))
+        for j, plot in enumerate(spec["report"].get("plots", [])):
+            f = figdir / f"{base}_plot{j}.png"
+            if _chart_value(spec, chart, names, rows, summaries, plot["value"], plot["label"], f):
+                sec["figures"].append((f.name, f"{plot['label']} against {spec['report'].get('resolution')}, "
+                                       f"{chart}, one series per method ({plot['value']} of each run). "
+                                       f"Reference: {ref}."))
         f3 = figdir / f"{base}_stability.png"
         notes = _chart_map(spec, chart, names, rows, f3)
         sec["figures"].append((f3.name, f"Stability map, {chart}: each run's outcome (method x "

@@ -84,6 +84,11 @@ SCHEMA = {
                 "resolution_label": {"type": "string", "minLength": 1},
                 "map": {"type": "string", "minLength": 1},
                 "map_label": {"type": "string", "minLength": 1},
+                "plots": {"type": "array", "items": {
+                    "type": "object", "required": ["value", "label"], "additionalProperties": False,
+                    "properties": {"value": {"type": "string", "minLength": 1},
+                                   "label": {"type": "string", "minLength": 1}}},
+                    "x-allowed": "must be an array of { value = <check metric or reported value>, label = <axis label with unit> }"},
                 "picture": {"type": "string", "minLength": 1,
                             "x-allowed": "must be the name of an output field (density, pressure, ...)"},
             },

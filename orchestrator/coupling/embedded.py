@@ -90,6 +90,23 @@ def background_modulus(ale: dict) -> float:
     return best
 
 
+def multiplier_oscillation(lam, pairs, normal) -> float:
+    """Zone-to-zone spread of the multipliers: the mean |λ_i - λ_j| over face-adjacent cut zones of
+    the same side of a surface (normals within 60 degrees: the two faces of a thin wall carry
+    different loads) relative to the mean |λ| (0 for a smooth field; the unstabilised solve gives
+    ~1.5 on a straight line with uniform masses, the stabilised one 0.02: coupling.solve.BETA)."""
+    if lam is None or len(pairs) == 0:
+        return 0.0
+    pairs = pairs[np.einsum("ij,ij->i", normal[pairs[:, 0]], normal[pairs[:, 1]]) > 0.5]
+    if len(pairs) == 0:
+        return 0.0
+    lam = np.asarray(lam).reshape(len(lam), -1)
+    scale = float(np.mean(np.linalg.norm(lam, axis=1)))
+    if not scale > 0.0:
+        return 0.0
+    return float(np.mean(np.linalg.norm(lam[pairs[:, 0]] - lam[pairs[:, 1]], axis=1)) / scale)
+
+
 class EmbeddedCoupling:
     def __init__(self, case: dict, surface: dict):
         self.grid = Grid.from_ale(case["ale"])
@@ -98,6 +115,9 @@ class EmbeddedCoupling:
         self.state = self.method.new_state()
         self.modulus = background_modulus(case["ale"])
         self.stable_limit = np.inf  # the variant's own explicit step limit, smallest over the run
+        self.cond_H = np.nan  # cond(H) of the multiplier system at the first step with an interface
+        self.lambda_oscillation = 0.0  # zone-to-zone spread of the multipliers this step (see solve)
+        self.lambda_oscillation_max = 0.0
         self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
         self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
@@ -158,7 +178,12 @@ class EmbeddedCoupling:
         self.m_solve = self._solve_masses(ops)
         v_f = vstar_f + load * self.free / self.mass[:, None]
         self.stable_limit = min(self.stable_limit, self.method.stable_dt(ops, m_b, self.m_solve, self.modulus))
+        if np.isnan(self.cond_H) and ops.n_zones:
+            # once: what the stabilisation is for (s_con = λmax/λmin independent of h when stabilised)
+            self.cond_H = self.method.condition_number(ops, m_b, self.m_solve, dt)
         res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus)
+        self.lambda_oscillation = multiplier_oscillation(self.state.lam, ops.pairs, ops.normal)
+        self.lambda_oscillation_max = max(self.lambda_oscillation_max, self.lambda_oscillation)
         self.imp_b = res.impulse_b
         imp = load + res.impulse_f
         self.imp_f = imp
@@ -204,14 +229,16 @@ class EmbeddedCoupling:
         return np.concatenate([self.imp_b.ravel(), v_half_e.ravel(), v_bar_e.ravel()])
 
     # ---- diagnostics and checkpoints ---------------------------------------------------------------
-    DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work", "stable_dt_limit")
+    DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work", "stable_dt_limit", "cond_H",
+                   "lambda_oscillation", "lambda_oscillation_max")
 
     def diagnostic_names(self) -> list[str]:
         return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
 
     def diagnostics(self) -> list[float]:
         return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
-                                        self.work_f, float(min(self.stable_limit, 1e300))]
+                                        self.work_f, float(min(self.stable_limit, 1e300)),
+                                        float(self.cond_H), self.lambda_oscillation, self.lambda_oscillation_max]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}

@@ -187,6 +187,10 @@ class CouplingMethod:
         """Impulses of one step from the predictor velocities; updates `state`."""
         raise NotImplementedError
 
+    def condition_number(self, ops: Operators, m_b, m_f, dt: float) -> float:
+        """cond(H) of the variant's system for this step, where it solves one (nan otherwise)."""
+        return math.nan
+
 
 # ----------------------------------------------------------------------------------------------
 @register("multiplier")
@@ -212,6 +216,14 @@ class Multiplier(CouplingMethod):
 
     def stable_dt(self, ops, m_b, m_f, modulus=None) -> float:
         return math.inf
+
+    def condition_number(self, ops, m_b, m_f, dt) -> float:
+        """λ_max/λ_min of the assembled H (S.assemble: the same system the matrix-free solve applies)."""
+        if ops.n_zones == 0:
+            return 1.0
+        sysm = S.assemble(ops, m_b, m_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
+                          beta=float(self.cfg["beta"]))
+        return S.condition_number(sysm.H)
 
     def step(self, ops, v_b, m_b, v_f, m_f, dt, state, modulus=None) -> StepResult:
         # (matrix_free: the same solve as S.solve in one numba kernel -- the step's hot path; imported
