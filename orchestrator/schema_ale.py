@@ -24,8 +24,8 @@ from .schema_rules import CaseError, check_expression, check_extent, check_lengt
 # ---- schema --------------------------------------------------------------------------------------
 EOS_KEYS = {
     "ideal_gas": ("eos", "gamma"),
-    "stiffened_gas": ("eos", "gamma", "p_inf"),
-    "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0"),
+    "stiffened_gas": ("eos", "gamma", "p_inf", "cavitation_pressure"),
+    "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0", "cavitation_pressure"),
     "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
     "void": ("eos",),   # empty space: volume only (several materials per zone)
 }
@@ -46,6 +46,8 @@ FLUID = {
         "bulk_modulus": number("Pa", exclusiveMinimum=0),
         "exponent": number("dimensionless", minimum=1),
         "p0": number("Pa"),
+        # a liquid's pressure below it stops the run naming cavitation (the EOS has no phase change)
+        "cavitation_pressure": number("Pa"),
         "A": number("Pa"),
         "B": number("Pa"),
         "R1": number("dimensionless", exclusiveMinimum=0),

@@ -77,7 +77,7 @@ JWL_OMEGA = 4
 JWL_RHO0 = 5
 
 # Keys of the material table that are not EOS parameters and are ignored.
-IGNORED_KEYS = ("eos",)
+IGNORED_KEYS = ("eos", "cavitation_pressure")  # (the solver reads the latter: solver._check_cavitation)
 
 
 def _gt(lo):

@@ -516,6 +516,36 @@ class AleSolver:
         if self._error is None:
             self._error = msg
 
+    def _check_cavitation(self) -> None:
+        """A liquid (tait, stiffened_gas) with a `cavitation_pressure` whose pressure fell below it:
+        the EOS would go on into tension it cannot hold (no phase change), so the run stops here
+        naming cavitation (the zone, its pressure and the limit)."""
+        limits = getattr(self, "_pcav", None)
+        if limits is None:
+            mats = self.config.get("materials", {})
+            names = self.mm.names if self.mm is not None else [self.material]
+            limits = np.array([float(mats.get(n, {}).get("cavitation_pressure", -np.inf)) for n in names])
+            self._pcav = limits
+        if not np.isfinite(limits).any():
+            return
+        zones = self.block.out_zones
+        if self.mm is None:
+            p = self.p[zones]
+            k = int(np.argmin(p))
+            if p[k] >= limits[0]:
+                return
+            bad, name, pk = int(zones[k]), self.material, float(p[k])
+        else:
+            pm = np.where(self.mm.vol[zones] > 0.0, self.mm.pm[zones], np.inf) - limits[None, :]
+            z, m = np.unravel_index(int(np.argmin(pm)), pm.shape)
+            if pm[z, m] >= 0.0:
+                return
+            bad, name, pk = int(zones[z]), self.mm.names[m], float(self.mm.pm[zones[z], m])
+        self._fail(f"ALE zone {self.block.zone_ijk(bad)}: material {name!r} cavitates: its pressure {pk:.6g} Pa "
+                   f"is below its cavitation_pressure {limits[self.mm.names.index(name) if self.mm else 0]:.6g} Pa "
+                   f"at step {self.step}, t={self.time:.6g} s (the EOS has no phase change: model the cavity "
+                   f"as void, or lower cavitation_pressure where the liquid holds tension)")
+
     def _sync(self, dt_min: float = np.inf) -> float:
         """Collective: the smallest stable step over the ranks; raises SolverError on every rank if
         one recorded a failure (its message there, the failing rank's number elsewhere)."""
@@ -547,6 +577,7 @@ class AleSolver:
         if self._blk is not None:  # face apertures of the cut zones
             dt_min = min(dt_min, self._blk.apertures(self))
         self._fill_zone_state()
+        self._check_cavitation()
         B = self.block
         if self.has_images:  # periodic images carry their image's corner forces exactly
             self.bc.fill_zones([self.fc], depth=1)  # (the gather reads one ghost layer)

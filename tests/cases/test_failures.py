@@ -122,3 +122,28 @@ map = "push"
     md = (out / "report.md").read_text()
     assert "Courant" in md and "negative internal energy" in md
     assert (out / "figures" / "failures_stability.png").stat().st_size > 10_000
+
+
+def test_cavitating_water_is_stopped_naming_cavitation(tmp_path, run_immerse):
+    """The water column with its piston pulled out at 50 m/s: the rarefaction would take the Tait
+    water to about p0 - rho c u = -7e7 Pa, a tension it cannot hold. With cavitation_pressure = 0 the
+    run stops at the first zone below it, the message naming the material, its pressure and the
+    limit; the steps written are finite. (Without the key the EOS allows tension: linear acoustics
+    about p = 0, cases/acoustic_transmission.)"""
+    case = _variant(tmp_path, "pulled", "water_piston_column",
+                    {"velocity = 50.0": "velocity = -50.0",
+                     "p0 = 1.0e5 }": "p0 = 1.0e5, cavitation_pressure = 0.0 }"})
+    out = tmp_path / "out"
+    line = _failed_line(run_immerse("run", case, "--out", out))
+    assert "SolverError: ALE zone (0, 0): material 'water' cavitates: its pressure -" in line, line
+    assert "is below its cavitation_pressure 0 Pa" in line, line
+    _written_steps_are_finite(out, "ale")
+
+
+def test_cavitation_in_a_mixed_zone_names_the_material(tmp_path, run_immerse):
+    """The water-air shock tube (several materials per zone) with a cavitation pressure of the water
+    above its 1 GPa: stopped at once, naming the water."""
+    case = _variant(tmp_path, "mixed", "water_air_shock_tube",
+                    {"p_inf = 6.0e8 }": "p_inf = 6.0e8, cavitation_pressure = 2.0e9 }"})
+    line = _failed_line(run_immerse("run", case, "--out", tmp_path / "out"))
+    assert "material 'water' cavitates: its pressure 1e+09 Pa is below its cavitation_pressure 2e+09 Pa" in line, line
