@@ -632,7 +632,8 @@ def coupled_balances(case, out, history, params):
     """A coupled run's bookkeeping: the largest |balance| of every solver and of the coupling over
     the run (`<role>.<Q>_balance_rel` -> metric `<Q>_balance_rel`, the largest over the roles), the
     interface work relative to the initial energy of gas + bodies (`interface_work_rel`), and the gas
-    mass left in zones a body fills at the last output (`covered_gas_mass`, kg), cond(H) of the
+    mass left in zones a body fills at the last output (`covered_gas_mass`, kg), the largest
+    displacement of a body node between the first and the last output (`max_displacement`, m), cond(H) of the
     multiplier system and the multipliers' zone-to-zone spread (`cond_H`, `lambda_oscillation_max`,
     `lambda_oscillation`: orchestrator.coupling.embedded.multiplier_oscillation); with several
     background materials, the largest relative change of one material's mass over the run
@@ -663,6 +664,12 @@ def coupled_balances(case, out, history, params):
         full = cd["blocked_fraction"] >= 1.0 - 1e-12
         # (density there is 0 when the zone holds nothing: the check's reference is exactly 0)
         vals["covered_gas_mass"] = float(np.sum(cd["density"][full]) * zone_volume)
+    # the largest displacement of a body node at the end (m): what a body did, for comparing methods
+    lag = output.read_steps(out, "lagrange")
+    if lag:
+        x0 = output.read_step(out, "lagrange", lag[0][2])[0]
+        x1 = output.read_step(out, "lagrange", lag[-1][2])[0]
+        vals["max_displacement"] = float(np.max(np.linalg.norm(x1 - x0, axis=1)))
     # the multiplier system's conditioning (first step) and the multipliers' zone-to-zone spread
     # (the largest over the run, and at the end): what the stabilisation is for
     for key in ("cond_H", "lambda_oscillation_max", "lambda_oscillation"):

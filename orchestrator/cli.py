@@ -232,7 +232,8 @@ def main(argv=None) -> int:
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the runs that failed, were unstable or timed out")
     p.add_argument("--only", nargs="*", metavar="AXIS=LEVELS",
-                   help="run only these levels of an axis, e.g. zones=100,200 (a reduced matrix)")
+                   help="run only these levels of an axis, e.g. zones=100,200, or these series, "
+                        "series=NAME,NAME (a reduced matrix)")
     p.set_defaults(func=cmd_campaign)
     p = sub.add_parser("report", help="rebuild a campaign's report from its stored results")
     p.add_argument("out")

@@ -5,7 +5,9 @@ Columns, in this order (a column appears when any run has it):
   level.<axis>            the run's level of each axis
   set.<case key>          every case key the run set
   error_metric, error     the campaign's error measure: the metric's relative error (a metric with a
-                          reference) or its value (a reported value, or a metric whose reference is 0)
+                          reference) or its value (a reported value, or a metric whose reference is 0);
+                          for a series `relative_to` another: error_reference (that series), value
+                          (the measure's value) and error = |value / the reference run's value - 1|
   wall_time_s             the time loop (start-up excluded: summary.json's wall_time_s)
   elapsed_s               the whole `immerse run`, start-up included
   steps, dt_min, dt_max, ranks_total, end_time
@@ -30,7 +32,7 @@ from pathlib import Path
 from orchestrator.campaign.rundir import atomic_write, read_result
 
 FIXED = ["run", "series", "chart", "index", "status", "message", "returncode"]
-COST = ["error_metric", "error", "wall_time_s", "elapsed_s", "steps", "dt_min", "dt_max",
+COST = ["error_metric", "error_reference", "value", "error", "wall_time_s", "elapsed_s", "steps", "dt_min", "dt_max",
         "ranks_total", "end_time"]
 
 
@@ -43,6 +45,16 @@ def error_of(summary: dict | None, metric: str | None) -> float:
     if metric in chk.get("reported", {}):
         return abs(float(chk["reported"][metric]))
     return math.nan
+
+
+def value_of(summary: dict | None, metric: str | None) -> float:
+    """The metric's value itself (not its error): a check metric's value or a reported value."""
+    if not summary or not metric or "check" not in summary:
+        return math.nan
+    chk = summary["check"]
+    if metric in chk.get("metrics", {}):
+        return float(chk["metrics"][metric]["value"])
+    return float(chk.get("reported", {}).get(metric, math.nan))
 
 
 def row_of(meta: dict, res: dict | None) -> dict:
@@ -58,6 +70,7 @@ def row_of(meta: dict, res: dict | None) -> dict:
     s = (res or {}).get("summary") or None
     row["error_metric"] = meta.get("error")
     row["error"] = error_of(s, meta.get("error"))
+    row["value"] = value_of(s, meta.get("error"))
     row["elapsed_s"] = res.get("elapsed_s") if res else None
     if s:
         row["wall_time_s"] = s.get("wall_time_s")
@@ -77,6 +90,26 @@ def row_of(meta: dict, res: dict | None) -> dict:
         for q, v in (s.get("conservation") or {}).items():
             row[f"conservation.{q}"] = v
     return row
+
+
+def apply_references(rows: list[dict], metas: list[dict]) -> None:
+    """A series with `relative_to`: its error is |v / v_ref - 1| of its error measure's value v against
+    the reference series' run at the same levels (a reference that does not vary an axis matches any
+    level of it); nan without a finished reference run."""
+    referenced = {m.get("relative_to") for m in metas} - {None}
+    for row, meta in zip(rows, metas):
+        ref_name = meta.get("relative_to")
+        if not ref_name:
+            if meta.get("series") in referenced:  # the reference itself: no error of its own here
+                row["error_reference"] = "(the reference)"
+                row["error"] = math.nan
+            continue
+        row["error_reference"] = ref_name
+        ref = [r for r, m in zip(rows, metas) if m.get("series") == ref_name
+               and all(m.get("levels", {}).get(a, v) == v for a, v in meta.get("levels", {}).items())]
+        v, v0 = row.get("value"), (ref[0].get("value") if ref else None)
+        ok = v is not None and v0 is not None and math.isfinite(v) and math.isfinite(v0) and v0 != 0.0
+        row["error"] = abs(v / v0 - 1.0) if ok else math.nan
 
 
 def gather(out: Path, names: list[str] | None = None) -> list[tuple[dict, dict | None]]:
@@ -156,6 +189,7 @@ def collect(out: Path, spec: dict, names: list[str] | None = None) -> list[dict]
     """Write campaign.csv and campaign.h5 of ``out``; return the rows."""
     found = gather(out, names)
     rows = [row_of(m, r) for m, r in found]
+    apply_references(rows, [m for m, _ in found])
     write_csv(out / "campaign.csv", rows)
     write_h5(out / "campaign.h5", rows, spec, found)
     return rows
@@ -171,6 +205,7 @@ def read_h5(path: Path, summaries: bool = False):
         found = [(d["run"], d["result"]) for d in (json.loads(g.attrs["json"]) for g in f["runs"].values())]
     found.sort(key=lambda mr: mr[0].get("index", 0))
     rows = [row_of(m, r) for m, r in found]
+    apply_references(rows, [m for m, _ in found])
     if summaries:
         return spec, rows, [(r or {}).get("summary") for _, r in found]
     return spec, rows

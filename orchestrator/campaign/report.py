@@ -241,7 +241,12 @@ def write_report(out: Path) -> list[Path]:
     ref = spec["report"].get("reference", "the cases' own check references")
     metric = spec["report"].get("error_label") or spec["report"].get("error", "error")
     sections = []
-    for chart, names in _groups(spec, rows).items():
+    spec_all, ref_all = spec, ref
+    for chart, names in _groups(spec_all, rows).items():
+        # a chart's own labels (report.charts."NAME": error_label, reference) over the campaign's
+        spec = {**spec_all, "report": {**spec_all["report"], **spec_all["report"].get("charts", {}).get(chart, {})}}
+        ref = spec["report"].get("reference", ref_all)
+        metric = spec["report"].get("error_label") or spec["report"].get("error", "error")
         base = _slug(chart)
         sec = {"chart": chart, "figures": [], "tables": []}
         f1 = figdir / f"{base}_cost.png"
@@ -279,7 +284,7 @@ def write_report(out: Path) -> list[Path]:
             if name:
                 sec["figures"].append((name, f"{caption} (pyvista)."))
         sections.append(sec)
-    md, page = _markdown(spec, sections), _html(spec, sections)
+    md, page = _markdown(spec_all, sections), _html(spec_all, sections)
     from orchestrator.campaign.rundir import atomic_write
 
     atomic_write(out / "report.md", md)

@@ -141,5 +141,5 @@ def prepare_run(out: Path, run) -> tuple[Path, bool]:
     atomic_write(d / "run.json", json.dumps({
         "name": run.name, "series": run.series, "chart": run.chart, "index": run.index,
         "levels": run.levels, "settings": run.settings, "base_case": str(run.case_dir),
-        "error": run.error, "fingerprint": fp}, indent=1) + "\n")
+        "error": run.error, "relative_to": run.relative_to, "fingerprint": fp}, indent=1) + "\n")
     return d, False

@@ -67,6 +67,7 @@ SCHEMA = {
                     "case": {"type": "string", "minLength": 1},
                     "chart": _NAME,
                     "error": {"type": "string", "minLength": 1},
+                    "relative_to": _NAME,
                     "vary": {"type": "array", "items": {"type": "string"}, "uniqueItems": True,
                              "x-allowed": "must be an array of axis names (the axes this series runs over)"},
                     "set": _KEYS,
@@ -84,6 +85,11 @@ SCHEMA = {
                 "resolution_label": {"type": "string", "minLength": 1},
                 "map": {"type": "string", "minLength": 1},
                 "map_label": {"type": "string", "minLength": 1},
+                "charts": {"type": "object", "additionalProperties": {
+                    "type": "object", "additionalProperties": False,
+                    "properties": {"error_label": {"type": "string", "minLength": 1},
+                                   "reference": {"type": "string", "minLength": 1}}},
+                    "x-allowed": "must be a table of chart names, each { error_label, reference }"},
                 "plots": {"type": "array", "items": {
                     "type": "object", "required": ["value", "label"], "additionalProperties": False,
                     "properties": {"value": {"type": "string", "minLength": 1},
@@ -107,6 +113,7 @@ class RunSpec:
     settings: dict[str, Any]  # dotted case key -> value (series' set, then the axes')
     chart: str
     error: str | None
+    relative_to: str | None = None  # series whose run (at the same levels) is this one's reference
     index: int = 0  # position in the campaign (array task id)
     ranks: dict = field(default_factory=dict)  # role -> ranks (filled by check_runs)
     data: dict = field(default_factory=dict, repr=False)  # the run's case.toml content
@@ -206,7 +213,8 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
                   only: dict[str, list[str]] | None = None) -> Campaign:
     """Read, validate and expand a campaign file. ``check_cases``: also load every run's case (the
     full case validation) -- what `immerse campaign` does before it starts anything. ``only``: axis
-    -> the levels (as written, e.g. "100") to keep (`immerse campaign --only zones=100,200`)."""
+    -> the levels (as written, e.g. "100") to keep (`immerse campaign --only zones=100,200`), and
+    "series" -> the series (by name) to keep."""
     p = Path(path).expanduser()
     p = (p / "campaign.toml") if p.is_dir() else p
     data = read_campaign(p)
@@ -226,7 +234,14 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
         if k in report and report[k] not in axes:
             raise CaseError(format_key(["report", k]), report[k],
                             f"must name an axis; axes: {', '.join(axes) or '(none)'}")
-    for a, keep in (only or {}).items():
+    only = dict(only or {})
+    keep_series = only.pop("series", None)  # --only series=NAME,...: those series only
+    if keep_series is not None:
+        names0 = [s["name"] for s in data["series"]]
+        for n in keep_series:
+            if n not in names0:
+                raise CaseError("--only", f"series={n}", "no such series; series: " + ", ".join(names0))
+    for a, keep in only.items():
         if a not in axes:
             raise CaseError("--only", a, f"no such axis; axes: {', '.join(axes) or '(none)'}")
         bad = [v for v in keep if v not in {_level_text(x) for x in axes[a]}]
@@ -237,6 +252,9 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
     for i, s in enumerate(data["series"]):
         if names.index(s["name"]) != i:
             raise CaseError(format_key(["series", i, "name"]), s["name"], "series names must differ")
+        if "relative_to" in s and s["relative_to"] not in names:
+            raise CaseError(format_key(["series", i, "relative_to"]), s["relative_to"],
+                            "must name another series (the reference whose value this one is compared with)")
     n_runs = sum(_product(len(axes[a]) for a in s.get("vary", axes) if a in axes) for s in data["series"])
     if n_runs > MAX_RUNS:
         raise CaseError("axes", f"{n_runs} runs", f"a campaign may have at most {MAX_RUNS} runs")
@@ -245,6 +263,8 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
 
     runs: list[RunSpec] = []
     for si, s in enumerate(data["series"]):
+        if keep_series is not None and s["name"] not in keep_series:
+            continue
         case_dir = (base / s["case"]).resolve()
         if not (case_dir / CASE_FILE).is_file():
             raise CaseError(format_key(["series", si, "case"]), s["case"],
@@ -290,7 +310,8 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
                     raise CaseError(format_key(where), value, f"cannot set in {s['case']}: {e.args[0]}") from None
             runs.append(RunSpec(name=name, series=s["name"], case_dir=case_dir, levels=levels,
                                 settings=settings, chart=s.get("chart", data["name"]),
-                                error=s.get("error", report.get("error")), index=len(runs), data=run_data))
+                                error=s.get("error", report.get("error")), relative_to=s.get("relative_to"),
+                                index=len(runs), data=run_data))
     if len({r.name for r in runs}) != len(runs):
         raise CaseError("series", names, "two runs get the same directory name: give the series or "
                         "levels names that differ in letters or digits")

@@ -92,7 +92,8 @@ def test_coupling_methods_multiplier_most_accurate_penalty_stopped_beyond_its_li
     within 1e-4 of p*; the multiplier's error below 0.7 x the penalty's (measured 0.41); the stiff
     penalty 'unstable' with the coupler's message naming the method and its limit, on the map."""
     out = tmp_path / "out"
-    r = run_immerse("campaign", CAMPAIGNS / "coupling_methods", "--out", out, "--only", "stiffness=10,10000")
+    r = run_immerse("campaign", CAMPAIGNS / "coupling_methods", "--out", out, "--only", "stiffness=10,10000",
+                    "series=multiplier,penalty,nitsche")
     assert r.returncode == 0, r.stdout + r.stderr
     rows = {x["run"]: x for x in _rows(out)}
     assert set(rows) == {"multiplier", "nitsche", "penalty-stiffness10", "penalty-stiffness10000"}

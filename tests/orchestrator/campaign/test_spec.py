@@ -110,3 +110,25 @@ def test_every_shipped_case_survives_the_toml_writer():
     for f in files:
         data = tomllib.loads(f.read_text())
         assert tomllib.loads(dumps(data)) == data, f
+
+
+def test_only_keeps_the_named_series_and_levels(tmp_path):
+    p = _write(tmp_path, BASE)
+    camp = load_campaign(p, only={"series": ["mid"], "zones": ["200"]})
+    assert [r.name for r in camp.runs] == ["mid-zones200"]
+    with pytest.raises(CaseError, match=r"^--only = 'series=fast': no such series; series: conforming, mid"):
+        load_campaign(p, only={"series": ["fast"]})
+    with pytest.raises(CaseError, match=r"^--only = 'zones=300': not a level of the axis; levels: 100, 200"):
+        load_campaign(p, only={"zones": ["300"]})
+
+
+def test_a_series_relative_to_another_gets_its_error_from_the_reference_run():
+    from orchestrator.campaign.collect import apply_references
+
+    metas = [{"series": "ref", "levels": {}}, {"series": "b", "levels": {"k": 1}, "relative_to": "ref"},
+             {"series": "b", "levels": {"k": 2}, "relative_to": "ref"}]
+    rows = [{"value": 2.0}, {"value": 2.2}, {"value": float("nan")}]
+    apply_references(rows, metas)
+    assert abs(rows[1]["error"] - 0.1) < 1e-15 and rows[2]["error"] != rows[2]["error"]
+    assert rows[1]["error_reference"] == "ref"
+    assert rows[0]["error"] != rows[0]["error"] and rows[0]["error_reference"] == "(the reference)"
