@@ -36,25 +36,28 @@ COST = ["error_metric", "error_reference", "value", "error", "wall_time_s", "ela
         "ranks_total", "end_time"]
 
 
-def error_of(summary: dict | None, metric: str | None) -> float:
+def _metric(summary: dict | None, metric: str | None) -> tuple[dict | None, dict | None]:
+    """(its check metric entry, the check's reported values) where the summary has the metric."""
     if not summary or not metric or "check" not in summary:
-        return math.nan
+        return None, None
     chk = summary["check"]
-    if metric in chk.get("metrics", {}):
-        return float(chk["metrics"][metric]["rel_error"])
-    if metric in chk.get("reported", {}):
-        return abs(float(chk["reported"][metric]))
-    return math.nan
+    return chk.get("metrics", {}).get(metric), chk.get("reported", {})
+
+
+def error_of(summary: dict | None, metric: str | None) -> float:
+    """The error measure of a run: a check metric's relative error, or |a reported value|."""
+    m, reported = _metric(summary, metric)
+    if m is not None:
+        return float(m["rel_error"])
+    return abs(float(reported[metric])) if reported and metric in reported else math.nan
 
 
 def value_of(summary: dict | None, metric: str | None) -> float:
     """The metric's value itself (not its error): a check metric's value or a reported value."""
-    if not summary or not metric or "check" not in summary:
-        return math.nan
-    chk = summary["check"]
-    if metric in chk.get("metrics", {}):
-        return float(chk["metrics"][metric]["value"])
-    return float(chk.get("reported", {}).get(metric, math.nan))
+    m, reported = _metric(summary, metric)
+    if m is not None:
+        return float(m["value"])
+    return float(reported[metric]) if reported and metric in reported else math.nan
 
 
 def row_of(meta: dict, res: dict | None) -> dict:

@@ -68,7 +68,7 @@ def _slug(text: str) -> str:
     return re.sub(r"[^A-Za-z0-9_-]+", "_", text).strip("_") or "chart"
 
 
-def _chart_cost(ax_fig, spec, chart, names, rows, path: Path) -> list[dict]:
+def _chart_cost(spec, chart, names, rows, path: Path) -> list[dict]:
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
@@ -101,7 +101,10 @@ def _chart_cost(ax_fig, spec, chart, names, rows, path: Path) -> list[dict]:
     return table
 
 
-def _chart_order(spec, chart, names, rows, path: Path) -> dict[str, float] | None:
+def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: str, path: Path,
+                         fit: bool) -> dict[str, float] | None:
+    """Per series, ``values(row)`` of its finished runs against the resolution axis (log-log); with
+    ``fit`` the observed order of each series in its legend (returned). None without a resolution."""
     import matplotlib.pyplot as plt
 
     axis = spec["report"].get("resolution")
@@ -112,48 +115,21 @@ def _chart_order(spec, chart, names, rows, path: Path) -> dict[str, float] | Non
     for k, name in enumerate(names):
         rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed")]
         n = np.array([_float(r.get(f"level.{axis}")) for r in rs])
-        e = np.array([_float(r.get("error")) for r in rs])
-        p = fit_order(n, e)
+        v = np.array([_float(values(r)) for r in rs])
+        p = fit_order(n, v) if fit else math.nan
         orders[name] = p
-        ok = np.isfinite(n) & np.isfinite(e) & (e > 0) & (n > 0)
-        ax.loglog(n[ok], e[ok], marker=_MARKERS[k % len(_MARKERS)], linestyle="-",
+        ok = np.isfinite(n) & np.isfinite(v) & (v > 0) & (n > 0)
+        ax.loglog(n[ok], v[ok], marker=_MARKERS[k % len(_MARKERS)], linestyle="-",
                   label=f"{name} (order {p:.2f})" if p == p else name)
     ax.set_xlabel(spec["report"].get("resolution_label") or f"{axis} (resolution)")
-    ax.set_ylabel(spec["report"].get("error_label") or spec["report"].get("error", "error"))
-    ax.set_title(f"{chart}: observed convergence")
+    ax.set_ylabel(ylabel)
+    ax.set_title(f"{chart}: {title}")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
     return orders
-
-
-def _chart_value(spec, chart, names, rows, found, value, label, path: Path) -> bool:
-    """A further quantity of the report (`plots`) against the resolution axis, one series per method."""
-    import matplotlib.pyplot as plt
-
-    from orchestrator.campaign.collect import error_of
-
-    axis = spec["report"].get("resolution")
-    if not axis:
-        return False
-    fig, ax = plt.subplots(figsize=(6.4, 4.6))
-    for k, name in enumerate(names):
-        rs = [(r, s) for r, s in zip(rows, found) if r["series"] == name and r["status"] in ("passed", "check_failed")]
-        n = np.array([_float(r.get(f"level.{axis}")) for r, _ in rs])
-        v = np.array([error_of(s, value) for _, s in rs])
-        ok = np.isfinite(n) & np.isfinite(v) & (v > 0) & (n > 0)
-        ax.loglog(n[ok], v[ok], marker=_MARKERS[k % len(_MARKERS)], linestyle="-", label=name)
-    ax.set_xlabel(spec["report"].get("resolution_label") or f"{axis} (resolution)")
-    ax.set_ylabel(label)
-    ax.set_title(f"{chart}: {value}")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return True
 
 
 _WORST = ["not_run", "passed", "check_failed", "timeout", "unstable", "failed"]
@@ -232,7 +208,7 @@ def write_report(out: Path) -> list[Path]:
     import matplotlib
 
     matplotlib.use("Agg")
-    from orchestrator.campaign.collect import read_h5
+    from orchestrator.campaign.collect import error_of, read_h5
 
     out = Path(out)
     spec, rows, summaries = read_h5(out / "campaign.h5", summaries=True)
@@ -250,12 +226,13 @@ def write_report(out: Path) -> list[Path]:
         base = _slug(chart)
         sec = {"chart": chart, "figures": [], "tables": []}
         f1 = figdir / f"{base}_cost.png"
-        pts = _chart_cost(None, spec, chart, names, rows, f1)
+        _chart_cost(spec, chart, names, rows, f1)
         sec["figures"].append((f1.name, f"Error against wall time, {chart}: {metric} against the "
                                f"time loop's wall time on this machine, one series per method; the "
                                f"ringed points are the Pareto front. Reference: {ref}."))
         f2 = figdir / f"{base}_order.png"
-        orders = _chart_order(spec, chart, names, rows, f2)
+        orders = _chart_vs_resolution(spec, chart, names, rows, lambda r: r.get("error"), metric,
+                                      "observed convergence", f2, fit=True)
         if orders is not None:
             sec["figures"].append((f2.name, f"Observed convergence, {chart}: {metric} against "
                                    f"{spec['report'].get('resolution')}; order fitted per series "
@@ -264,7 +241,10 @@ def write_report(out: Path) -> list[Path]:
                                   [[k, f"{v:.3f}" if v == v else "-"] for k, v in orders.items()]))
         for j, plot in enumerate(spec["report"].get("plots", [])):
             f = figdir / f"{base}_plot{j}.png"
-            if _chart_value(spec, chart, names, rows, summaries, plot["value"], plot["label"], f):
+            by_run = dict(zip((r["run"] for r in rows), summaries))
+            if _chart_vs_resolution(spec, chart, names, rows,
+                                    lambda r, v=plot["value"]: error_of(by_run[r["run"]], v),
+                                    plot["label"], plot["value"], f, fit=False) is not None:
                 sec["figures"].append((f.name, f"{plot['label']} against {spec['report'].get('resolution')}, "
                                        f"{chart}, one series per method ({plot['value']} of each run). "
                                        f"Reference: {ref}."))

@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import subprocess
 import sys
 import time
-from pathlib import Path
 
 import pytest
 
+from tests.cases.test_coupled_cases import _penalty_case as _penalty
 from tests.conftest import CASES, REPO
 from tests.orchestrator.campaign.slurm_cluster import command_env, single_node_slurm, slurm_available
 
@@ -24,15 +23,6 @@ pytestmark = pytest.mark.skipif(REASON is not None, reason=REASON or "")
 def _run(env, *args, timeout=300):
     return subprocess.run([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=REPO, env=env,
                           capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
-
-
-def _penalty(tmp_path, stiffness, end_time):
-    case = tmp_path / f"penalty_{stiffness:g}"
-    shutil.copytree(CASES / "embedded_piston_sod", case, ignore=shutil.ignore_patterns("out"))
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace('method = "multiplier"', f'method = "penalty"\nstiffness = {stiffness!r}')
-                 .replace("end_time = 0.2", f"end_time = {end_time!r}"))
-    return case
 
 
 @pytest.mark.timeout(600)
