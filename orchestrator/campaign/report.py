@@ -21,9 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-STATUS_COLOURS = {"passed": "#2e9e44", "check_failed": "#a6d96a", "unstable": "#f28e2b",
+STATUS_COLOURS = {"passed": "#2e9e44", "check_failed": "#a6d96a", "warned": "#ffd92f", "unstable": "#f28e2b",
                   "failed": "#d62728", "timeout": "#7f7f7f", "not_run": "#ffffff"}
 STATUS_TEXT = {"passed": "stable, check passed", "check_failed": "stable, check outside tolerance",
+               "warned": "ran, a detector warned (ill-conditioned, beyond a limit)",
                "unstable": "unstable (detected)", "failed": "failed", "timeout": "timed out",
                "not_run": "not run"}
 _MARKERS = "osD^vP*Xh<>"
@@ -75,7 +76,7 @@ def _chart_cost(spec, chart, names, rows, path: Path) -> list[dict]:
     table = []
     pts_t, pts_e = [], []
     for k, name in enumerate(names):
-        rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed")]
+        rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed", "warned")]
         t = np.array([_float(r.get("wall_time_s")) for r in rs])
         e = np.array([_float(r.get("error")) for r in rs])
         ok = np.isfinite(t) & np.isfinite(e) & (t > 0) & (e > 0)
@@ -113,7 +114,7 @@ def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: s
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     orders = {}
     for k, name in enumerate(names):
-        rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed")]
+        rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed", "warned")]
         n = np.array([_float(r.get(f"level.{axis}")) for r in rs])
         v = np.array([_float(values(r)) for r in rs])
         p = fit_order(n, v) if fit else math.nan
@@ -132,7 +133,7 @@ def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: s
     return orders
 
 
-_WORST = ["not_run", "passed", "check_failed", "timeout", "unstable", "failed"]
+_WORST = ["not_run", "passed", "check_failed", "warned", "timeout", "unstable", "failed"]
 
 
 def _chart_map(spec, chart, names, rows, path: Path) -> list[dict]:
@@ -182,7 +183,7 @@ def _pictures(out: Path, spec, names, rows, figdir: Path) -> list[tuple[str, str
     axis = spec["report"].get("resolution")
     pics = []
     for name in names:
-        rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed")]
+        rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed", "warned")]
         if not rs:
             continue
         best = max(rs, key=lambda r: _float(r.get(f"level.{axis}")) if axis else r["index"])
@@ -199,7 +200,7 @@ def _pictures(out: Path, spec, names, rows, figdir: Path) -> list[tuple[str, str
         for p in paths[:1]:
             dest = figdir / f"picture_{_slug(best['run'])}.png"
             shutil.copyfile(p, dest)
-            pics.append((f"{name}, finest run {best['run']}: {field} at the end time", dest.name))
+            pics.append((f"{name}, finest run {best['run']}: {field} at the end time", dest.name))  # (orchestrator.view)
     return pics
 
 
@@ -262,7 +263,7 @@ def write_report(out: Path) -> list[Path]:
                                   [[n["series"], n["run"], n["status"], n["message"]] for n in notes]))
         for caption, name in _pictures(out, spec, names, rows, figdir):
             if name:
-                sec["figures"].append((name, f"{caption} (pyvista)."))
+                sec["figures"].append((name, f"{caption} (immerse view)."))
         sections.append(sec)
     md, page = _markdown(spec_all, sections), _html(spec_all, sections)
     from orchestrator.campaign.rundir import atomic_write

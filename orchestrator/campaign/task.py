@@ -23,6 +23,8 @@ from pathlib import Path
 
 STATUSES = {
     "passed": "ran to its end time; its check passed (or it has none)",
+    "warned": "ran to its end time, but a detector warned of a known failure (an ill-conditioned "
+              "multiplier system, steps beyond the stable limit): the warning is the message",
     "check_failed": "ran to its end time; a check metric is outside its tolerance",
     "unstable": "stopped by a detector that names an instability (coupling beyond its stable limit, "
                 "Courant limit, energy growth, inverted elements, non-finite or non-positive state)",
@@ -37,7 +39,9 @@ INSTABILITY = re.compile(
 """Words of the detectors' messages that name an instability (the map's 'unstable detected')."""
 
 
-def classify(rc: int, message: str, summary: dict | None) -> str:
+def classify(rc: int, message: str, summary: dict | None, warnings: list[str] | None = None) -> str:
+    if rc in (0, 1) and warnings and summary is not None:
+        return "warned"
     if rc == 0:
         return "passed"
     if summary is not None and rc == 1 and "check" in summary and not summary["check"]["passed"]:
@@ -51,6 +55,15 @@ def _message(stderr: str) -> str:
     own = [ln for ln in lines if ln.startswith("immerse:")]
     text = own[-1] if own else (lines[-1] if lines else "")
     return text.removeprefix("immerse:").strip()[:2000]
+
+
+def _warnings(log: Path) -> list[str]:
+    """The run's own warnings (log lines 'warning: ...', time stamp dropped)."""
+    try:
+        lines = log.read_text(errors="replace").splitlines()
+    except OSError:
+        return []
+    return [ln.split("] ", 1)[-1].removeprefix("warning: ").strip() for ln in lines if "] warning: " in ln]
 
 
 def _wait_for_previous(out: Path, limit: float = 30.0) -> None:
@@ -111,10 +124,14 @@ def run_task(d: Path, timeout: float | None = None, engine: str = "local") -> in
     except (OSError, ValueError):
         pass
     message = _message(stderr) if rc != 0 else ""
-    status = "timeout" if timed_out else classify(rc, message, summary)
+    warnings = _warnings(out / "log.txt")
+    status = "timeout" if timed_out else classify(rc, message, summary, warnings)
+    if status == "warned":
+        message = "; ".join(warnings)[:2000]
     if timed_out:
         message = f"timed out after {timeout:g} s (the campaign's timeout); ended"
     result = {"name": meta["name"], "status": status, "returncode": rc, "message": message,
+              "warnings": warnings,
               "elapsed_s": elapsed, "fingerprint": meta["fingerprint"], "engine": engine,
               "summary": summary}
     atomic_write(d / "result.json", json.dumps(result, indent=1) + "\n")

@@ -121,6 +121,7 @@ def test_multiplier_stabilisation_keeps_cond_h_constant_and_the_multipliers_smoo
         st, un = rows[("sta", n)], rows[("uns", n)]
         assert float(st["reported.cond_H"]) < 10 < 100 < float(un["reported.cond_H"]), (st, un)
         assert float(un["reported.lambda_oscillation"]) > 2 * float(st["reported.lambda_oscillation"])
+        assert st["status"] == "passed" and un["status"] == "warned" and "cond(H) =" in un["message"], un
         log = (out / "runs" / un["run"] / "out" / "log.txt").read_text()
         assert "warning: coupling multiplier: cond(H) =" in log and "(beta = 0.0)" in log
         assert "cond(H)" not in (out / "runs" / st["run"] / "out" / "log.txt").read_text()

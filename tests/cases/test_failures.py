@@ -88,8 +88,9 @@ def test_inverted_elements_are_stopped_naming_the_element(tmp_path, run_immerse)
 
 @pytest.mark.timeout(600)
 def test_a_campaign_puts_each_failure_on_its_stability_map(tmp_path, run_immerse):
-    """dt_scale 0.9 and 1.5 on Sod, the parting halves at 2 and 5 m/s: the stable runs pass, the
-    others are 'unstable' with their messages, and the report's map and table show them."""
+    """dt_scale 0.9 and 1.5 on Sod, the parting halves at 2 and 5 m/s, the Taylor bar at 287 and 5000
+    m/s, the water column's piston pushed and pulled (cavitation_pressure 0): the first of each runs,
+    the second is 'unstable' with its message naming the cause, on the report's map and in its table."""
     (tmp_path / "campaign.toml").write_text(f'''
 name = "failures"
 [axes.push]
@@ -107,6 +108,18 @@ case = "{CASES / 'toro123'}"
 "ale.regions[1].velocity" = [[2.0, 0.0], [5.0, 0.0]]
 "check.params.left" = [[1.0, -2.0, 0.4], [1.0, -5.0, 0.4]]
 "check.params.right" = [[1.0, 2.0, 0.4], [1.0, 5.0, 0.4]]
+[[series]]
+name = "Taylor bar, impact speed"
+case = "{CASES / 'taylor_bar'}"
+set = {{ "run.end_time" = 2.0e-5, "run.output_interval" = 1.0e-5 }}
+[series.axes.push]
+"lagrange.bodies[0].initial_velocity" = [[0.0, 0.0, -287.0], [0.0, 0.0, -5000.0]]
+[[series]]
+name = "water column, piston speed"
+case = "{CASES / 'water_piston_column'}"
+set = {{ "ale.materials.water.cavitation_pressure" = 0.0 }}
+[series.axes.push]
+"ale.boundaries.x_lower.piston.velocity" = [50.0, -50.0]
 [report]
 map = "push"
 ''')
@@ -117,10 +130,14 @@ map = "push"
         rows = {x["run"]: x for x in csv.DictReader(f)}
     assert rows["Sod_dt_scale-push1"]["status"] == "passed"
     assert rows["Toro_123_parting_speed-push1"]["status"] == "passed"
-    for name, words in (("Sod_dt_scale-push2", "Courant"), ("Toro_123_parting_speed-push2", "negative internal energy")):
+    for name, words in (("Sod_dt_scale-push2", "Courant"), ("Toro_123_parting_speed-push2", "negative internal energy"),
+                        ("Taylor_bar_impact_speed-push2", "inverted or invalid element"),
+                        ("water_column_piston_speed-push2", "material 'water' cavitates")):
         assert rows[name]["status"] == "unstable" and words in rows[name]["message"], rows[name]
+        assert rows[name.replace("push2", "push1")]["status"] in ("passed", "check_failed"), rows
     md = (out / "report.md").read_text()
-    assert "Courant" in md and "negative internal energy" in md
+    for words in ("Courant", "negative internal energy", "inverted or invalid element", "cavitates"):
+        assert words in md, words
     assert (out / "figures" / "failures_stability.png").stat().st_size > 10_000
 
 
