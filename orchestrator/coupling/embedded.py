@@ -242,10 +242,14 @@ class EmbeddedCoupling:
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}
-        out.update({"momentum_f": self.momentum_f, "sums": np.array([self.work_f, self.dissipation])})
+        out.update({"momentum_f": self.momentum_f, "sums": np.array([self.work_f, self.dissipation]),
+                    "conditioning": np.array([self.cond_H, self.lambda_oscillation, self.lambda_oscillation_max])})
         return out
 
     def load_state(self, arrays: dict) -> None:
         self.state.load_state({k[len("method_"):]: v for k, v in arrays.items() if k.startswith("method_")})
         self.momentum_f = np.array(arrays["momentum_f"], dtype=np.float64)
         self.work_f, self.dissipation = (float(a) for a in arrays["sums"])
+        if "conditioning" in arrays:  # (a restart reports the first step's cond(H), not its own)
+            self.cond_H, self.lambda_oscillation, self.lambda_oscillation_max = (
+                float(a) for a in arrays["conditioning"])

@@ -12,10 +12,25 @@ from solvers.ale.exact.riemann import RiemannSolution
 
 
 def test_registry_is_keyed_by_check_kinds():
-    assert set(PROFILES) == {"riemann", "piston", "reflected_shock", "bar_wave"}
+    assert set(PROFILES) == {"riemann", "piston", "reflected_shock", "bar_wave", "riemann_wall"}
     assert set(PROFILES) <= set(checks.CHECKS)
     assert exact_profile({"check": {"kind": "taylor_bar"}}, 1.0) is None
     assert exact_profile({"check": None}, 1.0) is None
+
+
+def test_riemann_wall_profile_is_riemann_then_the_reflected_state_and_nothing_beyond_the_wall():
+    """Sod into a wall at x = 0.9, t = 0.27: Riemann's solution up to the reflected shock (0.8579),
+    the Rankine-Hugoniot state behind it (rho 0.509395, p 0.780387), no gas beyond the wall."""
+    params = {"axis": "x", "x0": 0.5, "x_wall": 0.9, "left": [1.0, 0.0, 1.0], "right": [0.125, 0.0, 0.1],
+              "gamma_left": 1.4}
+    prof = exact_profile({"check": {"kind": "riemann_wall", "params": params}}, 0.27)
+    x = np.array([0.1, 0.6, 0.8, 0.85, 0.87, 0.89, 0.95])
+    got = prof.sample(x)
+    rho, u, p, _ = RiemannSolution((1.0, 0.0, 1.0), (0.125, 0.0, 0.1), 1.4).sample(x, 0.27, 0.5)
+    np.testing.assert_array_equal(got["density"][:4], rho[:4])
+    np.testing.assert_allclose(got["density"][4:6], 0.509395, rtol=2e-6)
+    np.testing.assert_allclose(got["pressure"][4:6], 0.780387, rtol=2e-6)
+    assert np.all(got["velocity"][4:6] == 0.0) and np.isnan(got["density"][6])
 
 
 def test_riemann_profile_along_y():
