@@ -4,7 +4,7 @@
   immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [--engine local|slurm] [MACHINE]
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
-  immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--retry-failed] [--only AXIS=L1,L2]
+  immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--cores N] [--retry-failed] [--only AXIS=L1,L2]
       runs a matrix of cases x parameters (orchestrator/campaign), then campaign.csv/.h5 and the report
   immerse report OUT                           rebuilds a campaign's report from OUT/campaign.h5
   immerse bench NAME [--out FILE] [--quick]   NAME: lagrange, taylor, ale, sod, advect, memory, output, coupling,
@@ -172,8 +172,10 @@ def cmd_campaign(args) -> int:
             return _fail(f"--only {item!r}: expected AXIS=LEVEL[,LEVEL...], e.g. zones=100,200")
         only[axis] = levels.split(",")
     try:
+        if args.cores is not None and args.cores < 1:
+            return _fail(f"--cores = {args.cores}: must be an integer >= 1")
         return run_campaign(args.campaign, args.out, engine=args.engine, retry_failed=args.retry_failed,
-                            only=only or None)
+                            only=only or None, cores=args.cores)
     except CaseError as e:
         return _fail(str(e))
 
@@ -231,6 +233,8 @@ def main(argv=None) -> int:
                    help="local: child processes on this machine (default); slurm: one sbatch job array")
     p.add_argument("--retry-failed", action="store_true",
                    help="run again the runs that failed, were unstable or timed out")
+    p.add_argument("--cores", type=int, metavar="N", help="cores the local engine may use (default: all "
+                   "of this machine's); a run takes as many as its solvers have ranks")
     p.add_argument("--only", nargs="*", metavar="AXIS=LEVELS",
                    help="run only these levels of an axis, e.g. zones=100,200, or these series, "
                         "series=NAME,NAME (a reduced matrix)")

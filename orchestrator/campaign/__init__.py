@@ -47,7 +47,7 @@ def _line(i: int, n: int, run, res: dict | None, note: str | None = None) -> str
 
 
 def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = False,
-                 report: bool = True, only: dict | None = None) -> int:
+                 report: bool = True, only: dict | None = None, cores: int | None = None) -> int:
     """The whole command; returns its exit code (0: every run ended with a result; 1: some run has
     none; 130/143 interrupted). Raises CaseError (nothing written) for bad input."""
     from orchestrator.campaign import collect, rundir
@@ -82,7 +82,7 @@ def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = Fal
         if engine == "local":
             from orchestrator.campaign.local import cores_here, run_local
 
-            run_local(pending, camp.timeout_s, cores_here(), on_done)
+            run_local(pending, camp.timeout_s, cores or cores_here(), on_done)
         else:
             from orchestrator.campaign.slurm import SlurmError, run_slurm
 

@@ -4,8 +4,8 @@ The script (``OUT/slurm/campaign_<n>.sbatch``, generated from the runs still to 
 ``$SLURM_ARRAY_TASK_ID`` to a run directory (``OUT/slurm/runs_<n>.txt``, one a line) and runs
 ``python -m orchestrator.campaign.task`` there: the same ``immerse run`` and the same result.json
 as the local engine, so both give the same campaign.csv. Resources: one task with as many CPUs as
-the largest run has processes (its solvers' ranks and the coupler; an array's tasks share one
-request), capped at the largest node's CPUs (``sinfo``); the run's ``mpiexec`` starts its ranks
+the largest run has solver ranks (the coupler mostly waits; an array's tasks share one request),
+capped at the largest node's CPUs (``sinfo``); the run's ``mpiexec`` starts its ranks
 inside the task on its node (``HYDRA_BOOTSTRAP=fork``). A campaign ``timeout`` becomes the tasks'
 ``--time``. Task output goes to ``OUT/slurm/task_<job>_<task>.out``.
 

@@ -88,6 +88,7 @@ def run_task(d: Path, timeout: float | None = None, engine: str = "local") -> in
     _wait_for_previous(out)
     cmd = [sys.executable, "-m", "orchestrator.cli", "run", str(d / meta["name"]), "--out", str(out), "--replace"]
     started = time.monotonic()
+    started_at = time.time()
     with open(d / "stdout.txt", "w") as so, open(d / "stderr.txt", "w+") as se:
         proc = subprocess.Popen(cmd, stdout=so, stderr=se, stdin=subprocess.DEVNULL,
                                 preexec_fn=dies_with_parent(signal.SIGTERM))
@@ -132,7 +133,8 @@ def run_task(d: Path, timeout: float | None = None, engine: str = "local") -> in
         message = f"timed out after {timeout:g} s (the campaign's timeout); ended"
     result = {"name": meta["name"], "status": status, "returncode": rc, "message": message,
               "warnings": warnings,
-              "elapsed_s": elapsed, "fingerprint": meta["fingerprint"], "engine": engine,
+              "elapsed_s": elapsed, "started_at": started_at, "ended_at": time.time(),
+              "fingerprint": meta["fingerprint"], "engine": engine,
               "summary": summary}
     atomic_write(d / "result.json", json.dumps(result, indent=1) + "\n")
     return 0

@@ -145,3 +145,32 @@ def test_a_campaign_killed_midway_runs_only_the_missing_runs_again(tmp_path):
     assert len(rows) == 6 and all(x["status"] in ("passed", "check_failed") for x in rows), rows
     for d in (out / "runs").iterdir():
         assert json.loads((d / "result.json").read_text())["summary"]["steps"] > 0
+
+
+@pytest.mark.timeout(300)
+def test_runs_share_the_cores_by_their_ranks(tmp_path, run_immerse):
+    """`--cores 2`: three 1-rank runs go two at a time (some pair overlaps, never three at once); the
+    same runs with 2 ALE ranks each go one at a time (no overlap)."""
+    import json
+
+    spans = {}
+    for ranks in (1, 2):
+        p = _campaign(tmp_path, KILLED.replace('name = "killed"', f'name = "ranks{ranks}"')
+                      .replace("values = [100, 150, 200, 250, 300, 350]", "values = [100, 150, 200]")
+                      .replace('"ale.grid.cells" = [[100, 1], [150, 1], [200, 1], [250, 1], [300, 1], [350, 1]]',
+                               '"ale.grid.cells" = [[100, 1], [150, 1], [200, 1]]')
+                      .replace('case = "@SHOCK/conforming"', f'case = "@SHOCK/conforming"\nset = {{ "ranks.ale" = {ranks} }}'))
+        out = tmp_path / f"out{ranks}"
+        r = run_immerse("campaign", p, "--out", out, "--cores", "2")
+        assert r.returncode == 0, r.stdout + r.stderr
+        spans[ranks] = [(x["started_at"], x["ended_at"]) for x in
+                        (json.loads(f.read_text()) for f in out.glob("runs/*/result.json"))]
+        assert len(spans[ranks]) == 3
+
+    def overlapping(s):
+        return [(a, b) for i, a in enumerate(s) for b in s[i + 1:] if a[0] < b[1] and b[0] < a[1]]
+
+    assert overlapping(spans[1]), spans[1]
+    assert not any(a[0] < b[1] and b[0] < a[1] and c[0] < min(a[1], b[1]) and max(a[0], b[0]) < c[1]
+                   for a, b in overlapping(spans[1]) for c in spans[1] if c not in (a, b))
+    assert not overlapping(spans[2]), spans[2]

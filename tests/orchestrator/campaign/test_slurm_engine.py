@@ -59,7 +59,7 @@ def test_slurm_and_local_engines_give_the_same_campaign_csv(tmp_path):
     res = (tmp_path / "slurm" / "runs" / "conforming-zones100" / "result.json").read_text()
     assert '"engine": "slurm"' in res
     script = next((tmp_path / "slurm" / "slurm").glob("campaign_*.sbatch")).read_text()
-    assert "#SBATCH --array=0-5" in script and "#SBATCH --cpus-per-task=2" in script, script
+    assert "#SBATCH --array=0-5" in script and "#SBATCH --cpus-per-task=1" in script, script
 
 
 @pytest.mark.timeout(600)
