@@ -90,16 +90,24 @@ def _chart_cost(spec, chart, names, rows, path: Path) -> list[dict]:
         f = pareto(t, e)
         ax.step(t[f], e[f], where="post", color="k", linewidth=0.8, alpha=0.6)
         ax.scatter(t[f], e[f], s=140, facecolors="none", edgecolors="k", label="Pareto front")
-    metric = spec["report"].get("error_label") or spec["report"].get("error", "error")
-    ax.set_xlabel("wall time of the time loop (s)")
-    ax.set_ylabel(metric)
-    ax.set_title(f"{chart}: error against cost")
+    _finish(fig, ax, "wall time of the time loop (s)",
+            spec["report"].get("error_label") or spec["report"].get("error", "error"),
+            f"{chart}: error against cost", path)
+    return table
+
+
+def _finish(fig, ax, xlabel: str, ylabel: str, title: str, path: Path) -> None:
+    """Axes labels (with units), title, grid, legend; saved and closed."""
+    import matplotlib.pyplot as plt
+
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
-    return table
 
 
 def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: str, path: Path,
@@ -122,14 +130,8 @@ def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: s
         ok = np.isfinite(n) & np.isfinite(v) & (v > 0) & (n > 0)
         ax.loglog(n[ok], v[ok], marker=_MARKERS[k % len(_MARKERS)], linestyle="-",
                   label=f"{name} (order {p:.2f})" if p == p else name)
-    ax.set_xlabel(spec["report"].get("resolution_label") or f"{axis} (resolution)")
-    ax.set_ylabel(ylabel)
-    ax.set_title(f"{chart}: {title}")
-    ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(fig, ax, spec["report"].get("resolution_label") or f"{axis} (resolution)", ylabel,
+            f"{chart}: {title}", path)
     return orders
 
 

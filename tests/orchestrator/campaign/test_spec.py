@@ -132,3 +132,16 @@ def test_a_series_relative_to_another_gets_its_error_from_the_reference_run():
     assert abs(rows[1]["error"] - 0.1) < 1e-15 and rows[2]["error"] != rows[2]["error"]
     assert rows[1]["error_reference"] == "ref"
     assert rows[0]["error"] != rows[0]["error"] and rows[0]["error_reference"] == "(the reference)"
+
+
+@pytest.mark.parametrize("args, text", [
+    (["--cores", "0"], "--cores = 0: must be an integer >= 1"),
+    (["--only", "zones"], "--only 'zones': expected AXIS=LEVEL[,LEVEL...]"),
+    (["--only", "zones=300"], "--only = 'zones=300': not a level of the axis"),
+    (["--engine", "pbs"], "argument --engine: invalid choice: 'pbs'"),
+])
+def test_bad_campaign_arguments_exit_2_and_write_nothing(tmp_path, run_immerse, args, text):
+    out = tmp_path / "out"
+    r = run_immerse("campaign", _write(tmp_path, BASE), "--out", out, *args)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and text in r.stderr, r.stderr
+    assert not out.exists()
