@@ -93,10 +93,15 @@ def piston_solution(case: dict):
     if mat["eos"] == "tait":
         ex = exact.tait(u_p, mat["rho0"], mat["bulk_modulus"], mat["exponent"], mat.get("p0", 0.0),
                         rho0=region["density"])
+    elif mat["eos"] == "mie_gruneisen":
+        if region["density"] != mat["rho0"] or region["pressure"] != 0.0:
+            raise ValueError("piston: a Mie-Grueneisen material must start at its reference state "
+                             "(density = rho0, pressure = 0)")
+        ex = exact.mie_gruneisen(u_p, mat["rho0"], mat["c0"], mat["s"])
     elif mat["eos"] in ("stiffened_gas", "ideal_gas"):
         ex = exact.stiffened_gas(u_p, region["density"], region["pressure"], mat["gamma"], mat.get("p_inf", 0.0))
     else:
-        raise ValueError(f"piston: eos {mat['eos']!r} (needs tait, stiffened_gas or ideal_gas)")
+        raise ValueError(f"piston: eos {mat['eos']!r} (needs tait, stiffened_gas, ideal_gas or mie_gruneisen)")
     g = ale["grid"]
     x_face = params.get("x_face", g["lower"][axis] if lower else g["upper"][axis])
     return ex, axis, float(x_face), 1.0 if lower else -1.0

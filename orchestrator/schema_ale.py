@@ -27,6 +27,7 @@ EOS_KEYS = {
     "stiffened_gas": ("eos", "gamma", "p_inf", "cavitation_pressure"),
     "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0", "cavitation_pressure"),
     "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+    "mie_gruneisen": ("eos", "rho0", "c0", "s", "gamma0", "cavitation_pressure"),
     "void": ("eos",),   # empty space: volume only (several materials per zone)
 }
 EOS_REQUIRED = {
@@ -34,6 +35,7 @@ EOS_REQUIRED = {
     "stiffened_gas": ("eos", "gamma", "p_inf"),
     "tait": ("eos", "rho0", "bulk_modulus", "exponent"),
     "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
+    "mie_gruneisen": ("eos", "rho0", "c0", "s", "gamma0"),
     "void": ("eos",),
 }
 FLUID = {
@@ -53,6 +55,9 @@ FLUID = {
         "R1": number("dimensionless", exclusiveMinimum=0),
         "R2": number("dimensionless", exclusiveMinimum=0),
         "omega": number("dimensionless", exclusiveMinimum=0),
+        "c0": number("m/s", exclusiveMinimum=0),          # Mie-Grueneisen: us = c0 + s up
+        "s": number("dimensionless", minimum=0),
+        "gamma0": number("dimensionless", minimum=0),
     },
     "additionalProperties": False,
     "required": ["eos"],

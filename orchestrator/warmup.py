@@ -38,10 +38,11 @@ _EOS = {
     "stiffened_gas": '{ eos = "stiffened_gas", gamma = 4.4, p_inf = 6.0e8 }',
     "tait": '{ eos = "tait", rho0 = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }',
     "jwl": '{ eos = "jwl", A = 3.712e11, B = 3.231e9, R1 = 4.15, R2 = 0.95, omega = 0.3, rho0 = 1630.0 }',
+    "mie_gruneisen": '{ eos = "mie_gruneisen", rho0 = 2700.0, c0 = 5350.0, s = 1.34, gamma0 = 2.0 }',
 }
 # a state each EOS accepts (density, pressure)
 _STATE = {"ideal_gas": (1.0, 1.0), "stiffened_gas": (1000.0, 1.0e9), "tait": (1000.0, 1.0e5),
-          "jwl": (1630.0, 1.0e9)}
+          "jwl": (1630.0, 1.0e9), "mie_gruneisen": (2800.0, 1.0e9)}
 
 
 def _grid(dim: int) -> str:

@@ -17,6 +17,11 @@ Models and parameter layout (unused entries are zero)::
      3    jwl             JWL_A=0, JWL_B=1, JWL_R1=2,      A (1 - w/(R1 V)) exp(-R1 V)
                           JWL_R2=3, JWL_OMEGA=4,           + B (1 - w/(R2 V)) exp(-R2 V) + w rho e,
                           JWL_RHO0=5                       V = rho0/rho (Lee-Tarver form, e per unit mass)
+     4    mie_gruneisen   MG_RHO0=0, MG_C0=1, MG_S=2,      p_H(eta) + Gamma0 rho0 (e - e_H(eta)), eta = 1 - rho0/rho,
+                          MG_GAMMA0=3                      p_H = rho0 c0^2 eta / (1 - s eta)^2, e_H = p_H eta / (2 rho0)
+                                                           (the linear us = c0 + s up Hugoniot from rest at p = e = 0
+                                                           as the reference curve, Gamma rho = Gamma0 rho0; the same
+                                                           curve in tension, eta < 0; invalid at eta >= 1/s)
 
 Sound speed: ``c^2 = dp/drho|_e + p/rho^2 dp/de`` (the isentropic derivative
 ``dp/drho|_s``, since ``de = p/rho^2 drho`` along an isentrope).  Closed forms:
@@ -25,6 +30,9 @@ Sound speed: ``c^2 = dp/drho|_e + p/rho^2 dp/de`` (the isentropic derivative
 * Tait: ``c^2 = K0/rho0 (rho/rho0)^(n-1)``;
 * JWL, with ``s_i = R_i V``: ``dp/drho|_e = sum_i A_i exp(-s_i) (s_i - w - w/s_i) / rho + w e``,
   ``dp/de = w rho``, so ``c^2 = dp/drho|_e + w p / rho``.
+* Mie-Grueneisen: ``deta/drho = rho0/rho^2``, ``dp_H/deta = rho0 c0^2 (1 + s eta)/(1 - s eta)^3``,
+  ``de_H/deta = (p_H + eta dp_H/deta)/(2 rho0)``, ``dp/de = Gamma0 rho0``, so
+  ``c^2 = rho0/rho^2 (dp_H/deta - Gamma0 rho0 de_H/deta) + Gamma0 rho0 p / rho^2``.
 
 The ideal/stiffened-gas and JWL formulas use the pressure passed in (it must be the
 pressure of the same state, as returned by :func:`pressure`); Tait ignores it.
@@ -54,7 +62,10 @@ STIFFENED_GAS = 1
 TAIT = 2
 JWL = 3
 
-EOS_CODES = {"ideal_gas": IDEAL_GAS, "stiffened_gas": STIFFENED_GAS, "tait": TAIT, "jwl": JWL}
+MIE_GRUNEISEN = 4
+
+EOS_CODES = {"ideal_gas": IDEAL_GAS, "stiffened_gas": STIFFENED_GAS, "tait": TAIT, "jwl": JWL,
+             "mie_gruneisen": MIE_GRUNEISEN}
 EOS_NAMES = {v: k for k, v in EOS_CODES.items()}
 
 NPAR = 8
@@ -68,6 +79,11 @@ TAIT_RHO0 = 0
 TAIT_K0 = 1
 TAIT_N = 2
 TAIT_P0 = 3
+
+MG_RHO0 = 0
+MG_C0 = 1
+MG_S = 2
+MG_GAMMA0 = 3
 
 JWL_A = 0
 JWL_B = 1
@@ -99,6 +115,10 @@ _SCHEMA = {
              ("bulk_modulus", TAIT_K0, _gt(0.0), None, "Pa"),
              ("exponent", TAIT_N, _ge(1.0), None, ""),
              ("p0", TAIT_P0, _ANY, 0.0, "Pa")],
+    "mie_gruneisen": [("rho0", MG_RHO0, _gt(0.0), None, "kg/m^3"),
+                      ("c0", MG_C0, _gt(0.0), None, "m/s"),
+                      ("s", MG_S, _ge(0.0), None, ""),
+                      ("gamma0", MG_GAMMA0, _ge(0.0), None, "")],
     "jwl": [("A", JWL_A, _ANY, None, "Pa"),
             ("B", JWL_B, _ANY, None, "Pa"),
             ("R1", JWL_R1, _gt(0.0), None, ""),
@@ -162,10 +182,29 @@ def describe(code: int, par: np.ndarray, rho: float | None = None, e: float | No
 
 
 @njit(cache=True)
+def _mg_reference(par, rho):
+    """Mie-Grueneisen reference curve (the Hugoniot): (eta, p_H, e_H, dp_H/deta, de_H/deta); NaN at
+    or beyond the compression limit eta = 1/s."""
+    rho0 = par[MG_RHO0]
+    s = par[MG_S]
+    eta = 1.0 - rho0 / rho
+    d = 1.0 - s * eta
+    if not d > 0.0:
+        return eta, np.nan, np.nan, np.nan, np.nan
+    k = rho0 * par[MG_C0] * par[MG_C0]
+    ph = k * eta / (d * d)
+    dph = k * (1.0 + s * eta) / (d * d * d)
+    return eta, ph, ph * eta / (2.0 * rho0), dph, (ph + eta * dph) / (2.0 * rho0)
+
+
+@njit(cache=True)
 def pressure(code, par, rho, e):
     """p(rho, e); NaN unless 0 < rho < inf."""
     if not 0.0 < rho < math.inf:
         return np.nan
+    if code == MIE_GRUNEISEN:
+        _, ph, eh, _, _ = _mg_reference(par, rho)
+        return ph + par[MG_GAMMA0] * par[MG_RHO0] * (e - eh)
     if code == IDEAL_GAS:
         return (par[IG_GAMMA] - 1.0) * rho * e
     if code == STIFFENED_GAS:
@@ -197,6 +236,10 @@ def derivatives(code, par, rho, e):
     if code == TAIT:
         rho0 = par[TAIT_RHO0]
         return par[TAIT_K0] / rho0 * (rho / rho0) ** (par[TAIT_N] - 1.0), 0.0
+    if code == MIE_GRUNEISEN:
+        _, _, _, dph, deh = _mg_reference(par, rho)
+        g = par[MG_GAMMA0] * par[MG_RHO0]
+        return par[MG_RHO0] / (rho * rho) * (dph - g * deh), g
     if code == JWL:
         w = par[JWL_OMEGA]
         s1 = par[JWL_R1] * par[JWL_RHO0] / rho
@@ -222,6 +265,9 @@ def sound_speed_squared(code, par, rho, e, p):
     if code == JWL:
         dpdrho, _ = derivatives(code, par, rho, e)
         return dpdrho + par[JWL_OMEGA] * p / rho
+    if code == MIE_GRUNEISEN:
+        dpdrho, dpde = derivatives(code, par, rho, e)
+        return dpdrho + p / (rho * rho) * dpde
     return np.nan
 
 
@@ -262,6 +308,9 @@ def energy_from_pressure(code, par, rho, p):
         s2 = par[JWL_R2] * par[JWL_RHO0] / rho
         cold = par[JWL_A] * (1.0 - w / s1) * math.exp(-s1) + par[JWL_B] * (1.0 - w / s2) * math.exp(-s2)
         return (p - cold) / (w * rho)
+    if code == MIE_GRUNEISEN:
+        _, ph, eh, _, _ = _mg_reference(par, rho)
+        return eh + (p - ph) / (par[MG_GAMMA0] * par[MG_RHO0])
     return np.nan
 
 

@@ -60,7 +60,7 @@ def test_warmup_cases_are_valid_and_cover_the_options(tmp_path):
             seen.update(m["model"] for m in case["materials"].values())
             seen.update(b["type"] for b in case["boundaries"])
     assert seen >= {"dim2", "dim3", "eulerian", "lagrangian", "scalar", "monotonic", "ideal_gas",
-                    "stiffened_gas", "tait", "jwl", "void", "mixed", "obstacles", "wall", "outflow",
+                    "stiffened_gas", "tait", "jwl", "mie_gruneisen", "void", "mixed", "obstacles", "wall", "outflow",
                     "periodic", "inflow", "piston", "linear_elastic", "neo_hookean", "johnson_cook",
                     "fixed", "velocity", "symmetry", "rigid_wall"}
 

@@ -15,7 +15,8 @@ state is the root of that equation (``scipy.optimize.brentq``):
   ``rho1/rho0 = ((g+1) P1 + (g-1) P0) / ((g-1) P1 + (g+1) P0)`` with ``P = p + p_inf``; unknown p1;
 * Tait (barotropic, ``p(rho) = p_ref + K0/n ((rho/rho_ref)^n - 1)``, the form of solvers/ale/eos.py,
   ``c^2 = K0/rho_ref (rho/rho_ref)^(n-1)``): only mass and momentum with ``p1 = p(rho1)``; unknown
-  rho1 (the energy jump is not imposed: a barotropic shock dissipates the difference).
+  rho1 (the energy jump is not imposed: a barotropic shock dissipates the difference);
+* Mie-Grueneisen from its reference state at rest: the linear us-up Hugoniot, D = c0 + s u_p.
 
 Then ``D = rho1 u_p / (rho1 - rho0)``.  Positions (piston starting at ``x0`` and moving along +x):
 piston ``x0 + u_p t``, shock ``x0 + D t``.
@@ -115,3 +116,13 @@ def tait(u_p: float, rho_ref: float, bulk_modulus: float, exponent: float, p_ref
     D = rho1 * u_p / (rho1 - rho0)
     c0 = math.sqrt(K0 / rr * (rho0 / rr) ** (n - 1.0))
     return PistonShock(u_p, rho0, p0, rho1, p(rho1), D, c0)
+
+
+def mie_gruneisen(u_p: float, rho0: float, c0: float, s: float) -> PistonShock:
+    """Mie-Grueneisen material at rest at its reference state (p = e = 0, the EOS of
+    solvers/ale/eos.py): its reference curve is the Hugoniot from that state, so the shock follows
+    the linear us-up relation exactly: D = c0 + s u_p, p1 = rho0 D u_p, rho1 = rho0 D / (D - u_p)
+    (mass and momentum; the energy jump e1 = u_p^2 / 2 lies on the reference curve)."""
+    u_p = _check_speed(u_p)
+    D = c0 + s * u_p
+    return PistonShock(u_p, rho0, 0.0, rho0 * D / (D - u_p), rho0 * D * u_p, D, c0)
