@@ -164,6 +164,14 @@ def _last_step(out: Path, role: str):
     return output.read_steps(out, role)[-1]
 
 
+def _crossings(x, a, level):
+    """(k, positions): the segments [x[k], x[k+1]] where the profile a crosses `level` (strictly,
+    sign change) and the crossing positions by linear interpolation."""
+    sgn = np.sign(a - level)
+    k = np.flatnonzero(sgn[:-1] * sgn[1:] < 0)
+    return k, x[k] + (level - a[k]) * (x[k + 1] - x[k]) / (a[k + 1] - a[k])
+
+
 def _plateau(x, a, lo, hi, margin, stat="mean"):
     sel = (x > lo + margin) & (x < hi - margin)
     if not sel.any():
@@ -217,11 +225,9 @@ def riemann(case, out, history, params):
 
     def crossing(level, near):
         """Position nearest `near` where the density profile crosses `level` (linear interpolation)."""
-        s = np.sign(prof["rho"] - level)
-        k = np.flatnonzero(s[:-1] * s[1:] < 0)
+        k, xs = _crossings(x, prof["rho"], level)
         if len(k) == 0:
             return float("nan")
-        xs = x[k] + (level - prof["rho"][k]) * (x[k + 1] - x[k]) / (prof["rho"][k + 1] - prof["rho"][k])
         return float(xs[np.argmin(np.abs(xs - near))])
 
     if "right_shock" in w:
@@ -237,10 +243,8 @@ def riemann(case, out, history, params):
         # two materials: where the left material's volume fraction crosses 1/2, and the largest
         # pressure deviation from p* over the star region (both sides of the interface)
         f = prof[f"volume_fraction_{params['interface_material']}"]
-        s = np.sign(f - 0.5)
-        k = np.flatnonzero(s[:-1] * s[1:] < 0)
+        k, xs = _crossings(x, f, 0.5)
         if len(k):
-            xs = x[k] + (0.5 - f[k]) * (x[k + 1] - x[k]) / (f[k + 1] - f[k])
             vals["interface_position_error_cells"] = float(np.min(np.abs(xs - contact))) / dx
         else:
             vals["interface_position_error_cells"] = float("nan")
@@ -358,11 +362,8 @@ def reflected_shock(case, out, history, params):
         "exact_p_reflected": ex.p5,
         "exact_reflected_shock_position": xs,
     }
-    level = 0.5 * (ex.rho2 + ex.rho5)
-    sgn = np.sign(rho - level)
-    k = np.flatnonzero(sgn[:-1] * sgn[1:] < 0)
+    k, xc = _crossings(x, rho, 0.5 * (ex.rho2 + ex.rho5))
     if len(k):
-        xc = x[k] + (level - rho[k]) * (x[k + 1] - x[k]) / (rho[k + 1] - rho[k])
         vals["reflected_shock_position_error_cells"] = float(np.min(np.abs(xc - xs)) / dx)
     else:
         vals["reflected_shock_position_error_cells"] = float("inf")
@@ -414,11 +415,9 @@ def riemann_wall(case, out, history, params):
         "exact_p_reflected": refl.p5,
         "exact_reflected_shock_position": xs,
     }
-    level = 0.5 * (refl.rho2 + refl.rho5)
-    sgn = np.sign(rho - level)
-    k = np.flatnonzero((sgn[:-1] * sgn[1:] < 0) & (x[:-1] > w["contact"] + margin))
-    if len(k):
-        xc = x[k] + (level - rho[k]) * (x[k + 1] - x[k]) / (rho[k + 1] - rho[k])
+    k, xc = _crossings(x, rho, 0.5 * (refl.rho2 + refl.rho5))
+    xc = xc[x[k] > w["contact"] + margin]  # (the reflected shock, not the contact)
+    if len(xc):
         vals["reflected_shock_position_error_cells"] = float(np.min(np.abs(xc - xs)) / dx)
     else:
         vals["reflected_shock_position_error_cells"] = float("inf")
@@ -462,11 +461,8 @@ def piston(case, out, history, params):
         "exact_shock_position": xs,
         "plateau_zones": float(inside.size),
     }
-    level = 0.5 * (ex.p0 + ex.p1)
-    sgn = np.sign(p - level)
-    k = np.flatnonzero(sgn[:-1] * sgn[1:] < 0)
+    k, xc = _crossings(x, p, 0.5 * (ex.p0 + ex.p1))
     if len(k):
-        xc = x[k] + (level - p[k]) * (x[k + 1] - x[k]) / (p[k + 1] - p[k])
         vals["shock_position_error_cells"] = float(np.min(np.abs(xc - xs)) / dx0)
     else:
         vals["shock_position_error_cells"] = float("inf")

@@ -15,11 +15,13 @@ class SlurmError(RuntimeError):
     pass
 
 
-def command(*args: str, check: bool = True, timeout: float = 60) -> subprocess.CompletedProcess:
+def command(*args: str, check: bool = True, timeout: float = 60, input: str | None = None) -> subprocess.CompletedProcess:
+    """Run a Slurm command (found on PATH, or in the usual sbin directories); ``input``: its stdin."""
     exe = shutil.which(args[0]) or shutil.which(args[0], path="/usr/bin:/usr/sbin:/usr/local/bin")
     if exe is None:
         raise SlurmError(f"{args[0]} not found: --engine slurm needs Slurm's commands on PATH")
-    r = subprocess.run([exe, *args[1:]], capture_output=True, text=True, timeout=timeout)
+    r = subprocess.run([exe, *args[1:]], capture_output=True, text=True, timeout=timeout, input=input,
+                       stdin=None if input is not None else subprocess.DEVNULL)
     if check and r.returncode != 0:
         raise SlurmError(f"{' '.join(args[:2])} failed (exit {r.returncode}): "
                          f"{' '.join((r.stderr or r.stdout).split())[:300]}")

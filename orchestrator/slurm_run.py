@@ -18,9 +18,7 @@ the run ends its job in order, as on a local Ctrl-C.
 from __future__ import annotations
 
 import shlex
-import shutil
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -91,8 +89,7 @@ def submit_run(args, case: dict, ranks: dict[str, int]) -> int:
     try:
         output = out / "slurm-%j.out"
         script = batch_script(case, inner, procs, int(args.nodes) if args.nodes else None, overcommit, output)
-        sb = subprocess.run([_which("sbatch"), "--parsable"], input=script, capture_output=True, text=True,
-                            timeout=60)
+        sb = command("sbatch", "--parsable", input=script, check=False)
         if sb.returncode != 0:
             print(f"immerse: sbatch refused the job: {' '.join(sb.stderr.split())[:300]}", file=sys.stderr)
             return 1
@@ -108,13 +105,6 @@ def submit_run(args, case: dict, ranks: dict[str, int]) -> int:
     finally:
         if (out / f"slurm-{job}.out").is_file():  # (after the job: its own --replace keeps it)
             outdir.record_written(out, out / f"slurm-{job}.out")
-
-
-def _which(name: str) -> str:
-    exe = shutil.which(name) or shutil.which(name, path="/usr/bin:/usr/sbin:/usr/local/bin")
-    if exe is None:
-        raise SlurmError(f"{name} not found: --engine slurm needs Slurm's commands on PATH")
-    return exe
 
 
 def follow(job: str, name: str, out: Path) -> int:

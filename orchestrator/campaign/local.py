@@ -16,7 +16,6 @@ import subprocess
 import sys
 import time
 from collections import deque
-from pathlib import Path
 
 
 def run_weight(run, cores: int) -> int:
@@ -84,5 +83,3 @@ def cores_here() -> int:
     except AttributeError:
         return os.cpu_count() or 1
 
-
-__all__ = ["run_local", "run_weight", "cores_here", "Path"]

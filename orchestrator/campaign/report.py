@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import html
 import math
-import os
 import shutil
 from pathlib import Path
 
@@ -321,5 +320,3 @@ def _html(spec, sections) -> str:
     parts.append("</body></html>")
     return "\n".join(parts) + "\n"
 
-
-__all__ = ["write_report", "pareto", "fit_order", "os"]

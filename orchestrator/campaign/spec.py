@@ -183,13 +183,6 @@ def _level_text(v: Any) -> str:
     return f"{v:g}" if isinstance(v, float) else str(v)
 
 
-def _schema_error(err) -> CaseError:
-    from orchestrator.case import _schema_error_to_case_error
-
-    e = _schema_error_to_case_error(err)
-    return e
-
-
 def read_campaign(path: str | Path) -> dict:
     from orchestrator import case as case_mod
 
@@ -205,7 +198,7 @@ def read_campaign(path: str | Path) -> dict:
         raise CaseError(p.name, e.value, e.allowed) from None
     err = best_match(itertools.islice(_VALIDATOR.iter_errors(data), 100), key=case_mod._relevance)
     if err is not None:
-        raise _schema_error(err)
+        raise case_mod._schema_error_to_case_error(err)
     return data
 
 

@@ -150,6 +150,11 @@ class AleSolver:
         self.eos_code, self.eos_par = _eos.eos_params(props.pop("eos"), props)
         self.eos_code = int(self.eos_code)
         self.eos_par = np.ascontiguousarray(self.eos_par, dtype=np.float64)
+        # each material's cavitation_pressure (-inf: none; _check_cavitation), in the order of its
+        # pressures: the zone's material, or the mixed zones' material columns
+        names = self.mm.names if self.mm is not None else [first]
+        self._pcav = np.array([float(config["materials"][n].get("cavitation_pressure", -np.inf)) for n in names])
+        self._cavitation = bool(np.isfinite(self._pcav).any())
 
         nz, nn = B.nzones, B.nnodes
         nc = 4 if dim == 2 else 8
@@ -520,31 +525,25 @@ class AleSolver:
         """A liquid (tait, stiffened_gas) with a `cavitation_pressure` whose pressure fell below it:
         the EOS would go on into tension it cannot hold (no phase change), so the run stops here
         naming cavitation (the zone, its pressure and the limit)."""
-        limits = getattr(self, "_pcav", None)
-        if limits is None:
-            mats = self.config.get("materials", {})
-            names = self.mm.names if self.mm is not None else [self.material]
-            limits = np.array([float(mats.get(n, {}).get("cavitation_pressure", -np.inf)) for n in names])
-            self._pcav = limits
-        if not np.isfinite(limits).any():
+        if not self._cavitation:
             return
-        zones = self.block.out_zones
+        zones, limits = self.block.out_zones, self._pcav
         if self.mm is None:
             p = self.p[zones]
             k = int(np.argmin(p))
             if p[k] >= limits[0]:
                 return
-            bad, name, pk = int(zones[k]), self.material, float(p[k])
+            bad, name, pk, limit = int(zones[k]), self.material, float(p[k]), limits[0]
         else:
             pm = np.where(self.mm.vol[zones] > 0.0, self.mm.pm[zones], np.inf) - limits[None, :]
             z, m = np.unravel_index(int(np.argmin(pm)), pm.shape)
             if pm[z, m] >= 0.0:
                 return
-            bad, name, pk = int(zones[z]), self.mm.names[m], float(self.mm.pm[zones[z], m])
+            bad, name, pk, limit = int(zones[z]), self.mm.names[m], float(self.mm.pm[zones[z], m]), limits[m]
         self._fail(f"ALE zone {self.block.zone_ijk(bad)}: material {name!r} cavitates: its pressure {pk:.6g} Pa "
-                   f"is below its cavitation_pressure {limits[self.mm.names.index(name) if self.mm else 0]:.6g} Pa "
-                   f"at step {self.step}, t={self.time:.6g} s (the EOS has no phase change: model the cavity "
-                   f"as void, or lower cavitation_pressure where the liquid holds tension)")
+                   f"is below its cavitation_pressure {limit:.6g} Pa at step {self.step}, t={self.time:.6g} s "
+                   f"(the EOS has no phase change: model the cavity as void, or lower cavitation_pressure "
+                   f"where the liquid holds tension)")
 
     def _sync(self, dt_min: float = np.inf) -> float:
         """Collective: the smallest stable step over the ranks; raises SolverError on every rank if
