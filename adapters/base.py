@@ -8,7 +8,7 @@ Hook order, per coupled step n -> n+1 (driven by the coupler, see orchestrator.c
     remap(fractions)   background only: advection restricted by the bodies' volume fractions
     stable_dt()        the solver's own explicit limit for the next step (collective, same on all ranks)
     diagnostics()      mass, momentum, energies (collective; meaningful on the group root)
-and when the coupler asks: write(index, step, time), checkpoint(path).
+and when the coupler asks: write(index, step, time), checkpoint(path); close() after the last command.
 Every hook is collective over the solver group's communicator `self.comm`.
 """
 from __future__ import annotations
@@ -43,6 +43,10 @@ class SolverAdapter(ABC):
     def correct(self, impulse: dict[str, np.ndarray] | None = None) -> None: ...
 
     def remap(self, fractions: np.ndarray | None = None) -> None:
+        return None
+
+    def close(self) -> None:
+        """Release what the solver holds (e.g. a LAMMPS instance) while MPI is still up."""
         return None
 
     @abstractmethod

@@ -137,6 +137,7 @@ def serve(adapter_cls, argv=None) -> None:
         elif c == P.CMD_STOP:
             answer(True)
             break
+    adapter.close()
     # a clean exit: the launcher must not take this process's end for a failure
     pidfile = P.run_dir(out) / "pids" / str(os.getpid())
     pidfile.unlink(missing_ok=True)

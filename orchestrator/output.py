@@ -135,7 +135,8 @@ INDEX_H5 = "results.h5"
 INDEX_XDMF = "results.xdmf"
 TENSOR6_COMPONENTS = ("xx", "yy", "zz", "xy", "yz", "zx")  # stored order of (n, 6) tensors
 # meshio/VTK cell type -> (XDMF topology type, nodes per element)
-CELL_TYPES = {"quad": ("Quadrilateral", 4), "hexahedron": ("Hexahedron", 8)}
+CELL_TYPES = {"quad": ("Quadrilateral", 4), "hexahedron": ("Hexahedron", 8),
+              "vertex": ("Polyvertex", 1)}  # particles: a point cloud, one vertex per particle
 
 _ROLE_RE = re.compile(r"^[A-Za-z][A-Za-z0-9_-]*$")
 _STEP_RE = re.compile(r"^(?P<role>[A-Za-z][A-Za-z0-9_-]*)_(?P<index>\d{6,})\.h5$")

@@ -233,7 +233,27 @@ def _ale_ranks(case: dict, n: int) -> str | None:
     return None
 
 
-ROLES = {"lagrange": (_lagrange_memory, _lagrange_ranks), "ale": (_ale_memory, _ale_ranks)}
+SPH_BYTES_PER_PARTICLE = {2: 800, 3: 1500}
+"""Memory of a LAMMPS SPH particle at h = 3 dx, set-up, one step and one output (peak RSS growth per
+particle, 160k particles in 2-D: 786 B, 125k in 3-D: 1417 B); the neighbour lists, most of it in
+3-D, grow as (h / dx)^dim."""
+
+
+def _sph_memory(case: dict, nranks: int) -> list[tuple[str, object, str, int]]:
+    s, dim = case["sph"], case["run"]["dimension"]
+    reach = max(1.0, (s["smoothing_length"] / (3.0 * s["spacing"])) ** dim)
+    return [("sph.bodies", f"{s['particles']} particles", "sph particles",
+             int(s["particles"] * SPH_BYTES_PER_PARTICLE[dim] * reach))]
+
+
+def _sph_ranks(case: dict, n: int) -> str | None:
+    if n > case["sph"]["particles"]:
+        return f"more ranks than the {case['sph']['particles']} particles of the SPH bodies"
+    return None
+
+
+ROLES = {"lagrange": (_lagrange_memory, _lagrange_ranks), "ale": (_ale_memory, _ale_ranks),
+         "sph": (_sph_memory, _sph_ranks)}
 """Per solver role: (memory parts of the case for n ranks, why n ranks cannot work or None).  A role
 without an entry is charged its processes only."""
 

@@ -39,7 +39,7 @@ __all__ = ["render", "scalar_field", "available", "line_profile", "line_figure",
            "PICTURES_DIR"]
 
 PICTURES_DIR = "pictures"
-_VTK_CELL = {"quad": 9, "hexahedron": 12}  # VTK_QUAD, VTK_HEXAHEDRON
+_VTK_CELL = {"quad": 9, "hexahedron": 12, "vertex": 1}  # VTK_QUAD, VTK_HEXAHEDRON, VTK_VERTEX
 _SAFE = re.compile(r"[^A-Za-z0-9_.-]+")
 _AXES = "xyz"
 

@@ -206,6 +206,42 @@ method = "multiplier"
 condition = "slip"
 """
 
+SPH = """\
+[run]
+dimension = 2
+end_time = 0.01
+
+[sph]
+spacing = 0.01
+smoothing_length = 0.03
+domain = { lower = [0.0, 0.0], upper = [0.2, 0.2] }
+boundaries = { x_lower = "wall", x_upper = "wall", y_lower = "wall", y_upper = "wall" }
+materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }
+bodies = [ { material = "water", region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }, density = 1000.0 } ]
+lammps_commands = ["fix drag all viscous 0.01"]
+"""
+BASES["SPH"] = SPH
+
+
+def _sph_line(line: str) -> str:
+    return edit(SPH, '"fix drag all viscous 0.01"', repr(line).replace("'", '"') if "'" not in line else f"'{line}'")
+
+
+SPH_FORBIDDEN = [  # the issue's list: shell, python, include, write_*, dump, log, fix print; and more
+    ("shell touch pwned", "command 'shell'"),
+    ("python f here from os import system", "command 'python'"),
+    ("include other.in", "command 'include'"),
+    ("write_data out.data", "command 'write_data'"),
+    ("write_restart out.restart", "command 'write_restart'"),
+    ("dump d all atom 1 d.txt", "command 'dump'"),
+    ("log run.log", "command 'log'"),
+    ("fix p all print 1 hello file out.txt", "keyword 'file'"),
+    ("fix p all print 1 hello", "fix style 'print'"),
+    ("plugin load evil.so", "command 'plugin'"),
+    ("run 1000", "command 'run'"),
+    ("variable v python f", "variable style 'python'"),
+]
+
 
 BAD_INPUTS = [
     # -- numbers that are not finite (every float of the schema) --
@@ -286,6 +322,18 @@ BAD_INPUTS = [
         + '[coupling]\nmethod = "multiplier"\n'),
     Bad("coupling_lagrangian_background", "ale.mode = 'lagrangian'", "'eulerian'",
         edit(COUPLED, "[ale]", '[ale]\nmode = "lagrangian"')),
+    # -- the SPH group (LAMMPS): the case's own LAMMPS lines, bodies, resources --
+    *[Bad(f"sph_line_{line.split()[0]}_{i}", f"sph.lammps_commands[0] = {line!r}", why, _sph_line(line))
+      for i, (line, why) in enumerate(SPH_FORBIDDEN)],
+    Bad("sph_body_outside_domain", "sph.bodies[0].region", "must lie inside sph.domain",
+        edit(SPH, "upper = [0.1, 0.1] }", "upper = [0.3, 0.1] }")),
+    Bad("sph_smoothing_below_spacing", "sph.smoothing_length = 0.005", ">= sph.spacing", edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.005")),
+    Bad("sph_taitwater_with_pressure", "sph.bodies[0].pressure = 100.0", "follows from its density",
+        edit(SPH, "density = 1000.0 } ]", "density = 1000.0, pressure = 100.0 } ]")),
+    Bad("sph_1e12_particles", "sph.bodies[0].region", "more than sph.max_particles",
+        edit(edit(SPH, "spacing = 0.01", "spacing = 1e-7"), "smoothing_length = 0.03", "smoothing_length = 3e-7")),
+    Bad("sph_ranks_beyond_particles", "ranks.sph = 101", "more ranks than the 100 particles",
+        SPH + "[ranks]\nsph = 101\n", args=("--oversubscribe",)),
     # -- files that are not regular, too big, or not text --
     Bad("case_toml_fifo", "case.toml", "FIFO", make=_fifo),
     Bad("case_toml_dev_zero", "case.toml", "character device", make=_dev_zero),

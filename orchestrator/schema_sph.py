@@ -1,0 +1,273 @@
+"""The SPH particle group's table of case.toml, ``[sph]`` (LAMMPS, SPH package): schema fragment,
+normaliser and cross-field checks, registered in :mod:`orchestrator.schema_registry`.
+
+Normalised layout (``case["sph"]``, present when the file has the table)::
+
+    {dimension, spacing, smoothing_length, cfl, domain: {lower, upper},
+     boundaries: {face: "open" | "periodic" | "wall"} (every face of the dimension, "open" unless
+     given), gravity: [g_x, g_y(, g_z)], density_summation: bool,
+     materials: {name: {model, density, sound_speed, viscosity}},
+     bodies: [{name, material, region, density, velocity, fixed, spacing,
+               [pressure | specific_internal_energy]}],
+     lammps_commands: [line, ...], particles: int}
+
+``region`` is exactly one of ``{"box": {lower, upper}}``, ``{"sphere": {centre, radius}}``,
+``{"cylinder": {base, axis, radius, length}}``, with an optional ``where`` expression
+(solvers/particles.py).  ``particles`` is the number of particles the bodies give (counted here,
+before anything launches).
+
+Materials (LAMMPS pair styles, one model per case):
+
+* ``taitwater`` (pair sph/taitwater): p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7; keys density
+  (rho0), sound_speed (c0), viscosity (Monaghan's alpha);
+* ``idealgas`` (pair sph/idealgas): p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4; key
+  viscosity (LAMMPS's nu).  Its bodies give pressure or specific_internal_energy.
+"""
+from __future__ import annotations
+
+from solvers.expressions import BOOL
+
+from .lammps_lines import LammpsLineError, check_line
+from .schema_parts import NAME_PATTERN, integer, name, number, table, vector
+from .schema_registry import register_table
+from .schema_rules import CaseError, check_expression, check_length, format_key, to_float
+
+IDEALGAS_GAMMA = 1.4
+"""The ratio of specific heats LAMMPS's pair sph/idealgas hard-codes (p = 0.4 rho e)."""
+
+MAX_PARTICLES = 20_000_000
+"""More particles than this in one case is refused (memory of the SPH group and of its output)."""
+
+MODEL_KEYS = {
+    "taitwater": ("model", "density", "sound_speed", "viscosity"),
+    "idealgas": ("model", "viscosity"),
+}
+MATERIAL = {
+    "type": "object",
+    "properties": {
+        "model": {"type": "string", "enum": list(MODEL_KEYS)},
+        "density": number("kg/m^3", exclusiveMinimum=0),
+        "sound_speed": number("m/s", exclusiveMinimum=0),
+        "viscosity": number("dimensionless", minimum=0),
+    },
+    "additionalProperties": False,
+    "required": ["model"],
+    "allOf": [
+        {"if": {"properties": {"model": {"const": m}}, "required": ["model"]},
+         "then": {"properties": {k: True for k in keys}, "additionalProperties": False,
+                  "required": list(keys), "x-when": f"model = {m!r}"}}
+        for m, keys in MODEL_KEYS.items()
+    ],
+}
+REGION_BOX = table({"lower": vector("m"), "upper": vector("m")}, required=("lower", "upper"))
+SPHERE = table({"centre": vector("m"), "radius": number("m", exclusiveMinimum=0)},
+               required=("centre", "radius"))
+CYLINDER = table({"base": vector("m"), "axis": {"type": "string", "enum": ["x", "y", "z"]},
+                  "radius": number("m", exclusiveMinimum=0), "length": number("m", exclusiveMinimum=0)},
+                 required=("base", "axis", "radius", "length"))
+REGION = {
+    "type": "object",
+    "properties": {"box": REGION_BOX, "sphere": SPHERE, "cylinder": CYLINDER,
+                   "where": {"type": "string", "minLength": 1}},
+    "additionalProperties": False,
+    "oneOf": [{"required": ["box"]}, {"required": ["sphere"]}, {"required": ["cylinder"]}],
+    "x-allowed": "needs exactly one of box = { lower, upper }, sphere = { centre, radius }, "
+                 "cylinder = { base, axis, radius, length } (and optionally where = \"expression\")",
+}
+BODY = table(
+    {
+        "name": name(),
+        "material": {"type": "string", "minLength": 1},
+        "region": REGION,
+        "density": number("kg/m^3", exclusiveMinimum=0),
+        "pressure": number("Pa"),
+        "specific_internal_energy": number("J/kg", minimum=0),
+        "velocity": vector("m/s"),
+        "fixed": {"type": "boolean"},
+        "spacing": number("m", exclusiveMinimum=0),
+    },
+    required=("material", "region", "density"),
+)
+SPH_FACE = {"type": "string", "enum": ["open", "periodic", "wall"]}
+FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
+SPH = table(
+    {
+        "spacing": number("m", exclusiveMinimum=0),
+        "smoothing_length": number("m", exclusiveMinimum=0),
+        "cfl": number("dimensionless", exclusiveMinimum=0, maximum=1),
+        "domain": REGION_BOX,
+        "boundaries": table({f: SPH_FACE for f in FACES}),
+        "gravity": vector("m/s^2"),
+        "density_summation": {"type": "boolean"},
+        "materials": {
+            "type": "object",
+            "minProperties": 1,
+            "propertyNames": {"pattern": NAME_PATTERN},
+            "additionalProperties": MATERIAL,
+        },
+        "bodies": {"type": "array", "minItems": 1, "items": BODY},
+        "lammps_commands": {"type": "array", "items": {"type": "string"}},
+        "neighbor_skin": number("m", exclusiveMinimum=0),
+        "max_particles": integer(minimum=1),
+    },
+    required=("spacing", "smoothing_length", "domain", "materials", "bodies"),
+)
+
+DEFAULT_CFL = 0.25
+"""dt = cfl h / max(c + |v|) (Monaghan's acoustic limit on the kernel support h)."""
+
+
+def _vec(v):
+    return [to_float(a) for a in v]
+
+
+def _region(r: dict) -> dict:
+    out = {}
+    if "box" in r:
+        out["box"] = {"lower": _vec(r["box"]["lower"]), "upper": _vec(r["box"]["upper"])}
+    elif "sphere" in r:
+        out["sphere"] = {"centre": _vec(r["sphere"]["centre"]), "radius": to_float(r["sphere"]["radius"])}
+    else:
+        c = r["cylinder"]
+        out["cylinder"] = {"base": _vec(c["base"]), "axis": c["axis"], "radius": to_float(c["radius"]),
+                           "length": to_float(c["length"])}
+    if "where" in r:
+        out["where"] = r["where"]
+    return out
+
+
+def _normalise(s: dict, dim: int) -> dict:
+    spacing = to_float(s["spacing"])
+    out = {
+        "dimension": dim,
+        "spacing": spacing,
+        "smoothing_length": to_float(s["smoothing_length"]),
+        "cfl": to_float(s.get("cfl", DEFAULT_CFL)),
+        "domain": {"lower": _vec(s["domain"]["lower"]), "upper": _vec(s["domain"]["upper"])},
+        "boundaries": {f: s.get("boundaries", {}).get(f, "open") for f in FACES[: 2 * dim]},
+        "gravity": _vec(s.get("gravity", [0.0] * dim)),
+        "density_summation": bool(s.get("density_summation", False)),
+        "materials": {n: {k: (v if k == "model" else to_float(v)) for k, v in m.items()}
+                      for n, m in s["materials"].items()},
+        "bodies": [],
+        "lammps_commands": list(s.get("lammps_commands", [])),
+        "max_particles": int(s.get("max_particles", MAX_PARTICLES)),
+    }
+    if "neighbor_skin" in s:
+        out["neighbor_skin"] = to_float(s["neighbor_skin"])
+    for i, b in enumerate(s["bodies"]):
+        body = {
+            "name": b.get("name", f"body{i}"),
+            "material": b["material"],
+            "region": _region(b["region"]),
+            "density": to_float(b["density"]),
+            "velocity": _vec(b.get("velocity", [0.0] * dim)),
+            "fixed": bool(b.get("fixed", False)),
+            "spacing": to_float(b.get("spacing", spacing)),
+        }
+        for k in ("pressure", "specific_internal_energy"):
+            if k in b:
+                body[k] = to_float(b[k])
+        out["bodies"].append(body)
+    return out
+
+
+def _check(sph: dict, raw: dict, dim: int) -> None:
+    """Cross-field rules: vector lengths, the domain, periodic pairs, one material model, each body's
+    material and thermodynamic state, regions inside the domain, the extra LAMMPS lines, the
+    particle count."""
+    import numpy as np
+
+    from solvers.particles import bounds, lattice_counts, lattice_points
+
+    for k in ("lower", "upper"):
+        check_length(format_key(["sph", "domain", k]), raw["domain"][k], dim)
+    lo, hi = sph["domain"]["lower"], sph["domain"]["upper"]
+    for j in range(dim):
+        if not hi[j] > lo[j]:
+            raise CaseError("sph.domain.upper", raw["domain"]["upper"], f"must be > lower component-wise (component {j})")
+    if "gravity" in raw:
+        check_length("sph.gravity", raw["gravity"], dim)
+    faces = raw.get("boundaries", {})
+    for f in faces:
+        if f[0] not in "xyz"[:dim]:
+            raise CaseError(format_key(["sph", "boundaries", f]), faces[f],
+                            f"dimension mismatch: no {f[0]} faces in a {dim}D case")
+    for a in "xyz"[:dim]:
+        lo_f, hi_f = sph["boundaries"][f"{a}_lower"], sph["boundaries"][f"{a}_upper"]
+        if (lo_f == "periodic") != (hi_f == "periodic"):
+            bad = f"{a}_lower" if lo_f == "periodic" else f"{a}_upper"
+            raise CaseError(format_key(["sph", "boundaries", bad]), "periodic",
+                            f"periodic must be set on both {a}_lower and {a}_upper")
+    h = sph["smoothing_length"]
+    if h < sph["spacing"]:
+        raise CaseError("sph.smoothing_length", raw["smoothing_length"],
+                        f"must be >= sph.spacing = {raw['spacing']} m (the kernel must reach the neighbours)")
+    models = {m["model"] for m in sph["materials"].values()}
+    if len(models) > 1:
+        raise CaseError("sph.materials", sorted(models), "one material model per case (LAMMPS runs one "
+                        "SPH pair style); allowed: all taitwater or all idealgas")
+    total = 0
+    for i, (body, rb) in enumerate(zip(sph["bodies"], raw["bodies"])):
+        base = ["sph", "bodies", i]
+        if body["material"] not in sph["materials"]:
+            raise CaseError(format_key(base + ["material"]), body["material"],
+                            "undefined material; defined in [sph.materials]: " + ", ".join(sph["materials"]))
+        model = sph["materials"][body["material"]]["model"]
+        state = [k for k in ("pressure", "specific_internal_energy") if k in rb]
+        if model == "idealgas" and len(state) != 1:
+            raise CaseError(format_key(base), {k: rb[k] for k in state} or "no state",
+                            "an idealgas body needs exactly one of pressure, specific_internal_energy")
+        if model == "taitwater" and state:
+            raise CaseError(format_key(base + [state[0]]), rb[state[0]],
+                            "a taitwater body's pressure follows from its density (Tait's equation); remove it")
+        if "pressure" in body and body["pressure"] < 0:
+            raise CaseError(format_key(base + ["pressure"]), rb["pressure"], "must be >= 0 for an ideal gas (Pa)")
+        if "velocity" in rb:
+            check_length(format_key(base + ["velocity"]), rb["velocity"], dim)
+        reg, rreg = body["region"], rb["region"]
+        for kind, keys in (("box", ("lower", "upper")), ("sphere", ("centre",)), ("cylinder", ("base",))):
+            if kind in reg:
+                for k in keys:
+                    check_length(format_key(base + ["region", kind, k]), rreg[kind][k], dim)
+        if "cylinder" in reg and dim != 3:
+            raise CaseError(format_key(base + ["region", "cylinder"]), rreg["cylinder"],
+                            "cylinders are 3-D; in 2-D a disc is a sphere = { centre, radius }")
+        if "box" in reg and not all(u > v for u, v in zip(reg["box"]["upper"], reg["box"]["lower"])):
+            raise CaseError(format_key(base + ["region", "box", "upper"]), rreg["box"]["upper"],
+                            "must be > lower component-wise")
+        if "where" in reg:
+            check_expression(format_key(base + ["region", "where"]), reg["where"], dim, BOOL)
+        blo, bhi = bounds(reg, dim)
+        if any(b < a for a, b in zip(lo, blo)) or any(b > a for a, b in zip(hi, bhi)):
+            raise CaseError(format_key(base + ["region"]), rreg,
+                            f"must lie inside sph.domain (lower {raw['domain']['lower']}, upper {raw['domain']['upper']})")
+        if total + int(np.prod(lattice_counts(reg, body["spacing"], dim), dtype=np.float64)) > sph["max_particles"] * 4:
+            raise CaseError(format_key(base + ["region"]), rreg,  # the lattice alone is too big to build
+                            f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
+        n = len(lattice_points(reg, body["spacing"], dim))
+        if n == 0:
+            raise CaseError(format_key(base + ["region"]), rreg,
+                            f"holds no particle at spacing {body['spacing']:g} m")
+        total += n
+        if total > sph["max_particles"]:
+            raise CaseError(format_key(base + ["region"]), rreg,
+                            f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
+    sph["particles"] = total
+    for i, line in enumerate(sph["lammps_commands"]):
+        try:
+            check_line(line)
+        except LammpsLineError as exc:
+            raise CaseError(format_key(["sph", "lammps_commands", i]), line, str(exc)) from None
+
+
+def normalise(raw: dict | None, case: dict) -> dict | None:
+    return None if raw is None else _normalise(raw, case["run"]["dimension"])
+
+
+def check(case: dict, data: dict) -> None:
+    _check(case["sph"], data["sph"], case["run"]["dimension"])
+
+
+# ---- registration (after [[boundaries]] 50, before [coupling] 60) ----------------------------------
+register_table("sph", SPH, normalise, check, order=55)

@@ -1,0 +1,58 @@
+"""Particle lattices filling the regions of a case's SPH bodies (used by the LAMMPS adapter to create
+the particles and by the case checks to count them before anything launches).
+
+A body's region is one of ``{"box": {lower, upper}}``, ``{"sphere": {centre, radius}}`` (a disc in
+2-D), ``{"cylinder": {base, axis, radius, length}}`` (3-D; the axis is "x", "y" or "z") and may be
+narrowed by ``where``, a boolean expression in ``x, y[, z]`` (solvers.expressions).  Particles sit
+at the centres of the cells of a square / cubic lattice of spacing dx anchored at the region's
+lower corner (so a box of n dx holds exactly n particles per side and its particles' volumes
+dx^dim add up to the box's); each particle carries the volume dx^dim.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solvers.expressions import BOOL, compile_expression
+
+
+def bounds(region: dict, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """The axis-aligned box around a region (m)."""
+    if "box" in region:
+        return np.asarray(region["box"]["lower"], float), np.asarray(region["box"]["upper"], float)
+    if "sphere" in region:
+        c, r = np.asarray(region["sphere"]["centre"], float), float(region["sphere"]["radius"])
+        return c - r, c + r
+    cyl = region["cylinder"]
+    base, r, length = np.asarray(cyl["base"], float), float(cyl["radius"]), float(cyl["length"])
+    a = "xyz".index(cyl["axis"])
+    lo, hi = base - r, base + r
+    lo[a], hi[a] = base[a], base[a] + length
+    return lo, hi
+
+
+def lattice_counts(region: dict, spacing: float, dim: int) -> np.ndarray:
+    lo, hi = bounds(region, dim)
+    return np.maximum(np.rint((hi - lo) / spacing).astype(np.int64), 1)
+
+
+def lattice_points(region: dict, spacing: float, dim: int) -> np.ndarray:
+    """(n, dim) particle positions of one body (C order of the lattice: x slowest)."""
+    lo, _ = bounds(region, dim)
+    counts = lattice_counts(region, spacing, dim)
+    axes = [lo[d] + (np.arange(counts[d]) + 0.5) * spacing for d in range(dim)]
+    x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
+    keep = np.ones(len(x), bool)
+    if "sphere" in region:
+        c, r = np.asarray(region["sphere"]["centre"], float), float(region["sphere"]["radius"])
+        keep &= np.sum((x - c) ** 2, axis=1) <= r * r
+    elif "cylinder" in region:
+        cyl = region["cylinder"]
+        a = "xyz".index(cyl["axis"])
+        off = x - np.asarray(cyl["base"], float)
+        off[:, a] = 0.0
+        keep &= np.sum(off ** 2, axis=1) <= float(cyl["radius"]) ** 2
+    if region.get("where"):
+        names = ("x", "y", "z")[:dim]
+        f = compile_expression(region["where"], names, kind=BOOL)
+        keep &= np.asarray(f(*(x[:, d] for d in range(dim))), bool)
+    return x[keep]
