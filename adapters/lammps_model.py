@@ -2,9 +2,14 @@
 fixes, walls, gravity) and the particles (positions, types, masses, densities, energies), built from
 the normalised case (orchestrator/schema_sph.py).  Nothing here runs LAMMPS.
 
-One LAMMPS atom type per body (its mass per particle is the body's density times its lattice cell
-volume, so bodies of different density on the same lattice keep their own masses), types numbered
-from 1 in body order.  The adapter's own fixes and computes have IDs starting with ``immerse``
+A LAMMPS atom type per distinct (material, particle mass, fixed) of the bodies, numbered from 1 in
+order of first appearance: atom_style sph keeps masses per type (a particle's mass is its body's
+density times its lattice cell volume), and bodies that share all three share a type.  Why not a
+type per body: LAMMPS's pair sph/idealgas symmetrises the cutoff of a type pair but not its
+viscosity (PairSPHIdealGas::init_one), so the viscous force between two types depends on which
+particle LAMMPS takes as "i", which changes with the domain decomposition (measured: 0.14 dx
+apart after 100 steps of the two-type shock tube on 1 and 2 ranks, 5e-14 with one type).  Equal
+particle masses (e.g. the lighter gas on a coarser lattice) keep a gas case on one type.  The adapter's own fixes and computes have IDs starting with ``immerse``
 (orchestrator/lammps_lines.py refuses case lines that touch them).
 """
 from __future__ import annotations
@@ -18,11 +23,12 @@ FIXED_GROUP = "immerse_fixed"
 
 
 def boundary_letters(sph: dict) -> list[str]:
-    """LAMMPS boundary per axis: p (periodic), else f (fixed box: particles must stay inside; walls
-    keep them, open faces need room in the domain)."""
+    """LAMMPS boundary per face pair: p (periodic); per face f (a wall: the box stays, wall/reflect
+    keeps the particles in) or s (open: the box follows the particles, shrink-wrapped)."""
     out = []
     for a in "xyz"[: sph["dimension"]]:
-        out.append("p" if sph["boundaries"][f"{a}_lower"] == "periodic" else "f")
+        faces = [sph["boundaries"][f"{a}_{side}"] for side in ("lower", "upper")]
+        out.append("p" if faces[0] == "periodic" else "".join("f" if f == "wall" else "s" for f in faces))
     if sph["dimension"] == 2:
         out.append("p")
     return out
@@ -43,24 +49,52 @@ def box_commands(sph: dict) -> list[str]:
         "boundary " + " ".join(boundary_letters(sph)),
         "newton on",
         "region immerse_box block " + " ".join(f"{a!r} {b!r}" for a, b in zip(lo, hi)),
-        f"create_box {len(sph['bodies'])} immerse_box",
-        "comm_modify vel yes",  # SPH forces need the ghosts' velocities
+        f"create_box {len(atom_types(sph)[1])} immerse_box",
+        # (no "comm_modify vel yes": the SPH pair styles use the velocity estimate vest, which atom_style
+        # sph sends to the ghosts with the positions; measured: 2 ranks = 1 rank to 1e-14 without it)
         f"neighbor {skin!r} bin",
         "neigh_modify every 1 delay 0 check yes",
     ]
 
 
-def particles(sph: dict):
-    """(ids, types, x (n, dim), v (n, dim), rho (n,), esph (n,), masses per type (ntypes,)):
-    ids 1..n in body order, types 1.. per body, esph the particle's internal energy (J: specific
-    energy times mass, LAMMPS's convention)."""
+def atom_types(sph: dict) -> tuple[list[int], list[dict]]:
+    """(type of each body, [{material, mass, fixed} of each type]) (see the module docstring)."""
     dim = sph["dimension"]
-    xs, types, vs, rhos, es, masses = [], [], [], [], [], []
-    for t, body in enumerate(sph["bodies"], start=1):
+    keys, of_body = [], []
+    for body in sph["bodies"]:
+        key = {"material": body["material"], "mass": body["density"] * body["spacing"] ** dim,
+               "fixed": body["fixed"]}
+        if key not in keys:
+            keys.append(key)
+        of_body.append(keys.index(key) + 1)
+    return of_body, keys
+
+
+def hydrostatic_density(body: dict, mat: dict, x: np.ndarray, gravity) -> np.ndarray:
+    """Tait's density under the weight of the body's own column: p = rho0 |g| depth,
+    rho = rho0 (1 + p / B)^(1/7), B = c0^2 rho0 / 7, depth below the body's top along g (its highest
+    particle plus half a spacing)."""
+    g = np.asarray(gravity, float)
+    gmag = float(np.linalg.norm(g))
+    down = x @ (g / gmag)
+    depth = down - (down.min() - 0.5 * body["spacing"])
+    b = mat["sound_speed"] ** 2 * mat["density"] / 7.0
+    return mat["density"] * (1.0 + mat["density"] * gmag * depth / b) ** (1.0 / 7.0)
+
+
+def particles(sph: dict):
+    """(ids, types, x (n, dim), v (n, dim), rho (n,), esph (n,), body (n,), masses per type):
+    ids 1..n in body order, esph the particle's internal energy (J: specific energy times mass,
+    LAMMPS's convention), body the body index of each particle."""
+    dim = sph["dimension"]
+    type_of_body, kinds = atom_types(sph)
+    masses = np.array([k["mass"] for k in kinds])
+    xs, types, vs, rhos, es, bodies = [], [], [], [], [], []
+    for i, body in enumerate(sph["bodies"]):
+        t = type_of_body[i]
         x = lattice_points(body["region"], body["spacing"], dim)
         n = len(x)
-        mass = body["density"] * body["spacing"] ** dim
-        masses.append(mass)
+        mass = masses[t - 1]
         mat = sph["materials"][body["material"]]
         if mat["model"] == "idealgas":
             from orchestrator.schema_sph import IDEALGAS_GAMMA
@@ -72,21 +106,26 @@ def particles(sph: dict):
         xs.append(x)
         types.append(np.full(n, t, np.int32))
         vs.append(np.tile(np.asarray(body["velocity"], float), (n, 1)))
-        rhos.append(np.full(n, body["density"]))
+        rho = (hydrostatic_density(body, mat, x, sph["gravity"]) if body.get("hydrostatic")
+               else np.full(n, body["density"]))
+        rhos.append(rho)
         es.append(np.full(n, e_spec * mass))
+        bodies.append(np.full(n, i, np.int64))
     x = np.concatenate(xs)
     ids = np.arange(1, len(x) + 1, dtype=np.int32)
-    return ids, np.concatenate(types), x, np.concatenate(vs), np.concatenate(rhos), np.concatenate(es), np.array(masses)
+    return (ids, np.concatenate(types), x, np.concatenate(vs), np.concatenate(rhos), np.concatenate(es),
+            np.concatenate(bodies), masses)
 
 
 def physics_commands(sph: dict) -> list[str]:
     """Masses, groups, pair style and coefficients, integration, walls, gravity."""
     dim, h = sph["dimension"], sph["smoothing_length"]
-    bodies, mats = sph["bodies"], sph["materials"]
-    ntypes = len(bodies)
+    mats = sph["materials"]
+    _, kinds = atom_types(sph)
+    ntypes = len(kinds)
     cmds = []
-    free = [str(t) for t, b in enumerate(bodies, start=1) if not b["fixed"]]
-    fixed = [str(t) for t, b in enumerate(bodies, start=1) if b["fixed"]]
+    free = [str(t) for t, k in enumerate(kinds, start=1) if not k["fixed"]]
+    fixed = [str(t) for t, k in enumerate(kinds, start=1) if k["fixed"]]
     cmds.append(f"group {FREE_GROUP} type {' '.join(free)}" if free else f"group {FREE_GROUP} empty")
     cmds.append(f"group {FIXED_GROUP} type {' '.join(fixed)}" if fixed else f"group {FIXED_GROUP} empty")
     model = next(iter(mats.values()))["model"]
@@ -100,7 +139,7 @@ def physics_commands(sph: dict) -> list[str]:
         prefix = ""
     for i in range(1, ntypes + 1):
         for j in range(i, ntypes + 1):
-            mi, mj = mats[bodies[i - 1]["material"]], mats[bodies[j - 1]["material"]]
+            mi, mj = mats[kinds[i - 1]["material"]], mats[kinds[j - 1]["material"]]
             visc = 0.5 * (mi["viscosity"] + mj["viscosity"])
             if model == "taitwater":
                 # LAMMPS sets rho0 and c0 of type i from every i-j line: give type i's own

