@@ -1,0 +1,66 @@
+"""The coupling geometry and operators of a particle (SPH) body in the background grid (Tsuji, Puso,
+Spangler, Owen et al., "Embedded smoothed particle hydrodynamics", CMAME 366 (2020); the seed's
+"Couple particles to background").
+
+A particle body has no mesh: its interface Gamma is the iso-surface c = 1/2 of the particles'
+colour function at the background nodes (particle_surface.py: marching squares / tetrahedra per
+zone, closed and outward-oriented), rebuilt from the particle positions at every step.  That
+surface is clipped by the zones exactly as a Lagrangian body's (geometry.clip_surface), so the
+blocked fractions and face coverages of the restricted advection, the areas, normals and B^b are
+the mesh body's.  Only B^f changes: the foreground velocity on Gamma is the particles'
+Shepard-normalised kernel interpolation, so
+
+    B^f_ei = ∫_{Γ_e} W_i / Σ_j W_j dΓ   (W_i = V_i W(|x - x_i|, h), Lucy kernel, support h),
+
+integrated with the pieces' quadrature points (geometry.py: degree 3 in 2-D, 4 in 3-D).  Its
+columns are particles.  Every quadrature point lies within h of a particle (it is on the c = 1/2
+surface), so the Shepard weights of a point sum to 1 and every row of B^f sums to the cut area A_e,
+as every row of B^b does: the impulses on particles and background are equal and opposite.
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import scipy.sparse as sp
+
+from orchestrator.coupling.geometry import clip_surface
+from orchestrator.coupling.operators import Operators
+from orchestrator.coupling.particle_surface import as_coupling_facets, particle_surface, shepard_weights
+
+
+@dataclasses.dataclass
+class ParticleInterface:
+    points: np.ndarray   # (nv, dim) vertices of the reconstructed surface
+    facets: np.ndarray   # (nf, 2 | 4) segments / quads (a, b, c, c) of the coupling geometry
+    pieces: object       # geometry.Pieces of the whole surface (fractions, coverages)
+    inner: object        # the pieces facing gas (operators)
+    ops: Operators       # B^f over particles
+
+
+def particle_rows(ops: Operators, inner, x: np.ndarray, volume: np.ndarray, h: float) -> sp.csr_matrix:
+    """B^f (n_zones x n_particles): the quadrature of the Shepard weights over each zone's pieces."""
+    qzone = np.asarray(inner.zone, dtype=np.int64)[np.asarray(inner.qpiece, dtype=np.int64)]
+    row = np.searchsorted(ops.zones, qzone)
+    row = np.minimum(row, max(ops.zones.size - 1, 0))
+    kept = (ops.zones.size > 0) & (ops.zones[row] == qzone) if ops.zones.size else np.zeros(qzone.size, bool)
+    q = np.flatnonzero(kept)
+    Z = sp.csr_matrix((np.asarray(inner.qw, float)[q], (row[q], q)), shape=(ops.zones.size, qzone.size))
+    S = shepard_weights(np.asarray(inner.qp, float), x, volume, h)
+    Bf = (Z @ S).tocsr()
+    Bf.sort_indices()
+    return Bf
+
+
+def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: float = 0.5) -> ParticleInterface:
+    """The reconstructed interface of the particles ``x`` (n, dim) with volumes ``volume`` (n,) and
+    kernel support ``h`` in ``grid`` (geometry.Grid), and its operators (columns of B^f: particles)."""
+    from orchestrator.coupling.embedded import facing_the_grid
+
+    points, tri = particle_surface(grid.lower, grid.h, grid.cells, x, volume, h, iso)
+    facets = as_coupling_facets(tri)
+    pieces = clip_surface(grid, points, facets, np.zeros(len(facets), np.int64))
+    inner = facing_the_grid(grid, pieces)
+    ops = Operators.build(grid, inner, facets, len(points))
+    ops = dataclasses.replace(ops, Bf=particle_rows(ops, inner, x, volume, h))
+    return ParticleInterface(points, facets, pieces, inner, ops)
