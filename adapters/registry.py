@@ -54,4 +54,4 @@ def adapter_class(role: str) -> type:
 # The solvers this project ships. A new solver adds one line here and an adapter module.
 declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground")
 declare("ale", "adapters.ale", "ale", coupling_side="background")
-declare("sph", "adapters.sph", "sph")  # LAMMPS particles; coupled to the background: issue 10 item 4
+declare("sph", "adapters.sph", "sph", coupling_side="foreground")  # LAMMPS particles

@@ -33,15 +33,18 @@ def restart_file(manifest: Path, role: str) -> Path:
 
 def pack_surface(adapter) -> np.ndarray:
     """A foreground's surface as one float64 buffer (collective: every rank computes it):
-    [ns, nv, nf, node_ids, facets, body, mass, free (ns, dim), x (ns, dim), v (ns, dim)]."""
+    [ns, nv, nf, node_ids, facets, body, mass, free (ns, dim), x (ns, dim), v (ns, dim)
+     (, h, volume (ns,): particles)]."""
     srf = adapter.surface()
     x = adapter.positions()
     v = adapter.velocities()
     ns, dim = x.shape
     facets = np.asarray(srf["facets"])
     free = np.asarray(srf.get("free", np.ones((ns, dim))), dtype=np.float64)
+    # a particle foreground (SPH) adds its kernel support h and the particles' volumes
+    particles = [[srf["smoothing_length"]], srf["volume"]] if "volume" in srf else []
     return np.concatenate([[ns, facets.shape[1], facets.shape[0]], srf["node_ids"], facets.ravel(),
-                           srf["body"], srf["mass"], free.ravel(), x.ravel(), v.ravel()]).astype(np.float64)
+                           srf["body"], srf["mass"], free.ravel(), x.ravel(), v.ravel(), *particles]).astype(np.float64)
 
 
 def unpack_surface(buf: np.ndarray, dim: int) -> dict:
@@ -54,6 +57,9 @@ def unpack_surface(buf: np.ndarray, dim: int) -> dict:
                                  ("v", ns * dim, (ns, dim), np.float64)):
         out[name] = buf[pos:pos + n].astype(kind).reshape(shape)
         pos += n
+    if pos < len(buf):  # particles
+        out["smoothing_length"] = float(buf[pos])
+        out["volume"] = buf[pos + 1: pos + 1 + ns].copy()
     return out
 
 
@@ -108,7 +114,9 @@ def serve(adapter_cls, argv=None) -> None:
                 P.send(ic, v, 0, P.TAG_VSTAR)
             imp = P.share(comm, P.recv(ic, 0, P.TAG_IMPULSE) if rank == 0 else None)
             adapter.correct(imp.reshape(v.shape))
-            state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel()])
+            volumes = getattr(adapter, "volumes", None)  # particles: their volumes too
+            state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(),
+                                    *([volumes()] if volumes else [])])
             if rank == 0:
                 P.send(ic, state, 0, P.TAG_STATE)
             adapter.remap(None)

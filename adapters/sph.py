@@ -78,6 +78,8 @@ class SphAdapter(SolverAdapter):
         self._dt = None
         self._setup_run(self._initial_dt())
         self._energy0 = None
+        self._free_per_mass = np.zeros(self.n)  # set by surface() when coupled
+        self._external_work = 0.0  # work of the coupling impulses on the particles
         self.diagnostics()  # the initial energy, the reference of energy_balance_rel (a restart reads its own)
         if self.comm.rank == 0:
             from orchestrator import output
@@ -175,15 +177,67 @@ class SphAdapter(SolverAdapter):
         return float(dt)
 
     # ---- the step ---------------------------------------------------------------------------
+    # LAMMPS's fix sph is velocity Verlet: a step is v += dt/2 f/m (f of the last step), x += dt v,
+    # forces, v += dt/2 f/m.  Between steps LAMMPS holds x^n, v^n, f^n, so the predictor of the
+    # coupling, v* = v^{n+1/2} before any impulse, is v^n + dt/2 f^n/m, computed here without
+    # stepping; correct(impulse) adds impulse/m to v^n and then runs the step, whose first half kick
+    # gives v^{n+1/2} = v* + impulse/m and whose drift moves the particles with it.  After the step
+    # v^{n+1/2} = v^{n+1} - dt/2 f^{n+1}/m.
     def stable_dt(self) -> float:
         return self._limits()
 
     def predict(self, dt: float, step: int, time: float) -> None:
         self._set_dt(dt)
-        self.lmp.command("run 1 pre no post no")
 
     def correct(self, impulse=None) -> None:
-        return None
+        if impulse is not None:
+            imp = np.asarray(impulse).reshape(self.n, self.dim)
+            dv = np.zeros((self.n, 3))
+            dv[:, : self.dim] = imp * self._free_per_mass[:, None]
+            v = self._gather("v", 3)
+            # the impulse's work: the kinetic energy it adds, sum imp . (v* + dv / 2) (LAMMPS's energy
+            # changes only through its pair styles; the balance adds what crosses the interface)
+            self._external_work += float(np.sum(imp * (self._vstar + 0.5 * dv[:, : self.dim])))
+            self._scatter("v", v + dv)
+        self.lmp.command("run 1 pre no post no")
+        self._stepped = True
+
+    # ---- the embedded coupling (foreground side; collective, every rank gets the same arrays) ----
+    def _per_particle(self):
+        t = self._gather("type", 1, integer=True).astype(np.int64)
+        return self._mass_of_type[t], self._fixed_type[t]
+
+    def surface(self) -> dict:
+        """The particles as the coupling's foreground nodes (id order): no facets (the coupler
+        reconstructs the surface each step), masses, free components (fixed particles: none),
+        volumes m / rho and the kernel support h."""
+        m, fixed = self._per_particle()
+        self._free_per_mass = np.where(fixed, 0.0, 1.0 / m)
+        nv = 2 if self.dim == 2 else 4
+        return {"node_ids": np.arange(1, self.n + 1), "facets": np.zeros((0, nv), np.int64),
+                "body": np.zeros(0, np.int64), "mass": m,
+                "free": np.repeat((~fixed)[:, None], self.dim, axis=1).astype(np.float64),
+                "volume": self.volumes(), "smoothing_length": self.sph["smoothing_length"]}
+
+    def _half_kick(self) -> np.ndarray:
+        return (0.5 * self._dt) * self._gather("f", 3)[:, : self.dim] * self._free_per_mass[:, None]
+
+    def interface(self) -> dict:
+        """After predict: {"v": v* (n, dim)} = v^n + dt/2 f^n / m (fixed particles: 0)."""
+        self._vstar = self._gather("v", 3)[:, : self.dim] + self._half_kick()
+        return {"v": self._vstar}
+
+    def positions(self) -> np.ndarray:
+        return self._gather("x", 3)[:, : self.dim]
+
+    def velocities(self) -> np.ndarray:
+        """v^{n+1/2} after a step (v^{n+1} - dt/2 f^{n+1}/m); the initial velocity before the first."""
+        v = self._gather("v", 3)[:, : self.dim]
+        return v - self._half_kick() if getattr(self, "_stepped", False) else v
+
+    def volumes(self) -> np.ndarray:
+        m, _ = self._per_particle()
+        return m / self._gather("rho", 1)
 
     def close(self) -> None:
         self.lmp.close()
@@ -191,7 +245,7 @@ class SphAdapter(SolverAdapter):
     # ---- diagnostics ------------------------------------------------------------------------
     def diagnostic_names(self) -> list[str]:
         return ["mass", *[f"momentum_{a}" for a in "xyz"[: self.dim]], "kinetic_energy", "internal_energy",
-                "gravity_energy", "total_energy", "energy_balance_rel", "particles"]
+                "gravity_energy", "total_energy", "external_work", "energy_balance_rel", "particles"]
 
     def diagnostics(self) -> dict[str, float]:
         from mpi4py import MPI
@@ -210,8 +264,10 @@ class SphAdapter(SolverAdapter):
         e = ke + ie + ge
         if self._energy0 is None:
             self._energy0 = e
+        scale = max(abs(self._energy0), ke + abs(ie), abs(self._external_work), 1e-300)
         d.update(kinetic_energy=ke, internal_energy=ie, gravity_energy=ge, total_energy=e,
-                 energy_balance_rel=(e - self._energy0) / max(abs(self._energy0), ke + ie, 1e-300), particles=n)
+                 external_work=self._external_work,
+                 energy_balance_rel=(e - self._energy0 - self._external_work) / scale, particles=n)
         return {k: float(v) for k, v in d.items()}
 
     # ---- output -----------------------------------------------------------------------------
@@ -252,6 +308,7 @@ class SphAdapter(SolverAdapter):
                     h.create_dataset(k, data=a)
                 h.attrs["ntimestep"] = step
                 h.attrs["energy0"] = self._energy0
+                h.attrs["external_work"] = self._external_work
                 h.attrs["ranks"] = self.comm.size
             tmp.replace(path)
         self._load(s, step)
@@ -263,6 +320,7 @@ class SphAdapter(SolverAdapter):
             s = {k: h[k][...] for k in h}
             step = int(h.attrs["ntimestep"])
             self._energy0 = float(h.attrs["energy0"])
+            self._external_work = float(h.attrs["external_work"])
         self._load(s, step)
 
     def _load(self, s: dict, step: int) -> None:

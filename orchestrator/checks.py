@@ -590,19 +590,21 @@ def advected_shape(case, out, history, params):
 
 @register_check("embedded_piston", params=table(
     {"axis": AXIS, "gap": number("zone widths", minimum=0), "span": number("m", exclusiveMinimum=0),
-     "span_left": number("m", exclusiveMinimum=0), "span_right": number("m", exclusiveMinimum=0)}))
+     "span_left": number("m", exclusiveMinimum=0), "span_right": number("m", exclusiveMinimum=0),
+     "role": {"type": "string", "enum": ["lagrange", "sph"]}}))
 def embedded_piston(case, out, history, params):
-    """A free body (the Lagrangian solver's) immersed in a 1-D flow along `axis` (a piston between
-    two gases): at the last output, the body's centre (mean node position) and velocity (mean node
-    velocity) along the axis, and the pressure of the gas on each side (mean over the zones between
+    """A free body (the Lagrangian solver's, or particles: `role = "sph"`) immersed in a 1-D flow along
+    `axis` (a piston between two gases): at the last output, the body's centre (mean node or particle
+    position) and velocity (mean node or particle velocity) along the axis, and the pressure of the gas on each side (mean over the zones between
     `gap` and `span` from the body's faces, cut zones excluded; `span_left` / `span_right` where the
     uniform regions either side differ in width), against `centre`, `velocity` and `pressure` (the
     exact solution's, given in the case)."""
     from orchestrator import output
 
     axis = "xyz".index(params.get("axis", "x"))
-    t, _, index = _last_step(out, "lagrange")
-    points, pd, _ = output.read_step(out, "lagrange", index)
+    role = params.get("role", "lagrange")
+    t, _, index = _last_step(out, role)
+    points, pd, _ = output.read_step(out, role, index)
     x = points[:, axis]
     lo, hi = float(x.min()), float(x.max())
     _, _, aindex = _last_step(out, "ale")

@@ -133,8 +133,7 @@ class Coupler:
                 f"{c.stable_limit:.6g} s (a stiffer spring needs a smaller step: lower its stiffness, or "
                 f"run.dt_scale)")
         P.send(fg, impulse, 0, P.TAG_IMPULSE)
-        state = P.recv(fg, 0, P.TAG_STATE).reshape(2, -1, c.dim)
-        P.send(bg, c.background_correction(state[0], state[1]), 0, P.TAG_CORRECT)
+        P.send(bg, c.take_state(P.recv(fg, 0, P.TAG_STATE)), 0, P.TAG_CORRECT)
         from orchestrator.coupling.geometry import GeometryError
 
         try:

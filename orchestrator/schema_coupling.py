@@ -55,8 +55,14 @@ def check(case: dict, data: dict) -> None:
     if "ale" not in case:
         raise CaseError("ale", MISSING, "a [coupling] case needs the background grid [ale] its bodies move through")
     bodies = case.get("lagrange", {}).get("bodies", [])
-    if not bodies:
-        raise CaseError("lagrange.bodies", MISSING, "a [coupling] case needs at least one body ([[lagrange.bodies]])")
+    if not bodies and "sph" not in case:
+        raise CaseError("lagrange.bodies", MISSING, "a [coupling] case needs at least one body "
+                        "([[lagrange.bodies]] or the particles of [sph])")
+    if bodies and "sph" in case:
+        raise CaseError("sph", "[sph] beside [[lagrange.bodies]]", "one group of bodies per coupled case "
+                        "for now: Lagrangian bodies or SPH particles, not both")
+    if "sph" in case:
+        _sph_inside_grid(case, data)
     mode = case["ale"].get("mode", "eulerian")
     if mode != "eulerian":
         raise CaseError("ale.mode", data["ale"].get("mode", mode),
@@ -67,6 +73,22 @@ def check(case: dict, data: dict) -> None:
         if box is not None:
             kind = next(iter(body["mesh"]))
             _inside_grid(case, data, i, kind, box, dim)
+
+
+def _sph_inside_grid(case: dict, data: dict) -> None:
+    """Every SPH body's region lies in the background grid (the coupler reconstructs the particles'
+    surface on its nodes)."""
+    from solvers.particles import bounds
+
+    dim = case["run"]["dimension"]
+    g = case["ale"]["grid"]
+    for i, body in enumerate(case["sph"]["bodies"]):
+        lo, hi = bounds(body["region"], dim)
+        if any(a < b - 1e-12 * (u - b) for a, b, u in zip(lo, g["lower"], g["upper"])) or \
+                any(a > u + 1e-12 * (u - b) for a, b, u in zip(hi, g["lower"], g["upper"])):
+            raise CaseError(format_key(["sph", "bodies", i, "region"]), data["sph"]["bodies"][i]["region"],
+                            f"must lie inside the background grid, from ale.grid.lower = {data['ale']['grid']['lower']} "
+                            f"to ale.grid.upper = {data['ale']['grid']['upper']} (m)")
 
 
 def check_files(case: dict, data: dict) -> None:

@@ -121,6 +121,14 @@ class EmbeddedCoupling:
         self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
         self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
+        # a particle foreground (SPH): no facets; its surface is reconstructed every step from the
+        # particles (their volumes and kernel support h), B^f over particles (particle_operators.py)
+        self.volume = surface.get("volume")
+        self.particles = self.volume is not None
+        if self.particles:
+            self.volume = np.asarray(self.volume, dtype=np.float64).copy()
+            self.h = float(surface["smoothing_length"])
+            self.n_bodies = 1
         self.mass = np.asarray(surface["mass"], dtype=np.float64)
         free = np.asarray(surface["free"]).reshape(-1, self.dim)
         self.free = (free > 0.0).astype(np.float64)
@@ -143,11 +151,18 @@ class EmbeddedCoupling:
         the background's solvers.ale.coupled.BodyGeometry."""
         from solvers.ale.coupled import BodyGeometry
 
-        pieces = clip_surface(self.grid, self.x, self.facets, self.body)
+        if self.particles:
+            from orchestrator.coupling.particle_operators import particle_interface
+
+            pi = particle_interface(self.grid, self.x, self.volume, self.h)
+            pieces, inner = pi.pieces, pi.inner
+        else:
+            pieces = clip_surface(self.grid, self.x, self.facets, self.body)
         cov = coverage(self.grid, pieces, self.n_bodies)
         total = cov.total   # (bodies do not overlap: sums of disjoint parts)
         faces = tuple((ids, t) for (ids, _), t in zip(cov.faces, cov.face_totals))
-        inner = facing_the_grid(self.grid, pieces)
+        if not self.particles:
+            inner = facing_the_grid(self.grid, pieces)
         # B^b over every corner of a cut zone (the bilinear interpolation of the gas velocity on
         # Gamma_e): the constraint ties the gas nodes in front of the surface too, so the interface
         # carries the gas's inertia.  An earlier form kept only the corners behind the surface: a
@@ -155,7 +170,7 @@ class EmbeddedCoupling:
         # two steps at dt_scale 0.9 (the gas's stiffness on the body's surface mass alone), stable
         # with every corner; and the shipped cases are as accurate or more (oblique_slip_wall normal
         # velocity 1.26e-2 -> 7.7e-3, embedded_piston_sod velocity 1.16e-2 -> 7.9e-3)
-        self.ops = Operators.build(self.grid, inner, self.facets, self.ns)
+        self.ops = pi.ops if self.particles else Operators.build(self.grid, inner, self.facets, self.ns)
         self.pieces = pieces
         Bf = self.ops.Bf
         velocity = row_means(Bf.indptr, Bf.indices, Bf.data, self.v, self.ops.area)  # the surface's, per cut zone
@@ -210,6 +225,14 @@ class EmbeddedCoupling:
         inv = np.einsum("ij,ij->i", w, free) / self.mass
         inv[wsum == 0.0] = 1.0 / self.mass[wsum == 0.0]
         return np.divide(1.0, inv, out=np.full_like(inv, np.inf), where=inv > 1e-12 / self.mass)
+
+    def take_state(self, buf: np.ndarray) -> np.ndarray:
+        """The foreground's state after its correct (protocol TAG_STATE): x^{n+1}, v^{n+1/2} of its
+        surface nodes (particles: and their volumes); returns :meth:`background_correction`'s."""
+        n = self.ns * self.dim
+        if self.particles:
+            self.volume = np.asarray(buf[2 * n:], dtype=np.float64).copy()
+        return self.background_correction(buf[:n], buf[n: 2 * n])
 
     def background_correction(self, x_new: np.ndarray, v_new: np.ndarray) -> np.ndarray:
         """Step 3: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean velocity_e (nc, dim)] for

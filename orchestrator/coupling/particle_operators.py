@@ -13,9 +13,10 @@ Shepard-normalised kernel interpolation, so
     B^f_ei = ∫_{Γ_e} W_i / Σ_j W_j dΓ   (W_i = V_i W(|x - x_i|, h), Lucy kernel, support h),
 
 integrated with the pieces' quadrature points (geometry.py: degree 3 in 2-D, 4 in 3-D).  Its
-columns are particles.  Every quadrature point lies within h of a particle (it is on the c = 1/2
-surface), so the Shepard weights of a point sum to 1 and every row of B^f sums to the cut area A_e,
-as every row of B^b does: the impulses on particles and background are equal and opposite.
+columns are particles.  The Shepard weights of a point sum to 1 (a point beyond every kernel, where
+the surface runs straight across a zone coarser than h, takes its nearest particle's velocity), so
+every row of B^f sums to the cut area A_e, as every row of B^b does: the impulses on particles and
+background are equal and opposite.
 """
 from __future__ import annotations
 
@@ -26,7 +27,7 @@ import scipy.sparse as sp
 
 from orchestrator.coupling.geometry import clip_surface
 from orchestrator.coupling.operators import Operators
-from orchestrator.coupling.particle_surface import as_coupling_facets, particle_surface, shepard_weights
+from orchestrator.coupling.particle_surface import as_coupling_facets, colour_at_nodes, reconstruct, shepard_weights
 
 
 @dataclasses.dataclass
@@ -47,17 +48,54 @@ def particle_rows(ops: Operators, inner, x: np.ndarray, volume: np.ndarray, h: f
     q = np.flatnonzero(kept)
     Z = sp.csr_matrix((np.asarray(inner.qw, float)[q], (row[q], q)), shape=(ops.zones.size, qzone.size))
     S = shepard_weights(np.asarray(inner.qp, float), x, volume, h)
+    lone = np.flatnonzero(np.diff(S.indptr) == 0)
+    if lone.size:
+        # a quadrature point beyond every particle's kernel (the surface runs straight between its
+        # vertices on grid edges, which can lie up to a zone from the particles): its weight goes
+        # to the nearest particle, so every row still sums to the cut area (momentum balance)
+        from scipy.spatial import cKDTree
+
+        _, near = cKDTree(x).query(np.asarray(inner.qp, float)[lone])
+        S = (S + sp.csr_matrix((np.ones(lone.size), (lone, near)), shape=S.shape)).tocsr()
     Bf = (Z @ S).tocsr()
     Bf.sort_indices()
     return Bf
 
 
+def boundary_images(grid, x: np.ndarray, volume: np.ndarray, h: float):
+    """The particles with their images across the grid's boundary planes (within h of a plane:
+    mirrored across it, or shifted by the period on a periodic axis), for the colour function only:
+    a body that reaches the boundary keeps c ~ 1 up to it instead of the half kernel's ~ 1/2, so its
+    reconstructed surface meets the boundary where the body does."""
+    xs, vs = [x], [volume]
+    periodic = np.asarray(grid.periodic, dtype=bool)
+    for d in range(grid.dim):   # (per axis; corners get no double image: c stays above 1/2 there)
+        lo, hi = float(grid.lower[d]), float(grid.upper[d])
+        for near, image in ((x[:, d] < lo + h, hi - lo if periodic[d] else 2.0 * lo),
+                            (x[:, d] > hi - h, lo - hi if periodic[d] else 2.0 * hi)):
+            xi = x[near].copy()
+            xi[:, d] = xi[:, d] + image if periodic[d] else image - xi[:, d]
+            xs.append(xi)
+            vs.append(volume[near])
+    return np.concatenate(xs), np.concatenate(vs)
+
+
 def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: float = 0.5) -> ParticleInterface:
     """The reconstructed interface of the particles ``x`` (n, dim) with volumes ``volume`` (n,) and
-    kernel support ``h`` in ``grid`` (geometry.Grid), and its operators (columns of B^f: particles)."""
+    kernel support ``h`` in ``grid`` (geometry.Grid), and its operators (columns of B^f: particles).
+    The surface closes on the grid's boundary planes where the body reaches them (those facets
+    count for the fractions and get no multiplier: embedded.facing_the_grid)."""
     from orchestrator.coupling.embedded import facing_the_grid
 
-    points, tri = particle_surface(grid.lower, grid.h, grid.cells, x, volume, h, iso)
+    xg, vg = boundary_images(grid, x, volume, h)
+    c = colour_at_nodes(grid.lower, grid.h, grid.cells, xg, vg, h)
+    points, tri = reconstruct(grid.lower, grid.h, grid.cells, c, iso, close_on_boundary=True)
+    if len(tri) == 0:
+        from orchestrator.coupling.geometry import GeometryError
+
+        raise GeometryError(f"the SPH particles form no surface on the background grid (their colour "
+                            f"function stays below {iso:g} at every node: the body has come apart into "
+                            "particles further apart than the smoothing length)")
     facets = as_coupling_facets(tri)
     pieces = clip_surface(grid, points, facets, np.zeros(len(facets), np.int64))
     inner = facing_the_grid(grid, pieces)

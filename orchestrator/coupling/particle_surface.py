@@ -396,7 +396,7 @@ _TETS, _TET_TABLE, _TET_COUNT = _tets_table()
 
 
 # ------------------------------------------------------------------------------------- marching
-def reconstruct(lower, spacing, cells, node_values, iso=0.5):
+def reconstruct(lower, spacing, cells, node_values, iso=0.5, close_on_boundary=False):
     """The closed surface ``c = iso`` of node values c on the grid (Tsuji et al. 2020: exterior cut
     edges, facets per cut zone, connected through the shared edge crossings): marching squares in
     2-D, marching tetrahedra (Kuhn split of each zone) in 3-D; see the module docstring.
@@ -404,7 +404,10 @@ def reconstruct(lower, spacing, cells, node_values, iso=0.5):
     ``node_values`` flat (or shaped cells + 1) in C order of the node array; ``iso > 0`` (nodes
     beyond the grid count as c = 0, outside).  Returns ``(points (nv, dim), facets (nf, 2|3) int64)``:
     segments / triangles into points, outward oriented, every vertex shared by the facets around it.
-    2-D saddle zones (diagonal corners inside) are joined when the zone's mean value is >= iso."""
+    2-D saddle zones (diagonal corners inside) are joined when the zone's mean value is >= iso.
+    ``close_on_boundary``: the outside layer lies ON the grid's boundary planes (zero-width zones),
+    so a body that reaches the boundary is closed by facets on the boundary plane itself (as a mesh
+    body resting on a wall is), not one zone beyond it."""
     lower, spacing, cells = _grid(lower, spacing, cells)
     dim = cells.size
     c = np.asarray(node_values, dtype=np.float64)
@@ -457,6 +460,10 @@ def reconstruct(lower, spacing, cells, node_values, iso=0.5):
     t = np.clip((iso - ca) / (cb - ca), 0.0, 1.0)
     ia = np.stack(np.unravel_index(a, tuple(nshape)), axis=1)
     planes = _planes(lower, spacing, cells, 1)
+    if close_on_boundary:
+        for d in range(dim):   # (per axis)
+            n = int(cells[d])
+            planes[d, 0], planes[d, n + 2] = planes[d, 1], planes[d, n + 1]
     axes = np.arange(dim)
     xa = planes[axes, ia]
     xb = planes[axes, ia + off]
@@ -465,11 +472,11 @@ def reconstruct(lower, spacing, cells, node_values, iso=0.5):
     return points, facets
 
 
-def particle_surface(lower, spacing, cells, x, volume, h, iso=0.5):
+def particle_surface(lower, spacing, cells, x, volume, h, iso=0.5, close_on_boundary=False):
     """``reconstruct`` of ``colour_at_nodes``: the closed outward surface (points, facets) of the
     particle bodies x (volumes V_j, Lucy support h) on the grid."""
     c = colour_at_nodes(lower, spacing, cells, x, volume, h)
-    return reconstruct(lower, spacing, cells, c, iso)
+    return reconstruct(lower, spacing, cells, c, iso, close_on_boundary)
 
 
 # ------------------------------------------------------------------------------------ utilities

@@ -60,3 +60,24 @@ def test_only_particles_near_the_surface_are_coupled():
     radius = np.linalg.norm(pi.points - 0.5, axis=1)
     assert r.min() >= radius.min() - h - 1e-12
     assert len(cols) < 0.5 * len(x)
+
+
+def test_a_slab_across_the_channel_closes_on_the_walls():
+    """Particles filling a channel's height (the embedded SPH piston): the surface closes on the
+    channel walls, which carry no multiplier; the blocked thickness is the slab's within one smoothing
+    length (measured 2.86 mm for 3.75 mm: each face 0.24 h inside, where the colour function crosses
+    1/2 between nodes 1.33 h apart), and the multipliers sit on its two faces only, normals along x."""
+    grid = Grid([0.0, 0.0], [1.0, 0.005], [400, 2])
+    dx = 0.000625
+    xs = np.arange(0.498125 + dx / 2, 0.501875, dx)
+    ys = np.arange(dx / 2, 0.005, dx)
+    x = np.stack(np.meshgrid(xs, ys, indexing="ij"), -1).reshape(-1, 2)
+    pi = particle_interface(grid, x, np.full(len(x), dx * dx), 3 * dx)
+    zones, frac = blocked_fractions(grid, pi.pieces, 1)[:2]
+    thickness = float(np.sum(frac)) * grid.zone_volume / 0.005
+    assert abs(thickness - 0.00375) < 0.6 * 3 * dx
+    ops = pi.ops
+    assert np.allclose(np.abs(ops.normal[:, 0]), 1.0, atol=1e-12)
+    rows_f = np.asarray(ops.Bf.sum(axis=1)).ravel()
+    assert np.abs(rows_f - ops.area).max() <= 1e-13 * ops.area.max()
+    assert ops.area.sum() == pytest.approx(2 * 0.005, rel=1e-12)

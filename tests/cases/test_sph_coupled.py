@@ -1,0 +1,89 @@
+"""SPH particles coupled to the ALE background (issue 10 item 4) end to end through `immerse run`:
+the embedded piston of cases/embedded_piston_sod made of SPH (taitwater) particles.
+
+A slab 1.5 zones thick (6 x 8 particles, dx = 0.000625, h = 3 dx; rho0 = 1, c0 = 3 m/s: its mass
+per area and compressibility are the FE block's) across Sod's shock tube at the diaphragm, tied to
+the gas by the stabilised multipliers on its reconstructed surface (B^f from the Shepard kernel,
+orchestrator/coupling/particle_operators.py).  A massless piston moves with Sod's contact, u* =
+0.927453.  Run to t = 0.05 here: a FLUID slab pushed by the lighter gas is Rayleigh-Taylor
+unstable (the light gas accelerates the heavy slab), and past t ~ 0.12 it comes apart (measured:
+thickness 3.1 -> 1.0 mm at t = 0.2 as the lattice shuffles, mean velocity 1.17); the issue's
+t = 0.2 case needs a solid (smd/tlsph) piston, which the SPH group does not model yet.
+"""
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from tests.conftest import immerse
+
+CASE = """\
+[run]
+dimension = 2
+end_time = 0.05
+output_interval = 0.025
+
+[ale]
+mode = "eulerian"
+grid = { lower = [0.0, 0.0], upper = [1.0, 0.005], cells = [400, 2] }
+boundaries = { x_lower = "wall", x_upper = "wall", y_lower = "wall", y_upper = "wall" }
+materials.gas = { eos = "ideal_gas", gamma = 1.4 }
+regions = [
+  { material = "gas", density = 1.0, pressure = 1.0 },
+  { material = "gas", region = "x > 0.5", density = 0.125, pressure = 0.1 },
+]
+
+[sph]
+spacing = 0.000625
+smoothing_length = 0.001875
+domain = { lower = [0.0, 0.0], upper = [1.0, 0.005] }
+boundaries = { x_lower = "open", x_upper = "open", y_lower = "periodic", y_upper = "periodic" }
+materials.piston = { model = "taitwater", density = 1.0, sound_speed = 3.0, viscosity = 0.3 }
+bodies = [ { name = "piston", material = "piston", region = { box = { lower = [0.498125, 0.0], upper = [0.501875, 0.005] } }, density = 1.0 } ]
+
+[coupling]
+method = "multiplier"
+condition = "slip"
+
+[check]
+kind = "embedded_piston"
+params = { role = "sph", axis = "x", gap = 3.0, span = 0.05 }
+metrics.velocity = { reference = 0.927453, tolerance = 0.015 }    # 5.7e-3
+"""
+
+
+def _run(tmp_path, name, *extra):
+    case = tmp_path / "sph_piston"
+    case.mkdir(exist_ok=True)
+    (case / "case.toml").write_text(CASE)
+    out = tmp_path / name
+    r = immerse("run", case, "--out", out, *extra)
+    assert r.returncode == 0, r.stdout + r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    with h5py.File(out / "diagnostics.h5") as h:
+        balance = float(np.abs(h["coupling.momentum_balance_rel"][...]).max())
+        # the particles' momentum is the impulses the coupler sent them (LAMMPS's pair forces sum to
+        # zero; no walls along x): the adapter applied each impulse as given
+        p_sph, p_sent = h["sph.momentum_x"][...], h["coupling.foreground_momentum_x"][...]
+        assert np.abs(p_sph - p_sent).max() <= 1e-13 * np.abs(p_sent).max()   # measured 2.5e-15
+    return s, balance
+
+
+def test_sph_piston_follows_the_contact_and_balances_momentum(tmp_path):
+    """Piston velocity within 1.5 % of u* at t = 0.05 (measured 0.57 %); the momentum the interface
+    gives the particles is what it takes from the gas to round-off (measured 3.4e-15); only the
+    background and SPH groups launch (no Lagrangian solver); on 2 SPH ranks the same piston to
+    4e-10 (measured: the coupled loop amplifies LAMMPS's round-off between decompositions)."""
+    s1, balance1 = _run(tmp_path, "one")
+    assert s1["check"]["passed"], s1["check"]
+    assert s1["ranks"] == {"ale": 1, "sph": 1}
+    assert balance1 < 1e-13
+    s2, balance2 = _run(tmp_path, "two", "--ranks", "sph=2")
+    assert s2["ranks"] == {"ale": 1, "sph": 2}
+    assert balance2 < 1e-13
+    for k in ("velocity", "centre"):
+        a = s1["check"]["metrics"].get(k, {}).get("value", s1["check"]["reported"].get(k))
+        b = s2["check"]["metrics"].get(k, {}).get("value", s2["check"]["reported"].get(k))
+        assert abs(a - b) <= 2e-9 * abs(a), k
