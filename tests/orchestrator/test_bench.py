@@ -57,3 +57,16 @@ def test_bench_output_quick(tmp_path):
     assert [x["params"]["output_steps"] for x in walls] == [13, 49]  # output_interval end/12, end/48, and t = 0
     extra = next(x for x in res if x["metric"] == "wall_time_per_extra_output")  # one for each pair of runs
     assert extra["params"]["outputs"] == [13, 49] and "write_time_per_output_ms" in extra["params"]
+
+
+def test_bench_sph_quick(tmp_path):
+    """The SPH bench writes LAMMPS alone and the driver alone for the same particles and steps (speed
+    itself is not asserted: `immerse bench sph` measures it)."""
+    out = tmp_path / "bench-sph.json"
+    r = immerse("bench", "sph", "--quick", "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    (row,) = json.loads(out.read_text())["results"]
+    p = row["params"]
+    assert row["name"] == "dam_break_2d" and row["metric"] == "particle_steps_per_s"
+    assert p["particles"] == 5688 and p["lammps_alone"] > 0 and p["driver_sph_alone"] == row["value"]
+    assert p["ratio_driver_to_lammps"] == row["value"] / p["lammps_alone"]

@@ -1,0 +1,113 @@
+"""`immerse bench sph`: particle-steps per second of the 2-D dam break (cases/dam_break's model) at
+about 6k and 50k particles, three ways in one run: LAMMPS alone (the same input, built by the
+adapter, stepped by one `run N` without the driver), the driver with the SPH group alone
+(`immerse run`, one coupler step per LAMMPS step), and their ratio (target >= 0.95).  The coupled
+embedded run's split (coupler + surface reconstruction against the step) is measured by the
+in-process coupler of orchestrator/bench_coupling.py for mesh bodies; for particles see the note
+in the JSON."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.bench import bench, machine
+from orchestrator.schema_sph import DEFAULT_SUBSTEPS
+
+DAM = """[run]
+dimension = 2
+end_time = 10.0
+max_steps = {steps}
+output_interval = 10.0
+
+[sph]
+spacing = {dx!r}
+smoothing_length = {h!r}
+domain = {{ lower = [{lo!r}, {lo!r}], upper = [{xhi!r}, 1.0] }}
+boundaries = {{ x_lower = "wall", x_upper = "wall", y_lower = "wall", y_upper = "open" }}
+gravity = [0.0, -9.81]
+substeps = {substeps}
+materials.water = {{ model = "taitwater", density = 1000.0, sound_speed = 22.15, viscosity = 0.3 }}
+bodies = [
+  {{ name = "water", material = "water", region = {{ box = {{ lower = [0.0, 0.0], upper = [0.25, 0.5] }} }}, density = 1000.0, hydrostatic = true }},
+  {{ name = "floor", material = "water", region = {{ box = {{ lower = [{w!r}, {w!r}], upper = [{fx!r}, 0.0] }} }}, density = 1000.0, fixed = true }},
+  {{ name = "left_wall", material = "water", region = {{ box = {{ lower = [{w!r}, 0.0], upper = [0.0, 0.75] }} }}, density = 1000.0, fixed = true }},
+  {{ name = "right_wall", material = "water", region = {{ box = {{ lower = [1.5, 0.0], upper = [{fx!r}, 0.75] }} }}, density = 1000.0, fixed = true }},
+]
+"""
+
+
+def dam_text(nx: int, steps: int, substeps: int) -> str:
+    """The dam break of cases/dam_break with nx particles across the column (a = 0.25 m)."""
+    dx = 0.25 / nx
+    w = -3 * dx
+    return DAM.format(steps=steps, dx=dx, h=3 * dx, lo=w - dx, xhi=1.5 - w + dx, w=w, fx=1.5 - w, substeps=substeps)
+
+
+def standalone(case: dict, steps: int) -> tuple[float, int]:
+    """(seconds for `run steps` of LAMMPS alone at the driver's first dt, particles)."""
+    from mpi4py import MPI
+
+    from adapters.sph import SphAdapter
+
+    with tempfile.TemporaryDirectory() as tmp:
+        (Path(tmp) / "steps").mkdir()
+        a = SphAdapter(MPI.COMM_SELF, case, Path(tmp))
+        a.setup()
+        a._set_dt(0.9 * a._limits())
+        t0 = time.perf_counter()
+        a.lmp.command(f"run {steps} pre no post no")
+        wall = time.perf_counter() - t0
+        n = a.n
+        a.close()
+    return wall, n
+
+
+def driver(case_dir: Path, steps: int) -> float:
+    """Time loop of `immerse run` (summary.json's wall_time_s) for `steps` coupler steps."""
+    out = case_dir / "out"
+    r = subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", str(case_dir), "--out", str(out), "--replace"],
+                       capture_output=True, text=True, env=dict(os.environ))
+    if r.returncode != 0:
+        raise RuntimeError(r.stderr)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["steps"] == steps, s["steps"]
+    return float(s["wall_time_s"])
+
+
+@bench("sph")
+def bench_sph(out: Path, quick: bool = False) -> Path:
+    from orchestrator.case import load_case
+
+    results = []
+    sizes = [(45, 400)] if quick else [(45, 1500), (140, 300)]
+    repeats = 1 if quick else 3
+    for nx, steps in sizes:
+        row = {}
+        for k in (1, DEFAULT_SUBSTEPS):  # one LAMMPS step per coupler step, and the default batch
+            with tempfile.TemporaryDirectory() as tmp:
+                d = Path(tmp) / "dam"
+                d.mkdir()
+                (d / "case.toml").write_text(dam_text(nx, steps // k, k))
+                case = load_case(d)
+                alone, drv = [], []
+                for _ in range(repeats):  # interleaved: the machine's noise hits both alike
+                    w, n = standalone(case, steps)
+                    alone.append(n * steps / w)
+                    drv.append(n * steps / driver(d, steps // k))
+            row[k] = (float(np.median(alone)), float(np.median(drv)))
+        a, b = row[DEFAULT_SUBSTEPS]
+        results.append({"name": "dam_break_2d", "metric": "particle_steps_per_s", "value": b, "unit": "1/s",
+                        "params": {"particles": n, "lammps_steps": steps, "substeps": DEFAULT_SUBSTEPS,
+                                   "lammps_alone": a, "driver_sph_alone": b, "ratio_driver_to_lammps": b / a,
+                                   "target": ">= 0.95", "holds": bool(b / a >= 0.95), "repeats": repeats,
+                                   "ratio_at_one_lammps_step_per_coupler_step": row[1][1] / row[1][0]}})
+    doc = {"results": results, "machine": machine()}
+    Path(out).write_text(json.dumps(doc, indent=2))
+    return Path(out)

@@ -1,0 +1,51 @@
+"""One pass over a rank's SPH particles for what the adapter needs after every step (adapters/sph.py):
+the fastest signal speed and acceleration of the moving particles (the stable step) and the sums of
+the diagnostics (mass, momentum, kinetic, internal and gravitational energy).  numba: the numpy
+form of the same sums cost 0.7 ms a step on 5.7k particles, 6 % of a batch of ten LAMMPS steps."""
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+TAIT, IDEAL = 0, 1
+IDEALGAS_GAMMA = 1.4  # LAMMPS's sph/idealgas (orchestrator/schema_sph.py documents it)
+
+
+@njit(cache=True)
+def particle_sums(x, v, f, rho, esph, types, mass_of_type, fixed_of_type, c0, rho0, model, gravity, dim):
+    """(speed_max, acc_max, sums): speed = c + |v| and acc = |f| / m over the moving particles (c from
+    the material: Tait c0 (rho/rho0)^3, ideal gas sqrt(gamma (gamma-1) e)); sums = [mass,
+    momentum (3), kinetic, internal, gravitational (-m g.x)] over all particles."""
+    speed = 0.0
+    acc = 0.0
+    out = np.zeros(7)
+    g1 = IDEALGAS_GAMMA * (IDEALGAS_GAMMA - 1.0)
+    for i in range(types.size):
+        t = types[i]
+        m = mass_of_type[t]
+        v2 = 0.0
+        f2 = 0.0
+        gx = 0.0
+        for d in range(dim):
+            v2 += v[i, d] * v[i, d]
+            f2 += f[i, d] * f[i, d]
+            gx += gravity[d] * x[i, d]
+            out[1 + d] += m * v[i, d]
+        out[0] += m
+        out[4] += 0.5 * m * v2
+        out[5] += esph[i]
+        out[6] -= m * gx
+        if not fixed_of_type[t]:
+            if model == TAIT:
+                r = rho[i] / rho0[t]
+                c = c0[t] * r * r * r
+            else:
+                e = esph[i] / m
+                c = np.sqrt(g1 * e) if e > 0.0 else 0.0
+            s = c + np.sqrt(v2)
+            if s > speed:
+                speed = s
+            a = np.sqrt(f2) / m
+            if a > acc:
+                acc = a
+    return speed, acc, out
