@@ -164,11 +164,29 @@ def cases() -> dict[str, str]:
                 dim, ("ideal_gas", "ideal_gas"), q,
                 boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
     out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
+    for dim, model in ((2, "taitwater"), (3, "idealgas")):  # the SPH group (LAMMPS)
+        out[f"sph_{dim}d_{model}"] = _sph(dim, model)
     for dim in (2, 3):  # the embedded-mesh coupling: a body moving through the grid
         out[f"coupled_{dim}d"] = _coupled(dim)
         out[f"coupled_{dim}d_mixed"] = _coupled(dim, mixed=True)
         out[f"coupled_{dim}d_still"] = _coupled(dim, still=True)  # (a body at rest: blocked.py's held path)
     return out
+
+
+def _sph(dim: int, model: str) -> str:
+    """A small block of particles (taitwater under gravity on fixed particles, or an ideal gas)."""
+    z = [0.0] * dim
+    lo, hi = [-0.1] * dim, [0.5] * dim
+    mat = ('{ model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.3 }' if model == "taitwater"
+           else '{ model = "idealgas", viscosity = 0.5 }')
+    state = "" if model == "taitwater" else ", pressure = 1.0"
+    floor = (f'  {{ material = "m", region = {{ box = {{ lower = {[-0.1] * dim}, upper = {[0.4] + [0.0] * (dim - 1)} }} }}, '
+             'density = 1000.0, fixed = true },\n') if model == "taitwater" else ""
+    gravity = f"gravity = {[0.0, -9.81] + [0.0] * (dim - 2)}\n" if model == "taitwater" else ""
+    return ((_RUN2 if dim == 2 else _RUN3) + "[sph]\nspacing = 0.05\nsmoothing_length = 0.15\n"
+            f"domain = {{ lower = {lo}, upper = {hi} }}\n" + gravity + f"materials.m = {mat}\n"
+            f'bodies = [\n  {{ material = "m", region = {{ box = {{ lower = {z}, upper = {[0.2] * dim} }} }}, '
+            f'density = {1000.0 if model == "taitwater" else 1.0}{state} }},\n' + floor + "]\n")
 
 
 def _coupled(dim: int, mixed: bool = False, still: bool = False) -> str:
@@ -254,6 +272,35 @@ def step_case(case: dict, steps: int = STEPS, blocked: bool = False) -> None:
             _step_ale(case, MPI.COMM_SELF, steps, blocked)
         elif role == "lagrange":
             _step_lagrange(case, MPI.COMM_SELF, steps)
+        elif role == "sph":
+            _step_sph(case, MPI.COMM_SELF, steps)
+
+
+def _step_sph(case: dict, comm, steps: int) -> None:
+    """The SPH adapter (LAMMPS) in this process: its per-step particle sums (solvers/particle_sums.py)."""
+    from adapters.sph import SphAdapter
+
+    with tempfile.TemporaryDirectory(prefix="immerse-warmup-sph-") as tmp:
+        (Path(tmp) / "steps").mkdir()
+        a = SphAdapter(comm, case, Path(tmp))
+        a.setup()
+        for i in range(min(steps, 2)):
+            a.predict(0.5 * a.stable_dt(), i, 0.0)
+            a.correct(None)
+            a.diagnostics()
+        a.close()
+
+
+def _particle_coupling() -> None:
+    """The coupler's particle interface (reconstruction, clipping, Shepard rows) in 2-D and 3-D."""
+    from orchestrator.coupling.grid import Grid
+    from orchestrator.coupling.particle_operators import particle_interface
+
+    for dim in (2, 3):
+        grid = Grid([0.0] * dim, [1.0] * dim, [6] * dim)
+        ax = np.arange(0.3, 0.7, 0.05) + 0.025
+        x = np.stack(np.meshgrid(*[ax] * dim, indexing="ij"), -1).reshape(-1, dim)
+        particle_interface(grid, x, np.full(len(x), 0.05 ** dim), 0.1)
 
 
 def dispatchers() -> dict[str, object]:
@@ -288,6 +335,8 @@ def _import_solvers() -> None:
     import orchestrator.coupling.geometry  # noqa: F401  (the coupler's interface geometry)
     import orchestrator.coupling.matrix_free  # noqa: F401  (its multiplier solve)
     import orchestrator.coupling.operator_rows  # noqa: F401  (its operators)
+    import orchestrator.coupling.particle_surface  # noqa: F401  (particle bodies' surfaces)
+    import solvers.particle_sums  # noqa: F401  (the SPH adapter's per-step sums)
 
 
 def warm(log=print) -> dict:
@@ -303,6 +352,7 @@ def warm(log=print) -> dict:
             d.mkdir()
             (d / "case.toml").write_text(text)
             step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
+        _particle_coupling()
     report = {"cases": len(table), "kernels": len(dispatchers()),
               "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
               "seconds": round(time.perf_counter() - t0, 2)}
