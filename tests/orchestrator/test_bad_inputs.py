@@ -323,8 +323,9 @@ BAD_INPUTS = [
     Bad("coupling_lagrangian_background", "ale.mode = 'lagrangian'", "'eulerian'",
         edit(COUPLED, "[ale]", '[ale]\nmode = "lagrangian"')),
     # -- the SPH group (LAMMPS): the case's own LAMMPS lines, bodies, resources --
-    *[Bad(f"sph_line_{line.split()[0]}_{i}", f"sph.lammps_commands[0] = {line!r}", why, _sph_line(line))
-      for i, (line, why) in enumerate(SPH_FORBIDDEN)],
+    # (through `run` only: the verb that would launch LAMMPS; `check` reads the same validation)
+    *[Bad(f"sph_line_{line.split()[0]}_{i}", f"sph.lammps_commands[0] = {line!r}", why, _sph_line(line),
+          verbs=("run",)) for i, (line, why) in enumerate(SPH_FORBIDDEN)],
     Bad("sph_body_outside_domain", "sph.bodies[0].region", "must lie inside sph.domain",
         edit(SPH, "upper = [0.1, 0.1] }", "upper = [0.3, 0.1] }")),
     Bad("sph_smoothing_below_spacing", "sph.smoothing_length = 0.005", ">= sph.spacing", edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.005")),
