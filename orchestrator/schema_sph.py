@@ -28,7 +28,7 @@ from __future__ import annotations
 from solvers.expressions import BOOL
 
 from .lammps_lines import LammpsLineError, check_line
-from .schema_parts import NAME_PATTERN, integer, name, number, table, vector
+from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, vector
 from .schema_registry import register_table
 from .schema_rules import CaseError, check_expression, check_length, format_key, to_float
 
@@ -52,12 +52,7 @@ MATERIAL = {
     },
     "additionalProperties": False,
     "required": ["model"],
-    "allOf": [
-        {"if": {"properties": {"model": {"const": m}}, "required": ["model"]},
-         "then": {"properties": {k: True for k in keys}, "additionalProperties": False,
-                  "required": list(keys), "x-when": f"model = {m!r}"}}
-        for m, keys in MODEL_KEYS.items()
-    ],
+    "allOf": variants("model", MODEL_KEYS),
 }
 REGION_BOX = table({"lower": vector("m"), "upper": vector("m")}, required=("lower", "upper"))
 SPHERE = table({"centre": vector("m"), "radius": number("m", exclusiveMinimum=0)},
