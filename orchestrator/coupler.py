@@ -116,6 +116,8 @@ class Coupler:
         dim = int(self.case["run"]["dimension"])
         surface = unpack_surface(P.recv(self.inter[self.fg], 0, P.TAG_SURFACE), dim)
         self.coupling = EmbeddedCoupling(self.case, surface)
+        # the coupler's own work per part (its waits for the solver groups excluded): summary.json
+        self.coupling_s = {"solve": 0.0, "correction": 0.0, "geometry": 0.0}
         P.send(self.inter[self.bg], self.coupling.geometry().pack(dim), 0, P.TAG_GEOMETRY)
         self.dt_prev = 0.0
 
@@ -125,7 +127,9 @@ class Coupler:
         dt_avg = 0.5 * dt if self.dt_prev == 0.0 else 0.5 * (self.dt_prev + dt)
         vstar = P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim)
         background = P.recv(bg, 0, P.TAG_INTERFACE)
+        t0 = _time.perf_counter()
         impulse = c.solve(dt, dt_avg, vstar, background)
+        self.coupling_s["solve"] += _time.perf_counter() - t0
         if dt > self.FAR_BEYOND * c.stable_limit:
             raise RuntimeError(
                 f"coupling method {c.method.NAME!r} is unstable at step {self.step}, t = {self.t:.6g} s: the "
@@ -133,11 +137,16 @@ class Coupler:
                 f"{c.stable_limit:.6g} s (a stiffer spring needs a smaller step: lower its stiffness, or "
                 f"run.dt_scale)")
         P.send(fg, impulse, 0, P.TAG_IMPULSE)
-        P.send(bg, c.take_state(P.recv(fg, 0, P.TAG_STATE)), 0, P.TAG_CORRECT)
+        state = P.recv(fg, 0, P.TAG_STATE)
+        t0 = _time.perf_counter()
+        P.send(bg, c.take_state(state), 0, P.TAG_CORRECT)
         from orchestrator.coupling.geometry import GeometryError
 
+        t1 = _time.perf_counter()
+        self.coupling_s["correction"] += t1 - t0
         try:
             geometry = c.geometry()
+            self.coupling_s["geometry"] += _time.perf_counter() - t1
         except GeometryError as e:  # a body left the background grid: say when
             raise RuntimeError(f"{e} at step {self.step}, t = {self.t + dt:.6g} s") from None
         P.send(bg, geometry.pack(c.dim), 0, P.TAG_GEOMETRY)
@@ -461,6 +470,10 @@ class Coupler:
             "final": final,
             "machine": {"host": socket.gethostname(), "cores": os.cpu_count()},
         }
+        if self.coupling is not None:  # the coupler's own work: solve, correction, geometry (the
+            # surfaces clipped; particle bodies: also reconstructed), and its share of the time loop
+            s["coupling_time_s"] = dict(self.coupling_s)
+            s["coupling_share"] = sum(self.coupling_s.values()) / wall if wall > 0 else None
         if self.case.get("check"):
             s["check"] = checks.run_check(self.case, self.out, hist)
         tmp = self.out / "summary.json.tmp"

@@ -60,13 +60,18 @@ def test_bench_output_quick(tmp_path):
 
 
 def test_bench_sph_quick(tmp_path):
-    """The SPH bench writes LAMMPS alone and the driver alone for the same particles and steps (speed
-    itself is not asserted: `immerse bench sph` measures it)."""
+    """The SPH bench writes LAMMPS alone and the driver alone for the same particles and steps, and the
+    coupler's share of a coupled embedded run (speed itself is not asserted: `immerse bench sph`
+    measures it)."""
     out = tmp_path / "bench-sph.json"
     r = immerse("bench", "sph", "--quick", "--out", out, timeout=600)
     assert r.returncode == 0, r.stderr
-    (row,) = json.loads(out.read_text())["results"]
+    rows = {r["name"]: r for r in json.loads(out.read_text())["results"]}
+    row = rows["dam_break_2d"]
     p = row["params"]
     assert row["name"] == "dam_break_2d" and row["metric"] == "particle_steps_per_s"
     assert p["particles"] == 5688 and p["lammps_alone"] > 0 and p["driver_sph_alone"] == row["value"]
     assert p["ratio_driver_to_lammps"] == row["value"] / p["lammps_alone"]
+    emb = rows["embedded_dam_break_2d"]  # the coupled run: the coupler's share of the time loop
+    assert emb["metric"] == "coupler_share" and 0.0 < emb["value"] < 1.0
+    assert emb["params"]["geometry_s"] > 0.0 and emb["params"]["particles"] == 2250

@@ -601,11 +601,46 @@ def test_coupled_balances(tmp_path):
     assert failed(r) == ["covered_gas_mass"], failed(r)
 
 
+# ---- surge_front (SPH particles) -----------------------------------------------------------------
+def dam_break_output(out, case, scale=1.0):
+    """Particles along the floor up to the front Z(T) of Martin & Moyce (linear between their points,
+    Z = 1 at T = 0), scaled by `scale`, at output times that include every measured T; a lone
+    droplet 0.3 m ahead (spray) and the fixed right wall (bodies 1..3) that the front must ignore."""
+    a, g = 0.25, 9.81
+    pts = case["check"]["params"]["points"]
+    T_ref = np.array([0.0] + [p[0] for p in pts])
+    Z_ref = np.array([1.0] + [p[1] for p in pts])
+    dx = case["sph"]["spacing"]
+    T_out = np.unique(np.concatenate([np.linspace(0.0, 4.2, 22), T_ref]))
+    n_free = 800
+    wall = np.column_stack([np.full(50, 1.5 + dx), np.linspace(0.0, 0.5, 50)])
+    output.write_mesh(out, "sph", np.arange(n_free + 1 + 50, dtype=np.int64)[:, None], "vertex")
+    for k, T in enumerate(T_out):
+        front = a * np.interp(T, T_ref, Z_ref) * scale
+        x = np.column_stack([np.linspace(0.0, front, n_free), np.full(n_free, 0.5 * dx)])
+        spray = np.array([[front + 0.3, 0.1]])
+        body = np.concatenate([np.zeros(n_free + 1, np.int64), np.full(50, 3)])
+        output.write_step(out, "sph", k, k, T / np.sqrt(2 * g / a), np.vstack([x, spray, wall]),
+                          {"body": body})
+    return out
+
+
+def test_surge_front(tmp_path):
+    case = load_case(CASES / "dam_break")
+    r = checks.run_check(case, dam_break_output(tmp_path / "good", case), history("sph"))
+    assert r["passed"], r
+    assert r["metrics"]["front_error_max_rel"]["value"] < 1e-9
+    # the front 12 % ahead of the measurements everywhere: fails
+    r = checks.run_check(case, dam_break_output(tmp_path / "fast", case, scale=1.12), history("sph"))
+    assert failed(r) == ["front_error_max_rel"], failed(r)
+    assert r["metrics"]["front_error_max_rel"]["value"] == pytest.approx(0.12, rel=1e-6)
+
+
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
-              "uniform_flow", "riemann_wall"}
+              "uniform_flow", "riemann_wall", "surge_front"}
     assert set(checks.CHECKS) == tested
 
 
