@@ -122,7 +122,7 @@ def bench_sph(out: Path, quick: bool = False) -> Path:
     from orchestrator.case import load_case
 
     results = []
-    sizes = [(45, 400)] if quick else [(45, 1500), (140, 300)]
+    sizes = [(45, 200)] if quick else [(45, 1500), (140, 300)]
     repeats = 1 if quick else 3
     for nx, steps in sizes:
         row = {}
@@ -146,7 +146,7 @@ def bench_sph(out: Path, quick: bool = False) -> Path:
                                    "ratio_at_one_lammps_step_per_coupler_step": row[1][1] / row[1][0]}})
     # the coupled embedded run: the coupler's own work (solve, correction, geometry = surface
     # reconstruction + clipping + operators) against the time loop (summary.json's coupling_share)
-    for nx, steps in ([(45, 100)] if quick else [(45, 400)]):
+    for nx, steps in ([(45, 40)] if quick else [(45, 400)]):
         with tempfile.TemporaryDirectory() as tmp:
             d = Path(tmp) / "embedded"
             d.mkdir()

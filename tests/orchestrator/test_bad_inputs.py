@@ -227,19 +227,15 @@ def _sph_line(line: str) -> str:
     return edit(SPH, '"fix drag all viscous 0.01"', repr(line).replace("'", '"') if "'" not in line else f"'{line}'")
 
 
-SPH_FORBIDDEN = [  # the issue's list: shell, python, include, write_*, dump, log, fix print; and more
+SPH_FORBIDDEN = [  # the issue's list: shell, python, include, write_*, dump, log, fix print (the rest of the
+    # allow-list's refusals: tests/orchestrator/test_lammps_lines.py)
     ("shell touch pwned", "command 'shell'"),
     ("python f here from os import system", "command 'python'"),
     ("include other.in", "command 'include'"),
     ("write_data out.data", "command 'write_data'"),
-    ("write_restart out.restart", "command 'write_restart'"),
     ("dump d all atom 1 d.txt", "command 'dump'"),
     ("log run.log", "command 'log'"),
     ("fix p all print 1 hello file out.txt", "keyword 'file'"),
-    ("fix p all print 1 hello", "fix style 'print'"),
-    ("plugin load evil.so", "command 'plugin'"),
-    ("run 1000", "command 'run'"),
-    ("variable v python f", "variable style 'python'"),
 ]
 
 

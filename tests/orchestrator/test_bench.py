@@ -74,4 +74,4 @@ def test_bench_sph_quick(tmp_path):
     assert p["ratio_driver_to_lammps"] == row["value"] / p["lammps_alone"]
     emb = rows["embedded_dam_break_2d"]  # the coupled run: the coupler's share of the time loop
     assert emb["metric"] == "coupler_share" and 0.0 < emb["value"] < 1.0
-    assert emb["params"]["geometry_s"] > 0.0 and emb["params"]["particles"] == 2250
+    assert emb["params"]["geometry_s"] > 0.0 and emb["params"]["particles"] == 4050
