@@ -1,0 +1,67 @@
+"""The [sph] table (orchestrator/schema_sph.py): each bad value is one CaseError naming its key and
+what is allowed (through the command line, with exit 2 and nothing launched: test_bad_inputs.py)."""
+from __future__ import annotations
+
+import pytest
+
+from orchestrator.case import load_case
+from orchestrator.schema_rules import CaseError
+from tests.orchestrator.test_bad_inputs import SPH, edit
+
+GAS = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
+           'materials.water = { model = "idealgas", viscosity = 0.5 }')
+
+BAD = [
+    # (name, text, key, fragment of what is allowed)
+    ("cfl_above_one", edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\ncfl = 1.5"), "sph.cfl", "<= 1"),
+    ("substeps_zero", edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\nsubsteps = 0"), "sph.substeps", ">= 1"),
+    ("face_unknown", edit(SPH, 'x_lower = "wall"', 'x_lower = "sticky"'), "sph.boundaries.x_lower", "'open', 'periodic', 'wall'"),
+    ("periodic_one_side", edit(SPH, 'x_lower = "wall"', 'x_lower = "periodic"'), "sph.boundaries.x_lower",
+     "periodic must be set on both"),
+    ("z_face_in_2d", edit(SPH, 'y_upper = "wall" }', 'y_upper = "wall", z_lower = "wall" }'), "sph.boundaries.z_lower",
+     "dimension mismatch"),
+    ("gravity_length", edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\ngravity = [0.0, -9.81, 0.0]"),
+     "sph.gravity", "dimension mismatch"),
+    ("hydrostatic_without_gravity", edit(SPH, "density = 1000.0 } ]", "density = 1000.0, hydrostatic = true } ]"),
+     "sph.bodies[0].hydrostatic", "non-zero sph.gravity"),
+    ("undefined_material", edit(SPH, '{ material = "water"', '{ material = "oil"'), "sph.bodies[0].material",
+     "undefined material"),
+    ("gas_without_state", GAS.replace("density = 1000.0 } ]", "density = 1.0 } ]"), "sph.bodies[0]",
+     "exactly one of pressure, specific_internal_energy"),
+    ("gas_key_of_water", edit(GAS, 'viscosity = 0.5 }', 'viscosity = 0.5, sound_speed = 3.0 }'),
+     "sph.materials.water.sound_speed", "unknown key for model = 'idealgas'"),
+    ("two_models", edit(SPH, 'viscosity = 0.1 }', 'viscosity = 0.1 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
+     "sph.materials", "one material model per case"),
+    ("cylinder_in_2d", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                            'region = { cylinder = { base = [0.1, 0.1], axis = "z", radius = 0.05, length = 0.1 } }'),
+     "sph.bodies[0].region.cylinder", "cylinders are 3-D"),
+    ("region_two_shapes", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                               "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] }, sphere = { centre = [0.1, 0.1], radius = 0.05 } }"),
+     "sph.bodies[0].region", "exactly one of box"),
+    ("where_not_boolean", edit(SPH, "upper = [0.1, 0.1] } }", 'upper = [0.1, 0.1] }, where = "x + y" }'),
+     "sph.bodies[0].region.where", "boolean"),
+    ("region_without_particles", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                                      'region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] }, where = "x > 1" }'),
+     "sph.bodies[0].region", "holds no particle"),
+    ("domain_inverted", edit(SPH, "upper = [0.2, 0.2] }", "upper = [-0.2, 0.2] }"), "sph.domain.upper", "must be > lower"),
+    ("coupled_sph_outside_grid", SPH.replace("[sph]", '[ale]\ngrid = { lower = [0.0, 0.0], upper = [0.05, 0.2], cells = [5, 20] }\n'
+                                              'materials.air = { eos = "ideal_gas", gamma = 1.4 }\n'
+                                              'regions = [ { material = "air", density = 1.2, pressure = 1000.0 } ]\n\n[sph]')
+     + '\n[coupling]\nmethod = "multiplier"\n', "sph.bodies[0].region", "inside the background grid"),
+]
+
+
+@pytest.mark.parametrize("name, text, key, fragment", BAD, ids=[b[0] for b in BAD])
+def test_bad_sph_table(tmp_path, name, text, key, fragment):
+    (tmp_path / "case.toml").write_text(text)
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == key, str(ei.value)
+    assert fragment in ei.value.allowed, str(ei.value)
+    assert "\n" not in str(ei.value)
+
+
+def test_the_base_is_valid(tmp_path):
+    (tmp_path / "case.toml").write_text(SPH)
+    case = load_case(tmp_path)
+    assert case["sph"]["particles"] == 100 and case["ranks"] == {"sph": 1}
