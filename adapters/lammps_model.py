@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solvers.particles import lattice_points
+from solvers.particles import IDEALGAS_GAMMA, lattice_points
 
 FREE_GROUP = "immerse_free"
 FIXED_GROUP = "immerse_fixed"
@@ -97,8 +97,6 @@ def particles(sph: dict):
         mass = masses[t - 1]
         mat = sph["materials"][body["material"]]
         if mat["model"] == "idealgas":
-            from orchestrator.schema_sph import IDEALGAS_GAMMA
-
             e_spec = body.get("specific_internal_energy",
                               body.get("pressure", 0.0) / ((IDEALGAS_GAMMA - 1.0) * body["density"]))
         else:

@@ -35,6 +35,7 @@ import numpy as np
 
 from adapters.base import SolverAdapter
 from adapters.registry import register
+from solvers.particles import IDEALGAS_GAMMA
 
 _FIELDS = (("x", 3), ("v", 3), ("vest", 3), ("rho", 1), ("esph", 1), ("f", 3), ("drho", 1), ("desph", 1))
 # restored after the set-up run: what LAMMPS's set-up recomputes differently from the step it replaces
@@ -74,6 +75,9 @@ class SphAdapter(SolverAdapter):
         self._c0 = np.array([0.0] + [m.get("sound_speed", 0.0) for m in mats])
         self._mass_of_type = np.concatenate([[0.0], masses])
         self._fixed_type = np.array([False] + [k["fixed"] for k in kinds])
+        # per particle in id order (types never change): masses and whether fixed
+        self._types = types.astype(np.int64)
+        self._mass, self._fixed = self._mass_of_type[self._types], self._fixed_type[self._types]
         self._summed = None
         self.gravity = np.zeros(3)
         self.gravity[: self.dim] = sph["gravity"]
@@ -110,13 +114,14 @@ class SphAdapter(SolverAdapter):
         self._scatter("rho", rho)
         self._scatter("esph", e)
 
-    def _scatter(self, name: str, values: np.ndarray) -> None:
-        """Set a per-atom double array by id (values in id order, 1..n) on the ranks that own them."""
+    def _scatter(self, name: str, values: np.ndarray, integer: bool = False) -> None:
+        """Set a per-atom array by id (values in id order, 1..n) on the ranks that own them."""
         import ctypes
 
-        a = np.ascontiguousarray(values, dtype=np.float64)
+        a = np.ascontiguousarray(values, dtype=np.int32 if integer else np.float64)
         count = 1 if a.ndim == 1 else a.shape[1]
-        self.lmp.scatter(name, 1, count, a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        c_type = ctypes.c_int if integer else ctypes.c_double
+        self.lmp.scatter(name, 0 if integer else 1, count, a.ctypes.data_as(ctypes.POINTER(c_type)))
 
     def _gather(self, name: str, count: int, integer: bool = False) -> np.ndarray:
         """A per-atom array in id order on every rank."""
@@ -149,26 +154,15 @@ class SphAdapter(SolverAdapter):
         if getattr(self, "_views", None) is None:
             nlocal = self.lmp.extract_global("nlocal")
             get = self.lmp.numpy.extract_atom
-            t = get("type")[:nlocal]
             self._views = {"x": get("x")[:nlocal], "v": get("v")[:nlocal], "f": get("f")[:nlocal],
-                           "rho": get("rho")[:nlocal], "esph": get("esph")[:nlocal], "type": t,
-                           "mass": self._mass_of_type[t]}
+                           "rho": get("rho")[:nlocal], "esph": get("esph")[:nlocal], "type": get("type")[:nlocal]}
         return self._views
-
-    def _sound_speed(self, rho, esph, mass, t):
-        if self.model == "taitwater":
-            return self._c0[t] * (rho / self._rho0[t]) ** 3
-        from orchestrator.schema_sph import IDEALGAS_GAMMA as g
-
-        return np.sqrt(np.maximum(g * (g - 1.0) * esph / mass, 0.0))
 
     def _pressure(self, rho, esph, mass, t):
         if self.model == "taitwater":
             b = self._c0[t] ** 2 * self._rho0[t] / 7.0
             return b * ((rho / self._rho0[t]) ** 7 - 1.0)
-        from orchestrator.schema_sph import IDEALGAS_GAMMA as g
-
-        return (g - 1.0) * rho * esph / mass
+        return (IDEALGAS_GAMMA - 1.0) * rho * esph / mass
 
     def _initial_dt(self) -> float:
         return self._limits(include_force=False)
@@ -228,22 +222,17 @@ class SphAdapter(SolverAdapter):
             # changes only through its pair styles; the balance adds what crosses the interface)
             self._external_work += float(np.sum(imp * (self._vstar + 0.5 * dv[:, : self.dim])))
             self._scatter("v", v + dv)
-            self._invalidate()
         self._invalidate()
         self.lmp.command(f"run {self.substeps} pre no post no")
         self._invalidate()
         self._stepped = True
 
     # ---- the embedded coupling (foreground side; collective, every rank gets the same arrays) ----
-    def _per_particle(self):
-        t = self._gather("type", 1, integer=True).astype(np.int64)
-        return self._mass_of_type[t], self._fixed_type[t]
-
     def surface(self) -> dict:
         """The particles as the coupling's foreground nodes (id order): no facets (the coupler
         reconstructs the surface each step), masses, free components (fixed particles: none),
         volumes m / rho and the kernel support h."""
-        m, fixed = self._per_particle()
+        m, fixed = self._mass, self._fixed
         self._free_per_mass = np.where(fixed, 0.0, 1.0 / m)
         nv = 2 if self.dim == 2 else 4
         return {"node_ids": np.arange(1, self.n + 1), "facets": np.zeros((0, nv), np.int64),
@@ -268,8 +257,7 @@ class SphAdapter(SolverAdapter):
         return v - self._half_kick() if getattr(self, "_stepped", False) else v
 
     def volumes(self) -> np.ndarray:
-        m, _ = self._per_particle()
-        return m / self._gather("rho", 1)
+        return self._mass / self._gather("rho", 1)
 
     def close(self) -> None:
         self.lmp.close()
@@ -302,12 +290,11 @@ class SphAdapter(SolverAdapter):
         v = self._gather("v", 3)
         rho = self._gather("rho", 1)
         e = self._gather("esph", 1)
-        t = self._gather("type", 1, integer=True).astype(np.int64)
         if self.comm.rank != 0:
             return
-        m = self._mass_of_type[t]
+        m = self._mass
         output.write_step(self.out_dir, self.role, index, step, time, x, point_data={
-            "velocity": v, "density": rho, "pressure": self._pressure(rho, e, m, t),
+            "velocity": v, "density": rho, "pressure": self._pressure(rho, e, m, self._types),
             "specific_internal_energy": e / m, "body": self.body})
 
     # ---- checkpoint / restart ---------------------------------------------------------------
@@ -353,11 +340,8 @@ class SphAdapter(SolverAdapter):
         self.lmp.command("delete_atoms group all")
         ids = np.arange(1, len(s["type"]) + 1, dtype=np.int32)
         self._create(ids, s["type"], s["x"], s["v"], s["vest"], s["rho"], s["esph"])
-        import ctypes
-
         for name in ("image", "mask"):  # periodic crossings; the groups (new atoms are only in "all")
-            a = np.ascontiguousarray(s[name], dtype=np.int32)
-            self.lmp.scatter(name, 0, 1, a.ctypes.data_as(ctypes.POINTER(ctypes.c_int)))
+            self._scatter(name, s[name], integer=True)
         self.lmp.command(f"reset_timestep {step}")
         self._setup_run(self._dt)
         for name, _ in _AFTER_SETUP:

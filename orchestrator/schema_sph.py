@@ -32,9 +32,6 @@ from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, 
 from .schema_registry import register_table
 from .schema_rules import CaseError, check_expression, check_length, format_key, to_float
 
-IDEALGAS_GAMMA = 1.4
-"""The ratio of specific heats LAMMPS's pair sph/idealgas hard-codes (p = 0.4 rho e)."""
-
 MAX_PARTICLES = 20_000_000
 """More particles than this in one case is refused (memory of the SPH group and of its output)."""
 

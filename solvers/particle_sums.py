@@ -7,8 +7,9 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from solvers.particles import IDEALGAS_GAMMA
+
 TAIT, IDEAL = 0, 1
-IDEALGAS_GAMMA = 1.4  # LAMMPS's sph/idealgas (orchestrator/schema_sph.py documents it)
 
 
 @njit(cache=True)

@@ -14,6 +14,11 @@ import numpy as np
 
 from solvers.expressions import BOOL, compile_expression
 
+IDEALGAS_GAMMA = 1.4
+"""The ratio of specific heats LAMMPS's pair sph/idealgas hard-codes (p = 0.4 rho e): the initial
+energies (adapters/lammps_model.py), the sound speed of the stable step (solvers/particle_sums.py)
+and the output pressure take it from here."""
+
 
 def bounds(region: dict, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """The axis-aligned box around a region (m)."""

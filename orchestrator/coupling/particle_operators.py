@@ -42,10 +42,11 @@ class ParticleInterface:
 def particle_rows(ops: Operators, inner, x: np.ndarray, volume: np.ndarray, h: float) -> sp.csr_matrix:
     """B^f (n_zones x n_particles): the quadrature of the Shepard weights over each zone's pieces."""
     qzone = np.asarray(inner.zone, dtype=np.int64)[np.asarray(inner.qpiece, dtype=np.int64)]
-    row = np.searchsorted(ops.zones, qzone)
-    row = np.minimum(row, max(ops.zones.size - 1, 0))
-    kept = (ops.zones.size > 0) & (ops.zones[row] == qzone) if ops.zones.size else np.zeros(qzone.size, bool)
-    q = np.flatnonzero(kept)
+    if ops.zones.size == 0:
+        return sp.csr_matrix((0, len(x)))
+    # the row of each point's zone; points of zones without a multiplier (zero area) are dropped
+    row = np.minimum(np.searchsorted(ops.zones, qzone), ops.zones.size - 1)
+    q = np.flatnonzero(ops.zones[row] == qzone)
     Z = sp.csr_matrix((np.asarray(inner.qw, float)[q], (row[q], q)), shape=(ops.zones.size, qzone.size))
     S = shepard_weights(np.asarray(inner.qp, float), x, volume, h)
     lone = np.flatnonzero(np.diff(S.indptr) == 0)
