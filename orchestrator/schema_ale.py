@@ -18,7 +18,7 @@ from solvers.expressions import BOOL
 
 from .schema_parts import BOX, NAME_PATTERN, integer, number, table, variants, vector
 from .schema_registry import register_table
-from .schema_rules import CaseError, check_expression, check_extent, check_length, format_key, to_float
+from .schema_rules import CaseError, check_expression, check_extent, check_faces, check_length, format_key, to_float
 
 
 # ---- schema --------------------------------------------------------------------------------------
@@ -176,17 +176,9 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
             raise CaseError("ale.grid.upper", raw["grid"]["upper"],
                             f"must be > lower component-wise (component {j})")
     check_extent("ale.grid", ale["grid"], raw["grid"])
-    axes = ("x", "y", "z")[:dim]
     raw_faces = raw.get("boundaries", {})
-    for f in raw_faces:
-        if f[0] not in axes:
-            raise CaseError(format_key(["ale", "boundaries", f]), raw_faces[f],
-                            f"dimension mismatch: no {f[0]} faces in a {dim}D case")
-    for a in axes:
-        lo, hi = ale["boundaries"][f"{a}_lower"], ale["boundaries"][f"{a}_upper"]
-        if (lo == "periodic") != (hi == "periodic"):
-            raise CaseError(format_key(["ale", "boundaries", f"{a}_lower" if lo == "periodic" else f"{a}_upper"]),
-                            "periodic", f"periodic must be set on both {a}_lower and {a}_upper")
+    check_faces("ale", ale["boundaries"], raw_faces, dim)
+    for a in "xyz"[:dim]:
         for f in (f"{a}_lower", f"{a}_upper"):
             face = ale["boundaries"][f]
             if isinstance(face, dict) and "piston" in face:

@@ -152,6 +152,22 @@ def check_length(key: str, value: list, dim: int) -> None:
                                     f"(run.dimension = {dim})")
 
 
+def check_faces(table: str, faces: dict, raw_faces: dict, dim: int) -> None:
+    """A solver's ``boundaries`` faces (``[ale]``, ``[sph]``): no face of an axis the dimension lacks,
+    and ``periodic`` on both faces of an axis or on neither.  ``faces``: the normalised faces (every
+    face of the dimension), ``raw_faces``: as written."""
+    axes = "xyz"[:dim]
+    for f in raw_faces:
+        if f[0] not in axes:
+            raise CaseError(format_key([table, "boundaries", f]), raw_faces[f],
+                            f"dimension mismatch: no {f[0]} faces in a {dim}D case")
+    for a in axes:
+        lo, hi = faces[f"{a}_lower"], faces[f"{a}_upper"]
+        if (lo == "periodic") != (hi == "periodic"):
+            raise CaseError(format_key([table, "boundaries", f"{a}_lower" if lo == "periodic" else f"{a}_upper"]),
+                            "periodic", f"periodic must be set on both {a}_lower and {a}_upper")
+
+
 def check_expression(key: str, text: str, dim: int, kind: str) -> None:
     """An expression compiles (whitelist, ``kind`` NUM or BOOL, constant parts folded)."""
     try:

@@ -30,7 +30,7 @@ from solvers.expressions import BOOL
 from .lammps_lines import LammpsLineError, check_line
 from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, vector
 from .schema_registry import register_table
-from .schema_rules import CaseError, check_expression, check_length, format_key, to_float
+from .schema_rules import CaseError, check_expression, check_faces, check_length, format_key, to_float
 
 MAX_PARTICLES = 20_000_000
 """More particles than this in one case is refused (memory of the SPH group and of its output)."""
@@ -194,17 +194,7 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
             raise CaseError("sph.domain.upper", raw["domain"]["upper"], f"must be > lower component-wise (component {j})")
     if "gravity" in raw:
         check_length("sph.gravity", raw["gravity"], dim)
-    faces = raw.get("boundaries", {})
-    for f in faces:
-        if f[0] not in "xyz"[:dim]:
-            raise CaseError(format_key(["sph", "boundaries", f]), faces[f],
-                            f"dimension mismatch: no {f[0]} faces in a {dim}D case")
-    for a in "xyz"[:dim]:
-        lo_f, hi_f = sph["boundaries"][f"{a}_lower"], sph["boundaries"][f"{a}_upper"]
-        if (lo_f == "periodic") != (hi_f == "periodic"):
-            bad = f"{a}_lower" if lo_f == "periodic" else f"{a}_upper"
-            raise CaseError(format_key(["sph", "boundaries", bad]), "periodic",
-                            f"periodic must be set on both {a}_lower and {a}_upper")
+    check_faces("sph", sph["boundaries"], raw.get("boundaries", {}), dim)
     h = sph["smoothing_length"]
     if h < sph["spacing"]:
         raise CaseError("sph.smoothing_length", raw["smoothing_length"],
