@@ -135,6 +135,13 @@ def momentum(case, out, history, params):
     return vals
 
 
+def _station_means(key, fields: dict):
+    """(the distinct station keys, ascending; {name: the mean of the field over each station})."""
+    keys, inv = np.unique(key, return_inverse=True)
+    count = np.bincount(inv)
+    return keys, {name: np.bincount(inv, weights=a) / count for name, a in fields.items()}
+
+
 def _zone_stations(out: Path, role: str, index: int, axis: int):
     """1-D profile along `axis` of a run on a grid: zone fields averaged over each station."""
     from orchestrator import output
@@ -142,20 +149,13 @@ def _zone_stations(out: Path, role: str, index: int, axis: int):
     cells, _ = output.read_mesh_file(out, role)
     points, pd, cd = output.read_step(out, role, index)
     centre = points[cells].mean(axis=1)[:, axis]
-    u = pd["velocity"][cells].mean(axis=1)[:, axis]
-    xs, inv = np.unique(np.round(centre, 12), return_inverse=True)
-    count = np.bincount(inv)
-
-    def station(a):
-        return np.bincount(inv, weights=a) / count
-
-    prof = {"x": xs, "rho": station(cd["density"]), "p": station(cd["pressure"]), "u": station(u)}
+    fields = {"rho": cd["density"], "p": cd["pressure"], "u": pd["velocity"][cells].mean(axis=1)[:, axis]}
     if "specific_internal_energy" in cd:
-        prof["e"] = station(cd["specific_internal_energy"])
-    for name, a in cd.items():  # several materials: volume fraction profiles
-        if name.startswith("volume_fraction_"):
-            prof[name] = station(a)
-    return prof
+        fields["e"] = cd["specific_internal_energy"]
+    # several materials: volume fraction profiles
+    fields.update({name: a for name, a in cd.items() if name.startswith("volume_fraction_")})
+    xs, prof = _station_means(np.round(centre, 12), fields)
+    return {"x": xs, **prof}
 
 
 def _particle_stations(out: Path, role: str, index: int, axis: int, width: float):
@@ -165,15 +165,9 @@ def _particle_stations(out: Path, role: str, index: int, axis: int, width: float
 
     points, pd, _ = output.read_step(out, role, index)
     xa = points[:, axis]
-    k = np.floor((xa - xa.min()) / width).astype(np.int64)
-    ks, inv = np.unique(k, return_inverse=True)
-    count = np.bincount(inv)
-
-    def station(a):
-        return np.bincount(inv, weights=a) / count
-
-    return {"x": xa.min() + (ks + 0.5) * width, "rho": station(pd["density"]), "p": station(pd["pressure"]),
-            "u": station(pd["velocity"][:, axis])}
+    ks, prof = _station_means(np.floor((xa - xa.min()) / width).astype(np.int64),
+                              {"rho": pd["density"], "p": pd["pressure"], "u": pd["velocity"][:, axis]})
+    return {"x": xa.min() + (ks + 0.5) * width, **prof}
 
 
 def _profile(case: dict, out: Path, role: str, index: int, axis: int):
