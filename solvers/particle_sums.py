@@ -9,21 +9,23 @@ from numba import njit
 
 from solvers.particles import IDEALGAS_GAMMA
 
-TAIT, IDEAL = 0, 1
+TAIT, IDEAL, SOLID = 0, 1, 2
+MODEL_CODES = {"taitwater": TAIT, "idealgas": IDEAL, "tlsph": SOLID}
 
 
 @njit(cache=True)
-def particle_sums(x, v, f, rho, esph, types, mass_of_type, fixed_of_type, c0, rho0, model, gravity, dim):
+def particle_sums(x, v, f, rho, esph, types, mass, moving, c0, rho0, model, gravity, dim):
     """(speed_max, acc_max, sums): speed = c + |v| and acc = |f| / m over the moving particles (c from
-    the material: Tait c0 (rho/rho0)^3, ideal gas sqrt(gamma (gamma-1) e)); sums = [mass,
-    momentum (3), kinetic, internal, gravitational (-m g.x)] over all particles."""
+    the material: Tait c0 (rho/rho0)^3, ideal gas sqrt(gamma (gamma-1) e), a solid's P-wave speed
+    c0 of its type); sums = [mass, momentum (3), kinetic, internal, gravitational (-m g.x)] over all
+    particles.  mass and moving are per particle (this rank's, in LAMMPS's local order)."""
     speed = 0.0
     acc = 0.0
     out = np.zeros(7)
     g1 = IDEALGAS_GAMMA * (IDEALGAS_GAMMA - 1.0)
     for i in range(types.size):
         t = types[i]
-        m = mass_of_type[t]
+        m = mass[i]
         v2 = 0.0
         f2 = 0.0
         gx = 0.0
@@ -36,10 +38,12 @@ def particle_sums(x, v, f, rho, esph, types, mass_of_type, fixed_of_type, c0, rh
         out[4] += 0.5 * m * v2
         out[5] += esph[i]
         out[6] -= m * gx
-        if not fixed_of_type[t]:
+        if moving[i]:
             if model == TAIT:
                 r = rho[i] / rho0[t]
                 c = c0[t] * r * r * r
+            elif model == SOLID:
+                c = c0[t]
             else:
                 e = esph[i] / m
                 c = np.sqrt(g1 * e) if e > 0.0 else 0.0

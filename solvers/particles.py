@@ -46,7 +46,16 @@ def lattice_points(region: dict, spacing: float, dim: int) -> np.ndarray:
     counts = lattice_counts(region, spacing, dim)
     axes = [lo[d] + (np.arange(counts[d]) + 0.5) * spacing for d in range(dim)]
     x = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, dim)
+    return x[points_in(region, x, dim, box=False)]
+
+
+def points_in(region: dict, x: np.ndarray, dim: int, box: bool = True) -> np.ndarray:
+    """(n,) bool: which points lie in the region (its box or shape, and its ``where``); ``box``
+    False skips the box test (a lattice built inside it)."""
     keep = np.ones(len(x), bool)
+    if box and "box" in region:
+        lo, hi = bounds(region, dim)
+        keep &= np.all((x >= lo) & (x <= hi), axis=1)
     if "sphere" in region:
         c, r = np.asarray(region["sphere"]["centre"], float), float(region["sphere"]["radius"])
         keep &= np.sum((x - c) ** 2, axis=1) <= r * r
@@ -54,10 +63,12 @@ def lattice_points(region: dict, spacing: float, dim: int) -> np.ndarray:
         cyl = region["cylinder"]
         a = "xyz".index(cyl["axis"])
         off = x - np.asarray(cyl["base"], float)
+        if box:
+            keep &= (off[:, a] >= 0.0) & (off[:, a] <= float(cyl["length"]))
         off[:, a] = 0.0
         keep &= np.sum(off ** 2, axis=1) <= float(cyl["radius"]) ** 2
     if region.get("where"):
         names = ("x", "y", "z")[:dim]
         f = compile_expression(region["where"], names, kind=BOOL)
         keep &= np.asarray(f(*(x[:, d] for d in range(dim))), bool)
-    return x[keep]
+    return keep

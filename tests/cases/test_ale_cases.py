@@ -70,6 +70,28 @@ def test_aluminium_piston(tmp_path):
     assert {"shock_position_error_cells", "piston_position_error_cells", "energy_balance_rel"} <= set(m)
 
 
+def test_mg_shock_tube(tmp_path):
+    """Mie-Grueneisen aluminium on both sides (20 GPa, 3000 kg/m^3 against the reference state),
+    Eulerian: the star plateaus, shock and contact against the general-EOS exact solution
+    (solvers.ale.exact.riemann_eos; measured p* 5.3e-4 low, rho*R 4.0e-5, shock within 0.054 cells,
+    tolerances in the case.toml), the check's references are that solution's, and no zone counted
+    invalid for its e = 0 (the metal's reference state) or e < 0."""
+    from orchestrator.case import load_case
+    from orchestrator.exact_profiles import riemann_solution
+    from tests.conftest import CASES
+
+    out, s = run_case("mg_shock_tube", tmp_path)
+    m, r = s["check"]["metrics"], s["check"]["reported"]
+    assert {"p_star", "u_star", "rho_star_left", "rho_star_right", "l1_density", "shock_position_error_cells",
+            "contact_position_error_cells", "p_star_max_deviation_rel", "mass_balance_rel",
+            "energy_balance_rel"} <= set(m)
+    ex = riemann_solution(load_case(CASES / "mg_shock_tube")["check"]["params"])
+    for name, value in (("p_star", ex.p_star), ("u_star", ex.u_star), ("rho_star_left", ex.rho_star_l),
+                        ("rho_star_right", ex.rho_star_r)):
+        assert m[name]["reference"] == pytest.approx(value, rel=1e-6), name
+    assert r["invalid_values"] == 0 and r["min_specific_internal_energy"] == 0.0
+
+
 def test_water_piston_column(tmp_path):
     """Piston at 50 m/s into Tait water (Lagrangian grid): plateau state against the Rankine-Hugoniot
     solution (solvers.ale.exact.piston), shock and piston positions, energy balance at round-off

@@ -82,14 +82,14 @@ def case_with(name, **params):
 
 
 # ---- riemann -------------------------------------------------------------------------------------
-def riemann_output(out, ex, t, x0, n, width=5, dip=None, bad_step=False, fraction=None):
-    """A 1-D Riemann solution on n x 1 zones of [0, 1] (as the shipped 1-D cases): the exact
+def riemann_output(out, ex, t, x0, n, width=5, dip=None, bad_step=False, fraction=None, length=1.0):
+    """A 1-D Riemann solution on n x 1 zones of [0, length] (as the shipped 1-D cases): the exact
     solution `ex` at the zone centres (nodes for the velocity) smeared over `width` zones; `dip`
     = (x_from, x_to, depth): the pressure lowered by depth p* there; `bad_step`: an earlier step
     with one negative density; `fraction`: the left material's volume fraction."""
-    xn = np.linspace(0.0, 1.0, n + 1)
+    xn = np.linspace(0.0, length, n + 1)
     xc = 0.5 * (xn[1:] + xn[:-1])
-    pts, cells = structured(xn, np.array([0.0, 1.0 / n]))
+    pts, cells = structured(xn, np.array([0.0, length / n]))
     rho, _, p, e = (smear(a, width) for a in cell_average(lambda s: ex.sample(s, t, x0), xn))
     u = np.tile(smear(ex.sample(xn, t, x0)[1], width), 2)
     if dip is not None:
@@ -134,6 +134,29 @@ def test_riemann_passes_the_exact_sod_profile_and_fails_another_gamma(tmp_path):
     assert not r["passed"]
     assert {"p_star", "u_star", "rho_star_left", "rho_star_right", "shock_position_error_cells",
             "l1_density"} <= set(failed(r)), failed(r)
+
+
+def test_riemann_with_eos_tables_passes_the_exact_mg_profile_and_fails_another_gamma0(tmp_path):
+    """cases/mg_shock_tube (Mie-Grueneisen aluminium, `eos_left`): its exact profile (the general-EOS
+    solver) passes its check with the plateaus exact to round-off; the exact solution of Gamma0 =
+    2.2 fails the star state."""
+    from orchestrator.exact_profiles import riemann_solution
+    from solvers.ale.exact.riemann_eos import EosRiemannSolution
+
+    case = load_case(CASES / "mg_shock_tube")
+    P = case["check"]["params"]
+    ex = riemann_solution(P)
+    assert isinstance(ex, EosRiemannSolution)
+    t = case["run"]["end_time"]
+    r = checks.run_check(case, riemann_output(tmp_path / "good", ex, t, 0.05, 400, length=0.1), history("ale"))
+    assert r["passed"], failed(r)
+    exact = {"p_star": ex.p_star, "u_star": ex.u_star, "rho_star_left": ex.rho_star_l, "rho_star_right": ex.rho_star_r}
+    for name, value in exact.items():
+        assert abs(r["metrics"][name]["value"] / value - 1) < 1e-12, (name, r["metrics"][name])
+    assert r["reported"]["invalid_values"] == 0  # e = 0 ahead of the shock is the metal's reference state
+    wrong = EosRiemannSolution(tuple(P["left"]), tuple(P["right"]), {**P["eos_left"], "gamma0": 2.2})
+    r = checks.run_check(case, riemann_output(tmp_path / "wrong", wrong, t, 0.05, 400, length=0.1), history("ale"))
+    assert {"p_star", "u_star", "rho_star_left", "rho_star_right"} <= set(failed(r)), failed(r)
 
 
 @pytest.mark.parametrize("residual", ["mass", "energy"])
@@ -636,11 +659,38 @@ def test_surge_front(tmp_path):
     assert r["metrics"]["front_error_max_rel"]["value"] == pytest.approx(0.12, rel=1e-6)
 
 
+# ---- free_end (a clamped bar set moving) ---------------------------------------------------------
+def free_end_output(out, c=1000.0, v0=1.0, length=1.0, n=53):
+    """Particles of a bar whose free end (x = L) follows the 1-D triangle wave of wave speed c
+    (displacement v0 t until L / c, then falling at v0), the rest at rest, sampled every 0.05 L / c."""
+    x0 = np.column_stack([np.linspace(0.0, length, 11), np.zeros(11)])
+    output.write_mesh(out, "sph", np.arange(11, dtype=np.int64)[:, None], "vertex")
+    for k, t in enumerate(np.arange(n) * 0.05 * length / 1000.0):
+        u = v0 * (t if t <= length / c else 2 * length / c - t)
+        x = x0.copy()
+        x[-1, 0] += u
+        output.write_step(out, "sph", k, k, t, x, {"body": np.zeros(11, np.int64)})
+    return out
+
+
+def test_free_end(tmp_path):
+    """The exact triangle (c = 1000 m/s): every error at round-off (the peak falls on a sample, the
+    zero crossing and the slope are linear); a bar whose waves run 4 % slow fails the times."""
+    case = load_case(CASES / "sph_elastic_bar")
+    r = checks.run_check(case, free_end_output(tmp_path / "good"), history("sph"))
+    assert r["passed"], r
+    for k in ("peak_time_error_rel", "rebound_time_error_rel", "rebound_speed_error_rel"):
+        assert r["metrics"][k]["value"] < 1e-9, k
+    r = checks.run_check(case, free_end_output(tmp_path / "slow", c=960.0), history("sph"))
+    assert failed(r) == ["peak_time_error_rel", "rebound_time_error_rel"], failed(r)
+    assert r["metrics"]["rebound_time_error_rel"]["value"] == pytest.approx(1000 / 960 - 1, rel=1e-6)
+
+
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
-              "uniform_flow", "riemann_wall", "surge_front"}
+              "uniform_flow", "riemann_wall", "surge_front", "free_end"}
     assert set(checks.CHECKS) == tested
 
 

@@ -44,6 +44,26 @@ def test_riemann_profile_along_y():
         np.testing.assert_array_equal(got[name], ref)
 
 
+def test_riemann_profile_of_eos_tables_is_the_general_solution():
+    """`eos_left` / `eos_right` (copper against aluminium, Mie-Grueneisen): the profile is the general-EOS
+    solution, e from each side's own EOS."""
+    from solvers.ale import eos
+    from solvers.ale.exact.riemann_eos import EosRiemannSolution
+
+    cu = {"eos": "mie_gruneisen", "rho0": 8930.0, "c0": 3940.0, "s": 1.49, "gamma0": 2.0}
+    al = {"eos": "mie_gruneisen", "rho0": 2700.0, "c0": 5350.0, "s": 1.34, "gamma0": 2.0}
+    params = {"axis": "x", "x0": 0.05, "left": [8930.0, 500.0, 0.0], "right": [2700.0, 0.0, 0.0],
+              "eos_left": cu, "eos_right": al}
+    prof = exact_profile({"check": {"kind": "riemann", "params": params}}, 5e-6)
+    x = np.linspace(0.0, 0.1, 21)
+    got = prof.sample(x)
+    rho, u, p, e = EosRiemannSolution((8930.0, 500.0, 0.0), (2700.0, 0.0, 0.0), cu, al).sample(x, 5e-6, 0.05)
+    for name, ref in (("density", rho), ("velocity", u), ("pressure", p), ("specific_internal_energy", e)):
+        np.testing.assert_array_equal(got[name], ref)
+    k = np.argmax(x > 0.0518)                   # in the shocked aluminium, right of the contact
+    assert p[k] > 5e9 and e[k] == eos.energy_from_pressure(*eos.eos_params("mie_gruneisen", al), rho[k], p[k])
+
+
 def _piston_case(face: str, length=1.0):
     return {
         "ale": {

@@ -8,6 +8,8 @@ from orchestrator.case import load_case
 from orchestrator.schema_rules import CaseError
 from tests.orchestrator.test_bad_inputs import SPH, edit
 
+SOLID = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
+             'materials.water = { model = "tlsph", density = 1000.0, youngs_modulus = 1e9, poisson_ratio = 0.3 }')
 GAS = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
            'materials.water = { model = "idealgas", viscosity = 0.5 }')
 
@@ -44,6 +46,26 @@ BAD = [
                                       'region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] }, where = "x > 1" }'),
      "sph.bodies[0].region", "holds no particle"),
     ("domain_inverted", edit(SPH, "upper = [0.2, 0.2] }", "upper = [-0.2, 0.2] }"), "sph.domain.upper", "must be > lower"),
+    ("solid_strength_unknown", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3, strength = "rigid" }'),
+     "sph.materials.water.strength", "linear_plastic = { yield_stress, hardening }"),
+    ("solid_jc_incomplete", edit(SOLID, "poisson_ratio = 0.3 }", "poisson_ratio = 0.3, strength = { johnson_cook = { A = 1e8 } } }"),
+     "sph.materials.water.strength", "johnson_cook = { A, B, n, C"),
+    ("solid_eos_unknown", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3, eos = "tait" }'),
+     "sph.materials.water.eos", "shock = { c0, s, gamma }"),
+    ("solid_poisson_half", edit(SOLID, "poisson_ratio = 0.3", "poisson_ratio = 0.5"),
+     "sph.materials.water.poisson_ratio", "< 0.5"),
+    ("solid_without_modulus", edit(SOLID, "youngs_modulus = 1e9, ", ""),
+     "sph.materials.water.youngs_modulus", "required key missing"),
+    ("solid_key_of_water", edit(SOLID, "poisson_ratio = 0.3 }", "poisson_ratio = 0.3, sound_speed = 3.0 }"),
+     "sph.materials.water.sound_speed", "unknown key for model = 'tlsph'"),
+    ("solid_with_pressure", edit(SOLID, "density = 1000.0 } ]", "density = 1000.0, pressure = 1.0 } ]"),
+     "sph.bodies[0].pressure", "starts unstressed"),
+    ("clamp_on_fluid", edit(SPH, "density = 1000.0 } ]", "density = 1000.0, clamp = { box = { lower = [0.0, 0.0], upper = [0.01, 0.1] } } } ]"),
+     "sph.bodies[0].clamp", "only tlsph"),
+    ("clamp_length", edit(SOLID, "density = 1000.0 } ]", "density = 1000.0, clamp = { box = { lower = [0.0, 0.0, 0.0], upper = [0.01, 0.1, 0.1] } } } ]"),
+     "sph.bodies[0].clamp.box.lower", "dimension mismatch"),
+    ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
+     "sph.materials", "all tlsph"),
     ("coupled_sph_outside_grid", SPH.replace("[sph]", '[ale]\ngrid = { lower = [0.0, 0.0], upper = [0.05, 0.2], cells = [5, 20] }\n'
                                               'materials.air = { eos = "ideal_gas", gamma = 1.4 }\n'
                                               'regions = [ { material = "air", density = 1.2, pressure = 1000.0 } ]\n\n[sph]')
@@ -65,3 +87,18 @@ def test_the_base_is_valid(tmp_path):
     (tmp_path / "case.toml").write_text(SPH)
     case = load_case(tmp_path)
     assert case["sph"]["particles"] == 100 and case["ranks"] == {"sph": 1}
+
+
+def test_a_solid_with_its_defaults(tmp_path):
+    """A tlsph material keeps what the case gives; the adapter fills MACHDYN's defaults
+    (adapters/lammps_tlsph.py) into one pair_coeff line per material."""
+    from adapters.lammps_tlsph import pair_commands
+
+    (tmp_path / "case.toml").write_text(edit(SOLID, "poisson_ratio = 0.3 }",
+                                             "poisson_ratio = 0.3, eos = { shock = { c0 = 5000.0, s = 1.4, gamma = 2.0 } } }"))
+    case = load_case(tmp_path)
+    mat = case["sph"]["materials"]["water"]
+    assert mat["eos"] == {"shock": {"c0": 5000.0, "s": 1.4, "gamma": 2.0}} and "strength" not in mat
+    assert pair_commands(case["sph"]) == [
+        "pair_style smd/tlsph",
+        "pair_coeff 1 1 *COMMON 1000.0 1000000000.0 0.3 1.0 0.0 10.0 1.0 *STRENGTH_LINEAR *EOS_SHOCK 5000.0 1.4 2.0 *END"]

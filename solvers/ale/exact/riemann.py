@@ -40,7 +40,8 @@ bounded by a contact.  Between the two edges the state is the vacuum state
 convention so that rho u and rho e integrate to 0).  A side given with rho = 0 is
 an initial vacuum (Toro ch. 4.6): the other side rarefies into it.
 
-Public API: :class:`RiemannSolution`.
+Public API: :class:`RiemannSolution`.  Any other EOS of the background (Mie-Grueneisen, JWL):
+:class:`solvers.ale.exact.riemann_eos.EosRiemannSolution` (the same interface, no vacuum).
 """
 from __future__ import annotations
 
