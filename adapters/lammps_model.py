@@ -95,6 +95,8 @@ it replaces (fix sph sets vest = v, sph/rhosum sums rho afresh, the forces and r
 that state)."""
 REFERENCE = None
 """(tlsph's reload creates the particles at their reference positions first; fluids have none.)"""
+DENSITY = "rho"
+"""The per-atom density the adapter gathers (volumes m / rho, output)."""
 
 
 def particles(sph: dict) -> dict:

@@ -42,6 +42,8 @@ setup force computation advances them once more, so a reload puts them back afte
 CHECKPOINT = (("x", 3, False), ("v", 3, False), ("f", 3, False), ("desph", 1, False)) + CREATED + HISTORY + (
     ("type", 1, True), ("image", 1, True), ("mask", 1, True))
 AFTER_SETUP = (("vest", 3, False), ("esph", 1, False), ("f", 3, False), ("desph", 1, False)) + HISTORY
+DENSITY = "c_immerse_rho"
+"""compute smd/rho: the current density (mass over the deformed volume)."""
 REFERENCE = "x0"
 """A reload creates the particles at their reference positions first: the pair's partner list and
 kernel weights are built from the positions at set-up (FixSMD_TLSPH_ReferenceConfiguration::setup),
@@ -125,8 +127,6 @@ def particles(sph: dict) -> dict:
 def _strength(s) -> list[str]:
     if s == "linear":
         return ["*STRENGTH_LINEAR"]
-    if s == "linear_defgrad":
-        return ["*LINEAR_DEFGRAD"]
     if "linear_plastic" in s:
         p = s["linear_plastic"]
         return ["*STRENGTH_LINEAR_PLASTIC", repr(p["yield_stress"]), repr(p.get("hardening", 0.0))]

@@ -300,7 +300,7 @@ class SphAdapter(SolverAdapter):
         return v - self._half_kick() if getattr(self, "_stepped", False) else v
 
     def volumes(self) -> np.ndarray:
-        return self._mass / self._gather("rho", 1)
+        return self._mass / self._gather(self.F.DENSITY, 1)
 
     def close(self) -> None:
         self.lmp.close()
@@ -332,10 +332,8 @@ class SphAdapter(SolverAdapter):
         x = self._gather("x", 3)
         v = self._gather("v", 3)
         e = self._gather("esph", 1)
-        if self.F is lammps_model:
-            rho = self._gather("rho", 1)
-        else:  # tlsph: density, Cauchy stress (xx yy zz xy xz yz, von Mises) and plastic strain from LAMMPS
-            rho = self._gather("c_immerse_rho", 1)
+        rho = self._gather(self.F.DENSITY, 1)
+        if self.F is not lammps_model:  # tlsph: Cauchy stress (xx yy zz xy xz yz, von Mises), plastic strain
             stress = self._gather("c_immerse_stress", 7)
             plastic = self._gather("eff_plastic_strain", 1)
         if self.comm.rank != 0:

@@ -20,7 +20,7 @@ Materials (LAMMPS pair styles, one model per case):
 
 * ``tlsph`` (MACHDYN pair smd/tlsph, atom_style smd; adapters/lammps_tlsph.py): an elastic or
   elastic-plastic solid; keys density, youngs_modulus, poisson_ratio, strength ("linear",
-  "linear_defgrad", {linear_plastic = {yield_stress, hardening}}, {johnson_cook = {A, B, n, C,
+  {linear_plastic = {yield_stress, hardening}}, {johnson_cook = {A, B, n, C,
   strain_rate0, room_temperature, melt_temperature, m}}), eos ("linear", "none", {shock = {c0, s,
   gamma}}), viscosity_q1, viscosity_q2, hourglass, heat_capacity.  A body may give ``clamp``, a
   region whose particles are held at rest.
@@ -50,12 +50,12 @@ MODEL_KEYS = {
 }
 MODEL_REQUIRED = {"taitwater": MODEL_KEYS["taitwater"], "idealgas": MODEL_KEYS["idealgas"],
                   "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio")}
-STRENGTH_TEXT = ("\"linear\", \"linear_defgrad\", { linear_plastic = { yield_stress, hardening } } or "
+STRENGTH_TEXT = ("\"linear\", { linear_plastic = { yield_stress, hardening } } or "
                  "{ johnson_cook = { A, B, n, C, strain_rate0, room_temperature, melt_temperature, m } }")
 EOS_TEXT = "\"linear\", \"none\" or { shock = { c0, s, gamma } } (Mie-Grueneisen, linear us-up)"
 STRENGTH = {
     "oneOf": [
-        {"type": "string", "enum": ["linear", "linear_defgrad"], "x-allowed": "must be " + STRENGTH_TEXT},
+        {"type": "string", "enum": ["linear"], "x-allowed": "must be " + STRENGTH_TEXT},
         table({"linear_plastic": table({"yield_stress": number("Pa", exclusiveMinimum=0),
                                         "hardening": number("Pa", minimum=0)}, required=("yield_stress",))},
               required=("linear_plastic",)),
@@ -279,6 +279,11 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
         if model == "tlsph" and state:
             raise CaseError(format_key(base + [state[0]]), rb[state[0]],
                             "a tlsph body starts unstressed at its density; remove it")
+        if model == "tlsph" and "periodic" in sph["boundaries"].values():
+            face = next(f for f, v in sph["boundaries"].items() if v == "periodic")
+            raise CaseError(format_key(["sph", "boundaries", face]), "periodic",
+                            "tlsph solids need open or wall faces: LAMMPS's PairTlsph::ComputeForces does not "
+                            "wrap the reference distance of a pair across a periodic face")
         if "clamp" in body and model != "tlsph":
             raise CaseError(format_key(base + ["clamp"]), rb["clamp"],
                             "only tlsph (solid) bodies are clamped; a fluid's boundary is a fixed body")

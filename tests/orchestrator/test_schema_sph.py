@@ -64,6 +64,10 @@ BAD = [
      "sph.bodies[0].clamp", "only tlsph"),
     ("clamp_length", edit(SOLID, "density = 1000.0 } ]", "density = 1000.0, clamp = { box = { lower = [0.0, 0.0, 0.0], upper = [0.01, 0.1, 0.1] } } } ]"),
      "sph.bodies[0].clamp.box.lower", "dimension mismatch"),
+    ("solid_periodic", edit(SOLID, 'x_lower = "wall", x_upper = "wall"', 'x_lower = "periodic", x_upper = "periodic"'),
+     "sph.boundaries.x_lower", "does not wrap the reference distance"),
+    ("solid_defgrad", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3, strength = "linear_defgrad" }'),
+     "sph.materials.water.strength", "must be \"linear\""),
     ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
      "sph.materials", "all tlsph"),
     ("coupled_sph_outside_grid", SPH.replace("[sph]", '[ale]\ngrid = { lower = [0.0, 0.0], upper = [0.05, 0.2], cells = [5, 20] }\n'
