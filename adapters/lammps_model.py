@@ -120,7 +120,7 @@ def particles(sph: dict) -> dict:
             e_spec = 0.0
         xs.append(x)
         types.append(np.full(n, t, np.int32))
-        vs.append(np.tile(np.asarray(body["velocity"], float), (n, 1)))
+        vs.append(np.tile(np.asarray(body["velocity"], float) * [a not in body["hold"] for a in "xyz"[:dim]], (n, 1)))
         rho = (hydrostatic_density(body, mat, x, sph["gravity"]) if body.get("hydrostatic")
                else np.full(n, body["density"]))
         rhos.append(rho)
@@ -141,7 +141,8 @@ def particles(sph: dict) -> dict:
 def setup_commands(sph: dict, parts: dict) -> list[str]:
     """Per-type masses, then the physics (after the particles)."""
     _, kinds = atom_types(sph)
-    return [f"mass {t} {float(k['mass'])!r}" for t, k in enumerate(kinds, start=1)] + physics_commands(sph)
+    return ([f"mass {t} {float(k['mass'])!r}" for t, k in enumerate(kinds, start=1)] + physics_commands(sph)
+            + hold_commands(sph))
 
 
 def physics_commands(sph: dict) -> list[str]:
@@ -178,6 +179,28 @@ def physics_commands(sph: dict) -> list[str]:
     if fixed:
         cmds.append(f"fix immerse_stationary {FIXED_GROUP} sph/stationary")
     return cmds + gravity_and_walls(sph, bool(free))
+
+
+def hold_commands(sph: dict) -> list[str]:
+    """Each body's held velocity components (``hold``): zero force on them after every other force
+    (the last post-force fix).  Bodies are contiguous id ranges in body order; the particles start
+    with those components zero (particles() of each family)."""
+    cmds, first = [], 1
+    for i, body in enumerate(sph["bodies"]):
+        n = len(lattice_points(body["region"], body["spacing"], sph["dimension"]))
+        if body["hold"]:
+            comps = " ".join("0.0" if a in body["hold"] else "NULL" for a in "xyz")
+            cmds += [f"group immerse_hold{i} id {first}:{first + n - 1}",
+                     f"fix immerse_hold{i} immerse_hold{i} setforce {comps}"]
+        first += n
+    return cmds
+
+
+def held_components(sph: dict, body: np.ndarray) -> np.ndarray:
+    """(n, dim) 1.0 where a particle's velocity component is free, 0.0 where its body holds it."""
+    dim = sph["dimension"]
+    per_body = np.array([[0.0 if a in b["hold"] else 1.0 for a in "xyz"[:dim]] for b in sph["bodies"]])
+    return per_body[body]
 
 
 def gravity_and_walls(sph: dict, free: bool) -> list[str]:

@@ -119,6 +119,7 @@ class Coupler:
         # the coupler's own work per part (its waits for the solver groups excluded): summary.json
         self.coupling_s = {"solve": 0.0, "correction": 0.0, "geometry": 0.0}
         P.send(self.inter[self.bg], self.coupling.geometry().pack(dim), 0, P.TAG_GEOMETRY)
+        self.coupling.load_kernels()   # (start-up: the first step would pay the kernels' cache loading)
         self.dt_prev = 0.0
 
     def _coupled_step(self, dt: float) -> None:

@@ -25,6 +25,10 @@ Materials (LAMMPS pair styles, one model per case):
   gamma}}), viscosity_q1, viscosity_q2, hourglass, heat_capacity.  A body may give ``clamp``, a
   region whose particles are held at rest.
 
+Any body may give ``hold``, velocity components held at zero (e.g. ["y"]: a piston sliding along
+a channel's walls, as a Lagrangian body's symmetry planes hold it; a free block under end loads
+is otherwise unstable to rigid rotation).
+
 * ``taitwater`` (pair sph/taitwater): p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7; keys density
   (rho0), sound_speed (c0), viscosity (Monaghan's alpha);
 * ``idealgas`` (pair sph/idealgas): p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4; key
@@ -126,6 +130,9 @@ BODY = table(
         "hydrostatic": {"type": "boolean"},
         # tlsph: the body's particles in this region are held at rest (a clamp)
         "clamp": REGION,
+        # velocity components held at zero (a body sliding between walls: ["y"])
+        "hold": {"type": "array", "items": {"type": "string", "enum": ["x", "y", "z"]}, "uniqueItems": True,
+                 "minItems": 1},
     },
     required=("material", "region", "density"),
 )
@@ -230,6 +237,7 @@ def _normalise(s: dict, dim: int) -> dict:
                 body[k] = to_float(b[k])
         if "clamp" in b:
             body["clamp"] = _region(b["clamp"])
+        body["hold"] = list(b.get("hold", []))
         out["bodies"].append(body)
     return out
 
@@ -294,6 +302,9 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
                         check_length(format_key(base + ["clamp", kind, k]), rb["clamp"][kind][k], dim)
             if "where" in body["clamp"]:
                 check_expression(format_key(base + ["clamp", "where"]), body["clamp"]["where"], dim, BOOL)
+        for a in body["hold"]:
+            if "xyz".index(a) >= dim:
+                raise CaseError(format_key(base + ["hold"]), rb["hold"], f"axes of the {dim}-D run: x, y" + (", z" if dim == 3 else ""))
         if "pressure" in body and body["pressure"] < 0:
             raise CaseError(format_key(base + ["pressure"]), rb["pressure"], "must be >= 0 for an ideal gas (Pa)")
         if "velocity" in rb:

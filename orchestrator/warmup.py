@@ -258,7 +258,9 @@ def step_case(case: dict, steps: int = STEPS, blocked: bool = False) -> None:
 
     from orchestrator.case import solvers_used
 
-    if case.get("coupling"):  # the coupled step, as the job runs it (orchestrator/coupling)
+    # the coupled step of a Lagrangian body, as the job runs it (orchestrator/coupling); particles'
+    # coupling kernels are warmed by _particle_coupling, their solvers one by one below
+    if case.get("coupling") and "lagrange" in case:
         from orchestrator.coupling.inprocess import InProcess
 
         run = InProcess(case)
@@ -301,6 +303,11 @@ def _particle_coupling() -> None:
         ax = np.arange(0.3, 0.7, 0.05) + 0.025
         x = np.stack(np.meshgrid(*[ax] * dim, indexing="ij"), -1).reshape(-1, dim)
         particle_interface(grid, x, np.full(len(x), 0.05 ** dim), 0.1)
+    # a block with a corner cut out on a coarse grid: the surface cuts across the concave corner
+    # farther than h from every particle, so quadrature points take the nearest particle (the
+    # kernels' second pass, particle_operators._particle_rows, called from Python)
+    x = x[~np.all(x > 0.5, axis=1)]
+    particle_interface(Grid([0.0] * 3, [1.0] * 3, [4] * 3), x, np.full(len(x), 0.05 ** 3), 0.1)
 
 
 def dispatchers() -> dict[str, object]:

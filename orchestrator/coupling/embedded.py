@@ -37,7 +37,8 @@ import numpy as np
 from orchestrator.coupling import variants
 from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
-from orchestrator.coupling.operator_rows import on_grid_boundary, row_means, transpose_product
+from orchestrator.coupling.operator_rows import (correction_means, impulse_sums, on_grid_boundary, oscillation,
+                                                 row_means, surface_load)
 from orchestrator.coupling.operators import Operators
 
 
@@ -94,17 +95,13 @@ def multiplier_oscillation(lam, pairs, normal) -> float:
     """Zone-to-zone spread of the multipliers: the mean |λ_i - λ_j| over face-adjacent cut zones of
     the same side of a surface (normals within 60 degrees: the two faces of a thin wall carry
     different loads) relative to the mean |λ| (0 for a smooth field; the unstabilised solve gives
-    ~1.5 on a straight line with uniform masses, the stabilised one 0.02: coupling.solve.BETA)."""
+    ~1.5 on a straight line with uniform masses, the stabilised one 0.02: coupling.solve.BETA).
+    (One kernel, operator_rows.oscillation: the numpy form cost ~25 us a step in call overhead.)"""
     if lam is None or len(pairs) == 0:
         return 0.0
-    pairs = pairs[np.einsum("ij,ij->i", normal[pairs[:, 0]], normal[pairs[:, 1]]) > 0.5]
-    if len(pairs) == 0:
-        return 0.0
-    lam = np.asarray(lam).reshape(len(lam), -1)
-    scale = float(np.mean(np.linalg.norm(lam, axis=1)))
-    if not scale > 0.0:
-        return 0.0
-    return float(np.mean(np.linalg.norm(lam[pairs[:, 0]] - lam[pairs[:, 1]], axis=1)) / scale)
+    lam = np.ascontiguousarray(np.asarray(lam, dtype=np.float64).reshape(len(lam), -1))
+    return float(oscillation(lam, np.ascontiguousarray(pairs, dtype=np.int64),
+                             np.ascontiguousarray(normal, dtype=np.float64)))
 
 
 class EmbeddedCoupling:
@@ -154,11 +151,12 @@ class EmbeddedCoupling:
         if self.particles:
             from orchestrator.coupling.particle_operators import particle_interface
 
+            # (its kernels give the coverage and the operators too: particle_operators.py, "Cost")
             pi = particle_interface(self.grid, self.x, self.volume, self.h)
-            pieces, inner = pi.pieces, pi.inner
+            pieces, cov = pi.pieces, pi.coverage
         else:
             pieces = clip_surface(self.grid, self.x, self.facets, self.body)
-        cov = coverage(self.grid, pieces, self.n_bodies)
+            cov = coverage(self.grid, pieces, self.n_bodies)
         total = cov.total   # (bodies do not overlap: sums of disjoint parts)
         faces = tuple((ids, t) for (ids, _), t in zip(cov.faces, cov.face_totals))
         if not self.particles:
@@ -177,6 +175,28 @@ class EmbeddedCoupling:
         return BodyGeometry(cov.zones, total, faces, self.ops.zones, self.ops.bnodes, velocity, cov.run_start,
                             cov.run_length)
 
+    def load_kernels(self) -> None:
+        """Load the step's numba kernels (solve, correction) before the time loop: the first call of
+        each reads it from numba's cache (~60 ms for the multiplier solve's, measured), a cost of the
+        coupler's start-up that would otherwise land on the first coupled step.  Runs them on zero
+        velocities with the current operators and a throwaway method state: nothing of this
+        coupling's state changes."""
+        ops, dim = self.ops, self.dim
+        if ops is None or ops.n_zones == 0:
+            return
+        nb, nc = ops.bnodes.size, ops.zones.size
+        zero_f = np.zeros((self.ns, dim))
+        load, v_f = surface_load(ops.Bf.indptr, ops.Bf.indices, ops.Bf.data, np.zeros((nc, dim)), ops.area, self.ns,
+                                 0.0, zero_f, self.free, np.ascontiguousarray(self.mass))
+        impulse_sums(load, zero_f)
+        correction_means(ops.Bf.indptr, ops.Bf.indices, ops.Bf.data, ops.area, self.v, self.v, zero_f)
+        multiplier_oscillation(np.zeros((nc, 1)), ops.pairs, ops.normal)
+        try:
+            self.method.step(ops, np.zeros((nb, dim)), np.ones(nb), v_f, self._solve_masses(ops), 1.0,
+                             self.method.new_state(), self.modulus)
+        except Exception:   # (loading only: the step itself reports whatever this would have)
+            pass
+
     # ---- the step ----------------------------------------------------------------------------------
     def solve(self, dt: float, dt_avg: float, vstar_f: np.ndarray, background: np.ndarray) -> np.ndarray:
         """Steps 1-2 of the module docstring: returns the foreground's surface impulses (ns, dim);
@@ -186,12 +206,13 @@ class EmbeddedCoupling:
         v_b = background[: nb * dim].reshape(nb, dim)
         m_b = background[nb * dim: nb * (dim + 1)]
         R = background[nb * (dim + 1):].reshape(nc, dim)
-        # the fluid's load on the body: -R_e over Gamma_e, consistent nodal forces B^f_eA / A_e
-        area = np.where(ops.area > 0.0, ops.area, 1.0)
-        F = -transpose_product(ops.Bf.indptr, ops.Bf.indices, ops.Bf.data, R / area[:, None], self.ns)
-        load = dt_avg * F
+        # the fluid's load on the body: -R_e over Gamma_e, consistent nodal forces B^f_eA / A_e, and
+        # the loaded predictor velocities v_f = v*_f + load free / m (one pass over the surface nodes:
+        # a particle body's are all its particles)
+        load, v_f = surface_load(ops.Bf.indptr, ops.Bf.indices, ops.Bf.data, np.ascontiguousarray(R), ops.area,
+                                 self.ns, float(dt_avg), np.ascontiguousarray(vstar_f, dtype=np.float64), self.free,
+                                 np.ascontiguousarray(self.mass))
         self.m_solve = self._solve_masses(ops)
-        v_f = vstar_f + load * self.free / self.mass[:, None]
         self.stable_limit = min(self.stable_limit, self.method.stable_dt(ops, m_b, self.m_solve, self.modulus))
         if np.isnan(self.cond_H) and ops.n_zones:
             # once: what the stabilisation is for (s_con = λmax/λmin independent of h when stabilised)
@@ -200,10 +221,10 @@ class EmbeddedCoupling:
         self.lambda_oscillation = multiplier_oscillation(self.state.lam, ops.pairs, ops.normal)
         self.lambda_oscillation_max = max(self.lambda_oscillation_max, self.lambda_oscillation)
         self.imp_b = res.impulse_b
-        imp = load + res.impulse_f
+        imp, total = impulse_sums(load, np.ascontiguousarray(res.impulse_f, dtype=np.float64))
         self.imp_f = imp
         diag = res.diagnostics
-        self.last = StepRecord(imp.sum(axis=0), 0.0, int(diag.get("iterations", 0)),
+        self.last = StepRecord(total, 0.0, int(diag.get("iterations", 0)),
                                float(diag.get("residual", 0.0)), float(diag.get("interface_dissipation", 0.0)))
         return imp
 
@@ -238,11 +259,11 @@ class EmbeddedCoupling:
         """Step 3: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean velocity_e (nc, dim)] for
         the background; advances the surface state and the diagnostics."""
         ops, Bf = self.ops, self.ops.Bf
-        v_new = np.asarray(v_new, dtype=np.float64).reshape(-1, self.dim)
-        vbar = 0.5 * (self.v + v_new)
-        v_half_e = row_means(Bf.indptr, Bf.indices, Bf.data, np.ascontiguousarray(v_new), ops.area)
-        v_bar_e = row_means(Bf.indptr, Bf.indices, Bf.data, vbar, ops.area)
-        work = float(np.sum(self.imp_f * vbar))
+        v_new = np.ascontiguousarray(np.asarray(v_new, dtype=np.float64).reshape(-1, self.dim))
+        # v^{n+1/2}_e, the mean (v^{n-1/2} + v^{n+1/2})_e / 2 and the impulses' work on it, one pass
+        v_half_e, v_bar_e, work = correction_means(Bf.indptr, Bf.indices, Bf.data, ops.area, self.v, v_new,
+                                                   self.imp_f)
+        work = float(work)
         self.last.work_f = work
         self.momentum_f += self.last.momentum_f
         self.work_f += work

@@ -293,3 +293,158 @@ def on_grid_boundary(centroid, normal, lower, upper, h):
         if on[p]:
             count += 1
     return on, count
+
+
+# ---- the coupled step's per-node arithmetic (embedded.EmbeddedCoupling.solve / background_correction)
+# A particle body's surface nodes are all its particles (thousands), so the step's few numpy
+# expressions over (ns, dim) arrays (temporaries, strided axis-0 sums: ~60 us for 4k particles,
+# every step) are single passes here, with numpy's summation orders so the results are the same.
+@njit(cache=True)
+def surface_load(indptr, indices, data, R, area, ns, dt_avg, vstar, free, mass):
+    """The fluid's load on the surface nodes and their loaded predictor velocities (embedded.solve):
+    ``load = dt_avg * -(B^fT (R / A_e))`` (a zone of zero area divides by 1) and ``v_f = vstar + load
+    free / m`` (free: 1 per component a boundary condition leaves free)."""
+    dim = R.shape[1]
+    x = np.empty(R.shape)
+    for e in range(R.shape[0]):
+        a_e = area[e] if area[e] > 0.0 else 1.0
+        for a in range(dim):
+            x[e, a] = R[e, a] / a_e
+    F = transpose_product(indptr, indices, data, x, ns)
+    load = np.empty((ns, dim))
+    v_f = np.empty((ns, dim))
+    for j in range(ns):
+        for a in range(dim):
+            load[j, a] = dt_avg * -F[j, a]
+            v_f[j, a] = vstar[j, a] + load[j, a] * free[j, a] / mass[j]
+    return load, v_f
+
+
+@njit(cache=True)
+def impulse_sums(load, impulse_f):
+    """``load + impulse_f`` and its column sums (numpy's axis-0 sum: the rows in order)."""
+    n, dim = load.shape
+    imp = np.empty((n, dim))
+    total = np.zeros(dim)
+    for j in range(n):
+        for a in range(dim):
+            imp[j, a] = load[j, a] + impulse_f[j, a]
+            total[a] += imp[j, a]
+    return imp, total
+
+
+@njit(cache=True)
+def _pairwise_block(a, s, n):
+    """numpy's pairwise_sum leaf (n <= 128): below 8 in turn, else 8 interleaved partial sums."""
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[s + i]
+        return res
+    r0, r1, r2, r3 = a[s], a[s + 1], a[s + 2], a[s + 3]
+    r4, r5, r6, r7 = a[s + 4], a[s + 5], a[s + 6], a[s + 7]
+    i = 8
+    while i < n - (n % 8):
+        r0 += a[s + i]
+        r1 += a[s + i + 1]
+        r2 += a[s + i + 2]
+        r3 += a[s + i + 3]
+        r4 += a[s + i + 4]
+        r5 += a[s + i + 5]
+        r6 += a[s + i + 6]
+        r7 += a[s + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += a[s + i]
+        i += 1
+    return res
+
+
+@njit(cache=True)
+def pairwise_sum(a, s, n):
+    """numpy's pairwise summation of a[s:s+n] (float64 ``add.reduce`` of a contiguous array: blocks of
+    at most 128 summed by ``_pairwise_block``, larger ranges split in two halves, the first a multiple
+    of 8, and the halves' sums added), so a sum done here is numpy's bit for bit.  The recursion is
+    walked with an explicit stack (a recursive njit function loaded from numba's cache into a caller
+    crashes)."""
+    if n <= 128:
+        return _pairwise_block(a, s, n)
+    cap = 256
+    ss = np.empty(cap, np.int64)
+    sn = np.empty(cap, np.int64)
+    st = np.zeros(cap, np.int64)
+    vals = np.empty(cap)
+    nv = 0
+    ss[0], sn[0], st[0] = s, n, 0
+    top = 1
+    while top > 0:
+        top -= 1
+        cs, cn, state = ss[top], sn[top], st[top]
+        if cn <= 128:
+            vals[nv] = _pairwise_block(a, cs, cn)
+            nv += 1
+        elif state == 0:   # expand: combine after the first half, then the second, are done
+            n2 = cn // 2
+            n2 -= n2 % 8
+            ss[top], sn[top], st[top] = cs, cn, 1
+            ss[top + 1], sn[top + 1], st[top + 1] = cs + n2, cn - n2, 0
+            ss[top + 2], sn[top + 2], st[top + 2] = cs, n2, 0
+            top += 3
+        else:
+            vals[nv - 2] = vals[nv - 2] + vals[nv - 1]
+            nv -= 1
+    return vals[0]
+
+
+@njit(cache=True)
+def correction_means(indptr, indices, data, area, v_old, v_new, imp_f):
+    """embedded.background_correction's arithmetic: the mean velocity ``(v_old + v_new) / 2``, the
+    zone means of v_new and of it (``row_means``), and the impulses' work ``sum(imp_f * vbar)``."""
+    n, dim = v_new.shape
+    vbar = np.empty((n, dim))
+    prod = np.empty(n * dim)
+    for j in range(n):
+        for a in range(dim):
+            vbar[j, a] = 0.5 * (v_old[j, a] + v_new[j, a])
+            prod[j * dim + a] = imp_f[j, a] * vbar[j, a]
+    work = 0.0 + pairwise_sum(prod, 0, prod.size)
+    return row_means(indptr, indices, data, v_new, area), row_means(indptr, indices, data, vbar, area), work
+
+
+@njit(cache=True)
+def oscillation(lam, pairs, normal):
+    """embedded.multiplier_oscillation on arrays: lam (nz, k), pairs (np, 2) rows, normal (nz, dim)
+    (np.linalg.norm's row norms and np.mean's pairwise sums)."""
+    dim = normal.shape[1]
+    k = lam.shape[1]
+    keep = np.empty(pairs.shape[0], np.int64)
+    m = 0
+    for p in range(pairs.shape[0]):
+        i, j = pairs[p, 0], pairs[p, 1]
+        dot = 0.0
+        for d in range(dim):
+            dot += normal[i, d] * normal[j, d]
+        if dot > 0.5:
+            keep[m] = p
+            m += 1
+    if m == 0:
+        return 0.0
+    norms = np.empty(lam.shape[0])
+    for e in range(lam.shape[0]):
+        s = 0.0
+        for c in range(k):
+            s += lam[e, c] * lam[e, c]
+        norms[e] = np.sqrt(s)
+    scale = pairwise_sum(norms, 0, norms.size) / norms.size
+    if not scale > 0.0:
+        return 0.0
+    diffs = np.empty(m)
+    for t in range(m):
+        i, j = pairs[keep[t], 0], pairs[keep[t], 1]
+        s = 0.0
+        for c in range(k):
+            d = lam[i, c] - lam[j, c]
+            s += d * d
+        diffs[t] = np.sqrt(s)
+    return (pairwise_sum(diffs, 0, m) / m) / scale

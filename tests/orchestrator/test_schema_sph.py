@@ -68,6 +68,10 @@ BAD = [
      "sph.boundaries.x_lower", "does not wrap the reference distance"),
     ("solid_defgrad", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3, strength = "linear_defgrad" }'),
      "sph.materials.water.strength", "must be \"linear\""),
+    ("hold_z_in_2d", edit(SPH, "density = 1000.0 } ]", 'density = 1000.0, hold = ["z"] } ]'),
+     "sph.bodies[0].hold", "axes of the 2-D run"),
+    ("hold_unknown_axis", edit(SPH, "density = 1000.0 } ]", 'density = 1000.0, hold = ["w"] } ]'),
+     "sph.bodies[0].hold[0]", "'x', 'y', 'z'"),
     ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
      "sph.materials", "all tlsph"),
     ("coupled_sph_outside_grid", SPH.replace("[sph]", '[ale]\ngrid = { lower = [0.0, 0.0], upper = [0.05, 0.2], cells = [5, 20] }\n'
