@@ -18,7 +18,8 @@ What differs from the SPH package's fluids (adapters/lammps_model.py):
 * 2-D: LAMMPS needs z periodic, and PairTlsph::ComputeForces applies the minimum image to a
   reference distance before it is assigned (its first pair on each rank reads an uninitialised
   vector), so a thin periodic z slab can fail with "Atoms have moved too far apart".  The z extent
-  is made large (+-1e6 h): the z coordinates of a 2-D run stay 0 and nothing else depends on it.
+  is made as deep as LAMMPS's neighbour bins allow (+-4e8 h; +-1e6 h still failed on a
+  plate): the z coordinates of a 2-D run stay 0 and nothing else depends on it.
 """
 from __future__ import annotations
 
@@ -71,8 +72,8 @@ def box_commands(sph: dict) -> list[str]:
     dim, h = sph["dimension"], sph["smoothing_length"]
     lo, hi = list(sph["domain"]["lower"]), list(sph["domain"]["upper"])
     if dim == 2:  # see the module docstring: a deep z slab
-        lo.append(-1e6 * h)
-        hi.append(1e6 * h)
+        lo.append(-4e8 * h)
+        hi.append(4e8 * h)
     skin = sph.get("neighbor_skin", 0.1 * h)
     return [
         "units si",

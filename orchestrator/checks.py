@@ -824,3 +824,35 @@ def free_end(case, out, history, params):
         if key.endswith("_balance_rel"):
             vals[key.split(".", 1)[1]] = float(np.max(np.abs(series)))
     return vals
+
+
+@register_check("tip_history", params=table(
+    {"role": {"type": "string", "enum": ["lagrange", "sph"]}, "axis": {"type": "string", "enum": ["x", "y", "z"]},
+     "along": {"type": "string", "enum": ["x", "y", "z"]},
+     "reference": {"type": "array", "minItems": 2, "items": {"type": "array", "minItems": 2, "maxItems": 2,
+                                                             "items": {"type": "number"}}},
+     "reference_source": {"type": "string"}},
+    required=("role", "axis", "along", "reference")))
+def tip_history(case, out, history, params):
+    """A body's tip (its nodes or particles that start at the largest coordinate ``along``): their
+    mean displacement along ``axis`` over the output steps against a reference history [[t, d],
+    ...] (e.g. the same body modelled otherwise, finer: ``reference_source`` says which), linearly
+    interpolated in time.  Metrics: ``tip_history_error`` = the largest |d - d_ref| over the
+    reference's span relative to the largest |d_ref| (one number for two curves, as an FE and an
+    SPH model of one body are compared), ``tip_final_error`` = the relative error at the reference's
+    last time."""
+    from orchestrator import output
+
+    role, a, b = params["role"], "xyz".index(params["axis"]), "xyz".index(params["along"])
+    ref = np.asarray(params["reference"], float)
+    steps = output.read_steps(out, role)
+    x0 = output.read_step(out, role, steps[0][2])[0]
+    top = x0[:, b] >= x0[:, b].max() - 1e-9 * max(abs(x0[:, b].max()), 1.0)
+    ts = np.array([t for t, _, _ in steps])
+    ds = np.array([np.mean(output.read_step(out, role, i)[0][top, a] - x0[top, a]) for _, _, i in steps])
+    span = (ts >= ref[0, 0] - 1e-12) & (ts <= ref[-1, 0] + 1e-12)
+    scale = np.abs(ref[:, 1]).max()
+    err = np.abs(ds[span] - np.interp(ts[span], ref[:, 0], ref[:, 1]))
+    final = float(np.interp(ref[-1, 0], ts, ds))
+    return {"tip_history_error": float(err.max() / scale),
+            "tip_final_error": abs(final - ref[-1, 1]) / max(abs(ref[-1, 1]), 1e-300)}

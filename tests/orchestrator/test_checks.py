@@ -686,11 +686,37 @@ def test_free_end(tmp_path):
     assert r["metrics"]["rebound_time_error_rel"]["value"] == pytest.approx(1000 / 960 - 1, rel=1e-6)
 
 
+# ---- tip_history (a body's tip against a reference history) ---------------------------------------
+def tip_output(out, case, scale=1.0):
+    """A plate's particles whose top row moves along x by `scale` times the case's reference
+    history, sampled at other times than the reference's (interpolated by the check)."""
+    ref = np.asarray(case["check"]["params"]["reference"], float)
+    x0 = np.column_stack([np.full(5, 0.6), np.linspace(0.0, 0.3, 5)])
+    output.write_mesh(out, "sph", np.arange(5, dtype=np.int64)[:, None], "vertex")
+    for k, t in enumerate(np.linspace(0.0, ref[-1, 0], 23)):
+        x = x0.copy()
+        x[-1, 0] += scale * np.interp(t, ref[:, 0], ref[:, 1])
+        output.write_step(out, "sph", k, k, t, x, {"body": np.zeros(5, np.int64)})
+    return out
+
+
+def test_tip_history(tmp_path):
+    """The reference itself passes at round-off; a tip deflecting 12 % more fails both metrics with
+    the error it was given (largest at the last time)."""
+    case = load_case(CASES / "sph_vs_fe_plate" / "sph")
+    r = checks.run_check(case, tip_output(tmp_path / "good", case), history("sph"))
+    assert r["passed"], r
+    assert r["metrics"]["tip_history_error"]["value"] < 1e-12
+    r = checks.run_check(case, tip_output(tmp_path / "far", case, scale=1.12), history("sph"))
+    assert failed(r) == ["tip_final_error", "tip_history_error"], failed(r)
+    assert r["metrics"]["tip_history_error"]["value"] == pytest.approx(0.12, rel=1e-9)
+
+
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
-              "uniform_flow", "riemann_wall", "surge_front", "free_end"}
+              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history"}
     assert set(checks.CHECKS) == tested
 
 
