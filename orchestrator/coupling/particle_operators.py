@@ -485,20 +485,6 @@ def _particle_rows(nrows, qrow, qw, sptr, sidx, sval, near):
     return fptr, fcol[:nf], fval[:nf]
 
 
-@njit(cache=True)
-def _grow_i(a, n):
-    out = np.empty(n, np.int64)
-    out[: a.size] = a
-    return out
-
-
-@njit(cache=True)
-def _grow_f(a, n):
-    out = np.empty(n)
-    out[: a.size] = a
-    return out
-
-
 # ------------------------------------------------------------------------------------- the interface
 def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: float = 0.5) -> ParticleInterface:
     """The reconstructed interface of the particles ``x`` (n, dim) with volumes ``volume`` (n,) and
