@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solvers.particles import IDEALGAS_GAMMA, lattice_points
+from solvers.particles import IDEALGAS_GAMMA, body_points
 
 FREE_GROUP = "immerse_free"
 FIXED_GROUP = "immerse_fixed"
@@ -109,7 +109,7 @@ def particles(sph: dict) -> dict:
     xs, types, vs, rhos, es, bodies = [], [], [], [], [], []
     for i, body in enumerate(sph["bodies"]):
         t = type_of_body[i]
-        x = lattice_points(body["region"], body["spacing"], dim)
+        x = body_points(body, dim)
         n = len(x)
         mass = masses[t - 1]
         mat = sph["materials"][body["material"]]
@@ -187,7 +187,7 @@ def hold_commands(sph: dict) -> list[str]:
     with those components zero (particles() of each family)."""
     cmds, first = [], 1
     for i, body in enumerate(sph["bodies"]):
-        n = len(lattice_points(body["region"], body["spacing"], sph["dimension"]))
+        n = len(body_points(body, sph["dimension"]))
         if body["hold"]:
             comps = " ".join("0.0" if a in body["hold"] else "NULL" for a in "xyz")
             cmds += [f"group immerse_hold{i} id {first}:{first + n - 1}",

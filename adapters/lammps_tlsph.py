@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from adapters.lammps_model import FIXED_GROUP, FREE_GROUP, boundary_letters, gravity_and_walls, hold_commands
-from solvers.particles import lattice_points, points_in
+from solvers.particles import body_points, points_in
 
 DEFAULTS = {"viscosity_q1": 1.0, "viscosity_q2": 0.0, "hourglass": 10.0, "heat_capacity": 1.0,
             "strength": "linear", "eos": "linear"}
@@ -96,7 +96,7 @@ def particles(sph: dict) -> dict:
     type_of_body, _ = atom_types(sph)
     parts = {k: [] for k in ("x", "type", "v", "mass", "vfrac", "fixed", "body", "contact_radius")}
     for i, body in enumerate(sph["bodies"]):
-        x = lattice_points(body["region"], body["spacing"], dim)
+        x = body_points(body, dim)
         n = len(x)
         vol = body["spacing"] ** dim
         fixed = np.full(n, body["fixed"])

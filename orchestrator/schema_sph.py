@@ -36,6 +36,8 @@ is otherwise unstable to rigid rotation).
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 from solvers.expressions import BOOL
 
 from .lammps_lines import LammpsLineError, check_line
@@ -120,6 +122,8 @@ BODY = table(
         "name": name(),
         "material": {"type": "string", "minLength": 1},
         "region": REGION,
+        # particle positions from a LAMMPS data file (its Atoms section), in place of a region
+        "data_file": {"type": "string", "minLength": 1},
         "density": number("kg/m^3", exclusiveMinimum=0),
         "pressure": number("Pa"),
         "specific_internal_energy": number("J/kg", minimum=0),
@@ -134,7 +138,9 @@ BODY = table(
         "hold": {"type": "array", "items": {"type": "string", "enum": ["x", "y", "z"]}, "uniqueItems": True,
                  "minItems": 1},
     },
-    required=("material", "region", "density"),
+    required=("material", "density"),
+    oneOf=[{"required": ["region"]}, {"required": ["data_file"]}],
+    **{"x-allowed": "needs exactly one of region = { ... } or data_file = \"file\" (a LAMMPS data file)"},
 )
 SPH_FACE = {"type": "string", "enum": ["open", "periodic", "wall"]}
 FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
@@ -202,7 +208,7 @@ def _material_value(key: str, v):
     return to_float(v)
 
 
-def _normalise(s: dict, dim: int) -> dict:
+def _normalise(s: dict, dim: int, case_dir) -> dict:
     spacing = to_float(s["spacing"])
     out = {
         "dimension": dim,
@@ -225,7 +231,7 @@ def _normalise(s: dict, dim: int) -> dict:
         body = {
             "name": b.get("name", f"body{i}"),
             "material": b["material"],
-            "region": _region(b["region"]),
+            "region": _region(b["region"]) if "region" in b else None,
             "density": to_float(b["density"]),
             "velocity": _vec(b.get("velocity", [0.0] * dim)),
             "fixed": bool(b.get("fixed", False)),
@@ -237,18 +243,72 @@ def _normalise(s: dict, dim: int) -> dict:
                 body[k] = to_float(b[k])
         if "clamp" in b:
             body["clamp"] = _region(b["clamp"])
+        if "data_file" in b:
+            body["data_file"] = (Path(case_dir) / b["data_file"]).resolve()
         body["hold"] = list(b.get("hold", []))
         out["bodies"].append(body)
     return out
 
 
-def _check(sph: dict, raw: dict, dim: int) -> None:
+DATA_FILE_LIMIT = 1 << 30
+"""A particle data file larger than this is refused (1 GiB: ~20 M particles of a text data file)."""
+
+
+def _read_body_file(body: dict, key: str, raw: str, case_dir, dim: int) -> None:
+    """A body's LAMMPS data file: inside the case directory, a regular file, its Atoms positions
+    (solvers/particles.py) kept as ``_points``; the body's region becomes the box of its particles
+    (half a spacing around them) for the domain and grid checks."""
+    import numpy as np
+
+    from solvers.particles import DataFileError, read_data_positions
+
+    from .schema_rules import check_path_inside, stat_regular
+
+    path = body["data_file"]
+    check_path_inside(key, raw, path, case_dir)
+    stat_regular(path, key, raw, "a LAMMPS data file (text)")
+    try:
+        with open(path, "rb") as f:
+            data = f.read(DATA_FILE_LIMIT + 1)
+    except OSError as exc:
+        raise CaseError(key, raw, f"cannot read: {exc.strerror or exc}") from None
+    if len(data) > DATA_FILE_LIMIT:
+        raise CaseError(key, raw, "is more than 1 GiB; allowed: a LAMMPS data file up to 1 GiB")
+    try:
+        x = read_data_positions(data.decode("utf-8"), dim)
+    except UnicodeDecodeError as exc:
+        raise CaseError(key, raw, f"not UTF-8 text (byte {exc.start}); allowed: a LAMMPS data file") from None
+    except DataFileError as exc:
+        raise CaseError(key, raw, f"{exc}; allowed: a LAMMPS data file with an Atoms section") from None
+    body["_points"] = x
+    half = 0.5 * body["spacing"]
+    body["region"] = {"box": {"lower": [float(v) for v in x.min(axis=0) - half],
+                              "upper": [float(v) for v in x.max(axis=0) + half]}}
+
+
+def _check_region(reg: dict, rreg: dict, base: list, dim: int) -> None:
+    """A region's vector lengths, shape for the dimension, box order and where expression."""
+    for kind, keys in (("box", ("lower", "upper")), ("sphere", ("centre",)), ("cylinder", ("base",))):
+        if kind in reg:
+            for k in keys:
+                check_length(format_key(base + ["region", kind, k]), rreg[kind][k], dim)
+    if "cylinder" in reg and dim != 3:
+        raise CaseError(format_key(base + ["region", "cylinder"]), rreg["cylinder"],
+                        "cylinders are 3-D; in 2-D a disc is a sphere = { centre, radius }")
+    if "box" in reg and not all(u > v for u, v in zip(reg["box"]["upper"], reg["box"]["lower"])):
+        raise CaseError(format_key(base + ["region", "box", "upper"]), rreg["box"]["upper"],
+                        "must be > lower component-wise")
+    if "where" in reg:
+        check_expression(format_key(base + ["region", "where"]), reg["where"], dim, BOOL)
+
+
+def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
     """Cross-field rules: vector lengths, the domain, periodic pairs, one material model, each body's
     material and thermodynamic state, regions inside the domain, the extra LAMMPS lines, the
     particle count."""
     import numpy as np
 
-    from solvers.particles import bounds, lattice_counts, lattice_points
+    from solvers.particles import body_points, bounds, lattice_counts
 
     for k in ("lower", "upper"):
         check_length(format_key(["sph", "domain", k]), raw["domain"][k], dim)
@@ -309,33 +369,28 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
             raise CaseError(format_key(base + ["pressure"]), rb["pressure"], "must be >= 0 for an ideal gas (Pa)")
         if "velocity" in rb:
             check_length(format_key(base + ["velocity"]), rb["velocity"], dim)
-        reg, rreg = body["region"], rb["region"]
-        for kind, keys in (("box", ("lower", "upper")), ("sphere", ("centre",)), ("cylinder", ("base",))):
-            if kind in reg:
-                for k in keys:
-                    check_length(format_key(base + ["region", kind, k]), rreg[kind][k], dim)
-        if "cylinder" in reg and dim != 3:
-            raise CaseError(format_key(base + ["region", "cylinder"]), rreg["cylinder"],
-                            "cylinders are 3-D; in 2-D a disc is a sphere = { centre, radius }")
-        if "box" in reg and not all(u > v for u, v in zip(reg["box"]["upper"], reg["box"]["lower"])):
-            raise CaseError(format_key(base + ["region", "box", "upper"]), rreg["box"]["upper"],
-                            "must be > lower component-wise")
-        if "where" in reg:
-            check_expression(format_key(base + ["region", "where"]), reg["where"], dim, BOOL)
+        if "data_file" in body:  # its region: the box around its particles (for the checks below)
+            _read_body_file(body, format_key(base + ["data_file"]), rb["data_file"], case_dir, dim)
+            where, rreg = "data_file", rb["data_file"]
+        else:
+            where, rreg = "region", rb["region"]
+            _check_region(body["region"], rreg, base, dim)
+        reg = body["region"]
         blo, bhi = bounds(reg, dim)
         if any(b < a for a, b in zip(lo, blo)) or any(b > a for a, b in zip(hi, bhi)):
-            raise CaseError(format_key(base + ["region"]), rreg,
+            raise CaseError(format_key(base + [where]), rreg,
                             f"must lie inside sph.domain (lower {raw['domain']['lower']}, upper {raw['domain']['upper']})")
-        if total + int(np.prod(lattice_counts(reg, body["spacing"], dim), dtype=np.float64)) > sph["max_particles"] * 4:
-            raise CaseError(format_key(base + ["region"]), rreg,  # the lattice alone is too big to build
+        if "_points" not in body and total + int(np.prod(lattice_counts(reg, body["spacing"], dim),
+                                                         dtype=np.float64)) > sph["max_particles"] * 4:
+            raise CaseError(format_key(base + [where]), rreg,  # the lattice alone is too big to build
                             f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
-        n = len(lattice_points(reg, body["spacing"], dim))
+        n = len(body_points(body, dim))
         if n == 0:
-            raise CaseError(format_key(base + ["region"]), rreg,
+            raise CaseError(format_key(base + [where]), rreg,
                             f"holds no particle at spacing {body['spacing']:g} m")
         total += n
         if total > sph["max_particles"]:
-            raise CaseError(format_key(base + ["region"]), rreg,
+            raise CaseError(format_key(base + [where]), rreg,
                             f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
     sph["particles"] = total
     for i, line in enumerate(sph["lammps_commands"]):
@@ -346,11 +401,11 @@ def _check(sph: dict, raw: dict, dim: int) -> None:
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:
-    return None if raw is None else _normalise(raw, case["run"]["dimension"])
+    return None if raw is None else _normalise(raw, case["run"]["dimension"], case["case_dir"])
 
 
 def check(case: dict, data: dict) -> None:
-    _check(case["sph"], data["sph"], case["run"]["dimension"])
+    _check(case["sph"], data["sph"], case["run"]["dimension"], case["case_dir"])
 
 
 # ---- registration (after [[boundaries]] 50, before [coupling] 60) ----------------------------------

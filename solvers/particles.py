@@ -72,3 +72,65 @@ def points_in(region: dict, x: np.ndarray, dim: int, box: bool = True) -> np.nda
         f = compile_expression(region["where"], names, kind=BOOL)
         keep &= np.asarray(f(*(x[:, d] for d in range(dim))), bool)
     return keep
+
+
+# the Atoms columns of the LAMMPS atom styles whose data files give particle positions here: where
+# x y z sit (LAMMPS's read_data formats; image flags may follow)
+DATA_STYLES = {"atomic": 2, "charge": 3, "sphere": 4, "sph": 5, "smd": 10, "bond": 3, "molecular": 3,
+               "full": 4}
+DATA_COLUMNS = {"atomic": 5, "charge": 6, "sphere": 7, "sph": 8, "smd": 13, "bond": 6, "molecular": 6, "full": 7}
+
+
+class DataFileError(ValueError):
+    """A LAMMPS data file this reader cannot take (the message names the line)."""
+
+
+def read_data_positions(text: str, dim: int) -> np.ndarray:
+    """(n, dim) particle positions from the text of a LAMMPS data file, in atom-id order: the
+    ``Atoms`` section, its style from the section's comment (``Atoms # sph``; atomic when none), the
+    x y z columns of that style (DATA_STYLES).  Only positions are read: the case gives each body's
+    material, density, velocity and spacing (the particles' volume)."""
+    lines = text.splitlines()
+    start = next((i for i, ln in enumerate(lines) if ln.split("#")[0].strip() == "Atoms"), None)
+    if start is None:
+        raise DataFileError("has no Atoms section")
+    comment = lines[start].split("#", 1)[1].strip() if "#" in lines[start] else "atomic"
+    style = comment.split()[0] if comment else "atomic"
+    if style not in DATA_STYLES:
+        raise DataFileError(f"line {start + 1}: Atoms style {style!r}; allowed: " + ", ".join(DATA_STYLES))
+    at, ncol = DATA_STYLES[style], DATA_COLUMNS[style]
+    ids, xs = [], []
+    for k in range(start + 1, len(lines)):
+        body = lines[k].split("#")[0].split()
+        if not body:
+            if xs:
+                break  # the blank line that ends the section
+            continue
+        if body[0][0].isalpha():  # the next section's header
+            break
+        if len(body) not in (ncol, ncol + 3):
+            raise DataFileError(f"line {k + 1}: {len(body)} columns; Atoms # {style} has {ncol} (or {ncol + 3} "
+                                f"with image flags)")
+        try:
+            ids.append(int(body[0]))
+            xs.append([float(v) for v in body[at:at + 3]])
+        except ValueError:
+            raise DataFileError(f"line {k + 1}: not a number in {' '.join(body)!r}") from None
+    if not xs:
+        raise DataFileError(f"line {start + 1}: the Atoms section is empty")
+    ids_a, x = np.array(ids), np.array(xs)
+    if len(np.unique(ids_a)) != len(ids_a):
+        raise DataFileError("repeats an atom id")
+    if not np.all(np.isfinite(x)):
+        raise DataFileError("has a position that is not finite")
+    if dim == 2 and np.any(x[:, 2] != 0.0):
+        raise DataFileError("a 2-D run needs z = 0 for every atom")
+    return x[np.argsort(ids_a)][:, :dim]
+
+
+def body_points(body: dict, dim: int) -> np.ndarray:
+    """A body's particle positions: its data file's (``_points``, read when the case was checked)
+    or the lattice filling its region."""
+    if "_points" in body:
+        return np.asarray(body["_points"], float)
+    return lattice_points(body["region"], body["spacing"], dim)

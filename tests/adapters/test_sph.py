@@ -172,3 +172,31 @@ def test_solid_strength_and_eos_reach_lammps(tmp_path):
     assert np.array_equal(runs["jc"][0], runs["plastic"][0])
     scale = np.abs(x - x0).max()
     assert np.abs(runs["shock"][0] - x).max() <= 2e-3 * scale
+
+
+def test_a_body_from_a_lammps_data_file_is_the_lattice_it_holds(tmp_path):
+    """cases/sph_elastic_bar with its bar read from a LAMMPS data file (Atoms # atomic, written in a
+    shuffled id order) holding the lattice's positions: the same particles and, after 5 coupler
+    steps, bitwise the same state as the lattice run."""
+    from solvers.particles import lattice_points
+
+    case = load_case(CASES / "sph_elastic_bar")
+    body = case["sph"]["bodies"][0]
+    x = lattice_points(body["region"], body["spacing"], 2)
+    order = np.random.default_rng(1).permutation(len(x))
+    rows = "\n".join(f"{i + 1} 1 {float(x[i, 0])!r} {float(x[i, 1])!r} 0.0" for i in order)
+    d = tmp_path / "from_file"
+    d.mkdir()
+    (d / "bar.data").write_text(f"bar\n\n{len(x)} atoms\n1 atom types\n\nAtoms # atomic\n\n{rows}\n")
+    text = (CASES / "sph_elastic_bar" / "case.toml").read_text()
+    (d / "case.toml").write_text(text.replace('region = { box = { lower = [0.0, 0.0], upper = [1.0, 0.08] } }',
+                                              'data_file = "bar.data"'))
+    runs = []
+    for c, tag in ((load_case(d), "file"), (case, "lattice")):
+        a = _adapter(MPI.COMM_SELF, tmp_path / tag, c)
+        _run(a, 4e-5, 5)
+        runs.append(a._state())
+        a.close()
+    assert len(runs[0]["x"]) == len(x) == 800
+    for k in runs[1]:
+        assert np.array_equal(runs[0][k], runs[1][k]), k

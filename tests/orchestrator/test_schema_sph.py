@@ -72,6 +72,13 @@ BAD = [
      "sph.bodies[0].hold", "axes of the 2-D run"),
     ("hold_unknown_axis", edit(SPH, "density = 1000.0 } ]", 'density = 1000.0, hold = ["w"] } ]'),
      "sph.bodies[0].hold[0]", "'x', 'y', 'z'"),
+    ("data_file_missing", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }", 'data_file = "water.data"'),
+     "sph.bodies[0].data_file", "file not found"),
+    ("data_file_outside", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }", 'data_file = "../water.data"'),
+     "sph.bodies[0].data_file", "outside the case directory"),
+    ("data_file_and_region", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                                  'region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }, data_file = "water.data"'),
+     "sph.bodies[0]", "exactly one of region"),
     ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
      "sph.materials", "all tlsph"),
     ("coupled_sph_outside_grid", SPH.replace("[sph]", '[ale]\ngrid = { lower = [0.0, 0.0], upper = [0.05, 0.2], cells = [5, 20] }\n'
@@ -110,3 +117,30 @@ def test_a_solid_with_its_defaults(tmp_path):
     assert pair_commands(case["sph"]) == [
         "pair_style smd/tlsph",
         "pair_coeff 1 1 *COMMON 1000.0 1000000000.0 0.3 1.0 0.0 10.0 1.0 *STRENGTH_LINEAR *EOS_SHOCK 5000.0 1.4 2.0 *END"]
+
+
+@pytest.mark.parametrize("content, fragment", [
+    ("no atoms here\n", "has no Atoms section"),
+    ("Atoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.5 0.5 0.0\n", "must lie inside sph.domain"),
+    ("Atoms # atomic\n\n1 1 0.05 0.05\n", "line 3: 4 columns"),
+    (b"Atoms\n\n1 1 0.05 \xff 0.0\n", "not UTF-8 text"),
+])
+def test_a_bad_data_file_is_one_line_naming_the_key(tmp_path, content, fragment):
+    """A body's data file is read while the case is checked: what is wrong with it, on its key."""
+    (tmp_path / "case.toml").write_text(edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                                             'data_file = "water.data"'))
+    (tmp_path / "water.data").write_bytes(content if isinstance(content, bytes) else content.encode())
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == "sph.bodies[0].data_file" and fragment in str(ei.value), str(ei.value)
+    assert "\n" not in str(ei.value)
+
+
+def test_a_data_file_body_counts_its_particles(tmp_path):
+    (tmp_path / "case.toml").write_text(edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                                             'data_file = "water.data"'))
+    (tmp_path / "water.data").write_text("Atoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.06 0.05 0.0\n")
+    case = load_case(tmp_path)
+    assert case["sph"]["particles"] == 2
+    box = case["sph"]["bodies"][0]["region"]["box"]  # half a spacing (0.01) around the particles
+    assert box["lower"] == pytest.approx([0.045, 0.045], abs=1e-15) and box["upper"] == pytest.approx([0.065, 0.055], abs=1e-15)
