@@ -258,8 +258,6 @@ def _read_body_file(body: dict, key: str, raw: str, case_dir, dim: int) -> None:
     """A body's LAMMPS data file: inside the case directory, a regular file, its Atoms positions
     (solvers/particles.py) kept as ``_points``; the body's region becomes the box of its particles
     (half a spacing around them) for the domain and grid checks."""
-    import numpy as np
-
     from solvers.particles import DataFileError, read_data_positions
 
     from .schema_rules import check_path_inside, stat_regular
