@@ -5,12 +5,10 @@ A slab 1.5 zones thick (6 x 8 particles, dx = 0.000625, h = 3 dx; rho0 = 1, c0 =
 per area and compressibility are the FE block's) across Sod's shock tube at the diaphragm, tied to
 the gas by the stabilised multipliers on its reconstructed surface (B^f from the Shepard kernel,
 orchestrator/coupling/particle_operators.py).  A massless piston moves with Sod's contact, u* =
-0.927453.  Run to t = 0.05 here: later the FLUID slab comes apart (measured: thickness 3.1 -> 1.0
-mm at t = 0.2 as the lattice shuffles, mean velocity 1.17).  Not the coupling's doing: the same slab
-without any gas, squeezed by constant forces on its two face columns (p = 0.3), comes apart in
-LAMMPS alone too (at t ~ 0.1-0.15 with c0 = 3 m/s, alpha 0.3 or 1; later with c0 = 10), while it
-translates intact when unloaded.  The issue's t = 0.2 case needs a solid (smd/tlsph) piston, which
-the SPH group does not model yet.
+0.927453.  Run to t = 0.05 here (a fluid slab free in y; measured before this session's kick fix:
+it came apart after t ~ 0.1, as a free block under end loads turns in LAMMPS alone too).  The
+issue's t = 0.2 case is cases/embedded_sph_piston: a solid (tlsph) piston held to slide along the
+walls (test_embedded_sph_piston below).
 """
 from __future__ import annotations
 
