@@ -120,7 +120,7 @@ def particles(sph: dict) -> dict:
             e_spec = 0.0
         xs.append(x)
         types.append(np.full(n, t, np.int32))
-        vs.append(np.tile(np.asarray(body["velocity"], float) * [a not in body["hold"] for a in "xyz"[:dim]], (n, 1)))
+        vs.append(np.tile(np.asarray(body["velocity"], float) * free_axes(body, dim), (n, 1)))
         rho = (hydrostatic_density(body, mat, x, sph["gravity"]) if body.get("hydrostatic")
                else np.full(n, body["density"]))
         rhos.append(rho)
@@ -142,7 +142,7 @@ def setup_commands(sph: dict, parts: dict) -> list[str]:
     """Per-type masses, then the physics (after the particles)."""
     _, kinds = atom_types(sph)
     return ([f"mass {t} {float(k['mass'])!r}" for t, k in enumerate(kinds, start=1)] + physics_commands(sph)
-            + hold_commands(sph))
+            + hold_commands(sph, parts))
 
 
 def physics_commands(sph: dict) -> list[str]:
@@ -181,26 +181,28 @@ def physics_commands(sph: dict) -> list[str]:
     return cmds + gravity_and_walls(sph, bool(free))
 
 
-def hold_commands(sph: dict) -> list[str]:
+def hold_commands(sph: dict, parts: dict) -> list[str]:
     """Each body's held velocity components (``hold``): zero force on them after every other force
-    (the last post-force fix).  Bodies are contiguous id ranges in body order; the particles start
+    (the last post-force fix).  A body's particles are one id range (ids in body order); they start
     with those components zero (particles() of each family)."""
-    cmds, first = [], 1
+    cmds = []
     for i, body in enumerate(sph["bodies"]):
-        n = len(body_points(body, sph["dimension"]))
         if body["hold"]:
+            ids = parts["ids"][parts["body"] == i]
             comps = " ".join("0.0" if a in body["hold"] else "NULL" for a in "xyz")
-            cmds += [f"group immerse_hold{i} id {first}:{first + n - 1}",
+            cmds += [f"group immerse_hold{i} id {ids.min()}:{ids.max()}",
                      f"fix immerse_hold{i} immerse_hold{i} setforce {comps}"]
-        first += n
     return cmds
+
+
+def free_axes(body: dict, dim: int) -> np.ndarray:
+    """(dim,) 1.0 for a velocity component the body leaves free, 0.0 for one it holds."""
+    return np.array([0.0 if a in body["hold"] else 1.0 for a in "xyz"[:dim]])
 
 
 def held_components(sph: dict, body: np.ndarray) -> np.ndarray:
     """(n, dim) 1.0 where a particle's velocity component is free, 0.0 where its body holds it."""
-    dim = sph["dimension"]
-    per_body = np.array([[0.0 if a in b["hold"] else 1.0 for a in "xyz"[:dim]] for b in sph["bodies"]])
-    return per_body[body]
+    return np.array([free_axes(b, sph["dimension"]) for b in sph["bodies"]])[body]
 
 
 def gravity_and_walls(sph: dict, free: bool) -> list[str]:

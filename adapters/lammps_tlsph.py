@@ -25,7 +25,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from adapters.lammps_model import FIXED_GROUP, FREE_GROUP, boundary_letters, gravity_and_walls, hold_commands
+from adapters.lammps_model import (FIXED_GROUP, FREE_GROUP, boundary_letters, free_axes, gravity_and_walls,
+                                   hold_commands)
 from solvers.particles import body_points, points_in
 
 DEFAULTS = {"viscosity_q1": 1.0, "viscosity_q2": 0.0, "hourglass": 10.0, "heat_capacity": 1.0,
@@ -104,7 +105,7 @@ def particles(sph: dict) -> dict:
             fixed |= points_in(body["clamp"], x, dim)
         parts["x"].append(x)
         parts["type"].append(np.full(n, type_of_body[i], np.int32))
-        velocity = np.asarray(body["velocity"], float) * [a not in body["hold"] for a in "xyz"[:dim]]
+        velocity = np.asarray(body["velocity"], float) * free_axes(body, dim)
         parts["v"].append(np.where(fixed[:, None], 0.0, velocity[None, :]))
         parts["mass"].append(np.full(n, body["density"] * vol))
         parts["vfrac"].append(np.full(n, vol))
@@ -184,7 +185,7 @@ def setup_commands(sph: dict, parts: dict) -> list[str]:
     free = not parts["fixed"].all()
     if free:
         cmds.append(f"fix immerse_integrate {FREE_GROUP} smd/integrate_tlsph")
-    cmds += gravity_and_walls(sph, free) + hold_commands(sph)
+    cmds += gravity_and_walls(sph, free) + hold_commands(sph, parts)
     cmds += ["compute immerse_stress all smd/tlsph/stress", "compute immerse_rho all smd/rho",
              "compute immerse_dt all smd/tlsph/dt"]
     return cmds
