@@ -46,6 +46,7 @@ Public API: :class:`RiemannSolution`.  Any other EOS of the background (Mie-Grue
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -54,6 +55,16 @@ __all__ = ["RiemannSolution"]
 # left-to-right order of the waves (breaks ties between coincident positions)
 _WAVE_ORDER = ("left_shock", "left_rarefaction_head", "left_rarefaction_tail", "contact", "vacuum_left",
                "vacuum_right", "right_rarefaction_tail", "right_rarefaction_head", "right_shock")
+
+
+def wave_regions(xi: np.ndarray, speeds: Mapping) -> tuple[np.ndarray, np.ndarray]:
+    """(star, fan) masks of the samples xi = (x - x0) / t on one side, measured away from the
+    contact (xi grows towards the contact), from the side's wave speeds: behind a shock or the
+    rarefaction's tail lies the star state, between the fan's head and tail the fan."""
+    if "shock" in speeds:
+        return xi >= speeds["shock"], np.zeros(xi.shape[0], dtype=bool)
+    star = xi >= speeds["rarefaction_tail"]
+    return star, (xi >= speeds["rarefaction_head"]) & ~star
 
 
 class _Side:
@@ -320,12 +331,7 @@ class RiemannSolution:
         pst = self.p_star_l if sign > 0 else self.p_star_r
         rst = self.rho_star_l if sign > 0 else self.rho_star_r
         sp = self._side_speeds(S, sign)
-        if "shock" in sp:
-            star = xi >= sp["shock"]
-            fan = np.zeros(n, dtype=bool)
-        else:
-            star = xi >= sp["rarefaction_tail"]
-            fan = (xi >= sp["rarefaction_head"]) & ~star
+        star, fan = wave_regions(xi, sp)
         rho[star] = rst
         u[star] = ust
         pb[star] = pst + S.p_inf

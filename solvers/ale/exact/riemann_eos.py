@@ -49,6 +49,7 @@ from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 
 from solvers.ale import eos as _eos
+from solvers.ale.exact.riemann import wave_regions
 
 __all__ = ["EosRiemannSolution", "WaveCurve"]
 
@@ -364,12 +365,7 @@ class EosRiemannSolution:
         if n == 0:
             return rho, u, p
         sp = self._side_speeds(S, sign)
-        if "shock" in sp:
-            star = xi >= sp["shock"]
-            fan = np.zeros(n, dtype=bool)
-        else:
-            star = xi >= sp["rarefaction_tail"]
-            fan = (xi >= sp["rarefaction_head"]) & ~star
+        star, fan = wave_regions(xi, sp)
         rho[star] = self.rho_star_l if sign > 0 else self.rho_star_r
         u[star] = sign * self.u_star
         p[star] = self.p_star
