@@ -47,6 +47,45 @@ def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | N
     return cmd
 
 
+class StderrRelay:
+    """Copies the job's stderr (mpiexec forwards every rank's there) to the launcher's own, and knows
+    whether the last byte ended a line. mpiexec killed while forwarding a rank's traceback leaves half
+    a line; the launcher's one-line report must not be glued to it, so close() ends such a line."""
+
+    def __init__(self, pipe):
+        self.pipe = pipe
+        self.at_line_start = True
+        self.thread = threading.Thread(target=self._copy, name="immerse-stderr-relay", daemon=True)
+        self.thread.start()
+
+    @staticmethod
+    def _write(data: bytes) -> None:
+        sys.stderr.flush()
+        try:
+            fd = sys.stderr.fileno()
+        except (AttributeError, OSError, ValueError):  # a stream without a descriptor (in-process use)
+            sys.stderr.write(data.decode(errors="replace"))
+            sys.stderr.flush()
+            return
+        while data:
+            data = data[os.write(fd, data):]
+
+    def _copy(self) -> None:
+        fd = self.pipe.fileno()
+        while chunk := os.read(fd, 65536):
+            self._write(chunk)
+            self.at_line_start = chunk.endswith(b"\n")
+
+    def close(self, timeout: float = 5.0) -> None:
+        """After the job has ended: copy what is left, then end a half-written line."""
+        self.thread.join(timeout)  # EOF once no process of the job holds the pipe
+        if not self.at_line_start:
+            self._write(b"\n")
+            self.at_line_start = True
+        if not self.thread.is_alive():
+            self.pipe.close()
+
+
 class RankWatch:
     """Watches the job's processes through Linux pidfds: poll() wakes the moment the first one ends,
     before MPI's own error propagation takes the others down, so the first failed rank is known.
@@ -319,7 +358,9 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     if stop.signum is not None:
         return JobResult(128 + stop.signum, f"interrupted by {signal.Signals(stop.signum).name} before "
                                             "the job started", stop.signum)
-    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=dies_with_parent())
+    proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=dies_with_parent(),
+                            stderr=subprocess.PIPE)
+    relay = StderrRelay(proc.stderr)
     watch = RankWatch(out)
     failed: list[str] = []
     died_first: list[str] = []  # ranks seen dead before any rank reported an error
@@ -344,6 +385,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         watch.close()
         # also after mpiexec's own end: no process of the job may outlive it
         end_job(proc, out)
+        relay.close()
     rc = proc.returncode
     if out.is_dir():
         output.write_index(out)  # every completed step file, also those the coupler had no time to index

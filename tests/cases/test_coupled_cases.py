@@ -334,7 +334,8 @@ def test_penalty_beyond_its_stable_step_is_stopped_naming_the_limit(tmp_path, st
 
     r = immerse("run", _penalty_case(tmp_path, stiffness), "--out", tmp_path / "out")
     assert r.returncode != 0
-    line = [ln for ln in r.stderr.splitlines() if ln.startswith("immerse: run failed")][0]
+    line = next((ln for ln in r.stderr.splitlines() if ln.startswith("immerse: run failed")), None)
+    assert line is not None, r.stderr
     assert "coupling method 'penalty' is unstable" in line, line
     if how == "solver":  # named before the solver's report
         assert line.startswith("immerse: run failed: coupling method 'penalty' is unstable"), line

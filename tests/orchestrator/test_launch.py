@@ -253,3 +253,23 @@ def test_launcher_killed(tmp_path):
     left = survivors(job)
     kill_survivors(job)
     assert left == [], left
+
+
+def test_report_starts_its_own_line_after_a_half_forwarded_one(tmp_path, monkeypatch, capfd):
+    """mpiexec ended while forwarding a rank's output leaves half a line on stderr; the launcher's
+    report still begins a line of its own (a job standing in for mpiexec writes half a line and a
+    coupler error report, then hangs until the launcher ends it)."""
+    from orchestrator import launch
+    from orchestrator.case import load_case, ranks_for
+
+    case = load_case(_ale_case(tmp_path, "sod"))
+    out = tmp_path / "out"
+    script = (f"printf 'Traceback (most recent call last):\\n  File \"x\", line' >&2; "
+              f"mkdir -p '{out}/.run'; echo 'coupler rank 0: RuntimeError: boom' > '{out}/.run/error_coupler_0.txt'; "
+              "exec sleep 60")
+    monkeypatch.setattr(launch, "build_command", lambda *a, **k: ["sh", "-c", script])
+    rc = launch.run_job(case, out, ranks_for(case, {}))
+    err = capfd.readouterr().err
+    assert rc != 0
+    assert "\nimmerse: run failed: coupler rank 0: RuntimeError: boom\n" in err, err
+    assert '  File "x", line\n' in err, err
