@@ -100,7 +100,9 @@ def report_failure(out_dir: Path, role: str, rank: int, message: str) -> None:
     try:
         d = run_dir(out_dir)
         d.mkdir(parents=True, exist_ok=True)
-        (d / f"error_{role}_{rank}.txt").write_text(line + "\n")
+        tmp = d / f".error_{role}_{rank}.tmp"  # atomic: the launcher polls for these and reads them
+        tmp.write_text(line + "\n")
+        os.replace(tmp, d / f"error_{role}_{rank}.txt")
     finally:
         print(f"immerse: {line}", file=sys.stderr, flush=True)
 
