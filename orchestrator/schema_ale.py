@@ -27,7 +27,7 @@ EOS_KEYS = {
     "stiffened_gas": ("eos", "gamma", "p_inf", "cavitation_pressure"),
     "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0", "cavitation_pressure"),
     "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
-    "mie_gruneisen": ("eos", "rho0", "c0", "s", "gamma0", "cavitation_pressure"),
+    "mie_gruneisen": ("eos", "rho0", "c0", "s", "gamma0", "pressure_cutoff", "cavitation_pressure"),
     "void": ("eos",),   # empty space: volume only (several materials per zone)
 }
 EOS_REQUIRED = {
@@ -58,6 +58,8 @@ FLUID = {
         "c0": number("m/s", exclusiveMinimum=0),          # Mie-Grueneisen: us = c0 + s up
         "s": number("dimensionless", minimum=0),
         "gamma0": number("dimensionless", minimum=0),
+        # the pressure never falls below it: the material gives way in tension (LS-DYNA's PC)
+        "pressure_cutoff": number("Pa", maximum=0),
     },
     "additionalProperties": False,
     "required": ["eos"],

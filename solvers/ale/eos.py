@@ -20,8 +20,12 @@ Models and parameter layout (unused entries are zero)::
      4    mie_gruneisen   MG_RHO0=0, MG_C0=1, MG_S=2,      p_H(eta) + Gamma0 rho0 (e - e_H(eta)), eta = 1 - rho0/rho,
                           MG_GAMMA0=3                      p_H = rho0 c0^2 eta / (1 - s eta)^2, e_H = p_H eta / (2 rho0)
                                                            (the linear us = c0 + s up Hugoniot from rest at p = e = 0
-                                                           as the reference curve, Gamma rho = Gamma0 rho0; the same
-                                                           curve in tension, eta < 0; invalid at eta >= 1/s)
+                                                           as the reference curve, Gamma rho = Gamma0 rho0; invalid
+                                                           at eta >= 1/s). In tension (eta < 0) the linear form
+                                                           rho0 c0^2 mu + Gamma0 rho0 e, mu = rho/rho0 - 1, as
+                                                           LS-DYNA's *EOS_GRUNEISEN (the Hugoniot form's dp_H/deta
+                                                           turns negative at eta < -1/s: c^2 < 0 in an expanded
+                                                           zone); MG_PC=4: pressure_cutoff (p >= it; -inf: none)
 
 Sound speed: ``c^2 = dp/drho|_e + p/rho^2 dp/de`` (the isentropic derivative
 ``dp/drho|_s``, since ``de = p/rho^2 drho`` along an isentrope).  Closed forms:
@@ -32,7 +36,10 @@ Sound speed: ``c^2 = dp/drho|_e + p/rho^2 dp/de`` (the isentropic derivative
   ``dp/de = w rho``, so ``c^2 = dp/drho|_e + w p / rho``.
 * Mie-Grueneisen: ``deta/drho = rho0/rho^2``, ``dp_H/deta = rho0 c0^2 (1 + s eta)/(1 - s eta)^3``,
   ``de_H/deta = (p_H + eta dp_H/deta)/(2 rho0)``, ``dp/de = Gamma0 rho0``, so
-  ``c^2 = rho0/rho^2 (dp_H/deta - Gamma0 rho0 de_H/deta) + Gamma0 rho0 p / rho^2``.
+  ``c^2 = rho0/rho^2 (dp_H/deta - Gamma0 rho0 de_H/deta) + Gamma0 rho0 p / rho^2``; in tension
+  ``c^2 = c0^2 + Gamma0 rho0 p / rho^2``.  A zone held at its ``pressure_cutoff`` (LS-DYNA's PC
+  of *MAT_NULL: the material gives way in tension instead of pulling) keeps the sound speed of
+  the uncut form at the cut pressure (its derivatives with the cut p), so its step stays bounded.
 
 The ideal/stiffened-gas and JWL formulas use the pressure passed in (it must be the
 pressure of the same state, as returned by :func:`pressure`); Tait ignores it.
@@ -84,6 +91,7 @@ MG_RHO0 = 0
 MG_C0 = 1
 MG_S = 2
 MG_GAMMA0 = 3
+MG_PC = 4
 
 JWL_A = 0
 JWL_B = 1
@@ -104,6 +112,10 @@ def _ge(lo):
     return (lambda v: v >= lo), f">= {lo:g}"
 
 
+def _le(hi):
+    return (lambda v: v <= hi), f"<= {hi:g}"
+
+
 _ANY = ((lambda v: True), "any finite real")
 
 # name -> [(key, index, (predicate, allowed range text), default or None, unit)]
@@ -118,7 +130,8 @@ _SCHEMA = {
     "mie_gruneisen": [("rho0", MG_RHO0, _gt(0.0), None, "kg/m^3"),
                       ("c0", MG_C0, _gt(0.0), None, "m/s"),
                       ("s", MG_S, _ge(0.0), None, ""),
-                      ("gamma0", MG_GAMMA0, _ge(0.0), None, "")],
+                      ("gamma0", MG_GAMMA0, _ge(0.0), None, ""),
+                      ("pressure_cutoff", MG_PC, _le(0.0), -math.inf, "Pa")],
     "jwl": [("A", JWL_A, _ANY, None, "Pa"),
             ("B", JWL_B, _ANY, None, "Pa"),
             ("R1", JWL_R1, _gt(0.0), None, ""),
@@ -147,7 +160,8 @@ def eos_params(name: str, props: Mapping) -> tuple[int, np.ndarray]:
         if key not in props:
             if default is None:
                 raise ValueError(f"eos {name!r}: missing key {key!r} (allowed range: {allowed})")
-            value = default
+            par[idx] = default  # (a default may be -inf: "none")
+            continue
         else:
             raw = props[key]
             if isinstance(raw, bool) or not isinstance(raw, (int, float, np.integer, np.floating)):
@@ -167,7 +181,7 @@ def describe(code: int, par: np.ndarray, rho: float | None = None, e: float | No
         return f"unknown eos code {code}"
     name = EOS_NAMES[code]
     items = ", ".join(f"{key}={par[idx]:.6g}" + (f" {unit}" if unit else "")
-                      for key, idx, _, _, unit in _SCHEMA[name])
+                      for key, idx, _, _, unit in _SCHEMA[name] if math.isfinite(par[idx]))
     text = f"{name}({items})"
     if rho is not None and e is not None:
         p = pressure(code, par, float(rho), float(e))
@@ -184,10 +198,15 @@ def describe(code: int, par: np.ndarray, rho: float | None = None, e: float | No
 @njit(cache=True)
 def _mg_reference(par, rho):
     """Mie-Grueneisen reference curve (the Hugoniot): (eta, p_H, e_H, dp_H/deta, de_H/deta); NaN at
-    or beyond the compression limit eta = 1/s."""
+    or beyond the compression limit eta = 1/s. In tension (eta < 0) the linear rho0 c0^2 mu, e_H = 0
+    (mu = eta / (1 - eta)): the same value and slope at eta = 0."""
     rho0 = par[MG_RHO0]
     s = par[MG_S]
     eta = 1.0 - rho0 / rho
+    if eta < 0.0:
+        k = rho0 * par[MG_C0] * par[MG_C0]
+        a = 1.0 - eta
+        return eta, k * eta / a, 0.0, k / (a * a), 0.0
     d = 1.0 - s * eta
     if not d > 0.0:
         return eta, np.nan, np.nan, np.nan, np.nan
@@ -204,7 +223,7 @@ def pressure(code, par, rho, e):
         return np.nan
     if code == MIE_GRUNEISEN:
         _, ph, eh, _, _ = _mg_reference(par, rho)
-        return ph + par[MG_GAMMA0] * par[MG_RHO0] * (e - eh)
+        return max(ph + par[MG_GAMMA0] * par[MG_RHO0] * (e - eh), par[MG_PC])
     if code == IDEAL_GAS:
         return (par[IG_GAMMA] - 1.0) * rho * e
     if code == STIFFENED_GAS:

@@ -190,6 +190,7 @@ BAD_CASES = [
     ("ale_undefined_material", "ale.regions[1].material", "undefined material"),
     ("ale_unknown_eos", "ale.materials.air.eos", "must be one of"),
     ("ale_gamma_one", "ale.materials.air.gamma", "must be > 1"),
+    ("ale_positive_pressure_cutoff", "ale.materials.al.pressure_cutoff", "must be <= 0 (Pa)"),
     ("ale_viscosity_kind", "ale.viscosity.kind", "one of: 'scalar', 'monotonic'"),
     ("ale_void_with_density", "ale.regions[1].density", "is void"),
     ("ale_mixed_lagrangian", "ale.mode", "need mode = \"eulerian\""),

@@ -60,6 +60,22 @@ _WAVE_ORDER = ("left_shock", "left_rarefaction_head", "left_rarefaction_tail", "
                "right_rarefaction_tail", "right_rarefaction_head", "right_shock")
 
 
+class _Pieces:
+    """Dense output of an isentrope integrated in pieces (split at a kink of the EOS): ``sol(p)``
+    from the piece whose pressure range holds p (pressures fall along the isentrope)."""
+
+    def __init__(self, pieces):
+        self.ends = [r.t[-1] for r in pieces[:-1]]
+        self.sols = [r.sol for r in pieces]
+
+    def sol(self, p):
+        p = np.asarray(p, dtype=np.float64)
+        out = self.sols[-1](p)
+        for end, f in zip(reversed(self.ends), reversed(self.sols[:-1])):
+            out = np.where(p >= end, f(p), out)
+        return out
+
+
 class _Invalid(Exception):
     """An EOS state without a finite pressure, energy or a positive c^2 on the way."""
 
@@ -164,12 +180,27 @@ class WaveCurve:
         p = float(p)
         if p == self.p:
             return (self.rho, 0.0, None) if dense else (self.rho, 0.0)
+        atol = [1e-15 * self.rho, 1e-15 * self.c]
+        kink = self.par[_eos.MG_RHO0] if self.code == _eos.MIE_GRUNEISEN else None
+        events = None
+        if kink is not None and self.rho > kink:
+            # the Mie-Grueneisen form changes at rho0 (Hugoniot form / linear tension form: c(rho) is
+            # continuous but not smooth there); a step across it would cost DOP853 its order
+            def events(_p, y):
+                return y[0] - kink
+            events.terminal = True
         res = solve_ivp(self._rhs, (self.p, p), [self.rho, 0.0], method="DOP853", rtol=_ODE_RTOL,
-                        atol=[1e-15 * self.rho, 1e-15 * self.c], dense_output=dense)
+                        atol=atol, dense_output=dense, events=events)
+        pieces = [res]
+        if res.status == 1 and res.t_events[0].size:
+            p_k, y_k = float(res.t_events[0][0]), res.y_events[0][0]
+            res = solve_ivp(self._rhs, (p_k, p), [float(y_k[0]), float(y_k[1])], method="DOP853",
+                            rtol=_ODE_RTOL, atol=atol, dense_output=dense)
+            pieces.append(res)
         if not res.success or not np.all(np.isfinite(res.y[:, -1])):
             raise _Invalid(f"{self.name}: isentrope to p={p!r} failed ({res.message})")
         rho, f = float(res.y[0, -1]), float(res.y[1, -1])
-        return (rho, f, res) if dense else (rho, f)
+        return (rho, f, _Pieces(pieces) if len(pieces) > 1 else res) if dense else (rho, f)
 
     # ------------------------------------------------------------------ pressure function
     def f(self, p):

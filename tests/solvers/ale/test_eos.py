@@ -398,6 +398,52 @@ def test_mie_gruneisen_sound_speed_and_limits():
         assert not m.state(code, par, rho, 1e5)[2]
 
 
+def test_mie_gruneisen_in_tension_is_the_linear_form():
+    """eta < 0: p = rho0 c0^2 mu + Gamma0 rho0 e (mu = rho/rho0 - 1, LS-DYNA's *EOS_GRUNEISEN), to
+    round-off (measured 0 / 1e-16; bound 1e-13); continuous with the Hugoniot form at rho0 in value
+    and slope (one-sided differences at +-1e-7 rho0 agree to 3e-7 relative: the slopes' own O(h)
+    difference; bound 1e-6); c^2 = c0^2 + Gamma0 rho0 p / rho^2 (> 0 while p > -rho^2 c0^2 /
+    (Gamma0 rho0): tens of GPa; deeper, a pressure_cutoff holds it)."""
+    from solvers.ale import eos as m
+
+    code, par = params("mie_gruneisen", AL)
+    k = AL["rho0"] * AL["c0"] ** 2
+    for rho, e in ((2600.0, 1.0e4), (2400.0, 0.0), (2200.0, 5.0e5)):
+        p = m.pressure(code, par, rho, e)
+        ref = k * (rho / AL["rho0"] - 1.0) + AL["gamma0"] * AL["rho0"] * e
+        assert abs(p - ref) <= 1e-13 * abs(ref), (rho, p, ref)
+        c2 = m.sound_speed_squared(code, par, rho, e, p)
+        ref_c2 = AL["c0"] ** 2 + AL["gamma0"] * AL["rho0"] * p / rho ** 2
+        assert abs(c2 / ref_c2 - 1.0) < 1e-13 and c2 > 0.0, (rho, c2, ref_c2)
+        assert abs(m.energy_from_pressure(code, par, rho, p) - e) < 1e-9 * max(e, 1.0)
+    h = 1e-7 * AL["rho0"]
+    up = (m.pressure(code, par, AL["rho0"] + h, 0.0) - m.pressure(code, par, AL["rho0"], 0.0)) / h
+    down = (m.pressure(code, par, AL["rho0"], 0.0) - m.pressure(code, par, AL["rho0"] - h, 0.0)) / h
+    assert m.pressure(code, par, AL["rho0"], 0.0) == 0.0
+    assert abs(up / down - 1.0) < 1e-6 and abs(down / AL["c0"] ** 2 - 1.0) < 1e-6
+
+
+def test_mie_gruneisen_pressure_cutoff():
+    """pressure_cutoff pc <= 0: p = max(p_MG, pc) (the material gives way in tension instead of
+    pulling), exact; the sound speed there is the uncut form's at p = pc (> 0, also at half the
+    density, where the uncut state has c^2 < 0); no cutoff: the uncut pressure; a positive cutoff is refused naming the key."""
+    from solvers.ale import eos as m
+
+    code, par = params("mie_gruneisen", dict(AL, pressure_cutoff=-1.0e8))
+    _, free = params("mie_gruneisen", AL)
+    rho = 2400.0  # p_MG = 2700 * 5350^2 * (-1/9) = -8.6e9 Pa
+    assert m.pressure(code, free, rho, 0.0) < -1e9
+    assert m.pressure(code, par, rho, 0.0) == -1.0e8
+    assert m.pressure(code, par, 2800.0, 0.0) == m.pressure(code, free, 2800.0, 0.0) > 0.0
+    c2 = m.sound_speed_squared(code, par, rho, 0.0, -1.0e8)
+    assert c2 == pytest.approx(AL["c0"] ** 2 - AL["gamma0"] * AL["rho0"] * 1.0e8 / rho ** 2, rel=1e-14)
+    # half the density, beyond the Hugoniot form's eta = -1/s (where its dp_H/deta < 0): valid when cut
+    assert not m.state(code, free, 1350.0, 0.0)[2] and m.state(code, par, 1350.0, 0.0)[2]
+    assert "pressure_cutoff=-1e+08 Pa" in m.describe(code, par) and "pressure_cutoff" not in m.describe(code, free)
+    with pytest.raises(ValueError, match=r"pressure_cutoff = 5.0 out of range \(allowed: <= 0"):
+        params("mie_gruneisen", dict(AL, pressure_cutoff=5.0))
+
+
 def test_mie_gruneisen_bad_parameters():
     with pytest.raises(ValueError, match="missing key 'c0'"):
         params("mie_gruneisen", {k: v for k, v in AL.items() if k != "c0"})

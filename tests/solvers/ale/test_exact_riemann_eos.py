@@ -177,13 +177,34 @@ def test_problem_structure():
         (9.48318e9, 573.984, 2741.457, 2979.479), rel=1e-6)
 
 
+def _with_eos_kinks(sol, t, edges):
+    """``edges`` and the points of a fan where the density crosses a Mie-Grueneisen rho0 (the EOS
+    changes form there: the profile's slope jumps, which would cost the Gauss rule its order;
+    cu_al_tube's copper fan crosses it: 4.4e-7 relative mass error without this point)."""
+    rho0 = [par[eos.MG_RHO0] for code, par in (sol.eos_l, sol.eos_r) if code == eos.MIE_GRUNEISEN]
+    out = list(edges)
+    for a, b in zip(edges[:-1], edges[1:]):
+        for r0 in rho0:
+            fa, fb = (sol.sample(np.array([x]), t, 0.5)[0][0] - r0 for x in (a + 1e-12, b - 1e-12))
+            if fa * fb < 0.0:
+                lo, hi = a, b
+                for _ in range(80):
+                    mid = 0.5 * (lo + hi)
+                    if (sol.sample(np.array([mid]), t, 0.5)[0][0] - r0) * fa > 0.0:
+                        lo = mid
+                    else:
+                        hi = mid
+                out.append(0.5 * (lo + hi))
+    return np.unique(out)
+
+
 @pytest.mark.parametrize("label,sol,t", PROBLEMS, ids=IDS)
 def test_conservation_over_domain(label, sol, t):
     w = sol.waves(t, 0.5)
     assert all(0.0 < x < 1.0 for x in w.values()), w
     UL, UR = (conserved(*sol.sample(np.array([x]), t, 0.5))[:, 0] for x in (0.0, 1.0))
     FL, FR = (flux(*sol.sample(np.array([x]), t, 0.5))[:, 0] for x in (0.0, 1.0))
-    edges = np.unique([0.0, 1.0, *w.values()])
+    edges = _with_eos_kinks(sol, t, np.unique([0.0, 1.0, *w.values()]))
     xg, wg = np.polynomial.legendre.leggauss(24)
     total, total_abs = np.zeros(3), np.zeros(3)
     for a, b in zip(edges[:-1], edges[1:]):
