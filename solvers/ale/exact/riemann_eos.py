@@ -186,9 +186,10 @@ class WaveCurve:
         if kink is not None and self.rho > kink:
             # the Mie-Grueneisen form changes at rho0 (Hugoniot form / linear tension form: c(rho) is
             # continuous but not smooth there); a step across it would cost DOP853 its order
-            def events(_p, y):
+            def at_kink(_p, y):
                 return y[0] - kink
-            events.terminal = True
+            at_kink.terminal = True
+            events = at_kink
         res = solve_ivp(self._rhs, (self.p, p), [self.rho, 0.0], method="DOP853", rtol=_ODE_RTOL,
                         atol=atol, dense_output=dense, events=events)
         pieces = [res]
