@@ -39,7 +39,7 @@ from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
 from orchestrator.coupling.operator_rows import (correction_means, impulse_sums, on_grid_boundary, oscillation,
                                                  row_means, surface_load)
-from orchestrator.coupling.operators import Operators
+from orchestrator.coupling.operators import Operators, restrict
 
 
 @dataclass
@@ -115,6 +115,7 @@ class EmbeddedCoupling:
         self.cond_H = np.nan  # cond(H) of the multiplier system at the first step with an interface
         self.lambda_oscillation = 0.0  # zone-to-zone spread of the multipliers this step (see solve)
         self.lambda_oscillation_max = 0.0
+        self.void_zones = 0  # cut zones left without a constraint this step (mostly void: variants.MIN_FILL)
         self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
         self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
@@ -205,7 +206,9 @@ class EmbeddedCoupling:
         nb, nc = ops.bnodes.size, ops.zones.size
         v_b = background[: nb * dim].reshape(nb, dim)
         m_b = background[nb * dim: nb * (dim + 1)]
-        R = background[nb * (dim + 1):].reshape(nc, dim)
+        a = nb * (dim + 1)
+        R = background[a: a + nc * dim].reshape(nc, dim)
+        fill = background[a + nc * dim:]   # (absent: no void)
         # the fluid's load on the body: -R_e over Gamma_e, consistent nodal forces B^f_eA / A_e, and
         # the loaded predictor velocities v_f = v*_f + load free / m (one pass over the surface nodes:
         # a particle body's are all its particles)
@@ -213,11 +216,19 @@ class EmbeddedCoupling:
                                  self.ns, float(dt_avg), np.ascontiguousarray(vstar_f, dtype=np.float64), self.free,
                                  np.ascontiguousarray(self.mass))
         self.m_solve = self._solve_masses(ops)
+        # the constraint where the gas is (variants.MIN_FILL); the load above over every cut zone
+        self.void_zones = int(np.count_nonzero(fill < self.method.min_fill)) if fill.size else 0
+        if self.void_zones:
+            ops = restrict(ops, fill >= self.method.min_fill)
         self.stable_limit = min(self.stable_limit, self.method.stable_dt(ops, m_b, self.m_solve, self.modulus))
         if np.isnan(self.cond_H) and ops.n_zones:
             # once: what the stabilisation is for (s_con = λmax/λmin independent of h when stabilised)
             self.cond_H = self.method.condition_number(ops, m_b, self.m_solve, dt)
-        res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus)
+        if ops.n_zones:
+            res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus)
+        else:  # no constraint anywhere (a body in void, or out of the gas): no multiplier to carry on
+            res = variants.StepResult(np.zeros((nb, dim)), np.zeros((self.ns, dim)), {})
+            self.state = self.method.new_state()
         self.lambda_oscillation = multiplier_oscillation(self.state.lam, ops.pairs, ops.normal)
         self.lambda_oscillation_max = max(self.lambda_oscillation_max, self.lambda_oscillation)
         self.imp_b = res.impulse_b
@@ -274,7 +285,7 @@ class EmbeddedCoupling:
 
     # ---- diagnostics and checkpoints ---------------------------------------------------------------
     DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work", "stable_dt_limit", "cond_H",
-                   "lambda_oscillation", "lambda_oscillation_max")
+                   "lambda_oscillation", "lambda_oscillation_max", "void_zones")
 
     def diagnostic_names(self) -> list[str]:
         return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
@@ -282,7 +293,8 @@ class EmbeddedCoupling:
     def diagnostics(self) -> list[float]:
         return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
                                         self.work_f, float(min(self.stable_limit, 1e300)),
-                                        float(self.cond_H), self.lambda_oscillation, self.lambda_oscillation_max]
+                                        float(self.cond_H), self.lambda_oscillation, self.lambda_oscillation_max,
+                                        float(self.void_zones)]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}

@@ -18,6 +18,7 @@ depend on the order the pieces arrive in beyond round-off of the sums.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -112,6 +113,20 @@ class Operators:
         Bf = sp.csr_matrix((fval, fcol, fptr), shape=(nz, int(n_surface_nodes)))
         return cls(zones=zones, bnodes=bnodes, Bb=Bb, Bf=Bf, area=area, avec=avec, normal=normal,
                    fallback=fallback, pairs=pairs, full_area=full_area, width=width)
+
+
+def restrict(ops: Operators, keep: np.ndarray) -> Operators:
+    """The operators of the rows ``keep`` (bool per cut zone) only: the same background columns and
+    surface nodes (a node of no kept row gets no impulse), the face pairs between kept rows."""
+    rows = np.flatnonzero(keep)
+    new = np.full(keep.size, -1, np.int64)
+    new[rows] = np.arange(rows.size)
+    pairs = new[ops.pairs] if len(ops.pairs) else ops.pairs
+    if len(pairs):
+        pairs = np.ascontiguousarray(pairs[(pairs >= 0).all(axis=1)])
+    return dataclasses.replace(ops, zones=ops.zones[rows], Bb=ops.Bb[rows], Bf=ops.Bf[rows], area=ops.area[rows],
+                               avec=ops.avec[rows], normal=ops.normal[rows], fallback=ops.fallback[rows],
+                               pairs=pairs)
 
 
 def _fallback_normals(normal, fallback, avec, prow, parea, pnormal):

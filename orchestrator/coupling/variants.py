@@ -74,7 +74,14 @@ def _number(**bounds) -> dict:
     return {"type": "number", **bounds}
 
 
-COMMON = {"method": {"type": "string"}, "condition": {"type": "string", "enum": list(S.CONDITIONS)}}
+COMMON = {"method": {"type": "string"}, "condition": {"type": "string", "enum": list(S.CONDITIONS)},
+          "min_fill": _number(minimum=0, exclusiveMaximum=1)}
+
+MIN_FILL = 0.1
+"""A cut zone whose open volume is less than this share material (the rest void) gets no constraint:
+nothing there pushes on the surface, and a node of (nearly) empty zones has (nearly) no mass, so the
+constraint would throw it at any speed (a rod's rear in void: 1e5 m/s, a zone inverted). LS-DYNA's
+*CONSTRAINED_LAGRANGE_IN_SOLID has the same switch (FRCMIN, default 0.5 there)."""
 
 
 # ----------------------------------------------------------------------------------------------
@@ -134,8 +141,9 @@ class CouplingMethod:
     def __init__(self, cfg: Mapping[str, Any]):
         cfg = {"method": self.NAME, **cfg}
         self.check(cfg)
-        self.cfg = {**self.DEFAULTS, **cfg}
+        self.cfg = {**self.DEFAULTS, "min_fill": MIN_FILL, **cfg}
         self.condition = self.cfg["condition"]
+        self.min_fill = float(self.cfg["min_fill"])
 
     @classmethod
     def check(cls, cfg: Mapping[str, Any]) -> None:
@@ -159,6 +167,11 @@ class CouplingMethod:
                 from orchestrator.case import MISSING
 
                 raise _error(key, MISSING, f"required with method = {cls.NAME!r}")
+        if "min_fill" in cfg:
+            v = cfg["min_fill"]
+            if not (isinstance(v, (int, float)) and not isinstance(v, bool) and 0.0 <= v < 1.0):
+                raise _error("min_fill", v, "must be a number >= 0 and < 1 (the share of a cut zone's "
+                             "open volume that must be material for a constraint there)")
         cls._check_values(cfg)
 
     @classmethod

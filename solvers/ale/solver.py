@@ -621,20 +621,36 @@ class AleSolver:
     def interface(self):
         """The coupled bodies' interface after predict (collective): on rank 0 the predictor velocity
         v* and the mass of every node the coupler asked for (BodyGeometry.nodes) and the net force
-        sum_c f_c of every cut zone (BodyGeometry.cut), as one buffer [v* (nn, dim), m (nn),
-        R (nc, dim)]; None on the other ranks.  Each value comes from the rank that owns it (zeros
-        elsewhere, summed: the same bits on any number of ranks)."""
+        sum_c f_c of every cut zone (BodyGeometry.cut) and the fill of every cut zone (the share of
+        its open volume that is not void: 1 without void), as one buffer [v* (nn, dim), m (nn),
+        R (nc, dim), fill (nc)]; None on the other ranks.  Each value comes from the rank that owns
+        it (zeros elsewhere, summed: the same bits on any number of ranks)."""
         blk, dim = self._blk, self.dim
         n, inside, owned = blk.nodes
-        buf = np.zeros(n.size * (dim + 1) + blk.n_cut * dim)
+        nc = blk.n_cut
+        buf = np.zeros(n.size * (dim + 1) + nc * (dim + 1))
         buf[: n.size * dim].reshape(-1, dim)[owned] = self.v[n[owned]]
         buf[n.size * dim: n.size * (dim + 1)][owned] = self.m[n[owned]]
-        buf[n.size * (dim + 1):].reshape(-1, dim)[blk.cut_rows] = blk.cut_forces(self)
+        a = n.size * (dim + 1)
+        buf[a: a + nc * dim].reshape(-1, dim)[blk.cut_rows] = blk.cut_forces(self)
+        buf[a + nc * dim:][blk.cut_rows] = self._fill(blk.cut)
         if self.dec.parallel:
             out = np.empty_like(buf) if self.dec.rank == 0 else None
             self.dec.comm.Reduce(buf, out, root=0)
             return out
         return buf
+
+    def _fill(self, zones: np.ndarray) -> np.ndarray:
+        """The share of each zone's open volume held by a material (not void): 1 without void."""
+        from solvers.ale.mixed import VOID
+
+        mm = self.mm
+        if mm is None or not mm.has_void:
+            return np.ones(zones.size)
+        vol = mm.vol[zones]
+        total = vol.sum(axis=1)
+        void = vol[:, mm.code == VOID].sum(axis=1)
+        return np.where(total > 0.0, 1.0 - void / np.where(total > 0.0, total, 1.0), 0.0)
 
     def correct(self, impulse=None, step: int = 0, time: float = 0.0, coupling=None) -> None:
         """Close the step (see the module docstring); ``step`` and ``time`` (after the step) name

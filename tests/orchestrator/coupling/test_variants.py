@@ -47,11 +47,12 @@ def test_the_registry_has_the_three_variants_and_rejects_unknown_names_in_one_li
     ({"method": "penalty"}, "coupling.stiffness = <missing>: required with method = 'penalty'"),
     ({"method": "multiplier", "stiffness": 1e9},
      "coupling.stiffness = 1000000000.0: only with method = 'penalty'; method 'multiplier' takes alpha, beta, "
-     "condition, method"),
+     "condition, method, min_fill"),
     ({"method": "penalty", "stiffness": 1e9, "gamma": 2.0},
-     "coupling.gamma = 2.0: only with method = 'nitsche'; method 'penalty' takes condition, method, stiffness"),
+     "coupling.gamma = 2.0: only with method = 'nitsche'; method 'penalty' takes condition, method, min_fill, "
+         "stiffness"),
     ({"method": "nitsche", "shear": 1},
-     "coupling.shear = 1: unknown key; method 'nitsche' takes condition, gamma, method"),
+     "coupling.shear = 1: unknown key; method 'nitsche' takes condition, gamma, method, min_fill"),
     ({"method": "multiplier", "alpha": 0}, "coupling.alpha = 0: must be a finite number > 0"),
     ({"method": "multiplier", "beta": -0.5}, "coupling.beta = -0.5: must be a finite number >= 0"),
     ({"method": "nitsche", "gamma": math.inf}, "coupling.gamma = inf: must be a finite number > 0"),
