@@ -4,10 +4,10 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 STAMP  := $(VENV)/.installed
-# numba compiles the solver kernels on first use (~20 s) and caches them by source content next to the
-# sources (or under NUMBA_CACHE_DIR): compile them here, once, and again whenever a solver changes.
-# The stamp lives with the cache, so deleting the cache (__pycache__) re-warms too.
-WARM   := $(or $(NUMBA_CACHE_DIR),solvers/__pycache__)/.immerse-kernels-warm
+# numba compiles the solver kernels on first use (~20 s) and caches them in .numba-cache/<digest of the
+# kernel sources> (or under NUMBA_CACHE_DIR; solvers/kernel_cache.py): compile them here, once, and
+# again whenever a solver changes. The stamp lives with the cache, so deleting the cache re-warms too.
+WARM   := $(or $(NUMBA_CACHE_DIR),.numba-cache)/.immerse-kernels-warm
 KERNEL_SOURCES := $(shell find solvers orchestrator/coupling -name '*.py') orchestrator/warmup.py
 # One thread per MPI rank so ranks do not oversubscribe the cores.
 export NUMBA_NUM_THREADS ?= 1
@@ -49,4 +49,4 @@ bench: venv
 	$(VENV)/bin/immerse bench lagrange
 
 clean:
-	rm -rf $(VENV) .pytest_cache
+	rm -rf $(VENV) .pytest_cache .numba-cache

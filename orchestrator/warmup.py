@@ -1,11 +1,13 @@
 """Compile (or load) every numba kernel specialisation of the solvers once, at install time.
 
 The solver kernels are `njit(cache=True)`: the first process that calls one compiles it (seconds per
-kernel, ~10-25 s for a whole solver) and stores the machine code next to its source (`__pycache__`,
-or under NUMBA_CACHE_DIR when that is set); every later process, every MPI rank included, loads it
-in milliseconds.  Numba keys the cache on the source file's path and content, the argument types and
-the CPU, so the ranks of `immerse run` find what this module compiled as long as they import the
-same source tree (the editable install of `make venv`) on the same machine.
+kernel, ~10-25 s for a whole solver) and stores the machine code in the cache directory of this
+source tree (solvers/kernel_cache.py: .numba-cache/<digest of every kernel source>); every later
+process, every MPI rank included, loads it in milliseconds.  Numba keys each entry on its source
+file's stamp, the argument types and the CPU, and the directory on the content of all kernel
+sources, so the ranks of `immerse run` find what this module compiled as long as they import the
+same source tree (the editable install of `make venv`) on the same machine, and a changed kernel
+never leaves a caller running its old machine code.
 
 `python -m orchestrator.warmup` (run by the Makefile after installing, and again whenever a solver
 source changes) steps tiny cases through the solver classes in this one process (no MPI job): 2-D

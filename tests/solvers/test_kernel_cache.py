@@ -1,0 +1,50 @@
+"""The numba cache directory is named by the content of every kernel source (solvers/kernel_cache.py):
+numba keys an entry on its own file's stamp only, and a kernel keeps the machine code of the kernels
+of other files it calls, so a changed EOS left the hydro kernels running the old one (seen: a
+penetrator run that stopped at step 723 with fresh kernels went to step 953 on stale ones)."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+
+from solvers.kernel_cache import source_digest
+from tests.conftest import REPO
+
+
+def _tree(tmp_path):
+    for pkg in ("solvers", "orchestrator", "adapters"):
+        (tmp_path / pkg).mkdir()
+    (tmp_path / "solvers" / "eos.py").write_text("from numba import njit\n@njit(cache=True)\ndef p(r): return r\n")
+    (tmp_path / "solvers" / "hydro.py").write_text("from numba import njit\nfrom solvers.eos import p\n")
+    (tmp_path / "orchestrator" / "cli.py").write_text("print('no kernels here')\n")
+    return tmp_path
+
+
+def test_the_digest_follows_the_kernel_sources_only(tmp_path):
+    base = _tree(tmp_path)
+    d0 = source_digest(base)
+    assert d0 == source_digest(base) and len(d0) == 16
+    (base / "orchestrator" / "cli.py").write_text("print('still no kernels')\n")
+    assert source_digest(base) == d0  # a file without numba: the same cache
+    (base / "solvers" / "eos.py").write_text("from numba import njit\n@njit(cache=True)\ndef p(r): return 2 * r\n")
+    d1 = source_digest(base)
+    assert d1 != d0  # the callee changed: its callers' entries are in a new directory
+    os.utime(base / "solvers" / "hydro.py", (0, 0))
+    assert source_digest(base) == d1  # a stamp alone does not matter
+
+
+def test_every_process_of_the_tree_uses_the_directory_of_its_sources(tmp_path):
+    """Set on import, before numba reads it; inherited by the children (the ranks of a job); a
+    NUMBA_CACHE_DIR of the user's is the root."""
+    code = "import orchestrator, os, numba.core.config as c; print(os.environ['NUMBA_CACHE_DIR'], c.CACHE_DIR)"
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "IMMERSE_NUMBA_CACHE_ROOT")}
+    env["PYTHONPATH"] = str(REPO)
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "root")
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout.split()
+    expected = str(tmp_path / "root" / source_digest(REPO))
+    assert out == [expected, expected]
+    child = ("import os, subprocess, sys, orchestrator; print(subprocess.run([sys.executable, '-c', "
+             "'import solvers, os; print(os.environ[\"NUMBA_CACHE_DIR\"])'], capture_output=True, text=True).stdout)")
+    out = subprocess.run([sys.executable, "-c", child], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == [expected]
