@@ -352,6 +352,37 @@ def surge_front(case, out, history, params):
     return vals
 
 
+@register_check("penetration", params=table(
+    {"surface": number("m"), "axis": AXIS, "window": WINDOW},
+    required=("surface", "axis", "window")))
+def penetration(case, out, history, params):
+    """A particle penetrator into a target whose surface is the plane ``axis`` = ``surface``, moving
+    towards -axis: its depth (surface minus the lowest particle that has a neighbour within two
+    lattice spacings: a lone particle is spray) at every output step; metrics: the penetration
+    velocity (least-squares slope of the depth over the output steps in ``window``, s) and the
+    depth at the last step."""
+    from scipy.spatial import cKDTree
+
+    from orchestrator import output
+
+    ax = "xyz".index(params["axis"])
+    dx = case["sph"]["spacing"]
+    ts, ds = [], []
+    for t, _, index in output.read_steps(out, "sph"):
+        x = output.read_step(out, "sph", index)[0][:, : case["run"]["dimension"]]
+        d, _ = cKDTree(x).query(x, k=2)
+        ts.append(t)
+        ds.append(float(params["surface"]) - float(x[d[:, 1] <= 2.0 * dx, ax].min()))
+    ts, ds = np.array(ts), np.array(ds)
+    lo, hi = params["window"]
+    sel = (ts >= lo * (1 - 1e-9)) & (ts <= hi * (1 + 1e-9))
+    if np.count_nonzero(sel) < 2:
+        raise ValueError(f"check.params.window = {[lo, hi]}: fewer than 2 output steps in it "
+                         f"(outputs at {ts.tolist()})")
+    slope = float(np.polyfit(ts[sel], ds[sel], 1)[0])
+    return {"penetration_velocity": slope, "depth": float(ds[-1])}
+
+
 @register_check("sedov", params=table(
     {"symmetry_factor": number(exclusiveMinimum=0), "geometry": {"type": "integer", "enum": [1, 2, 3]},
      "rho0": number("kg/m^3", exclusiveMinimum=0), "gamma": number(exclusiveMinimum=1), "centre": vector("m")},

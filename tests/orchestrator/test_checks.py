@@ -712,11 +712,50 @@ def test_tip_history(tmp_path):
     assert r["metrics"]["tip_history_error"]["value"] == pytest.approx(0.12, rel=1e-9)
 
 
+# ---- penetration (a rod's depth into a target) --------------------------------------------------
+def rod_output(out, speed, lone=False):
+    """A rod of particles (2 x 6 on dx = 1.25e-4) whose tip enters the surface y = 0.025 at
+    ``speed`` from t = 1 us (0.06 mm above it before), sampled every 1 us to 8 us; ``lone``: one
+    particle 5 mm ahead of it (spray: no neighbour)."""
+    dx = 1.25e-4
+    i, j = np.meshgrid(np.arange(2), np.arange(6), indexing="ij")
+    x0 = np.column_stack([i.ravel() * dx, 0.02506 + j.ravel() * dx])
+    if lone:
+        x0 = np.vstack([x0, [0.0, 0.02]])
+    n = x0.shape[0]
+    output.write_mesh(out, "sph", np.arange(n, dtype=np.int64)[:, None], "vertex")
+    for k in range(9):
+        t = k * 1e-6
+        x = x0.copy()
+        x[: 12, 1] -= 6e-5 + speed * max(t - 1e-6, 0.0) if k else 0.0
+        output.write_step(out, "sph", k, k, t, x, {"body": np.zeros(n, np.int64)})
+    return out
+
+
+def test_penetration(tmp_path):
+    """A tip moving into the target at exactly 574.3 m/s: the velocity to round-off and the depth
+    574.3 * 7 us; at 650 m/s the velocity fails with its error (+13.2 %); a lone particle ahead of
+    the rod is not its tip; a window with fewer than 2 outputs is an error naming it."""
+    case = load_case(CASES / "tate_penetration_rate")
+    r = checks.run_check(case, rod_output(tmp_path / "good", 574.3), history("sph"))
+    assert r["passed"], r
+    assert r["metrics"]["penetration_velocity"]["rel_error"] < 1e-9
+    assert r["reported"]["depth"] == pytest.approx(574.3 * 7e-6, rel=1e-9)
+    r = checks.run_check(case, rod_output(tmp_path / "fast", 650.0), history("sph"))
+    assert failed(r) == ["penetration_velocity"]
+    assert r["metrics"]["penetration_velocity"]["rel_error"] == pytest.approx(650 / 574.3 - 1, rel=1e-9)
+    r = checks.run_check(case, rod_output(tmp_path / "spray", 574.3, lone=True), history("sph"))
+    assert r["passed"], r
+    case = case_with("tate_penetration_rate", window=[2.5e-6, 2.9e-6])
+    with pytest.raises(ValueError, match=r"check.params.window = \[2.5e-06, 2.9e-06\]: fewer than 2"):
+        checks.run_check(case, rod_output(tmp_path / "few", 574.3), history("sph"))
+
+
 # ---- the registry and the CLI --------------------------------------------------------------------
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
-              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history"}
+              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration"}
     assert set(checks.CHECKS) == tested
 
 
