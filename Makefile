@@ -40,7 +40,7 @@ demo: venv
 test: test-serial test-mpi
 
 test-serial: venv
-	$(PY) -m pytest -q -p no:cacheprovider tests
+	$(PY) -m pytest -q -p no:cacheprovider --durations=25 tests
 
 test-mpi: venv
 	$(MPIEXEC) -n 2 $(PY) -m pytest -q -p no:cacheprovider -m mpi tests

@@ -312,6 +312,7 @@ BAD_INPUTS = [
         edit(COUPLED, 'method = "multiplier"', 'method = "magic"')),
     Bad("coupling_alpha_zero", "coupling.alpha = 0", "> 0", edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nalpha = 0.0')),
     Bad("coupling_alpha_negative", "coupling.alpha = -1", "> 0", edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nalpha = -1.0')),
+    Bad("coupling_min_fill_one", "coupling.min_fill = 1.0", "< 1", edit(COUPLED, 'condition = "slip"', 'condition = "slip"\nmin_fill = 1.0')),
     Bad("coupling_condition_glued", "coupling.condition = 'glued'", "'slip'",
         edit(COUPLED, 'condition = "slip"', 'condition = "glued"')),
     Bad("coupling_penalty_without_stiffness", "coupling.stiffness", "required",
