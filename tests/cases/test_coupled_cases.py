@@ -262,11 +262,8 @@ def test_water_air_box_restart_on_two_plus_two_ranks_is_bitwise(tmp_path):
             assert sb["final"][k] == pytest.approx(sa["final"][k], rel=1e-12, abs=1e-300), k
 
 
-def test_closed_box_with_void_above_the_gas(tmp_path):
-    """Void beside a coupled body (mixed.py's void material with blocked fractions): the closed box of
-    cases/closed_box_body with void above y = 0.305, just over the block; the gas expands into the
-    void and fills the box while the block moves: balances at round-off (measured mass 5.7e-14,
-    energy 1.9e-14, momentum 2.2e-14), the gas's mass exact, the void gone by the end."""
+def closed_box_with_void_above(tmp_path, y: float):
+    """cases/closed_box_body copied with void above ``y`` (the gas below it)."""
     case = tmp_path / "void"
     shutil.copytree(CASES / "closed_box_body", case, ignore=shutil.ignore_patterns("out"))
     p = case / "case.toml"
@@ -274,7 +271,16 @@ def test_closed_box_with_void_above_the_gas(tmp_path):
         'regions = [ { material = "air", density = 1.2, pressure = 1.0e5 } ]',
         'materials.empty = { eos = "void" }\n'
         'regions = [ { material = "air", density = 1.2, pressure = 1.0e5 },\n'
-        '  { material = "empty", region = "y > 0.305" } ]'))
+        f'  {{ material = "empty", region = "y > {y!r}" }} ]'))
+    return case
+
+
+def test_closed_box_with_void_above_the_gas(tmp_path):
+    """Void beside a coupled body (mixed.py's void material with blocked fractions): the closed box of
+    cases/closed_box_body with void above y = 0.305, just over the block; the gas expands into the
+    void and fills the box while the block moves: balances at round-off (measured mass 5.7e-14,
+    energy 1.9e-14, momentum 2.2e-14), the gas's mass exact, the void gone by the end."""
+    case = closed_box_with_void_above(tmp_path, 0.305)
     out = tmp_path / "out"
     r = immerse("run", case, "--out", out)
     assert r.returncode in (0, 1), r.stdout + r.stderr  # (the case's interface-work bound is for gas only)

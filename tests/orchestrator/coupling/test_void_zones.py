@@ -98,15 +98,9 @@ def test_a_gas_without_void_reports_full_zones(tmp_path):
 def test_the_background_reports_the_material_share_of_each_cut_zone(tmp_path):
     """The closed-box block with void above y = 0.25 (half-way up the block; zones 0.01 tall, so no
     zone is split): the cut zones below report fill 1, those above 0; the step drops the latter."""
-    case = tmp_path / "void"
-    shutil.copytree(CASES / "closed_box_body", case, ignore=shutil.ignore_patterns("out"))
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace(
-        'regions = [ { material = "air", density = 1.2, pressure = 1.0e5 } ]',
-        'materials.empty = { eos = "void" }\n'
-        'regions = [ { material = "air", density = 1.2, pressure = 1.0e5 },\n'
-        '  { material = "empty", region = "y > 0.25" } ]'))
-    r = InProcess(load_case(case))
+    from tests.cases.test_coupled_cases import closed_box_with_void_above
+
+    r = InProcess(load_case(closed_box_with_void_above(tmp_path, 0.25)))
     c, ale = r.coupling, r.ale
     ale.predict(1e-7)
     nb, nc, dim = c.ops.bnodes.size, c.ops.n_zones, c.dim
