@@ -5,10 +5,10 @@ PY     := $(VENV)/bin/python
 MPIEXEC := $(VENV)/bin/mpiexec
 STAMP  := $(VENV)/.installed
 # numba compiles the solver kernels on first use (~20 s) and caches them in .numba-cache/<digest of the
-# kernel sources> (or under NUMBA_CACHE_DIR; solvers/kernel_cache.py): compile them here, once, and
-# again whenever a solver changes. The stamp lives with the cache, so deleting the cache re-warms too.
-WARM   := $(or $(NUMBA_CACHE_DIR),.numba-cache)/.immerse-kernels-warm
-KERNEL_SOURCES := $(shell find solvers orchestrator/coupling -name '*.py') orchestrator/warmup.py
+# kernel sources> (or under NUMBA_CACHE_DIR; solvers/kernel_cache.py, stdlib only): compile them here,
+# once. The stamp lives in the digest's directory, so a changed kernel source (a new digest) or a
+# deleted cache re-warms.
+WARM   := $(shell $(PYTHON) solvers/kernel_cache.py)/.immerse-kernels-warm
 # One thread per MPI rank so ranks do not oversubscribe the cores.
 export NUMBA_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
@@ -23,7 +23,7 @@ $(STAMP): requirements.txt pyproject.toml
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 
-$(WARM): $(STAMP) $(KERNEL_SOURCES)
+$(WARM): $(STAMP)
 	$(PY) -m orchestrator.warmup
 	mkdir -p $(dir $(WARM))
 	touch $(WARM)
