@@ -74,11 +74,10 @@ def points_in(region: dict, x: np.ndarray, dim: int, box: bool = True) -> np.nda
     return keep
 
 
-# the Atoms columns of the LAMMPS atom styles whose data files give particle positions here: where
-# x y z sit (LAMMPS's read_data formats; image flags may follow)
-DATA_STYLES = {"atomic": 2, "charge": 3, "sphere": 4, "sph": 5, "smd": 10, "bond": 3, "molecular": 3,
-               "full": 4}
-DATA_COLUMNS = {"atomic": 5, "charge": 6, "sphere": 7, "sph": 8, "smd": 13, "bond": 6, "molecular": 6, "full": 7}
+# the Atoms lines of the LAMMPS atom styles whose data files give particle positions here: (the
+# column of x, then y z; the number of columns) in LAMMPS's read_data formats (image flags may follow)
+DATA_STYLES = {"atomic": (2, 5), "charge": (3, 6), "sphere": (4, 7), "sph": (5, 8), "smd": (10, 13),
+               "bond": (3, 6), "molecular": (3, 6), "full": (4, 7)}
 
 
 class DataFileError(ValueError):
@@ -98,7 +97,7 @@ def read_data_positions(text: str, dim: int) -> np.ndarray:
     style = comment.split()[0] if comment else "atomic"
     if style not in DATA_STYLES:
         raise DataFileError(f"line {start + 1}: Atoms style {style!r}; allowed: " + ", ".join(DATA_STYLES))
-    at, ncol = DATA_STYLES[style], DATA_COLUMNS[style]
+    at, ncol = DATA_STYLES[style]
     ids, xs = [], []
     for k in range(start + 1, len(lines)):
         body = lines[k].split("#")[0].split()

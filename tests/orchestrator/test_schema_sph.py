@@ -12,6 +12,8 @@ SOLID = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, so
              'materials.water = { model = "tlsph", density = 1000.0, youngs_modulus = 1e9, poisson_ratio = 0.3 }')
 GAS = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
            'materials.water = { model = "idealgas", viscosity = 0.5 }')
+REGION = "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }"  # the water body's, in SPH
+FROM_FILE = edit(SPH, REGION, 'data_file = "water.data"')  # the same body from a LAMMPS data file
 
 BAD = [
     # (name, text, key, fragment of what is allowed)
@@ -34,15 +36,15 @@ BAD = [
      "sph.materials.water.sound_speed", "unknown key for model = 'idealgas'"),
     ("two_models", edit(SPH, 'viscosity = 0.1 }', 'viscosity = 0.1 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
      "sph.materials", "one material model per case"),
-    ("cylinder_in_2d", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+    ("cylinder_in_2d", edit(SPH, REGION,
                             'region = { cylinder = { base = [0.1, 0.1], axis = "z", radius = 0.05, length = 0.1 } }'),
      "sph.bodies[0].region.cylinder", "cylinders are 3-D"),
-    ("region_two_shapes", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+    ("region_two_shapes", edit(SPH, REGION,
                                "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] }, sphere = { centre = [0.1, 0.1], radius = 0.05 } }"),
      "sph.bodies[0].region", "exactly one of box"),
     ("where_not_boolean", edit(SPH, "upper = [0.1, 0.1] } }", 'upper = [0.1, 0.1] }, where = "x + y" }'),
      "sph.bodies[0].region.where", "boolean"),
-    ("region_without_particles", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+    ("region_without_particles", edit(SPH, REGION,
                                       'region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] }, where = "x > 1" }'),
      "sph.bodies[0].region", "holds no particle"),
     ("domain_inverted", edit(SPH, "upper = [0.2, 0.2] }", "upper = [-0.2, 0.2] }"), "sph.domain.upper", "must be > lower"),
@@ -72,12 +74,12 @@ BAD = [
      "sph.bodies[0].hold", "axes of the 2-D run"),
     ("hold_unknown_axis", edit(SPH, "density = 1000.0 } ]", 'density = 1000.0, hold = ["w"] } ]'),
      "sph.bodies[0].hold[0]", "'x', 'y', 'z'"),
-    ("data_file_missing", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }", 'data_file = "water.data"'),
+    ("data_file_missing", FROM_FILE,
      "sph.bodies[0].data_file", "file not found"),
-    ("data_file_outside", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }", 'data_file = "../water.data"'),
+    ("data_file_outside", edit(SPH, REGION, 'data_file = "../water.data"'),
      "sph.bodies[0].data_file", "outside the case directory"),
-    ("data_file_and_region", edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
-                                  'region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }, data_file = "water.data"'),
+    ("data_file_and_region", edit(SPH, REGION,
+                                  REGION + ', data_file = "water.data"'),
      "sph.bodies[0]", "exactly one of region"),
     ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
      "sph.materials", "all tlsph"),
@@ -127,8 +129,7 @@ def test_a_solid_with_its_defaults(tmp_path):
 ])
 def test_a_bad_data_file_is_one_line_naming_the_key(tmp_path, content, fragment):
     """A body's data file is read while the case is checked: what is wrong with it, on its key."""
-    (tmp_path / "case.toml").write_text(edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
-                                             'data_file = "water.data"'))
+    (tmp_path / "case.toml").write_text(FROM_FILE)
     (tmp_path / "water.data").write_bytes(content if isinstance(content, bytes) else content.encode())
     with pytest.raises(CaseError) as ei:
         load_case(tmp_path)
@@ -137,8 +138,7 @@ def test_a_bad_data_file_is_one_line_naming_the_key(tmp_path, content, fragment)
 
 
 def test_a_data_file_body_counts_its_particles(tmp_path):
-    (tmp_path / "case.toml").write_text(edit(SPH, "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
-                                             'data_file = "water.data"'))
+    (tmp_path / "case.toml").write_text(FROM_FILE)
     (tmp_path / "water.data").write_text("Atoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.06 0.05 0.0\n")
     case = load_case(tmp_path)
     assert case["sph"]["particles"] == 2
