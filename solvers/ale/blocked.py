@@ -1235,7 +1235,9 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
             s2 = ve[a, 0] * ve[a, 0] + ve[a, 1] * ve[a, 1]
             if s2 > u:
                 u = s2
-        dte = lc / (math.sqrt(u) + qq + math.sqrt(qq * qq + cz * cz))
+        den = math.sqrt(u) + qq + math.sqrt(qq * qq + cz * cz)
+        # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
+        dte = lc / den if den > 0.0 else math.inf
         if dte < dt_min:
             dt_min = dte
         for a in range(4):
@@ -1292,7 +1294,9 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
             s2 = ve[a, 0] * ve[a, 0] + ve[a, 1] * ve[a, 1] + ve[a, 2] * ve[a, 2]
             if s2 > u:
                 u = s2
-        dte = lc / (math.sqrt(u) + qq + math.sqrt(qq * qq + cz * cz))
+        den = math.sqrt(u) + qq + math.sqrt(qq * qq + cz * cz)
+        # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
+        dte = lc / den if den > 0.0 else math.inf
         if dte < dt_min:
             dt_min = dte
         for a in range(8):

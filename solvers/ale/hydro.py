@@ -462,7 +462,9 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                         if s2 > u:
                             u = s2
                     u = math.sqrt(u)
-                dte = lc / (u + qq + math.sqrt(qq * qq + cz * cz))
+                den = u + qq + math.sqrt(qq * qq + cz * cz)
+                # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
+                dte = lc / den if den > 0.0 else math.inf
                 if dte < dt_min:
                     dt_min = dte
                 s = pz + qz
@@ -596,7 +598,9 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                     if s2 > u:
                         u = s2
                 u = math.sqrt(u)
-            dte = lc / (u + qq + math.sqrt(qq * qq + cz * cz))
+            den = u + qq + math.sqrt(qq * qq + cz * cz)
+            # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
+            dte = lc / den if den > 0.0 else math.inf
             if dte < dt_min:
                 dt_min = dte
             s = pz + qz

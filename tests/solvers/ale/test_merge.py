@@ -87,9 +87,10 @@ def test_a_donor_whose_open_neighbours_all_merge_passes_its_content_two_zones_on
 
 
 def test_a_pocket_of_small_zones_keeps_an_open_zone_and_names_a_covered_one():
-    """Two slivers with only each other open: the open one keeps its content (no code); a covered
-    zone with material whose only open neighbour is such a sliver is returned (nowhere to go)."""
-    closed = {(i, j): 0.0 for i in range(-1, 4) for j in range(-1, 4)}
+    """Two slivers with only each other open and no zone within two that keeps its content: the open
+    one keeps its content (no code); a covered zone with material whose only open neighbour is such
+    a sliver is returned (nowhere to go)."""
+    closed = {(i, j): 0.0 for i in range(-2, 5) for j in range(-2, 5)}
     phi, b, M, usable = block({**closed, (1, 1): 0.05, (1, 2): 0.04})
     bad, code = targets(phi, b, M, usable, [(1, 1), (1, 2)])
     assert bad == -1 and code[z(1, 1)] == -1.0 and code[z(1, 2)] == -1.0
@@ -97,6 +98,38 @@ def test_a_pocket_of_small_zones_keeps_an_open_zone_and_names_a_covered_one():
     M[z(2, 1)] = 0.1  # covered, holds material; its only open neighbour is the sliver (1, 1)
     bad, code = targets(phi, b, M, usable, [(2, 1)])
     assert bad == z(2, 1)
+
+
+def test_a_covered_zone_with_only_corner_neighbours_open_passes_its_content_across_the_corner():
+    """(1, 1) covered with material, its four face neighbours covered too (a body's corner closing
+    around it), the corner neighbour (2, 2) open: into (2, 2); with the corner a sliver too, into
+    the nearest zone within two that keeps its content."""
+    shut = {(0, 1): 0.0, (2, 1): 0.0, (1, 0): 0.0, (1, 2): 0.0}
+    phi, b, M, usable = block({(1, 1): 0.0, **shut})
+    M[z(1, 1)] = 1e-12
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and offset(code, (1, 1)) in {(1, 1), (-1, 1), (1, -1), (-1, -1)}
+    closed = {(i, j): 0.0 for i in range(-2, 5) for j in range(-2, 5)}
+    phi, b, M, usable = block({**closed, (1, 1): 0.0, (2, 2): 0.05, (3, 3): 0.6, (3, 2): 1.0})
+    M[z(1, 1)] = 1e-12
+    bad, code = targets(phi, b, M, usable, [(1, 1), (2, 2)])
+    assert bad == -1 and offset(code, (1, 1)) == (2, 1)  # (3, 2): nearer than (3, 3)
+
+
+def test_a_pocket_with_a_keeper_within_two_passes_its_content_there():
+    """The penetrator's lip: a sliver (1, 1) whose open face neighbours (2, 1), (1, 2) are slivers
+    whose own best neighbour (2, 2) is a sliver as well: the chain finds no target, and the pocket,
+    left to keep its content, would be squeezed as its open fraction shrinks (2.8 rho0 in five
+    steps at phi 1e-4).  It goes to the nearest zone within two that keeps its content, (2, 3)."""
+    closed = {(i, j): 0.0 for i in range(-2, 5) for j in range(-2, 5)}
+    phi, b, M, usable = block({**closed, (1, 1): 0.01, (2, 1): 0.02, (1, 2): 0.02, (2, 2): 0.1,
+                               (2, 3): 0.6, (3, 3): 1.0})
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and offset(code, (1, 1)) == (1, 2)
+    # with (2, 3) shut as well, (3, 3) at (2, 2) is the nearest
+    phi[z(2, 3)], M[z(2, 3)], b[z(2, 3)] = 0.0, 0.0, 1.0
+    bad, code = targets(phi, b, M, usable, [(1, 1)])
+    assert bad == -1 and offset(code, (1, 1)) == (2, 2)
 
 
 def test_group_totals_are_the_targets_own_and_its_donors():
