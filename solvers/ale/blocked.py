@@ -102,7 +102,7 @@ from solvers.ale import eos as _eos
 from solvers.ale.boundary import constrain as _constrain_kernel
 from solvers.ale.grid import GHOST
 from solvers.ale.points import subcell_offsets
-from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_q
+from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_dt, zone_q
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_components, group_material_totals, group_totals,
                                member_materials, merge_members, merge_nodes, merge_targets, merge_velocities,
                                zone_gids, _split, _zone_around)
@@ -1235,9 +1235,7 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
             s2 = ve[a, 0] * ve[a, 0] + ve[a, 1] * ve[a, 1]
             if s2 > u:
                 u = s2
-        den = math.sqrt(u) + qq + math.sqrt(qq * qq + cz * cz)
-        # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
-        dte = lc / den if den > 0.0 else math.inf
+        dte = zone_dt(lc, math.sqrt(u), qq, cz)
         if dte < dt_min:
             dt_min = dte
         for a in range(4):
@@ -1294,9 +1292,7 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
             s2 = ve[a, 0] * ve[a, 0] + ve[a, 1] * ve[a, 1] + ve[a, 2] * ve[a, 2]
             if s2 > u:
                 u = s2
-        den = math.sqrt(u) + qq + math.sqrt(qq * qq + cz * cz)
-        # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
-        dte = lc / den if den > 0.0 else math.inf
+        dte = zone_dt(lc, math.sqrt(u), qq, cz)
         if dte < dt_min:
             dt_min = dte
         for a in range(8):

@@ -353,6 +353,15 @@ def _mono_q(grad, z, zs, ndir, r, cz, q_lin, q_quad, solid):
 # ------------------------------------------------------------------------------------------------
 
 @njit(cache=True, inline="always")
+def zone_dt(lc, u, qq, cz):
+    """The zone's stable step lc / (u + Q + sqrt(Q^2 + c^2)) (u: its fastest node in Eulerian mode,
+    Q: zone_q's Courant term); a still zone without sound speed -- void, or an outflow boundary's
+    ghost of it -- limits nothing (infinity, not a division by zero)."""
+    den = u + qq + math.sqrt(qq * qq + cz * cz)
+    return lc / den if den > 0.0 else math.inf
+
+
+@njit(cache=True, inline="always")
 def zone_q(qkind, grad, z, zs, ndir, r, cz, lc, divv, q_lin, q_quad, solid):
     """Artificial viscosity of zone z and its Courant term Q: (q, Q), both 0 unless compressed
     (div v < 0); scalar q from div v and the length lc, or the monotonic q (:func:`_mono_q`)."""
@@ -462,9 +471,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                         if s2 > u:
                             u = s2
                     u = math.sqrt(u)
-                den = u + qq + math.sqrt(qq * qq + cz * cz)
-                # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
-                dte = lc / den if den > 0.0 else math.inf
+                dte = zone_dt(lc, u, qq, cz)
                 if dte < dt_min:
                     dt_min = dte
                 s = pz + qz
@@ -598,9 +605,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                     if s2 > u:
                         u = s2
                 u = math.sqrt(u)
-            den = u + qq + math.sqrt(qq * qq + cz * cz)
-            # (a still zone without sound speed -- void, or an outflow boundary's ghost of it -- limits nothing)
-            dte = lc / den if den > 0.0 else math.inf
+            dte = zone_dt(lc, u, qq, cz)
             if dte < dt_min:
                 dt_min = dte
             s = pz + qz

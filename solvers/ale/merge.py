@@ -27,8 +27,8 @@ all merge, or that has no open face neighbour (a body's corner closing around it
 the nearest zone within two per axis that does not merge, the most open of the nearest
 (``_nearest_keeper``); with none, it keeps its content (or stays empty) if it is open and holds no
 negative mass, and is an error otherwise (a covered zone with material and nowhere to pass it: the
-caller names it).  Groups are keyed by their target's global zone id (periodic images share it), and every sum
-over a group's nodes is taken by the nodes' owners and added in (group, node) order
+caller names it).  Groups are keyed by their target's global zone id (periodic images share it),
+and every sum over a group's nodes is taken by the nodes' owners and added in (group, node) order
 (``_group_sums``), so any number of ranks gives the same bits.
 """
 from __future__ import annotations
