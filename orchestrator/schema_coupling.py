@@ -76,14 +76,14 @@ def check(case: dict, data: dict) -> None:
 
 
 def _sph_inside_grid(case: dict, data: dict) -> None:
-    """Every SPH body's region lies in the background grid (the coupler reconstructs the particles'
-    surface on its nodes)."""
-    from solvers.particles import bounds
+    """Every SPH body's particles (their cells) lie in the background grid (the coupler reconstructs
+    the particles' surface on its nodes)."""
+    from solvers.particles import cells_box
 
     dim = case["run"]["dimension"]
     g = case["ale"]["grid"]
     for i, body in enumerate(case["sph"]["bodies"]):
-        lo, hi = bounds(body["region"], dim)
+        lo, hi = cells_box(body, dim)
         if any(a < b - 1e-12 * (u - b) for a, b, u in zip(lo, g["lower"], g["upper"])) or \
                 any(a > u + 1e-12 * (u - b) for a, b, u in zip(hi, g["lower"], g["upper"])):
             raise CaseError(format_key(["sph", "bodies", i, "region"]), data["sph"]["bodies"][i]["region"],

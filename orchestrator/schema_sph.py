@@ -306,7 +306,7 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
     particle count."""
     import numpy as np
 
-    from solvers.particles import body_points, bounds, lattice_counts
+    from solvers.particles import body_points, cells_box, lattice_counts
 
     for k in ("lower", "upper"):
         check_length(format_key(["sph", "domain", k]), raw["domain"][k], dim)
@@ -374,15 +374,17 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
             where, rreg = "region", rb["region"]
             _check_region(body["region"], rreg, base, dim)
         reg = body["region"]
-        blo, bhi = bounds(reg, dim)
-        if any(b < a for a, b in zip(lo, blo)) or any(b > a for a, b in zip(hi, bhi)):
-            raise CaseError(format_key(base + [where]), rreg,
-                            f"must lie inside sph.domain (lower {raw['domain']['lower']}, upper {raw['domain']['upper']})")
         if "_points" not in body and total + int(np.prod(lattice_counts(reg, body["spacing"], dim),
                                                          dtype=np.float64)) > sph["max_particles"] * 4:
             raise CaseError(format_key(base + [where]), rreg,  # the lattice alone is too big to build
                             f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
         n = len(body_points(body, dim))
+        clo, chi = cells_box(body, dim)  # the particles' cells: a where may cut the region at a face
+        slack = 1e-9 * body["spacing"]
+        if n and (np.any(clo < np.asarray(lo) - slack) or np.any(chi > np.asarray(hi) + slack)):
+            raise CaseError(format_key(base + [where]), rreg,
+                            f"must lie inside sph.domain (lower {raw['domain']['lower']}, upper {raw['domain']['upper']}; "
+                            "its particles' cells, x +- spacing / 2)")
         if n == 0:
             raise CaseError(format_key(base + [where]), rreg,
                             f"holds no particle at spacing {body['spacing']:g} m")

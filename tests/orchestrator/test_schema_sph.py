@@ -144,3 +144,22 @@ def test_a_data_file_body_counts_its_particles(tmp_path):
     assert case["sph"]["particles"] == 2
     box = case["sph"]["bodies"][0]["region"]["box"]  # half a spacing (0.01) around the particles
     assert box["lower"] == pytest.approx([0.045, 0.045], abs=1e-15) and box["upper"] == pytest.approx([0.065, 0.055], abs=1e-15)
+
+
+QUARTER = 'region = { sphere = { centre = [0.0, 0.0], radius = 0.1 }, where = "x > 0 and y > 0" }'
+
+
+def test_a_where_may_cut_a_region_at_the_domain_faces(tmp_path):
+    """A quarter of a disc centred on the domain's corner (its two wall faces the symmetry planes of
+    a quarter model): what must lie inside the domain is the particles' cells (x +- spacing / 2),
+    not the region's box; the same disc without the where pokes out and is refused on its key."""
+    (tmp_path / "case.toml").write_text(edit(SPH, REGION, QUARTER))
+    case = load_case(tmp_path)
+    # the lattice of 0.01 anchored at (-0.1, -0.1): cell centres at (i + 1/2) 0.01, i >= 0, in the disc
+    c = (__import__("numpy").arange(10) + 0.5) * 0.01
+    expected = int(((c[:, None] ** 2 + c[None, :] ** 2) <= 0.01).sum())
+    assert case["sph"]["particles"] == expected == 79
+    (tmp_path / "case.toml").write_text(edit(SPH, REGION, QUARTER.replace(', where = "x > 0 and y > 0"', "")))
+    with pytest.raises(CaseError) as ei:
+        load_case(tmp_path)
+    assert ei.value.key == "sph.bodies[0].region" and "must lie inside sph.domain" in str(ei.value)

@@ -651,3 +651,28 @@ def test_two_labels_of_one_gas_against_an_obstacle_give_the_one_gas_run():
     for k, exact in enumerate((0.780387, 0.509395)):
         assert abs(out[True][k] / out[False][k] - 1.0) < 2e-4, (out[True][k], out[False][k])
         assert abs(out[True][k] / exact - 1.0) < 1e-2, out[True][k]
+
+
+@pytest.mark.parametrize("mass, inverted", [(1e-12, False), (1e-8, True)])
+def test_a_trace_zone_whose_corners_cross_becomes_a_sliver(mass, inverted):
+    """The Lagrangian open volume of a zone whose corners crossed within the step (here its +x face
+    swept 1.5 zone volumes inwards): a zone holding a trace (mass below mixed.TRACE = 1e-9 of a full
+    zone at its density, 1 here) keeps a sliver of 1e-9 of its volume and no EOS shift, like a cut
+    zone a body surface swept (its content goes with the remap); a zone with more is an inverted
+    zone the solver reports (the index of the first).  A 3x3 patch of 2-D zones, the middle one
+    (index 4) tested: before, the trace zone was reported too and stopped the 3-D penetrator."""
+    from solvers.ale.blocked import lagrangian_open_volumes
+
+    n, zs = 9, np.array([3, 1, 0])
+    ASV = np.zeros((2, n + 3))
+    ASV[0, 4 + 3] = -1.5                         # the +x face of zone 4 sweeps 1.5 VE inwards
+    SB, CUT, VE, phi = np.zeros(n), np.zeros(n, np.uint8), np.ones(n), np.ones(n)
+    V, M, rho = np.ones(n), np.zeros(n), np.ones(n)
+    M[4] = mass
+    p, q, de_h = np.ones(n), np.zeros(n), np.full(n, 7.0)
+    bad = lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h,
+                                  np.array([1, 1, 0]), np.array([2, 2, 1]), zs)
+    if inverted:
+        assert bad == 4
+    else:
+        assert bad == -1 and V[4] == 1e-9 and de_h[4] == 0.0 and rho[4] == pytest.approx(mass / 1e-9, rel=1e-15)
