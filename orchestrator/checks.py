@@ -642,18 +642,34 @@ def advected_shape(case, out, history, params):
 @register_check("embedded_piston", params=table(
     {"axis": AXIS, "gap": number("zone widths", minimum=0), "span": number("m", exclusiveMinimum=0),
      "span_left": number("m", exclusiveMinimum=0), "span_right": number("m", exclusiveMinimum=0),
-     "role": {"type": "string", "enum": ["lagrange", "sph"]}}))
+     "role": {"type": "string", "enum": ["lagrange", "sph"]},
+     "roles": {"type": "array", "items": {"type": "string", "enum": ["lagrange", "sph"]}, "minItems": 1,
+               "uniqueItems": True}}))
 def embedded_piston(case, out, history, params):
     """A free body (the Lagrangian solver's, or particles: `role = "sph"`) immersed in a 1-D flow along
     `axis` (a piston between two gases): at the last output, the body's centre (mean node or particle
     position) and velocity (mean node or particle velocity) along the axis, and the pressure of the gas on each side (mean over the zones between
     `gap` and `span` from the body's faces, cut zones excluded; `span_left` / `span_right` where the
     uniform regions either side differ in width), against `centre`, `velocity` and `pressure` (the
-    exact solution's, given in the case)."""
+    exact solution's, given in the case).  `roles = ["lagrange", "sph"]`: one piston per group, its
+    values named `<role>_centre`, ... (a case with both groups immersed)."""
+    vals = {}
+    if "roles" in params:
+        for role in params["roles"]:
+            vals.update({f"{role}_{k}": v for k, v in _piston(case, out, role, params).items()})
+    else:
+        vals = _piston(case, out, params.get("role", "lagrange"), params)
+    for key, a in history.items():
+        if key.endswith("_balance_rel"):
+            name = key.split(".", 1)[1]
+            vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
+    return vals
+
+
+def _piston(case, out, role, params):
     from orchestrator import output
 
     axis = "xyz".index(params.get("axis", "x"))
-    role = params.get("role", "lagrange")
     t, _, index = _last_step(out, role)
     points, pd, _ = output.read_step(out, role, index)
     x = points[:, axis]
@@ -667,18 +683,13 @@ def embedded_piston(case, out, history, params):
     xs, p = prof["x"], prof["p"]
     left = (xs < lo - gap) & (xs > lo - span_l)
     right = (xs > hi + gap) & (xs < hi + span_r)
-    vals = {
+    return {
         "centre": float(x.mean()),
         "velocity": float(pd["velocity"][:, axis].mean()),
         "p_left": float(p[left].mean()) if left.any() else float("nan"),
         "p_right": float(p[right].mean()) if right.any() else float("nan"),
         "thickness": hi - lo,
     }
-    for key, a in history.items():
-        if key.endswith("_balance_rel"):
-            name = key.split(".", 1)[1]
-            vals[name] = max(vals.get(name, 0.0), float(np.max(np.abs(a))))
-    return vals
 
 
 @register_check("acoustic_transmission", params=table(

@@ -109,13 +109,14 @@ class Coupler:
         group's start-up finishes: the background's initial state leaves the bodies' volume empty)."""
         from adapters.registry import coupling_side
         from adapters.runtime import unpack_surface
-        from orchestrator.coupling.embedded import EmbeddedCoupling
+        from orchestrator.coupling.foregrounds import ForegroundCouplings
 
-        sides = {coupling_side(r): r for r in self.roles}
-        self.fg, self.bg = sides["foreground"], sides["background"]
+        # every foreground group (SPH particles, Lagrangian bodies) in one background
+        self.fgs = [r for r in self.roles if coupling_side(r) == "foreground"]
+        self.bg = next(r for r in self.roles if coupling_side(r) == "background")
         dim = int(self.case["run"]["dimension"])
-        surface = unpack_surface(P.recv(self.inter[self.fg], 0, P.TAG_SURFACE), dim)
-        self.coupling = EmbeddedCoupling(self.case, surface)
+        surfaces = [unpack_surface(P.recv(self.inter[r], 0, P.TAG_SURFACE), dim) for r in self.fgs]
+        self.coupling = ForegroundCouplings(self.case, surfaces, self.fgs)
         # the coupler's own work per part (its waits for the solver groups excluded): summary.json
         self.coupling_s = {"solve": 0.0, "correction": 0.0, "geometry": 0.0}
         P.send(self.inter[self.bg], self.coupling.geometry().pack(dim), 0, P.TAG_GEOMETRY)
@@ -124,12 +125,12 @@ class Coupler:
 
     def _coupled_step(self, dt: float) -> None:
         """The coupler's part of a coupled step (orchestrator/coupling/embedded.py, hook order)."""
-        c, fg, bg = self.coupling, self.inter[self.fg], self.inter[self.bg]
+        c, fgs, bg = self.coupling, [self.inter[r] for r in self.fgs], self.inter[self.bg]
         dt_avg = 0.5 * dt if self.dt_prev == 0.0 else 0.5 * (self.dt_prev + dt)
-        vstar = P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim)
+        vstars = [P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim) for fg in fgs]
         background = P.recv(bg, 0, P.TAG_INTERFACE)
         t0 = _time.perf_counter()
-        impulse = c.solve(dt, dt_avg, vstar, background)
+        impulses = c.solve(dt, dt_avg, vstars, background)
         self.coupling_s["solve"] += _time.perf_counter() - t0
         if dt > self.FAR_BEYOND * c.stable_limit:
             raise RuntimeError(
@@ -137,10 +138,11 @@ class Coupler:
                 f"step {dt:.6g} s is more than {self.FAR_BEYOND:g} times its explicit stable-step limit "
                 f"{c.stable_limit:.6g} s (a stiffer spring needs a smaller step: lower its stiffness, or "
                 f"run.dt_scale)")
-        P.send(fg, impulse, 0, P.TAG_IMPULSE)
-        state = P.recv(fg, 0, P.TAG_STATE)
+        for fg, impulse in zip(fgs, impulses):
+            P.send(fg, impulse, 0, P.TAG_IMPULSE)
+        states = [P.recv(fg, 0, P.TAG_STATE) for fg in fgs]
         t0 = _time.perf_counter()
-        P.send(bg, c.take_state(state), 0, P.TAG_CORRECT)
+        P.send(bg, c.take_state(states), 0, P.TAG_CORRECT)
         from orchestrator.coupling.geometry import GeometryError
 
         t1 = _time.perf_counter()
@@ -206,7 +208,7 @@ class Coupler:
         names = self.names[self.bg]
         bgrow = self.reply[self.bg][P.REPLY_HEAD:]
         p_fluid = np.array([bgrow[names.index(f"interface_momentum_{a}")] for a in "xyz"[: c.dim]])
-        scale = max(np.linalg.norm(p_fluid), np.linalg.norm(c.momentum_f), 1e-300)
+        scale = max(np.linalg.norm(p_fluid), c.momentum_scale, 1e-300)
         bal = np.linalg.norm(p_fluid + c.momentum_f) / scale
         work = bgrow[names.index("interface_energy")] + c.work_f
         self._check_coupling_energy(work)
@@ -239,7 +241,7 @@ class Coupler:
     def _coupled_energy(self) -> float:
         """Total energy of the background plus the bodies' kinetic energy, from their last replies."""
         total = 0.0
-        for r, name in ((self.bg, "total_energy"), (self.fg, "kinetic_energy")):
+        for r, name in ((self.bg, "total_energy"), *((f, "kinetic_energy") for f in self.fgs)):
             names = self.names[r]
             if name in names:
                 total += float(self.reply[r][P.REPLY_HEAD + names.index(name)])

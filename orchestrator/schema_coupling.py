@@ -4,6 +4,8 @@ each variant registers itself with its schema fragment and its cross-field check
 
 Normalised layout (``case["coupling"]``, present when the file has the table): the variant's keys
 with its defaults filled in, e.g. ``{method: "multiplier", condition: "tied" | "slip", alpha, beta}``.
+Lagrangian bodies and SPH particles may be immersed together (each group its own constraint solve
+with the one method: orchestrator/coupling/foregrounds.py).
 
 Cross-field rules: a coupled case needs the background (``[ale]``, Eulerian mode: the bodies move
 through the fixed grid) and bodies (``[[lagrange.bodies]]``); every body made from a box or a
@@ -58,9 +60,6 @@ def check(case: dict, data: dict) -> None:
     if not bodies and "sph" not in case:
         raise CaseError("lagrange.bodies", MISSING, "a [coupling] case needs at least one body "
                         "([[lagrange.bodies]] or the particles of [sph])")
-    if bodies and "sph" in case:
-        raise CaseError("sph", "[sph] beside [[lagrange.bodies]]", "one group of bodies per coupled case "
-                        "for now: Lagrangian bodies or SPH particles, not both")
     if "sph" in case:
         _sph_inside_grid(case, data)
     mode = case["ale"].get("mode", "eulerian")

@@ -149,3 +149,19 @@ def test_tate_penetrator_with_outflow_faces_runs(tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert s["end_time"] == 4.0e-6 and s["conservation"]["mass_rel"] < 1e-12, s
+
+
+def test_two_pistons_fe_sph(tmp_path):
+    """cases/two_pistons_fe_sph: an FE piston and an SPH (tlsph) piston in one tube, Sod's problem and
+    its mirror (the three solver groups from one case file, one constraint solve per foreground,
+    orchestrator/coupling/foregrounds.py): each piston against the massless piston's exact motion
+    with its one-piston case's errors (FE: centre 6.4e-3, velocity 1.3e-5, pressures 2.4e-5; SPH:
+    centre 6.3e-3 of its travel, velocity 1.8e-3, pressures 1.5e-3), gas mass to round-off, the
+    interface impulses of both groups paired to 1.3e-15 of their size."""
+    from tests.cases.test_cases import run_case
+
+    out, s = run_case("two_pistons_fe_sph", tmp_path)
+    assert {f"{r}_{k}" for r in ("lagrange", "sph") for k in ("centre", "velocity", "p_left", "p_right")} \
+        <= set(s["check"]["metrics"])
+    assert {"ale", "lagrange", "sph"} <= set(s["ranks"])
+    assert s["final"]["coupling.momentum_balance_rel"] < 1e-14

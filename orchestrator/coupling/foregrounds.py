@@ -1,0 +1,193 @@
+"""Several foreground solver groups in one coupled case (an SPH group and a Lagrangian FE group
+immersed in the one ALE background): one :class:`~orchestrator.coupling.embedded.EmbeddedCoupling`
+per foreground role, presented to the coupler and to the background as one.
+
+The background sees one geometry per step, the union of the members' (:func:`merge_geometries`):
+blocked fractions and face coverages add (the bodies are disjoint), the cut zones, the nodes the
+constraint solves need and the covered runs are the union of the members', in the orders the
+background expects (sorted ids).  It answers with one interface packet over those lists; each member
+gets its own rows of it (:meth:`ForegroundCouplings.solve`), solves its own constraint with the same
+method, and the background gets one correction: the members' node impulses at their rows (summed),
+their cut zones' surface velocities at theirs.
+
+The members' constraint solves are independent, which is exact as long as no background node is in
+the stencil of two members' cut zones (bodies of different solvers more than a zone apart).  Closer
+than that the two multiplier systems would share the node's mass, a coupled system this module does
+not assemble: the run stops with a GeometryError naming the zone or node and the time (contact
+between bodies is issue 11's dual-pass mortar method).
+
+With one member everything passes straight through (the single-foreground case is bitwise the one
+it was before this module).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from orchestrator.coupling.embedded import EmbeddedCoupling
+from orchestrator.coupling.geometry import GeometryError
+
+
+def _union_sum(ids_list, vals_list):
+    """Sorted union of ids with the sum of their values (clipped to 1: disjoint bodies' fractions)."""
+    ids = np.concatenate(ids_list).astype(np.int64)
+    vals = np.concatenate(vals_list).astype(np.float64)
+    u, inv = np.unique(ids, return_inverse=True)
+    return u, np.minimum(np.bincount(inv, weights=vals, minlength=u.size), 1.0)
+
+
+def merge_geometries(geoms, roles):
+    """One solvers.ale.coupled.BodyGeometry from the members' (each with sorted ``cut`` and
+    ``nodes``), and per member the positions of its cut zones and nodes in the merged lists."""
+    from solvers.ale.coupled import BodyGeometry
+
+    zones, fractions = _union_sum([g.zones for g in geoms], [g.fractions for g in geoms])
+    faces = tuple(_union_sum([g.faces[d][0] for g in geoms], [g.faces[d][1] for g in geoms])
+                  for d in range(len(geoms[0].faces)))
+    cut = np.concatenate([g.cut for g in geoms])
+    order = np.argsort(cut, kind="stable")
+    cut = cut[order]
+    _shared("zone", cut, geoms, roles, "cut")
+    nodes = np.unique(np.concatenate([g.nodes for g in geoms]))
+    if nodes.size != sum(g.nodes.size for g in geoms):
+        _shared("node", np.sort(np.concatenate([g.nodes for g in geoms])), geoms, roles, "nodes")
+    velocity = np.concatenate([g.velocity for g in geoms])[order]
+    rs = np.concatenate([g.run_start for g in geoms])
+    ro = np.argsort(rs, kind="stable")
+    merged = BodyGeometry(zones, fractions, faces, cut, nodes, velocity, rs[ro],
+                          np.concatenate([g.run_length for g in geoms])[ro])
+    rows = [(np.searchsorted(cut, g.cut), np.searchsorted(nodes, g.nodes)) for g in geoms]
+    return merged, rows
+
+
+def _shared(what, ids_sorted, geoms, roles, attr):
+    dup = ids_sorted[1:][ids_sorted[1:] == ids_sorted[:-1]]
+    if dup.size:
+        owners = [r for g, r in zip(geoms, roles) if np.isin(dup[0], getattr(g, attr))]
+        raise GeometryError(
+            f"bodies of the {' and '.join(owners)} groups share the background {what} {int(dup[0])}: bodies of "
+            "two solver groups within a zone of each other need contact (issue 11), not two independent "
+            "constraint solves")
+
+
+class ForegroundCouplings:
+    """The coupler's view of the embedded-mesh coupling: the members (one per foreground role, in
+    the order of ``roles``) behind the interface of one EmbeddedCoupling."""
+
+    # how a diagnostic of the members combines into the coupling's one (EmbeddedCoupling.DIAGNOSTICS)
+    _COMBINE = {"iterations": max, "residual": max, "dissipation": sum, "foreground_work": sum,
+                "stable_dt_limit": min, "cond_H": max, "lambda_oscillation": max,
+                "lambda_oscillation_max": max, "void_zones": sum}
+
+    def __init__(self, case: dict, surfaces: list[dict], roles: list[str]):
+        self.roles = list(roles)
+        self.members = [EmbeddedCoupling(case, s) for s in surfaces]
+        first = self.members[0]
+        self.dim, self.method = first.dim, first.method
+        self._rows = None
+
+    # (what the coupler reads: the smallest limit, the worst conditioning, the sums of the exchange)
+    @property
+    def stable_limit(self) -> float:
+        return min(m.stable_limit for m in self.members)
+
+    @property
+    def cond_H(self) -> float:
+        c = [m.cond_H for m in self.members if not np.isnan(m.cond_H)]
+        return max(c) if c else np.nan
+
+    @property
+    def momentum_f(self) -> np.ndarray:
+        return sum(m.momentum_f for m in self.members)
+
+    @property
+    def momentum_scale(self) -> float:
+        """The scale of the momentum balance: the members' impulses in size (two pistons driven
+        apart give each other's opposite momentum: their sum alone would measure round-off against
+        round-off)."""
+        return float(sum(np.linalg.norm(m.momentum_f) for m in self.members))
+
+    @property
+    def work_f(self) -> float:
+        return sum(m.work_f for m in self.members)
+
+    def geometry(self):
+        geoms = [m.geometry() for m in self.members]
+        if len(geoms) == 1:
+            return geoms[0]
+        merged, self._rows = merge_geometries(geoms, self.roles)
+        return merged
+
+    def load_kernels(self) -> None:
+        for m in self.members:
+            m.load_kernels()
+
+    def solve(self, dt: float, dt_avg: float, vstars: list, background: np.ndarray) -> list:
+        """Each member's surface impulses from its rows of the background's interface packet
+        (v_b, m_b of the merged nodes, R and the fill of the merged cut zones)."""
+        if len(self.members) == 1:
+            return [self.members[0].solve(dt, dt_avg, vstars[0], background)]
+        dim = self.dim
+        nb = sum(r[1].size for r in self._rows)
+        nc = sum(r[0].size for r in self._rows)
+        v_b = background[: nb * dim].reshape(nb, dim)
+        m_b = background[nb * dim: nb * (dim + 1)]
+        a = nb * (dim + 1)
+        R = background[a: a + nc * dim].reshape(nc, dim)
+        fill = background[a + nc * dim:]
+        out = []
+        for m, (ic, inode), vs in zip(self.members, self._rows, vstars):
+            part = [v_b[inode].ravel(), m_b[inode], R[ic].ravel()] + ([fill[ic]] if fill.size else [])
+            out.append(m.solve(dt, dt_avg, vs, np.concatenate(part)))
+        return out
+
+    def take_state(self, states: list) -> np.ndarray:
+        """The background's correction: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean
+        velocity_e (nc, dim)] over the merged lists."""
+        if len(self.members) == 1:
+            return self.members[0].take_state(states[0])
+        dim = self.dim
+        nb = sum(r[1].size for r in self._rows)
+        nc = sum(r[0].size for r in self._rows)
+        imp = np.zeros((nb, dim))
+        vh, vb = np.zeros((nc, dim)), np.zeros((nc, dim))
+        for m, (ic, inode), st in zip(self.members, self._rows, states):
+            c = m.take_state(st)
+            k, n = inode.size * dim, ic.size * dim
+            np.add.at(imp, inode, c[:k].reshape(-1, dim))
+            vh[ic] = c[k: k + n].reshape(-1, dim)
+            vb[ic] = c[k + n: k + 2 * n].reshape(-1, dim)
+        return np.concatenate([imp.ravel(), vh.ravel(), vb.ravel()])
+
+    # ---- diagnostics and checkpoints ---------------------------------------------------------------
+    def diagnostic_names(self) -> list[str]:
+        return self.members[0].diagnostic_names()
+
+    def diagnostics(self) -> list[float]:
+        if len(self.members) == 1:
+            return self.members[0].diagnostics()
+        rows = [m.diagnostics() for m in self.members]
+        names = self.diagnostic_names()
+        out = []
+        for j, name in enumerate(names):
+            vals = [r[j] for r in rows]
+            if name.startswith("foreground_momentum_"):
+                out.append(sum(vals))
+            elif name == "cond_H":
+                fin = [v for v in vals if not np.isnan(v)]
+                out.append(max(fin) if fin else np.nan)
+            else:
+                out.append(self._COMBINE[name](vals))
+        return out
+
+    def state_arrays(self) -> dict[str, np.ndarray]:
+        if len(self.members) == 1:
+            return self.members[0].state_arrays()
+        return {f"{r}__{k}": a for r, m in zip(self.roles, self.members) for k, a in m.state_arrays().items()}
+
+    def load_state(self, arrays: dict) -> None:
+        if len(self.members) == 1:
+            self.members[0].load_state(arrays)
+            return
+        for r, m in zip(self.roles, self.members):
+            p = f"{r}__"
+            m.load_state({k[len(p):]: a for k, a in arrays.items() if k.startswith(p)})

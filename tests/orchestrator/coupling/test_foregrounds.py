@@ -1,0 +1,41 @@
+"""Several foreground groups behind one coupling (orchestrator/coupling/foregrounds.py): the merged
+geometry the background gets, the rows of it each member gets back, and the refusal of bodies of two
+groups that share a background zone or node (contact, not two independent solves)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from orchestrator.coupling.foregrounds import merge_geometries
+from orchestrator.coupling.geometry import GeometryError
+from solvers.ale.coupled import BodyGeometry
+
+
+def _geom(zones, fractions, cut, nodes, velocity, runs=((), ())):
+    faces = ((np.array(zones[:1]), np.array([0.25])), (np.array([], np.int64), np.array([])))
+    return BodyGeometry(np.array(zones), np.array(fractions, float), faces, np.array(cut), np.array(nodes),
+                        np.array(velocity, float).reshape(-1, 2), np.array(runs[0], np.int64),
+                        np.array(runs[1], np.int64))
+
+
+def test_the_merged_geometry_is_the_union_in_sorted_order():
+    a = _geom([5, 9], [0.5, 1.0], [5], [5, 6, 11, 12], [[1.0, 0.0]], runs=([40], [3]))
+    b = _geom([2, 7], [0.25, 0.75], [2, 7], [2, 3, 8, 9, 13, 14], [[0.0, 2.0], [0.0, 3.0]], runs=([20], [2]))
+    m, rows = merge_geometries([a, b], ["sph", "lagrange"])
+    assert m.zones.tolist() == [2, 5, 7, 9] and m.fractions.tolist() == [0.25, 0.5, 0.75, 1.0]
+    assert m.faces[0][0].tolist() == [2, 5] and m.faces[0][1].tolist() == [0.25, 0.25]
+    assert m.cut.tolist() == [2, 5, 7]
+    assert m.velocity.tolist() == [[0.0, 2.0], [1.0, 0.0], [0.0, 3.0]]   # each cut zone keeps its own
+    assert m.nodes.tolist() == [2, 3, 5, 6, 8, 9, 11, 12, 13, 14]
+    assert m.run_start.tolist() == [20, 40] and m.run_length.tolist() == [2, 3]
+    # each member's rows of the merged lists give back its own ids
+    for g, (ic, inode) in zip((a, b), rows):
+        assert np.array_equal(m.cut[ic], g.cut) and np.array_equal(m.nodes[inode], g.nodes)
+
+
+@pytest.mark.parametrize("cut_b, nodes_b, what", [([5], [20, 21], "zone 5"), ([7], [6, 7], "node 6")])
+def test_bodies_of_two_groups_in_one_zone_or_at_one_node_are_refused(cut_b, nodes_b, what):
+    a = _geom([5], [0.5], [5], [5, 6], [[1.0, 0.0]])
+    b = _geom([cut_b[0]], [0.25], cut_b, nodes_b, [[0.0, 1.0]])
+    with pytest.raises(GeometryError, match=f"sph and lagrange groups share the background {what}"):
+        merge_geometries([a, b], ["sph", "lagrange"])
