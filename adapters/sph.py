@@ -389,6 +389,11 @@ class SphAdapter(SolverAdapter):
                 h.attrs["energy0"] = self._energy0
                 h.attrs["external_work"] = self._external_work
                 h.attrs["ranks"] = self.comm.size
+                # the last step's dt and whether one was taken: velocities() gives the coupler
+                # v^{n+1/2} = v^{n+1} - dt/2 f/m with them (a restart without them handed the
+                # coupled run v^{n+1} and its first step's mean surface velocities differed)
+                h.attrs["dt"] = np.nan if self._dt is None else self._dt
+                h.attrs["stepped"] = bool(getattr(self, "_stepped", False))
             tmp.replace(path)
         with _quiet_stdout():
             self._load(s, step)
@@ -401,6 +406,10 @@ class SphAdapter(SolverAdapter):
             step = int(h.attrs["ntimestep"])
             self._energy0 = float(h.attrs["energy0"])
             self._external_work = float(h.attrs["external_work"])
+            dt, stepped = float(h.attrs.get("dt", np.nan)), bool(h.attrs.get("stepped", False))
+        if np.isfinite(dt):
+            self._set_dt(dt)
+        self._stepped = stepped
         with _quiet_stdout():
             self._load(s, step)
 

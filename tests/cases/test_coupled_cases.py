@@ -27,14 +27,14 @@ def coupled_balances(s):
     assert c["mass_rel"] < 1e-13 and c["energy_rel"] < 1e-13, c
 
 
-def assert_same_steps(a, b, steps=slice(None)):
-    """The output steps (times, points, every field) of runs a and b are bit for bit equal, for both
-    groups; ``steps`` selects which (default: all)."""
+def assert_same_steps(a, b, steps=slice(None), roles=("ale", "lagrange")):
+    """The output steps (times, points, every field) of runs a and b are bit for bit equal, for every
+    group of ``roles``; ``steps`` selects which (default: all)."""
     import numpy as np
 
     from orchestrator import output
 
-    for role in ("ale", "lagrange"):
+    for role in roles:
         sa, sb = output.read_steps(a, role)[steps], output.read_steps(b, role)[steps]
         assert len(sa) == len(sb)
         for (ta, _, ia), (tb, _, ib) in zip(sa, sb):
