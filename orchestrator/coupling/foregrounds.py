@@ -27,6 +27,12 @@ from orchestrator.coupling.embedded import EmbeddedCoupling
 from orchestrator.coupling.geometry import GeometryError
 
 
+def _nanmax(vals):
+    """The largest of the values that are numbers (nan: a member that has not measured it yet)."""
+    fin = [v for v in vals if not np.isnan(v)]
+    return max(fin) if fin else np.nan
+
+
 def _union_sum(ids_list, vals_list):
     """Sorted union of ids with the sum of their values (clipped to 1: disjoint bodies' fractions)."""
     ids = np.concatenate(ids_list).astype(np.int64)
@@ -75,7 +81,7 @@ class ForegroundCouplings:
 
     # how a diagnostic of the members combines into the coupling's one (EmbeddedCoupling.DIAGNOSTICS)
     _COMBINE = {"iterations": max, "residual": max, "dissipation": sum, "foreground_work": sum,
-                "stable_dt_limit": min, "cond_H": max, "lambda_oscillation": max,
+                "stable_dt_limit": min, "cond_H": _nanmax, "lambda_oscillation": max,
                 "lambda_oscillation_max": max, "void_zones": sum}
 
     def __init__(self, case: dict, surfaces: list[dict], roles: list[str]):
@@ -92,8 +98,7 @@ class ForegroundCouplings:
 
     @property
     def cond_H(self) -> float:
-        c = [m.cond_H for m in self.members if not np.isnan(m.cond_H)]
-        return max(c) if c else np.nan
+        return _nanmax([m.cond_H for m in self.members])
 
     @property
     def momentum_f(self) -> np.ndarray:
@@ -170,13 +175,7 @@ class ForegroundCouplings:
         out = []
         for j, name in enumerate(names):
             vals = [r[j] for r in rows]
-            if name.startswith("foreground_momentum_"):
-                out.append(sum(vals))
-            elif name == "cond_H":
-                fin = [v for v in vals if not np.isnan(v)]
-                out.append(max(fin) if fin else np.nan)
-            else:
-                out.append(self._COMBINE[name](vals))
+            out.append(sum(vals) if name.startswith("foreground_momentum_") else self._COMBINE[name](vals))
         return out
 
     def state_arrays(self) -> dict[str, np.ndarray]:

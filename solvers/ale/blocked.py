@@ -106,13 +106,17 @@ from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, z
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_components, group_material_totals, group_totals,
                                member_materials, merge_members, merge_nodes, merge_targets, merge_velocities,
                                zone_gids, _split, _zone_around)
-from solvers.ale.mixed import TRACE, fit_open_volumes
+from solvers.ale.mixed import fit_open_volumes
 from solvers.ale.remap import face_flux, set_positions
 from solvers.sorted_ids import sorted_unique
 from solvers import elements as _elements
 from solvers.elements import hex_bvectors, quad_bvectors
 
 SOLID_TOL = 1e-12
+TRACE_ZONE = 1e-6
+"""A zone whose mass is below this share of a full zone at its density is a trace zone: its corners
+may cross within a step (lagrangian_open_volumes).  A quarter-rod penetrator had one of 1.3e-9 invert
+at 2.4 us (artificial viscosity 0.1) and one of 7e-11 at 12 us (viscosity 1)."""
 """A zone with blocked fraction b >= 1 - SOLID_TOL is fully blocked (open fraction exactly 0)."""
 
 PHI_Q = 0.5
@@ -904,8 +908,8 @@ def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, z
     half-step EOS shift de_h of the zones with material.  A coupled body's cut zone (CUT) whose open
     part the body surface and its faces sweep away within the step keeps a sliver of volume (its
     material leaves through the positivity-limited fluxes and the small-zone merge) and no EOS shift.
-    So does a zone that holds a trace (mass below ``TRACE`` of a full zone at its density,
-    mixed.py): its corners, driven by the zones around them, may cross within the step (a void
+    So does a zone that holds a trace (mass below ``TRACE_ZONE`` of a full zone at its density):
+    its corners, driven by the zones around them, may cross within the step (a void
     zone at the crater of a 3-D penetrator, 9e-18 kg at 1018 kg/m^3 in 1.25e-10 m^3, inverted at
     12 us and stopped the run); its content goes with the remap as a sliver's does.
     Returns the first other zone with V <= 0."""
@@ -918,7 +922,7 @@ def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, z
                 vn = v0 + SB[z]
                 for d in range(dim):
                     vn += ASV[d, z + zs[d]] - ASV[d, z]
-                trace = M[z] < TRACE * rho[z] * VE[z]   # (rho: the zone's density before the step)
+                trace = M[z] < TRACE_ZONE * rho[z] * VE[z]   # (rho: the zone's density before the step)
                 swept = (CUT[z] != 0 or trace) and not (vn > 1e-9 * VE[z])
                 if swept:
                     # a body surface and the zone's open faces swept past its whole open part

@@ -39,3 +39,30 @@ def test_bodies_of_two_groups_in_one_zone_or_at_one_node_are_refused(cut_b, node
     b = _geom([cut_b[0]], [0.25], cut_b, nodes_b, [[0.0, 1.0]])
     with pytest.raises(GeometryError, match=f"sph and lagrange groups share the background {what}"):
         merge_geometries([a, b], ["sph", "lagrange"])
+
+
+def test_the_members_diagnostics_combine_into_the_couplings():
+    """Momentum, work, dissipation and void zones add; the step limit is the smallest; iterations,
+    residual, conditioning and oscillations the worst (cond(H) of a member that has not measured it
+    yet, nan, does not count)."""
+    from orchestrator.coupling.foregrounds import ForegroundCouplings
+
+    names = ["foreground_momentum_x", "foreground_momentum_y", "iterations", "residual", "dissipation",
+             "foreground_work", "stable_dt_limit", "cond_H", "lambda_oscillation", "lambda_oscillation_max",
+             "void_zones"]
+
+    class Member:
+        def __init__(self, row, cond):
+            self.row, self.cond_H = row, cond
+
+        def diagnostics(self):
+            return self.row
+
+        def diagnostic_names(self):
+            return names
+
+    c = ForegroundCouplings.__new__(ForegroundCouplings)
+    c.members = [Member([1.0, 2.0, 3, 1e-3, -1.0, 2.0, 0.1, np.nan, 0.2, 0.3, 1], np.nan),
+                 Member([-1.0, 0.5, 5, 2e-3, -2.0, 3.0, 0.05, 7.0, 0.1, 0.4, 2], 7.0)]
+    assert c.diagnostics() == [0.0, 2.5, 5, 2e-3, -3.0, 5.0, 0.05, 7.0, 0.2, 0.4, 3]
+    assert c.cond_H == 7.0
