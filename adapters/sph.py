@@ -116,9 +116,9 @@ class SphAdapter(SolverAdapter):
         self.gravity[: self.dim] = sph["gravity"]
         self._dt = None
         self.engine_s = 0.0  # seconds inside LAMMPS's runs (summary.json's engine_time_s)
-        # LAMMPS steps per coupler step: uncoupled, a batch (each `run` call re-initialises LAMMPS's
-        # styles, about 0.2 ms, and each coupler step costs a round trip: one LAMMPS step per
-        # coupler step ran at 0.45x LAMMPS alone on the 5.7k dam break); coupled, one (the
+        # LAMMPS steps per coupler step: uncoupled, a batch (each `run` call costs LAMMPS 9 us of
+        # set-up, bench sph's call_cost_s, and each coupler step a round trip and the sums: one
+        # LAMMPS step per coupler step ran at 0.81x LAMMPS alone on the 5.7k dam break); coupled, one (the
         # impulses act every LAMMPS step).  The limit is re-evaluated between batches.
         self.substeps = 1 if self.case.get("coupling") else int(sph["substeps"])
         self._setup_run(self._initial_dt())

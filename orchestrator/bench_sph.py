@@ -109,7 +109,7 @@ def standalone(case: dict, steps: int) -> tuple[float, int]:
 def call_cost(case: dict, calls: int = 400) -> float:
     """Seconds LAMMPS spends on one `run k pre no post no` call besides its k steps, with the
     `timestep` the driver sets before it: the median of ``calls`` calls of `timestep` + `run 0 pre
-    no post no` (the same fixed path: thermo set-up, timers, clean-up; measured 19 us).  A batch
+    no post no` (the same fixed path: thermo set-up, timers, clean-up; measured 9.2 us).  A batch
     costs LAMMPS alone this much over one long run."""
     from mpi4py import MPI
 

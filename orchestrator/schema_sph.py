@@ -378,8 +378,9 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
                                                          dtype=np.float64)) > sph["max_particles"] * 4:
             raise CaseError(format_key(base + [where]), rreg,  # the lattice alone is too big to build
                             f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
-        n = len(body_points(body, dim))
-        clo, chi = cells_box(body, dim)  # the particles' cells: a where may cut the region at a face
+        x = body_points(body, dim)
+        n = len(x)
+        clo, chi = cells_box(body, dim, x)  # the particles' cells: a where may cut the region at a face
         slack = 1e-9 * body["spacing"]
         if n and (np.any(clo < np.asarray(lo) - slack) or np.any(chi > np.asarray(hi) + slack)):
             raise CaseError(format_key(base + [where]), rreg,

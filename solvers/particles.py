@@ -135,11 +135,12 @@ def body_points(body: dict, dim: int) -> np.ndarray:
     return lattice_points(body["region"], body["spacing"], dim)
 
 
-def cells_box(body: dict, dim: int) -> tuple[np.ndarray, np.ndarray]:
+def cells_box(body: dict, dim: int, x: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The box around a body's particles' cells (x +- spacing / 2): what must lie inside the SPH
     domain and the background grid.  Not the region's box: a ``where`` may cut a region at a
-    symmetry plane (a quarter of a rod whose axis lies on two wall faces)."""
-    x = body_points(body, dim)
+    symmetry plane (a quarter of a rod whose axis lies on two wall faces).  ``x``: its particles
+    when the caller has them (else built by body_points)."""
+    x = body_points(body, dim) if x is None else x
     if len(x) == 0:
         return bounds(body["region"], dim)
     half = 0.5 * float(body["spacing"])

@@ -113,11 +113,12 @@ from solvers import elements as _elements
 from solvers.elements import hex_bvectors, quad_bvectors
 
 SOLID_TOL = 1e-12
+"""A zone with blocked fraction b >= 1 - SOLID_TOL is fully blocked (open fraction exactly 0)."""
+
 TRACE_ZONE = 1e-6
 """A zone whose mass is below this share of a full zone at its density is a trace zone: its corners
 may cross within a step (lagrangian_open_volumes).  A quarter-rod penetrator had one of 1.3e-9 invert
 at 2.4 us (artificial viscosity 0.1) and one of 7e-11 at 12 us (viscosity 1)."""
-"""A zone with blocked fraction b >= 1 - SOLID_TOL is fully blocked (open fraction exactly 0)."""
 
 PHI_Q = 0.5
 """The artificial viscosity of a cut zone takes its divergence over at least this fraction of the
