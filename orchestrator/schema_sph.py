@@ -30,7 +30,9 @@ a channel's walls, as a Lagrangian body's symmetry planes hold it; a free block 
 is otherwise unstable to rigid rotation).
 
 * ``taitwater`` (pair sph/taitwater): p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7; keys density
-  (rho0), sound_speed (c0), viscosity (Monaghan's alpha);
+  (rho0), sound_speed (c0), viscosity (Monaghan's alpha), optional pressure_cutoff (the least
+  pressure, <= 0 and > -B: a strength-free liquid or metal cavitates instead of pulling its
+  neighbours back; Tait's law alone holds tension down to -B, 23 GPa for steel);
 * ``idealgas`` (pair sph/idealgas): p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4; key
   viscosity (LAMMPS's nu).  Its bodies give pressure or specific_internal_energy.
 """
@@ -49,12 +51,12 @@ MAX_PARTICLES = 20_000_000
 """More particles than this in one case is refused (memory of the SPH group and of its output)."""
 
 MODEL_KEYS = {
-    "taitwater": ("model", "density", "sound_speed", "viscosity"),
+    "taitwater": ("model", "density", "sound_speed", "viscosity", "pressure_cutoff"),
     "idealgas": ("model", "viscosity"),
     "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio", "strength", "eos", "viscosity_q1",
               "viscosity_q2", "hourglass", "heat_capacity"),
 }
-MODEL_REQUIRED = {"taitwater": MODEL_KEYS["taitwater"], "idealgas": MODEL_KEYS["idealgas"],
+MODEL_REQUIRED = {"taitwater": ("model", "density", "sound_speed", "viscosity"), "idealgas": MODEL_KEYS["idealgas"],
                   "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio")}
 STRENGTH_TEXT = ("\"linear\", { linear_plastic = { yield_stress, hardening } } or "
                  "{ johnson_cook = { A, B, n, C, strain_rate0, room_temperature, melt_temperature, m } }")
@@ -89,6 +91,7 @@ MATERIAL = {
         "density": number("kg/m^3", exclusiveMinimum=0),
         "sound_speed": number("m/s", exclusiveMinimum=0),
         "viscosity": number("dimensionless", minimum=0),
+        "pressure_cutoff": number("Pa", maximum=0),
         "youngs_modulus": number("Pa", exclusiveMinimum=0),
         "poisson_ratio": number("dimensionless", minimum=0, exclusiveMaximum=0.5),
         "strength": STRENGTH,
@@ -325,6 +328,13 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
     if len(models) > 1:
         raise CaseError("sph.materials", sorted(models), "one material model per case (LAMMPS runs one "
                         "pair style); allowed: all taitwater, all idealgas or all tlsph")
+    for mname, m in sph["materials"].items():
+        if "pressure_cutoff" in m:
+            b = m["sound_speed"] ** 2 * m["density"] / 7.0
+            if not m["pressure_cutoff"] > -b:
+                raise CaseError(format_key(["sph", "materials", mname, "pressure_cutoff"]),
+                                raw["materials"][mname]["pressure_cutoff"],
+                                f"must be > -B = -c0^2 rho0 / 7 = {-b:.6g} Pa (Tait's least pressure)")
     total = 0
     for i, (body, rb) in enumerate(zip(sph["bodies"], raw["bodies"])):
         base = ["sph", "bodies", i]

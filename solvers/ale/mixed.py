@@ -61,7 +61,7 @@ from solvers.ale.points import fraction_samples, subcell_offsets
 from solvers.ale.remap import face_flux
 
 VOID = -1
-TRACE = 1e-9       # volume fraction below which a material is a trace: no EOS call, no say in c
+TRACE = 1e-6       # volume fraction below which a material is a trace: no EOS call, no say in c
 PURE = 1e-12       # a zone whose other materials hold less than this fraction is pure
 RELAX_PASSES = 2
 RELAX_PASSES_INITIAL = 30   # initial mixed zones may be far from equilibrium

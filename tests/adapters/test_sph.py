@@ -200,3 +200,62 @@ def test_a_body_from_a_lammps_data_file_is_the_lattice_it_holds(tmp_path):
     assert len(runs[0]["x"]) == len(x) == 800
     for k in runs[1]:
         assert np.array_equal(runs[0][k], runs[1][k]), k
+
+
+PULLED_APART = """
+[run]
+dimension = 2
+end_time = 1.0
+output_interval = 1.0
+
+[sph]
+spacing = 0.001
+smoothing_length = 0.003
+cfl = 0.25
+domain = {{ lower = [-0.05, -0.05], upper = [0.05, 0.05] }}
+boundaries = {{ x_lower = "open", x_upper = "open", y_lower = "open", y_upper = "open" }}
+materials.water = {{ model = "taitwater", density = 1000.0, sound_speed = 50.0, viscosity = 1.0{cutoff} }}
+bodies = [
+  {{ name = "left", material = "water", region = {{ box = {{ lower = [-0.01, -0.005], upper = [0.0, 0.005] }} }}, velocity = [-1.0, 0.0], density = 1000.0 }},
+  {{ name = "right", material = "water", region = {{ box = {{ lower = [0.0, -0.005], upper = [0.01, 0.005] }} }}, velocity = [1.0, 0.0], density = 1000.0 }},
+]
+"""
+
+
+def _pulled_apart(tmp: Path, cutoff):
+    d = tmp / f"cutoff{cutoff}"
+    d.mkdir()
+    (d / "case.toml").write_text(PULLED_APART.format(cutoff="" if cutoff is None else f", pressure_cutoff = {cutoff!r}"))
+    a = _adapter(MPI.COMM_SELF, d, load_case(d))
+    x0 = a._gather("x", 3)[:, 0]
+    _run(a, 2.5e-5, 200)  # 5 ms, 20 LAMMPS steps a call
+    v, x = a._gather("v", 3)[:, 0], a._gather("x", 3)[:, 0]
+    a.close()
+    right = a.body == 1
+    gap0 = x0[right].min() - x0[~right].max()
+    return v[right], v[~right], x[right].min() - x[~right].max() - gap0
+
+
+def test_pressure_cutoff_lets_a_pulled_apart_block_cavitate(tmp_path):
+    """Two halves of a water block (10 x 10 mm each, B = rho0 c0^2 / 7 = 357 kPa), each at rest in
+    itself, driven apart at -1 and +1 m/s for 5 ms.  Only the particles at the split see a falling
+    density (no pair inside a half has a relative velocity).
+    pressure_cutoff = 0 (a strength-free liquid): the clamp before each step keeps the split at rho0
+    when the pair computes pressures, so nothing pulls: both halves keep their speeds and the gap
+    opens by 2 x 1 m/s x 5 ms (measured: exact, the pressures are exactly 0).  Without the clamp
+    staged by the half-step rate (rho >= rho0 alone) the split would pull at c0^2 dt/2 |drho| a step.
+    A cutoff of -1 kPa: the split's tension is bounded by it while the halves are within the kernel's
+    reach, so each loses momentum in proportion to the cutoff (measured: 0.0316 of its speed at -1 kPa,
+    0.0156 at -0.5 kPa, ratio 2.03).  Without a cutoff Tait's tension (down to -B) holds the halves
+    together: their mean speeds 0.013 apart (measured), the gap 0.12 mm."""
+    right, left, opened = _pulled_apart(tmp_path, 0.0)
+    assert np.abs(right - 1.0).max() <= 1e-12 and np.abs(left + 1.0).max() <= 1e-12  # measured 0
+    assert opened == pytest.approx(0.01, abs=1e-12)  # measured 7e-16
+    loss = {}
+    for c in (-1.0e3, -5.0e2):
+        right, left, _ = _pulled_apart(tmp_path, c)
+        loss[c] = 1.0 - 0.5 * (right.mean() - left.mean())
+    assert 0.02 < loss[-1.0e3] < 0.05  # measured 0.0316
+    assert loss[-1.0e3] / loss[-5.0e2] == pytest.approx(2.0, rel=0.05)  # measured 2.03
+    right, left, opened = _pulled_apart(tmp_path, None)
+    assert abs(0.5 * (right.mean() - left.mean())) < 0.05 and opened < 1e-3  # measured 0.013, 1.2e-4

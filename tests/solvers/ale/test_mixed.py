@@ -484,3 +484,34 @@ def test_equilibrium_volumes_give_one_pressure_and_fill_the_volume():
     code_v = code.copy()
     code_v[2] = VOID
     assert not equilibrium_volumes(code_v, par, np.array([2.0, 0.012, 0.0]), ener, vraw, V, 0.0, out)
+
+
+@pytest.mark.parametrize("fraction", [5e-7, 2e-6])
+def test_a_trace_of_metal_is_not_asked_its_state(fraction):
+    """Aluminium (Mie-Grueneisen, s = 1.34: no Hugoniot beyond rho0 / (1 - 1/s) = 10.6e3 kg/m^3) as
+    a sliver in a void zone, squeezed to 15.1e3 kg/m^3 -- the state a 3-D penetrator's crater left
+    in a zone holding 1.5e-8 of it, which stopped the run at 0.48 us while TRACE was 1e-9.  Below
+    TRACE = 1e-6 of the zone it is a trace: no EOS call, it carries the pressure of the rest (void:
+    none).  At 2e-6 the same state is asked for and refused, naming the zone and the material."""
+    cfg = {"dimension": 2, "mode": "eulerian",
+           "grid": {"lower": [0.0, 0.0], "upper": [1.0, 0.25], "cells": [4, 1]},
+           "materials": {"aluminium": {"eos": "mie_gruneisen", "rho0": 2700.0, "c0": 5350.0, "s": 1.34,
+                                       "gamma0": 2.0},
+                         "vacuum": {"eos": "void"}},
+           "regions": [{"material": "aluminium", "density": 2700.0, "pressure": 0.0},
+                       {"material": "vacuum", "region": "x > 0.3125"}]}
+    s = AleSolver(None, cfg)
+    z = int(np.flatnonzero(s.block.real_zone)[1])
+    mm = s.mm
+    V = mm.vol[z].sum()
+    mm.vol[z] = [fraction * V, (1.0 - fraction) * V]
+    mm.mass[z] = [15114.9 * fraction * V, 0.0]
+    mm.ener[z] = [491121.0, 0.0]
+    mm.deh[z] = 0.0
+    s.M[z] = mm.mass[z].sum()
+    if fraction < mixed.TRACE:
+        mm.update_eos(s)
+        assert mm.pm[z, 0] == 0.0 and s.p[z] == 0.0 and s.c[z] == 0.0
+    else:
+        with pytest.raises(Exception, match="invalid thermodynamic state of material 'aluminium'"):
+            mm.update_eos(s)
