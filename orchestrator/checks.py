@@ -352,35 +352,72 @@ def surge_front(case, out, history, params):
     return vals
 
 
+def _main_body(x: np.ndarray, link: float) -> np.ndarray:
+    """The particles of the largest cluster whose members are linked by neighbours within ``link``
+    (connected components of the neighbour graph)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(x).query_pairs(link, output_type="ndarray")
+    n = x.shape[0]
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    _, label = connected_components(graph, directed=False)
+    return label == np.argmax(np.bincount(label))
+
+
 @register_check("penetration", params=table(
-    {"surface": number("m"), "axis": AXIS, "window": WINDOW},
+    {"surface": number("m"), "axis": AXIS, "window": WINDOW, "depth_time": number("s", exclusiveMinimum=0)},
     required=("surface", "axis", "window")))
 def penetration(case, out, history, params):
     """A particle penetrator into a target whose surface is the plane ``axis`` = ``surface``, moving
-    towards -axis: its depth (surface minus the lowest particle that has a neighbour within two
-    lattice spacings: a lone particle is spray) at every output step; metrics: the penetration
-    velocity (least-squares slope of the depth over the output steps in ``window``, s) and the
-    depth at the last step."""
-    from scipy.spatial import cKDTree
-
+    towards -axis: its depth (surface minus the lowest particle of the rod's main body, the largest
+    cluster of particles linked by neighbours within two lattice spacings: a lone particle or a
+    fragment thrown off at impact is not the rod's tip) at every output step; metrics: the penetration
+    velocity (least-squares slope of the depth over the output steps in ``window``, s), the depth
+    at the last step, and the primary penetration ``depth_consumed``: the depth when the rod is used
+    up (Tate's hydrodynamic limit L sqrt(rho_p / rho_t) is this depth), i.e. when its rear face
+    (the particles within half a spacing of its initial rear, followed by id) has come within one
+    smoothing length of the tip, linearly interpolated between the output steps; the time is
+    reported as ``consumed_time``.  Not reached by the last step: depth_consumed is NaN (fails).
+    With ``depth_time`` (s): ``depth_at_time``, the depth then (interpolated; NaN past the last
+    step), for a model's depth history such as Tate's, U t up to its erosion time L / (v - U)."""
     from orchestrator import output
 
     ax = "xyz".index(params["axis"])
     dx = case["sph"]["spacing"]
-    ts, ds = [], []
+    h = case["sph"]["smoothing_length"]
+    ts, ds, rs = [], [], []
+    rear = None
     for t, _, index in output.read_steps(out, "sph"):
         x = output.read_step(out, "sph", index)[0][:, : case["run"]["dimension"]]
-        d, _ = cKDTree(x).query(x, k=2)
+        if rear is None:
+            rear = x[:, ax] >= x[:, ax].max() - 0.5 * dx
         ts.append(t)
-        ds.append(float(params["surface"]) - float(x[d[:, 1] <= 2.0 * dx, ax].min()))
-    ts, ds = np.array(ts), np.array(ds)
+        ds.append(float(params["surface"]) - float(x[_main_body(x, 2.0 * dx), ax].min()))
+        rs.append(float(params["surface"]) - float(x[rear, ax].mean()))
+    ts, ds, rs = np.array(ts), np.array(ds), np.array(rs)
     lo, hi = params["window"]
     sel = (ts >= lo * (1 - 1e-9)) & (ts <= hi * (1 + 1e-9))
     if np.count_nonzero(sel) < 2:
         raise ValueError(f"check.params.window = {[lo, hi]}: fewer than 2 output steps in it "
                          f"(outputs at {ts.tolist()})")
     slope = float(np.polyfit(ts[sel], ds[sel], 1)[0])
-    return {"penetration_velocity": slope, "depth": float(ds[-1])}
+    # the rod's remaining length less h: positive while the rear is more than h behind the tip
+    left = ds - rs - h
+    done = np.flatnonzero(left <= 0.0)
+    consumed_time = consumed = float("nan")
+    if done.size:
+        k = int(done[0])
+        w = 1.0 if k == 0 else left[k - 1] / (left[k - 1] - left[k])
+        consumed_time = float(ts[k - 1] + w * (ts[k] - ts[k - 1])) if k else float(ts[0])
+        consumed = float(ds[k - 1] + w * (ds[k] - ds[k - 1])) if k else float(ds[0])
+    values = {"penetration_velocity": slope, "depth": float(ds[-1]), "depth_consumed": consumed,
+              "consumed_time": consumed_time}
+    if "depth_time" in params:
+        t = float(params["depth_time"])
+        values["depth_at_time"] = float(np.interp(t, ts, ds)) if ts[0] <= t <= ts[-1] * (1 + 1e-12) else float("nan")
+    return values
 
 
 @register_check("sedov", params=table(

@@ -136,7 +136,8 @@ def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immer
     level (cases/sph_vs_fe_plate as shipped: their own checks pass, and their tip histories agree
     within 10 %), and the cost chart is drawn."""
     out = tmp_path / "out"
-    r = run_immerse("campaign", CAMPAIGNS / "fe_vs_sph_bodies", "--out", out, "--only", "refinement=1,2")
+    r = run_immerse("campaign", CAMPAIGNS / "fe_vs_sph_bodies", "--out", out, "--only", "refinement=1,2",
+                    "rod_resolution=1")
     assert r.returncode == 0, r.stdout + r.stderr
     rows = {x["run"]: x for x in _rows(out)}
     e = {k: float(x["error"]) for k, x in rows.items()}
@@ -144,6 +145,11 @@ def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immer
     assert e["tlsph_particles-refinement2"] < e["tlsph_particles-refinement1"], e
     assert max(e["FE_quads-refinement2"], e["tlsph_particles-refinement2"]) < 0.1, e
     assert (out / "figures" / "fe_vs_sph_bodies_cost.png").is_file()
+    # the penetrator's coarse level (cases/penetrator_tate on 0.5 mm zones, dx = 0.25 mm: 2 and 4
+    # across the rod's radius): it runs to 32 us and its depth at Tate's erosion time is charted
+    rod = rows["SPH_rod-rod_resolution1"]
+    assert rod["error_metric"] == "depth_at_time" and np.isfinite(float(rod["error"])), rod
+    assert (out / "figures" / "penetrator_cost.png").is_file()
     # level 2 is cases/sph_vs_fe_plate/{fe,sph} as shipped: their checks pass, and the two tip
     # histories agree within 10 % of the largest deflection (the issue's bound; measured 4.6e-2)
     assert rows["FE_quads-refinement2"]["status"] == rows["tlsph_particles-refinement2"]["status"] == "passed"

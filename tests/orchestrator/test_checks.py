@@ -746,9 +746,49 @@ def test_penetration(tmp_path):
     assert r["metrics"]["penetration_velocity"]["rel_error"] == pytest.approx(650 / 574.3 - 1, rel=1e-9)
     r = checks.run_check(case, rod_output(tmp_path / "spray", 574.3, lone=True), history("sph"))
     assert r["passed"], r
+    case = case_with("tate_penetration_rate", depth_time=5.5e-6)
+    r = checks.run_check(case, rod_output(tmp_path / "good", 574.3), history("sph"))
+    assert r["reported"]["depth_at_time"] == pytest.approx(574.3 * 4.5e-6, rel=1e-12)
+    r = checks.run_check(case_with("tate_penetration_rate", depth_time=9e-6), tmp_path / "good", history("sph"))
+    assert np.isnan(r["reported"]["depth_at_time"])
     case = case_with("tate_penetration_rate", window=[2.5e-6, 2.9e-6])
     with pytest.raises(ValueError, match=r"check.params.window = \[2.5e-06, 2.9e-06\]: fewer than 2"):
         checks.run_check(case, rod_output(tmp_path / "few", 574.3), history("sph"))
+
+
+def eroding_rod_output(out):
+    """A rod 2 x 40 particles (dx = 1.25e-4, length 4.875 mm between its tip and rear layers) whose
+    tip enters the surface y = 0.025 at t = 0 and moves at U = 574.3 m/s while its rear keeps
+    v = 911 m/s (the particles between spaced evenly): Tate's erosion, the rod's length shrinking
+    at v - U; sampled every 1 us to 16 us."""
+    dx, n, U, v = 1.25e-4, 40, 574.3, 911.0
+    L = (n - 1) * dx
+    write_mesh = output.write_mesh
+    write_mesh(out, "sph", np.arange(2 * n, dtype=np.int64)[:, None], "vertex")
+    for k in range(17):
+        t = k * 1e-6
+        tip = 0.025 - U * t
+        length = max(L - (v - U) * t, 1e-6)
+        y = tip + length * np.arange(n) / (n - 1)
+        x = np.column_stack([np.repeat([0.0, dx], n), np.tile(y, 2)])
+        output.write_step(out, "sph", k, k, t, x, {"body": np.zeros(2 * n, np.int64)})
+    return out
+
+
+def test_penetration_depth_when_the_rod_is_consumed(tmp_path):
+    """The rod is used up when its rear face comes within h = 3.75e-4 of its tip: at
+    t = (L - h) / (v - U) = 13.365 us, depth U t = 7.676 mm (linear in t, so interpolation between the
+    1-us outputs is exact to round-off).  A rod that is not eroded (rigid, rod_output) is never used
+    up: NaN, which fails a depth_consumed metric."""
+    case = load_case(CASES / "tate_penetration_rate")
+    r = checks.run_check(case, eroding_rod_output(tmp_path / "eroding"), history("sph"))
+    t = (39 * 1.25e-4 - 3.75e-4) / (911.0 - 574.3)
+    assert r["reported"]["consumed_time"] == pytest.approx(t, rel=1e-12)
+    assert r["reported"]["depth_consumed"] == pytest.approx(574.3 * t, rel=1e-12)
+    r = checks.run_check(case, rod_output(tmp_path / "rigid", 574.3), history("sph"))
+    assert np.isnan(r["reported"]["depth_consumed"])
+    spec = dict(case["check"], metrics={"depth_consumed": {"reference": 1.0, "tolerance": 1.0}})
+    assert not checks.run_check(dict(case, check=spec), tmp_path / "rigid", history("sph"))["passed"]
 
 
 # ---- the registry and the CLI --------------------------------------------------------------------

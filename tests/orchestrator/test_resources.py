@@ -189,7 +189,9 @@ def test_rank_counts(tmp_path):
 def test_shipped_cases_and_a_laptop_coupled_run_fit(tmp_path):
     """Every shipped case, and a coupler + a few ranks on 2 cores, pass without flags; each case's
     estimate under 1 GiB with up to two solver groups, plus one rank's base (R.RANK_BYTES) for each
-    group beyond (two_pistons_fe_sph runs ALE, Lagrangian and LAMMPS ranks: 1.08e9 B)."""
+    group beyond (two_pistons_fe_sph runs ALE, Lagrangian and LAMMPS ranks: 1.08e9 B).  The 3-D
+    penetrator (92k zones, 4160 particles) is the one larger validation case: estimate 1.54e9 B,
+    measured peak RSS of its processes 1.19e9 B; under 2 GiB."""
     from pathlib import Path
 
     repo = Path(__file__).resolve().parents[2]
@@ -198,7 +200,8 @@ def test_shipped_cases_and_a_laptop_coupled_run_fit(tmp_path):
         if (d / "case.toml").is_file():
             case = load_case(d)
             ranks = ranks_for(case)
-            assert R.check_resources(case, ranks, laptop) < 1 * GiB + max(len(ranks) - 2, 0) * R.RANK_BYTES, d.name
+            bound = 2 * GiB if d.name == "penetrator_tate" else 1 * GiB + max(len(ranks) - 2, 0) * R.RANK_BYTES
+            assert R.check_resources(case, ranks, laptop) < bound, d.name
     case = box_case(tmp_path, [10, 10, 10])
     R.check_resources(case, {"lagrange": 4}, laptop)   # coupler + 4 ranks on 2 cores
 
