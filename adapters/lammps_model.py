@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solvers.particles import IDEALGAS_GAMMA, body_points
+from solvers.particles import IDEALGAS_GAMMA, body_points, tait_density
 
 FREE_GROUP = "immerse_free"
 FIXED_GROUP = "immerse_fixed"
@@ -78,8 +78,7 @@ def hydrostatic_density(body: dict, mat: dict, x: np.ndarray, gravity) -> np.nda
     gmag = float(np.linalg.norm(g))
     down = x @ (g / gmag)
     depth = down - (down.min() - 0.5 * body["spacing"])
-    b = mat["sound_speed"] ** 2 * mat["density"] / 7.0
-    return mat["density"] * (1.0 + mat["density"] * gmag * depth / b) ** (1.0 / 7.0)
+    return tait_density(mat, mat["density"] * gmag * depth)
 
 
 CREATED = (("vest", 3, False), ("rho", 1, False), ("esph", 1, False))

@@ -40,7 +40,7 @@ import numpy as np
 
 from adapters.base import SolverAdapter
 from adapters.registry import register
-from solvers.particles import IDEALGAS_GAMMA
+from solvers.particles import IDEALGAS_GAMMA, tait_density
 
 from adapters import lammps_model, lammps_tlsph
 
@@ -108,9 +108,8 @@ class SphAdapter(SolverAdapter):
         self._c0 = np.array([0.0] + [lammps_tlsph.signal_speed(m) if m["model"] == "tlsph"
                                      else m.get("sound_speed", 0.0) for m in kmats])
         # a taitwater material's least density, from its pressure_cutoff (-inf: Tait's own tension)
-        self._rho_floor = np.array([-np.inf] + [
-            m["density"] * (1.0 + m["pressure_cutoff"] / (m["sound_speed"] ** 2 * m["density"] / 7.0)) ** (1.0 / 7.0)
-            if "pressure_cutoff" in m else -np.inf for m in kmats])
+        self._rho_floor = np.array([-np.inf] + [tait_density(m, m["pressure_cutoff"]) if "pressure_cutoff" in m
+                                                else -np.inf for m in kmats])
         self._cavitates = bool(np.isfinite(self._rho_floor).any())
         # per particle in id order (masses and held particles never change)
         self._types = parts["type"].astype(np.int64)

@@ -309,7 +309,7 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
     particle count."""
     import numpy as np
 
-    from solvers.particles import body_points, cells_box, lattice_counts
+    from solvers.particles import body_points, cells_box, lattice_counts, tait_b
 
     for k in ("lower", "upper"):
         check_length(format_key(["sph", "domain", k]), raw["domain"][k], dim)
@@ -330,7 +330,7 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
                         "pair style); allowed: all taitwater, all idealgas or all tlsph")
     for mname, m in sph["materials"].items():
         if "pressure_cutoff" in m:
-            b = m["sound_speed"] ** 2 * m["density"] / 7.0
+            b = tait_b(m)
             if not m["pressure_cutoff"] > -b:
                 raise CaseError(format_key(["sph", "materials", mname, "pressure_cutoff"]),
                                 raw["materials"][mname]["pressure_cutoff"],

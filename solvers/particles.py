@@ -20,6 +20,17 @@ energies (adapters/lammps_model.py), the sound speed of the stable step (solvers
 and the output pressure take it from here."""
 
 
+def tait_b(mat: dict) -> float:
+    """Tait's stiffness B = c0^2 rho0 / 7 of a taitwater material (pair sph/taitwater:
+    p = B ((rho / rho0)^7 - 1)); -B is the least pressure the law gives."""
+    return mat["sound_speed"] ** 2 * mat["density"] / 7.0
+
+
+def tait_density(mat: dict, p):
+    """The density at which a taitwater material's pressure is p: rho0 (1 + p / B)^(1/7)."""
+    return mat["density"] * (1.0 + p / tait_b(mat)) ** (1.0 / 7.0)
+
+
 def bounds(region: dict, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """The axis-aligned box around a region (m)."""
     if "box" in region:
