@@ -134,15 +134,30 @@ def unstable_coupling_note(out_dir: Path) -> str | None:
         return None
 
 
+MPI_ERROR = "MPI error (a rank it exchanges with may be gone)"
+"""Starts the report of a rank whose MPI call failed: most often a consequence (a neighbour in a
+halo exchange was killed), so the launcher names a rank that died silently before it as the cause."""
+
+
+def _is_mpi_error(exc: BaseException) -> bool:
+    mpi = sys.modules.get("mpi4py.MPI")
+    return mpi is not None and isinstance(exc, mpi.Exception)
+
+
+def _abort() -> None:
+    from mpi4py import MPI
+
+    MPI.COMM_WORLD.Abort(1)
+
+
 def install_fault_handler(out_dir: Path, role: str, rank: int) -> None:
     """An uncaught exception on any rank: report it by role and rank, then bring the whole job down."""
 
     def hook(exc_type, exc, tb):
         traceback.print_exception(exc_type, exc, tb, file=sys.stderr)
-        report_failure(out_dir, role, rank, f"{exc_type.__name__}: {exc}")
-        from mpi4py import MPI
-
-        MPI.COMM_WORLD.Abort(1)
+        prefix = f"{MPI_ERROR}: " if _is_mpi_error(exc) else ""
+        report_failure(out_dir, role, rank, f"{prefix}{exc_type.__name__}: {exc}")
+        _abort()
 
     sys.excepthook = hook
 

@@ -148,6 +148,16 @@ class RankWatch:
         self.fds.clear()
 
 
+def silent_deaths(reports: list[str], died_first: list[str], first_dead: list[str]) -> list[str]:
+    """The ranks that died without a report of their own and so caused the others' reports:
+    those seen dead before any report (``died_first``), or, when every report is a failed MPI call
+    (a neighbour's death seen from this side), those the first wake-up found dead: a rank's peer
+    may write its report microseconds after the death, before the launcher looks (seen in CI)."""
+    if not died_first and reports and all(P.MPI_ERROR in rep for rep in reports):
+        died_first = first_dead
+    return [r for r in died_first if not any(rep.startswith(r + ":") for rep in reports)]
+
+
 def _error_reports(out: Path) -> list[str]:
     d = P.run_dir(out)
     return [f.read_text().strip() for f in sorted(d.glob("error_*.txt"))] if d.is_dir() else []
@@ -364,10 +374,13 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     watch = RankWatch(out)
     failed: list[str] = []
     died_first: list[str] = []  # ranks seen dead before any rank reported an error
+    first_dead: list[str] = []  # the ranks the first wake-up found dead (a report may race them)
     ended_by_us = False
     try:
         while proc.poll() is None and stop.signum is None:
             failed = list(watch.wait(50))
+            if failed and not first_dead:
+                first_dead = failed
             if failed and not _error_reports(out):
                 died_first = failed
             if failed or _error_reports(out):
@@ -381,6 +394,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
             _ask_coupler_where(watch)
             ended_by_us = True
         failed = failed or list(watch.wait(0))
+        first_dead = first_dead or failed
     finally:
         watch.close()
         # also after mpiexec's own end: no process of the job may outlive it
@@ -394,7 +408,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     reports = _error_reports(out)
     if rc == 0 and not failed and not reports:
         return JobResult(0)
-    silent = [r for r in died_first if not any(rep.startswith(r + ":") for rep in reports)]
+    silent = silent_deaths(reports, died_first, first_dead)
     if rc < 0 and not ended_by_us:
         # mpiexec itself was killed: its proxies take the ranks down, which is not their failure
         why = (f"mpiexec (pid {proc.pid}) died, killed by {signal.Signals(-rc).name}; the job was "

@@ -273,3 +273,43 @@ def test_report_starts_its_own_line_after_a_half_forwarded_one(tmp_path, monkeyp
     assert rc != 0
     assert "\nimmerse: run failed: coupler rank 0: RuntimeError: boom\n" in err, err
     assert '  File "x", line\n' in err, err
+
+
+def test_a_silent_death_is_named_first_even_when_its_peers_report_raced_it():
+    """A rank killed by a signal writes no report; its halo neighbour's failed MPI call does, and
+    may do so before the launcher looks (CI saw ale rank 0's report win over ale rank 1's SIGKILL).
+    The silent rank found dead at the first wake-up is still named as the cause; a real error
+    report (not a failed MPI call) keeps the blame."""
+    from adapters.protocol import MPI_ERROR
+    from orchestrator.launch import silent_deaths
+
+    mpi_report = f"ale rank 0: {MPI_ERROR}: Exception: See the MPI_ERROR field in MPI_Status"
+    # the death was seen before any report
+    assert silent_deaths([mpi_report], ["ale rank 1"], ["ale rank 1"]) == ["ale rank 1"]
+    # the report raced the death: only failed MPI calls were reported
+    assert silent_deaths([mpi_report], [], ["ale rank 1"]) == ["ale rank 1"]
+    # the reporting rank itself is never the silent one
+    assert silent_deaths([mpi_report], [], ["ale rank 0", "ale rank 1"]) == ["ale rank 1"]
+    # a physical failure was reported: the ranks Abort took down after it are not its cause
+    physical = "ale rank 0: RuntimeError: zone 17 inverted at step 40, t=1e-3"
+    assert silent_deaths([physical], [], ["ale rank 1"]) == []
+    assert silent_deaths([physical, mpi_report], [], ["ale rank 1"]) == []
+
+
+def test_a_failed_mpi_call_is_reported_as_one(tmp_path, monkeypatch):
+    """The fault hook marks a rank's failed MPI call (mpi4py.MPI.Exception) so the launcher can
+    tell a neighbour's death seen from this side from an error of the rank's own."""
+    from mpi4py import MPI
+
+    from adapters import protocol
+
+    aborted = []
+    monkeypatch.setattr(protocol, "_abort", lambda: aborted.append(1))
+    monkeypatch.setattr(sys, "excepthook", sys.excepthook)  # restored after the test
+    protocol.install_fault_handler(tmp_path, "ale", 0)
+    report = tmp_path / ".run" / "error_ale_0.txt"
+    sys.excepthook(MPI.Exception, MPI.Exception(MPI.ERR_OTHER), None)
+    assert report.read_text().startswith(f"ale rank 0: {protocol.MPI_ERROR}: Exception: "), report.read_text()
+    sys.excepthook(RuntimeError, RuntimeError("zone 3 inverted"), None)
+    assert report.read_text() == "ale rank 0: RuntimeError: zone 3 inverted\n"
+    assert aborted == [1, 1]
