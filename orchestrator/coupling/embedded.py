@@ -40,6 +40,7 @@ from orchestrator.coupling.grid import Grid
 from orchestrator.coupling.operator_rows import (correction_means, impulse_sums, on_grid_boundary, oscillation,
                                                  row_means, surface_load)
 from orchestrator.coupling.operators import Operators, restrict
+from orchestrator.coupling.orphan_particles import find_orphans, tie
 
 
 @dataclass
@@ -116,6 +117,8 @@ class EmbeddedCoupling:
         self.lambda_oscillation = 0.0  # zone-to-zone spread of the multipliers this step (see solve)
         self.lambda_oscillation_max = 0.0
         self.void_zones = 0  # cut zones left without a constraint this step (mostly void: variants.MIN_FILL)
+        self.orphans = None  # particles outside the reconstructed surface (orphan_particles.py)
+        self.tied_orphans = 0  # of them, those tied to the background this step
         self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
         self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
         self.n_bodies = int(self.body.max()) + 1 if self.body.size else 0
@@ -173,7 +176,17 @@ class EmbeddedCoupling:
         self.pieces = pieces
         Bf = self.ops.Bf
         velocity = row_means(Bf.indptr, Bf.indices, Bf.data, self.v, self.ops.area)  # the surface's, per cut zone
-        return BodyGeometry(cov.zones, total, faces, self.ops.zones, self.ops.bnodes, velocity, cov.run_start,
+        # the nodes the next solve needs: the constraint's, and (particles) the corners of the zones
+        # of particles the reconstruction left out, tied point by point (orphan_particles.py)
+        self.nodes = self.ops.bnodes
+        self.orphans = None
+        if self.particles:
+            orph = find_orphans(self.grid, self.x, cov)
+            if orph.size:
+                self.orphans = orph
+                self.nodes = np.union1d(self.ops.bnodes, orph.nodes.ravel())
+        self.constraint_rows = np.searchsorted(self.nodes, self.ops.bnodes)
+        return BodyGeometry(cov.zones, total, faces, self.ops.zones, self.nodes, velocity, cov.run_start,
                             cov.run_length)
 
     def load_kernels(self) -> None:
@@ -203,12 +216,13 @@ class EmbeddedCoupling:
         """Steps 1-2 of the module docstring: returns the foreground's surface impulses (ns, dim);
         keeps the background's for :meth:`background_correction`."""
         ops, dim = self.ops, self.dim
-        nb, nc = ops.bnodes.size, ops.zones.size
-        v_b = background[: nb * dim].reshape(nb, dim)
-        m_b = background[nb * dim: nb * (dim + 1)]
-        a = nb * (dim + 1)
+        nn, nb, nc = self.nodes.size, ops.bnodes.size, ops.zones.size
+        v_all = background[: nn * dim].reshape(nn, dim)
+        m_all = background[nn * dim: nn * (dim + 1)]
+        a = nn * (dim + 1)
         R = background[a: a + nc * dim].reshape(nc, dim)
         fill = background[a + nc * dim:]   # (absent: no void)
+        v_b, m_b = v_all[self.constraint_rows], m_all[self.constraint_rows]
         # the fluid's load on the body: -R_e over Gamma_e, consistent nodal forces B^f_eA / A_e, and
         # the loaded predictor velocities v_f = v*_f + load free / m (one pass over the surface nodes:
         # a particle body's are all its particles)
@@ -231,13 +245,35 @@ class EmbeddedCoupling:
             self.state = self.method.new_state()
         self.lambda_oscillation = multiplier_oscillation(self.state.lam, ops.pairs, ops.normal)
         self.lambda_oscillation_max = max(self.lambda_oscillation_max, self.lambda_oscillation)
-        self.imp_b = res.impulse_b
-        imp, total = impulse_sums(load, np.ascontiguousarray(res.impulse_f, dtype=np.float64))
+        self.imp_b = np.zeros((nn, dim))
+        self.imp_b[self.constraint_rows] = res.impulse_b
+        imp_f, removed = res.impulse_f, 0.0
+        self.tied_orphans = 0
+        if self.orphans is not None:
+            imp_f, removed = self._tie_orphans(v_f, imp_f, v_all, m_all)
+        imp, total = impulse_sums(load, np.ascontiguousarray(imp_f, dtype=np.float64))
         self.imp_f = imp
         diag = res.diagnostics
-        self.last = StepRecord(total, 0.0, int(diag.get("iterations", 0)),
-                               float(diag.get("residual", 0.0)), float(diag.get("interface_dissipation", 0.0)))
+        self.last = StepRecord(total, 0.0, int(diag.get("iterations", 0)), float(diag.get("residual", 0.0)),
+                               float(diag.get("interface_dissipation", 0.0)) + removed)
         return imp
+
+    def _tie_orphans(self, v_f, imp_f, v_all, m_all):
+        """The particles outside the reconstructed surface tied to the background's velocity after the
+        constraint's impulses (orphan_particles.tie); returns the particles' impulses with theirs
+        added (the nodes' go into imp_b) and the kinetic energy the tie removed."""
+        o = self.orphans
+        i = o.index
+        u_p = v_f[i] + imp_f[i] / self.mass[i, None]
+        m_safe = np.where(m_all > 0.0, m_all, 1.0)
+        u_b = v_all + np.where(m_all[:, None] > 0.0, self.imp_b / m_safe[:, None], 0.0)
+        cols = np.searchsorted(self.nodes, o.nodes)
+        J, imp_nodes, self.tied_orphans, removed = tie(o, cols, u_p, self.mass[i], self.mass[i] / self.volume[i],
+                                                       u_b, m_all, self.grid.zone_volume)
+        imp_f = np.array(imp_f, dtype=np.float64, copy=True)
+        imp_f[i] += J
+        self.imp_b += imp_nodes
+        return imp_f, removed
 
     def _solve_masses(self, ops) -> np.ndarray:
         """The surface nodes' masses as the solve sees them, with the components a boundary condition
@@ -285,7 +321,7 @@ class EmbeddedCoupling:
 
     # ---- diagnostics and checkpoints ---------------------------------------------------------------
     DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work", "stable_dt_limit", "cond_H",
-                   "lambda_oscillation", "lambda_oscillation_max", "void_zones")
+                   "lambda_oscillation", "lambda_oscillation_max", "void_zones", "tied_orphans")
 
     def diagnostic_names(self) -> list[str]:
         return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
@@ -294,7 +330,7 @@ class EmbeddedCoupling:
         return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
                                         self.work_f, float(min(self.stable_limit, 1e300)),
                                         float(self.cond_H), self.lambda_oscillation, self.lambda_oscillation_max,
-                                        float(self.void_zones)]
+                                        float(self.void_zones), float(self.tied_orphans)]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}

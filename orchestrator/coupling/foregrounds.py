@@ -41,9 +41,11 @@ def _union_sum(ids_list, vals_list):
     return u, np.minimum(np.bincount(inv, weights=vals, minlength=u.size), 1.0)
 
 
-def merge_geometries(geoms, roles):
+def merge_geometries(geoms, roles, constraint_nodes=None):
     """One solvers.ale.coupled.BodyGeometry from the members' (each with sorted ``cut`` and
-    ``nodes``), and per member the positions of its cut zones and nodes in the merged lists."""
+    ``nodes``), and per member the positions of its cut zones and nodes in the merged lists.
+    ``constraint_nodes``: per member the nodes of its constraint solve (default: all its nodes),
+    which no two members may share."""
     from solvers.ale.coupled import BodyGeometry
 
     zones, fractions = _union_sum([g.zones for g in geoms], [g.fractions for g in geoms])
@@ -52,10 +54,12 @@ def merge_geometries(geoms, roles):
     cut = np.concatenate([g.cut for g in geoms])
     order = np.argsort(cut, kind="stable")
     cut = cut[order]
-    _shared("zone", cut, geoms, roles, "cut")
+    _shared("zone", cut, [g.cut for g in geoms], roles)
     nodes = np.unique(np.concatenate([g.nodes for g in geoms]))
-    if nodes.size != sum(g.nodes.size for g in geoms):
-        _shared("node", np.sort(np.concatenate([g.nodes for g in geoms])), geoms, roles, "nodes")
+    constraint = [g.nodes if c is None else c for g, c in zip(geoms, constraint_nodes or [None] * len(geoms))]
+    if np.unique(np.concatenate(constraint)).size != sum(c.size for c in constraint):
+        # (a node only tying another member's orphan particles may be shared: those impulses add)
+        _shared("node", np.sort(np.concatenate(constraint)), constraint, roles)
     velocity = np.concatenate([g.velocity for g in geoms])[order]
     rs = np.concatenate([g.run_start for g in geoms])
     ro = np.argsort(rs, kind="stable")
@@ -65,10 +69,10 @@ def merge_geometries(geoms, roles):
     return merged, rows
 
 
-def _shared(what, ids_sorted, geoms, roles, attr):
+def _shared(what, ids_sorted, lists, roles):
     dup = ids_sorted[1:][ids_sorted[1:] == ids_sorted[:-1]]
     if dup.size:
-        owners = [r for g, r in zip(geoms, roles) if np.isin(dup[0], getattr(g, attr))]
+        owners = [r for ids, r in zip(lists, roles) if np.isin(dup[0], ids)]
         raise GeometryError(
             f"bodies of the {' and '.join(owners)} groups share the background {what} {int(dup[0])}: bodies of "
             "two solver groups within a zone of each other need contact (issue 11), not two independent "
@@ -82,7 +86,7 @@ class ForegroundCouplings:
     # how a diagnostic of the members combines into the coupling's one (EmbeddedCoupling.DIAGNOSTICS)
     _COMBINE = {"iterations": max, "residual": max, "dissipation": sum, "foreground_work": sum,
                 "stable_dt_limit": min, "cond_H": _nanmax, "lambda_oscillation": max,
-                "lambda_oscillation_max": max, "void_zones": sum}
+                "lambda_oscillation_max": max, "void_zones": sum, "tied_orphans": sum}
 
     def __init__(self, case: dict, surfaces: list[dict], roles: list[str]):
         self.roles = list(roles)
@@ -119,7 +123,7 @@ class ForegroundCouplings:
         geoms = [m.geometry() for m in self.members]
         if len(geoms) == 1:
             return geoms[0]
-        merged, self._rows = merge_geometries(geoms, self.roles)
+        merged, self._rows = merge_geometries(geoms, self.roles, [m.ops.bnodes for m in self.members])
         return merged
 
     def load_kernels(self) -> None:

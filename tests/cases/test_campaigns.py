@@ -146,10 +146,11 @@ def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immer
     assert max(e["FE_quads-refinement2"], e["tlsph_particles-refinement2"]) < 0.1, e
     assert (out / "figures" / "fe_vs_sph_bodies_cost.png").is_file()
     # the penetrator's coarse level (cases/penetrator_tate on 0.5 mm zones, dx = 0.25 mm: 2 and 4
-    # across the rod's radius): it runs to 32 us and its depth at Tate's erosion time is charted
-    # (measured 19.3 mm, +13 %: too coarse for the 5 % the fine level meets)
+    # across the rod's radius): it runs to 32 us and its depth at Tate's erosion time is charted;
+    # measured 16.73 mm, -1.9 % (+13 % before the particles the reconstruction misses were tied:
+    # coupling/orphan_particles.py)
     rod = rows["SPH_rod-rod_resolution1"]
-    assert rod["error_metric"] == "depth_at_time" and np.isfinite(float(rod["error"])), rod
+    assert rod["error_metric"] == "depth_at_time" and abs(float(rod["error"])) < 0.05, rod
     assert (out / "figures" / "penetrator_cost.png").is_file()
     # level 2 is cases/sph_vs_fe_plate/{fe,sph} as shipped: their checks pass, and the two tip
     # histories agree within 10 % of the largest deflection (the bound; measured 4.6e-2)

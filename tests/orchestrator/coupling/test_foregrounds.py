@@ -41,6 +41,19 @@ def test_bodies_of_two_groups_in_one_zone_or_at_one_node_are_refused(cut_b, node
         merge_geometries([a, b], ["sph", "lagrange"])
 
 
+def test_a_node_that_only_ties_orphan_particles_may_be_shared():
+    """An SPH member's nodes include the corners of its orphan particles' zones (coupling/
+    orphan_particles.py): one of them next to the other member's body is not a shared constraint;
+    the merged list holds it once and both members' rows point at it (their impulses add)."""
+    a = _geom([5], [0.5], [5], [5, 6, 7], [[1.0, 0.0]])           # node 7: an orphan's only
+    b = _geom([7], [0.25], [7], [7, 8], [[0.0, 1.0]])
+    m, rows = merge_geometries([a, b], ["sph", "lagrange"], [np.array([5, 6]), np.array([7, 8])])
+    assert m.nodes.tolist() == [5, 6, 7, 8]
+    assert rows[0][1].tolist() == [0, 1, 2] and rows[1][1].tolist() == [2, 3]
+    with pytest.raises(GeometryError, match="share the background node 7"):
+        merge_geometries([a, b], ["sph", "lagrange"], [np.array([5, 6, 7]), np.array([7, 8])])
+
+
 def test_the_members_diagnostics_combine_into_the_couplings():
     """Momentum, work, dissipation and void zones add; the step limit is the smallest; iterations,
     residual, conditioning and oscillations the worst (cond(H) of a member that has not measured it
