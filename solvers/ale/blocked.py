@@ -116,9 +116,13 @@ SOLID_TOL = 1e-12
 """A zone with blocked fraction b >= 1 - SOLID_TOL is fully blocked (open fraction exactly 0)."""
 
 TRACE_ZONE = 1e-6
-"""A zone whose mass is below this share of a full zone at its density is a trace zone: its corners
-may cross within a step (lagrangian_open_volumes).  A quarter-rod penetrator had one of 1.3e-9 invert
-at 2.4 us (artificial viscosity 0.1) and one of 7e-11 at 12 us (viscosity 1)."""
+"""A zone whose mass is below this share of a full zone -- at its own density, or at the case's
+lightest initial density (AleSolver.rho_ref) if that is larger -- is a trace zone: its corners may
+cross within a step (lagrangian_open_volumes).  A quarter-rod penetrator had one of 1.3e-9 invert
+at 2.4 us (artificial viscosity 0.1) and one of 7e-11 at 12 us (viscosity 1).  The absolute
+reference is for a zone nearly empty of material (8.6e-50 kg of aluminium in a void zone at the
+crater, inverted): its own density, M / V, is as small as its mass, so at its own density alone
+it never counted as a trace."""
 
 PHI_Q = 0.5
 """The artificial viscosity of a cut zone takes its divergence over at least this fraction of the
@@ -527,7 +531,7 @@ class Blocked:
             s.bc.fill_zones([s.SV[d]], face_dir=d)
             np.multiply(self.A[d], s.SV[d], out=self.ASV[d])
         bad = lagrangian_open_volumes(self.ASV, self.SB, self.is_cut, self.VE, self.phi, s.V, s.M, s.rho, s.p,
-                                      s.q, s.de_h, s.zr[0], s.zr[1], B.zs)
+                                      s.q, s.de_h, s.zr[0], s.zr[1], B.zs, s.rho_ref)
         if bad >= 0:
             s._check((0.0, bad, BAD_VOLUME), " (Lagrangian grid)")
         if b_new is not None and self.A_body is not None and self.A_body is not self.A:
@@ -903,13 +907,14 @@ def mid_face_volumes(A0, A1, SV, ASV):
 
 
 @njit(cache=True)
-def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs):
+def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, zhi, zs, rho_ref):
     """V = phi VE + SB + sum_d (ASV_d[z + s_d] - ASV_d[z]) (open Lagrangian volume; SB the volume a
     coupled body's surface sweeps into the zone, negative when it advances), rho = M / V and the
     half-step EOS shift de_h of the zones with material.  A coupled body's cut zone (CUT) whose open
     part the body surface and its faces sweep away within the step keeps a sliver of volume (its
     material leaves through the positivity-limited fluxes and the small-zone merge) and no EOS shift.
-    So does a zone that holds a trace (mass below ``TRACE_ZONE`` of a full zone at its density):
+    So does a zone that holds a trace (mass below ``TRACE_ZONE`` of a full zone at its density or at
+    ``rho_ref``, the case's lightest initial density, whichever is larger):
     its corners, driven by the zones around them, may cross within the step (a void
     zone at the crater of a 3-D penetrator, 9e-18 kg at 1018 kg/m^3 in 1.25e-10 m^3, inverted at
     12 us and stopped the run); its content goes with the remap as a sliver's does.
@@ -923,7 +928,8 @@ def lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h, zlo, z
                 vn = v0 + SB[z]
                 for d in range(dim):
                     vn += ASV[d, z + zs[d]] - ASV[d, z]
-                trace = M[z] < TRACE_ZONE * rho[z] * VE[z]   # (rho: the zone's density before the step)
+                # (rho: the zone's density before the step)
+                trace = M[z] < TRACE_ZONE * max(rho[z], rho_ref) * VE[z]
                 swept = (CUT[z] != 0 or trace) and not (vn > 1e-9 * VE[z])
                 if swept:
                     # a body surface and the zone's open faces swept past its whole open part

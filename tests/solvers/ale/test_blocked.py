@@ -671,8 +671,31 @@ def test_a_trace_zone_whose_corners_cross_becomes_a_sliver(mass, inverted):
     M[4] = mass
     p, q, de_h = np.ones(n), np.zeros(n), np.full(n, 7.0)
     bad = lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h,
-                                  np.array([1, 1, 0]), np.array([2, 2, 1]), zs)
+                                  np.array([1, 1, 0]), np.array([2, 2, 1]), zs, 0.0)
     if inverted:
         assert bad == 4
     else:
         assert bad == -1 and V[4] == 1e-9 and de_h[4] == 0.0 and rho[4] == pytest.approx(mass / 1e-9, rel=1e-15)
+
+
+@pytest.mark.parametrize("rho_ref, inverted", [(0.0, True), (2700.0, False)])
+def test_a_nearly_empty_zone_is_a_trace_against_the_cases_density(rho_ref, inverted):
+    """A zone with 8.6e-50 kg of material (seen at the crater of a penetrator: a void zone) has the
+    density M / V = 8.6e-50 too, so against its own density it is no trace and its crossed corners
+    stop the run; against the case's lightest initial density (AleSolver.rho_ref, aluminium's 2700
+    here) it is one and keeps a sliver."""
+    from solvers.ale.blocked import lagrangian_open_volumes
+
+    n, zs = 9, np.array([3, 1, 0])
+    ASV = np.zeros((2, n + 3))
+    ASV[0, 4 + 3] = -1.5
+    SB, CUT, VE, phi = np.zeros(n), np.zeros(n, np.uint8), np.ones(n), np.ones(n)
+    V, M = np.ones(n), np.zeros(n)
+    M[4] = 8.6e-50
+    rho = M / V
+    p, q, de_h = np.zeros(n), np.zeros(n), np.zeros(n)
+    bad = lagrangian_open_volumes(ASV, SB, CUT, VE, phi, V, M, rho, p, q, de_h,
+                                  np.array([1, 1, 0]), np.array([2, 2, 1]), zs, rho_ref)
+    assert bad == (4 if inverted else -1)
+    if not inverted:
+        assert V[4] == 1e-9
