@@ -42,11 +42,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
+from typing import TYPE_CHECKING
 
-from orchestrator.coupling.operators import Operators
+import numpy as np
+
+if TYPE_CHECKING:  # (scipy is imported where it is used: `immerse check` reads CONDITIONS, ALPHA, BETA
+    # through the case schema and should not pay scipy's ~0.25 s import)
+    import scipy.sparse as sp
+
+    from orchestrator.coupling.operators import Operators
 
 CONDITIONS = ("tied", "slip")
 ALPHA = 1.0e3
@@ -114,6 +118,7 @@ class Solution:
 
 
 def _canonical(m) -> sp.csr_matrix:
+    import scipy.sparse as sp
     m = sp.csr_matrix(m)
     m.sum_duplicates()
     m.eliminate_zeros()
@@ -165,6 +170,7 @@ def material_operators(ops: Operators, m_b, m_f) -> MaterialOperators:
     a zero relative velocity; each rescaled weight stays <= A_e, so a zone whose material nodes carry
     little weight does not blow up.  A zone with no material node at all is left out (λ_e = 0): a
     surface in void has nothing to be tied to."""
+    import scipy.sparse as sp
     m_b = np.asarray(m_b, dtype=float)
     m_f = np.asarray(m_f, dtype=float)
     touched_f = check_masses(ops, m_b, m_f)
@@ -190,6 +196,7 @@ def assemble(ops: Operators, m_b, m_f, dt: float, condition: str = "tied", alpha
     m_b (nb,) lumped background masses on ops.bnodes; m_f (ns,) lumped surface-node masses.
     Void background nodes are left out (`material_operators`).  1/α = 0 (alpha=inf) and β = 0 give
     the unstabilised H."""
+    import scipy.sparse as sp
     if condition not in CONDITIONS:
         raise ValueError(f"condition = {condition!r}: must be one of {', '.join(CONDITIONS)}")
     if not (dt > 0.0 and np.isfinite(dt)):
@@ -219,6 +226,7 @@ def assemble(ops: Operators, m_b, m_f, dt: float, condition: str = "tied", alpha
 def jump_matrix(pairs: np.ndarray, rows: np.ndarray, scale: np.ndarray, beta: float) -> sp.csr_matrix:
     """J = β Σ_{pairs} sqrt(s_e s_e') (δ_e - δ_e')(δ_e - δ_e')^T over the pairs whose two zones are
     both in the system (`rows`: rows of ops kept, `scale`: s_e per kept row)."""
+    import scipy.sparse as sp
     n = rows.size
     local = np.full(int(rows.max()) + 1 if n else 0, -1, dtype=np.int64)
     local[rows] = np.arange(n)
@@ -351,6 +359,8 @@ def solve_system(ops: Operators, system: System, v_b, v_f, warm=None, rtol: floa
 def condition_number(H) -> float:
     """λ_max/λ_min of the SPD matrix H: dense eigenvalues up to 2000 rows, else the two extremal
     eigenvalues by Lanczos (largest directly, smallest by shift-invert about 0)."""
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
     n = H.shape[0]
     if n == 0:
         return 1.0

@@ -16,12 +16,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
 import numpy as np
 
 from orchestrator.coupling import solve as S
-from orchestrator.coupling.operators import Operators
+
+if TYPE_CHECKING:
+    from orchestrator.coupling.operators import Operators
 
 METHODS: dict[str, type["CouplingMethod"]] = {}
 
