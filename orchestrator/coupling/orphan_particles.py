@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from numba import njit
 
 DENSITY_RATIO = 0.1
 """Tie an orphan only where the background near it is at least this fraction of the particle's
@@ -51,43 +52,59 @@ class Orphans:
         return int(self.index.size)
 
 
-def _blocked(zone: np.ndarray, coverage) -> np.ndarray:
-    """Whether each zone id has a blocked fraction > 0: listed with one (``coverage.zones``) or inside
-    a run of zones covered whole."""
-    z = np.asarray(coverage.zones, dtype=np.int64)
-    if z.size:
-        total = np.asarray(coverage.total if coverage.total is not None else coverage.fractions).reshape(z.size, -1)
-        z = z[total.max(axis=1) > 0.0]
-    pos = np.searchsorted(z, zone)
-    hit = pos < z.size
-    hit[hit] = z[pos[hit]] == zone[hit]
-    start = np.asarray(coverage.run_start, dtype=np.int64)
-    if start.size:
-        order = np.argsort(start, kind="stable")
-        start, length = start[order], np.asarray(coverage.run_length, dtype=np.int64)[order]
-        k = np.searchsorted(start, zone, side="right") - 1
-        ok = k >= 0
-        ok[ok] = zone[ok] < start[k[ok]] + length[k[ok]]
-        hit |= ok
-    return hit
+@njit(cache=True)
+def _outside_kernel(x, lower, upper, h, cells, zones, total, run_start, run_length, mark):
+    """(n,) True for each particle inside the grid whose zone has no blocked fraction: the zones with
+    one (``zones`` with ``total`` > 0, and the runs covered whole) are marked in ``mark`` (zeros,
+    one per zone; left zeroed again), then each particle looks its zone up."""
+    n, dim = x.shape
+    for k in range(zones.size):
+        if total[k] > 0.0:
+            mark[zones[k]] = 1
+    for r in range(run_start.size):
+        for z in range(run_start[r], run_start[r] + run_length[r]):
+            mark[z] = 1
+    out = np.zeros(n, np.bool_)
+    for p in range(n):
+        zone, stride, inside = 0, 1, True
+        for d in range(dim):
+            if not (x[p, d] >= lower[d] and x[p, d] <= upper[d]):
+                inside = False
+                break
+            i = min(int((x[p, d] - lower[d]) / h[d]), cells[d] - 1)
+            zone += i * stride
+            stride *= cells[d]
+        out[p] = inside and mark[zone] == 0
+    for k in range(zones.size):
+        mark[zones[k]] = 0
+    for r in range(run_start.size):
+        for z in range(run_start[r], run_start[r] + run_length[r]):
+            mark[z] = 0
+    return out
 
 
 def find_orphans(grid, x: np.ndarray, coverage) -> Orphans:
     """The particles at ``x`` (n, dim) inside the grid whose zone no body blocks (``coverage``:
-    geometry.Coverage of the reconstructed surface), with their zones' corner nodes and weights."""
-    x = np.asarray(x, dtype=np.float64).reshape(-1, grid.dim)
-    inside = np.all((x >= grid.lower) & (x <= grid.upper), axis=1)
-    idx = np.flatnonzero(inside)
+    geometry.Coverage of the reconstructed surface), with their zones' corner nodes and weights.
+    (One kernel pass: the numpy form of the lookup cost half the surface reconstruction's time on
+    the 2-D dam break's 4k particles.)"""
+    x = np.ascontiguousarray(x, dtype=np.float64).reshape(-1, grid.dim)
+    zones = np.ascontiguousarray(coverage.zones, dtype=np.int64)
+    total = coverage.total if coverage.total is not None else coverage.fractions
+    total = np.ascontiguousarray(np.asarray(total, dtype=np.float64).reshape(zones.size, -1).max(axis=1)
+                                 if zones.size else np.zeros(0))
+    mark = np.zeros(grid.n_zones, np.uint8)
+    idx = np.flatnonzero(_outside_kernel(x, np.asarray(grid.lower), np.asarray(grid.upper), np.asarray(grid.h),
+                                         np.asarray(grid.cells), zones, total,
+                                         np.ascontiguousarray(coverage.run_start, dtype=np.int64),
+                                         np.ascontiguousarray(coverage.run_length, dtype=np.int64), mark))
     s = (x[idx] - grid.lower) / grid.h
     ijk = np.minimum(np.floor(s).astype(np.int64), grid.cells - 1)
-    zone = grid.zone_ids(ijk)
-    keep = ~_blocked(zone, coverage)
-    idx, s, ijk, zone = idx[keep], s[keep], ijk[keep], zone[keep]
     xi = s - ijk                                                   # (no, dim) in [0, 1]
     c = np.arange(2 ** grid.dim)
     bits = (c[:, None] >> np.arange(grid.dim)[None, :]) & 1        # (2^dim, dim): grid.zone_nodes' order
     w = np.prod(np.where(bits[None, :, :] == 1, xi[:, None, :], 1.0 - xi[:, None, :]), axis=2)
-    return Orphans(idx, grid.zone_nodes(zone).reshape(idx.size, c.size), w)
+    return Orphans(idx, grid.zone_nodes(grid.zone_ids(ijk)).reshape(idx.size, c.size), w)
 
 
 def tie(orphans: Orphans, cols: np.ndarray, u_p: np.ndarray, m_p: np.ndarray, rho_p: np.ndarray,
