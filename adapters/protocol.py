@@ -139,6 +139,38 @@ MPI_ERROR = "MPI error (a rank it exchanges with may be gone)"
 halo exchange was killed), so the launcher names a rank that died silently before it as the cause."""
 
 
+GONE = "gone at this report: "
+"""In a failed MPI call's report, before the names of the job's processes (this host's pid records)
+that had already ended when the rank reported: the neighbour whose death failed the call, named
+while the others still run (the launcher may wake after MPI's abort took them all down)."""
+
+
+def gone_processes(out_dir: Path) -> list[str]:
+    """'role rank N' of every recorded process of the job on this host that has ended (or is a
+    zombie its parent has not reaped yet); records removed by a clean exit are not listed."""
+    d = run_dir(out_dir) / "pids"
+    gone = []
+    try:
+        records = sorted(d.iterdir(), key=lambda f: f.name)
+    except OSError:
+        return gone
+    for f in records:
+        if not f.name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{f.name}/stat") as st:
+                alive = st.read().rsplit(")", 1)[1].split()[0] != "Z"
+        except (OSError, IndexError):
+            alive = False
+        if not alive:
+            try:
+                role, rank = f.read_text().split()
+            except (OSError, ValueError):
+                continue   # removed meanwhile: a clean exit
+            gone.append(f"{role} rank {rank}")
+    return gone
+
+
 def _is_mpi_error(exc: BaseException) -> bool:
     mpi = sys.modules.get("mpi4py.MPI")
     return mpi is not None and isinstance(exc, mpi.Exception)
@@ -155,7 +187,10 @@ def install_fault_handler(out_dir: Path, role: str, rank: int) -> None:
 
     def hook(exc_type, exc, tb):
         traceback.print_exception(exc_type, exc, tb, file=sys.stderr)
-        prefix = f"{MPI_ERROR}: " if _is_mpi_error(exc) else ""
+        prefix = ""
+        if _is_mpi_error(exc):
+            gone = gone_processes(out_dir)
+            prefix = f"{MPI_ERROR}" + (f" [{GONE}{', '.join(gone)}]" if gone else "") + ": "
         report_failure(out_dir, role, rank, f"{prefix}{exc_type.__name__}: {exc}")
         _abort()
 

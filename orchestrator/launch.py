@@ -152,9 +152,14 @@ def silent_deaths(reports: list[str], died_first: list[str], first_dead: list[st
     """The ranks that died without a report of their own and so caused the others' reports:
     those seen dead before any report (``died_first``), or, when every report is a failed MPI call
     (a neighbour's death seen from this side), those the first wake-up found dead: a rank's peer
-    may write its report microseconds after the death, before the launcher looks (seen in CI)."""
+    may write its report microseconds after the death, before the launcher looks (seen in CI).
+    Those reports name the processes already gone when they were written (protocol.GONE): when the
+    launcher woke only after MPI's abort had taken every rank down, that list is the only record
+    of who died first."""
     if not died_first and reports and all(P.MPI_ERROR in rep for rep in reports):
-        died_first = first_dead
+        named = [name for rep in reports if P.GONE in rep
+                 for name in rep.split(P.GONE, 1)[1].split("]", 1)[0].split(", ")]
+        died_first = list(dict.fromkeys(named)) or first_dead
     return [r for r in died_first if not any(rep.startswith(r + ":") for rep in reports)]
 
 

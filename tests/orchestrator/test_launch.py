@@ -280,7 +280,7 @@ def test_a_silent_death_is_named_first_even_when_its_peers_report_raced_it():
     may do so before the launcher looks (CI saw ale rank 0's report win over ale rank 1's SIGKILL).
     The silent rank found dead at the first wake-up is still named as the cause; a real error
     report (not a failed MPI call) keeps the blame."""
-    from adapters.protocol import MPI_ERROR
+    from adapters.protocol import GONE, MPI_ERROR
     from orchestrator.launch import silent_deaths
 
     mpi_report = f"ale rank 0: {MPI_ERROR}: Exception: See the MPI_ERROR field in MPI_Status"
@@ -290,6 +290,10 @@ def test_a_silent_death_is_named_first_even_when_its_peers_report_raced_it():
     assert silent_deaths([mpi_report], [], ["ale rank 1"]) == ["ale rank 1"]
     # the reporting rank itself is never the silent one
     assert silent_deaths([mpi_report], [], ["ale rank 0", "ale rank 1"]) == ["ale rank 1"]
+    # the launcher woke after MPI's abort took the coupler down too (seen in CI): the report names
+    # who was gone when it was written
+    gone = f"ale rank 0: {MPI_ERROR} [{GONE}ale rank 1]: Exception: See the MPI_ERROR field"
+    assert silent_deaths([gone], [], ["coupler rank 0", "ale rank 1"]) == ["ale rank 1"]
     # a physical failure was reported: the ranks Abort took down after it are not its cause
     physical = "ale rank 0: RuntimeError: zone 17 inverted at step 40, t=1e-3"
     assert silent_deaths([physical], [], ["ale rank 1"]) == []
@@ -310,6 +314,16 @@ def test_a_failed_mpi_call_is_reported_as_one(tmp_path, monkeypatch):
     report = tmp_path / ".run" / "error_ale_0.txt"
     sys.excepthook(MPI.Exception, MPI.Exception(MPI.ERR_OTHER), None)
     assert report.read_text().startswith(f"ale rank 0: {protocol.MPI_ERROR}: Exception: "), report.read_text()
+    # with the job's pid records: a process that has ended is named in the report, a live one not
+    pids = tmp_path / ".run" / "pids"
+    pids.mkdir()
+    done = subprocess.Popen([sys.executable, "-c", "pass"])
+    done.wait()
+    (pids / str(done.pid)).write_text("ale 1\n")
+    (pids / str(os.getpid())).write_text("ale 0\n")
+    sys.excepthook(MPI.Exception, MPI.Exception(MPI.ERR_OTHER), None)
+    assert report.read_text().startswith(f"ale rank 0: {protocol.MPI_ERROR} [{protocol.GONE}ale rank 1]: "), \
+        report.read_text()
     sys.excepthook(RuntimeError, RuntimeError("zone 3 inverted"), None)
     assert report.read_text() == "ale rank 0: RuntimeError: zone 3 inverted\n"
-    assert aborted == [1, 1]
+    assert aborted == [1, 1, 1]
