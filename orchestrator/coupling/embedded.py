@@ -40,7 +40,7 @@ from orchestrator.coupling.grid import Grid
 from orchestrator.coupling.operator_rows import (correction_means, impulse_sums, on_grid_boundary, oscillation,
                                                  row_means, surface_load)
 from orchestrator.coupling.operators import Operators, restrict
-from orchestrator.coupling.orphan_particles import find_orphans, tie
+from orchestrator.coupling.orphan_particles import find_orphans, may_tie, tie
 
 
 @dataclass
@@ -130,6 +130,10 @@ class EmbeddedCoupling:
             self.volume = np.asarray(self.volume, dtype=np.float64).copy()
             self.h = float(surface["smoothing_length"])
             self.n_bodies = 1
+        # particles outside the reconstructed surface are looked for only where some could be tied
+        # (the lightest particle is the easiest to tie)
+        self.find_orphans = bool(self.particles and self.volume.size and may_tie(
+            case["ale"], float(np.min(np.asarray(surface["mass"], dtype=np.float64) / self.volume))))
         self.mass = np.asarray(surface["mass"], dtype=np.float64)
         free = np.asarray(surface["free"]).reshape(-1, self.dim)
         self.free = (free > 0.0).astype(np.float64)
@@ -180,12 +184,14 @@ class EmbeddedCoupling:
         # of particles the reconstruction left out, tied point by point (orphan_particles.py)
         self.nodes = self.ops.bnodes
         self.orphans = None
-        if self.particles:
+        if self.find_orphans:
             orph = find_orphans(self.grid, self.x, cov)
             if orph.size:
                 self.orphans = orph
                 self.nodes = np.union1d(self.ops.bnodes, orph.nodes.ravel())
-        self.constraint_rows = np.searchsorted(self.nodes, self.ops.bnodes)
+        # (no orphans: every node is the constraint's, in its order -- a slice, no copies per step)
+        self.constraint_rows = (np.searchsorted(self.nodes, self.ops.bnodes) if self.orphans is not None
+                                else slice(None))
         return BodyGeometry(cov.zones, total, faces, self.ops.zones, self.nodes, velocity, cov.run_start,
                             cov.run_length)
 
@@ -245,8 +251,11 @@ class EmbeddedCoupling:
             self.state = self.method.new_state()
         self.lambda_oscillation = multiplier_oscillation(self.state.lam, ops.pairs, ops.normal)
         self.lambda_oscillation_max = max(self.lambda_oscillation_max, self.lambda_oscillation)
-        self.imp_b = np.zeros((nn, dim))
-        self.imp_b[self.constraint_rows] = res.impulse_b
+        if self.orphans is None:
+            self.imp_b = res.impulse_b
+        else:
+            self.imp_b = np.zeros((nn, dim))
+            self.imp_b[self.constraint_rows] = res.impulse_b
         imp_f, removed = res.impulse_f, 0.0
         self.tied_orphans = 0
         if self.orphans is not None:

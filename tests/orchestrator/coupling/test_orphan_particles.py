@@ -9,7 +9,7 @@ import pytest
 from orchestrator.case import load_case
 from orchestrator.coupling.embedded import EmbeddedCoupling
 from orchestrator.coupling.grid import Grid
-from orchestrator.coupling.orphan_particles import DENSITY_RATIO, find_orphans, tie
+from orchestrator.coupling.orphan_particles import DENSITY_RATIO, MAX_COMPRESSION, find_orphans, may_tie, tie
 from orchestrator.coupling.particle_operators import particle_interface
 from tests.conftest import CASES
 from tests.orchestrator.coupling.test_particle_operators import _ball
@@ -122,3 +122,18 @@ def test_a_fragment_in_the_target_moves_with_it(tmp_path, density):
     # equal and opposite: the particles' total impulse against the nodes'
     total = imp.sum(axis=0) + imp_b.sum(axis=0)
     assert np.abs(total).max() <= 1e-12 * np.abs(imp).sum()
+
+
+def test_the_lookup_is_skipped_where_no_background_could_tie_a_particle():
+    """Water particles (1000 kg/m^3) in air (1.2) never meet a background of a tenth of their
+    density short of a ~80-fold compression: the coupling does not look for orphans (the embedded
+    dam break). Steel in aluminium does; so does water in air fed by a dense enough inflow."""
+    air = {"regions": [{"material": "air", "density": 1.2, "pressure": 1e5}], "boundaries": {"x_lower": "wall"}}
+    assert not may_tie(air, 1000.0)
+    assert may_tie({"regions": [{"material": "al", "density": 2700.0}]}, 7850.0)
+    dense = DENSITY_RATIO * 1000.0 / MAX_COMPRESSION
+    inflow = dict(air, boundaries={"x_lower": {"inflow": {"density": dense, "velocity": [1.0, 0.0], "pressure": 1e5}}})
+    assert may_tie(inflow, 1000.0) and not may_tie(inflow, 1000.0 * 1.01)
+    # the coupling follows it: the Tate case's rod in aluminium looks
+    ec, _ = _tate_coupling(None, [[0.005, 0.02]])
+    assert ec.find_orphans
