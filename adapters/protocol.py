@@ -145,6 +145,22 @@ that had already ended when the rank reported: the neighbour whose death failed 
 while the others still run (the launcher may wake after MPI's abort took them all down)."""
 
 
+def proc_stat(pid: int) -> tuple[int, str] | None:
+    """(parent pid, state letter) of a process from /proc, None if it is gone."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return int(fields[1]), fields[0]
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def is_running(pid: int) -> bool:
+    """Alive and not a zombie (a zombie has ended; only its exit status waits to be collected)."""
+    st = proc_stat(pid)
+    return st is not None and st[1] not in "ZX"
+
+
 def gone_processes(out_dir: Path) -> list[str]:
     """'role rank N' of every recorded process of the job on this host that has ended (or is a
     zombie its parent has not reaped yet); records removed by a clean exit are not listed."""
@@ -155,14 +171,7 @@ def gone_processes(out_dir: Path) -> list[str]:
     except OSError:
         return gone
     for f in records:
-        if not f.name.isdigit():
-            continue
-        try:
-            with open(f"/proc/{f.name}/stat") as st:
-                alive = st.read().rsplit(")", 1)[1].split()[0] != "Z"
-        except (OSError, IndexError):
-            alive = False
-        if not alive:
+        if f.name.isdigit() and not is_running(int(f.name)):
             try:
                 role, rank = f.read_text().split()
             except (OSError, ValueError):

@@ -170,16 +170,6 @@ def _error_reports(out: Path) -> list[str]:
 
 
 # ---- the process table -----------------------------------------------------------------------------
-def _proc_stat(pid: int) -> tuple[int, str] | None:
-    """(parent pid, state letter) of a process from /proc, None if it is gone."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            fields = f.read().rsplit(")", 1)[1].split()
-        return int(fields[1]), fields[0]
-    except (OSError, IndexError, ValueError):
-        return None
-
-
 def descendants(pid: int) -> set[int]:
     """Every live process below ``pid`` in the process table. hydra's proxies and the ranks each
     start a session of their own (setsid), so a process group or session signal from the launcher
@@ -187,7 +177,7 @@ def descendants(pid: int) -> set[int]:
     children: dict[int, list[int]] = {}
     for name in os.listdir("/proc"):
         if name.isdigit():
-            st = _proc_stat(int(name))
+            st = P.proc_stat(int(name))
             if st:
                 children.setdefault(st[0], []).append(int(name))
     found, todo = set(), [pid]
@@ -197,12 +187,6 @@ def descendants(pid: int) -> set[int]:
                 found.add(c)
                 todo.append(c)
     return found
-
-
-def is_running(pid: int) -> bool:
-    """Alive and not a zombie (a zombie has ended; only its exit status waits to be collected)."""
-    st = _proc_stat(pid)
-    return st is not None and st[1] not in "ZX"
 
 
 def _runs_job(pid: int, out: Path) -> bool:
@@ -242,9 +226,9 @@ def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
                 except OSError:
                     pass
             deadline = time.monotonic() + wait_s
-            while any(is_running(p) for p in fds) and time.monotonic() < deadline:
+            while any(P.is_running(p) for p in fds) and time.monotonic() < deadline:
                 time.sleep(0.02)
-            if not any(is_running(p) for p in fds):
+            if not any(P.is_running(p) for p in fds):
                 break
     finally:
         for fd in fds.values():
@@ -346,7 +330,7 @@ def _ask_coupler_where(watch: RankWatch, timeout: float = 1.0) -> None:
     except OSError:
         return
     deadline = time.monotonic() + timeout
-    while is_running(pid) and time.monotonic() < deadline:
+    while P.is_running(pid) and time.monotonic() < deadline:
         time.sleep(0.01)
 
 

@@ -15,6 +15,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from orchestrator.coupling.grid import corner_weights
 from orchestrator.coupling.operators import Operators
 from orchestrator.coupling.solve import ALPHA, BETA, assemble, condition_number
 
@@ -54,14 +55,6 @@ def _zone_id(idx: np.ndarray, n: int) -> np.ndarray:
     return sum(idx[:, a] * n**a for a in range(idx.shape[1]))
 
 
-def _multilinear(xi: np.ndarray) -> np.ndarray:
-    """Shape functions of the 2**dim corners at local coordinates xi (nq, dim) in [0, 1]."""
-    dim = xi.shape[1]
-    c = np.arange(2**dim)
-    off = np.stack([(c >> a) & 1 for a in range(dim)], axis=1)
-    return np.prod(np.where(off[None] == 1, xi[:, None, :], 1.0 - xi[:, None, :]), axis=2)
-
-
 def _pieces(lat: Lattice, zone, facet, area, normal, qp, qw, qf, nq_per_piece):
     """Pieces sorted by (zone, facet, position) with the background shape functions at the points."""
     order = np.lexsort((np.arange(zone.size), facet, zone))
@@ -74,7 +67,7 @@ def _pieces(lat: Lattice, zone, facet, area, normal, qp, qw, qf, nq_per_piece):
     centroid = np.stack([np.bincount(qpiece, weights=qw * qp[:, a]) for a in range(lat.dim)], axis=1) / area[:, None]
     return SimpleNamespace(zone=zone, body=np.zeros(zone.size, np.int64), facet=facet, area=area,
                            normal=np.repeat(normal[None, :], zone.size, axis=0), centroid=centroid, qp=qp,
-                           qw=qw, qpiece=qpiece, qf=qf, qb=_multilinear(np.clip(xi, 0.0, 1.0)))
+                           qw=qw, qpiece=qpiece, qf=qf, qb=corner_weights(np.clip(xi, 0.0, 1.0)))
 
 
 def straight_cut(dim: int, h: float, rng: np.random.Generator):

@@ -27,6 +27,15 @@ from dataclasses import dataclass
 import numpy as np
 
 
+def corner_weights(xi: np.ndarray) -> np.ndarray:
+    """(n, 2**dim) the bilinear / trilinear shape functions of a zone's corners (the corner order
+    above) at local coordinates ``xi`` (n, dim) in [0, 1]."""
+    dim = xi.shape[1]
+    c = np.arange(2 ** dim)
+    off = (c[:, None] >> np.arange(dim)[None, :]) & 1          # (2**dim, dim)
+    return np.prod(np.where(off[None] == 1, xi[:, None, :], 1.0 - xi[:, None, :]), axis=2)
+
+
 SNAP_ULPS = 8
 """Node coordinates within this many ulps (of the grid's coordinate scale) of a grid plane lie on it
 (``Grid.snap``): a body face typed at a plane's value in other digits is still on the plane."""

@@ -34,6 +34,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numba import njit
 
+from orchestrator.coupling.grid import corner_weights
+from orchestrator.coupling.particle_operators import _constants
+
 DENSITY_RATIO = 0.1
 """Tie an orphan only where the background near it is at least this fraction of the particle's
 density (module docstring): below it the background barely slows a fragment anyway."""
@@ -101,13 +104,9 @@ def _outside_kernel(x, lower, upper, h, cells, zones, total, run_start, run_leng
 
 
 @functools.lru_cache(maxsize=16)
-def _grid_arrays(grid):
-    """Per grid (grid.Grid hashes by identity): the kernel's float/int arrays and its zone marks
-    (zeros between calls), made once: the coupler asks every step."""
-    return (np.array(grid.lower, dtype=np.float64), np.array(grid.upper, dtype=np.float64),
-            np.array(grid.h, dtype=np.float64), np.array(grid.cells, dtype=np.int64),
-            np.zeros(grid.n_zones, np.uint8))
-
+def _zone_marks(grid):
+    """Per grid (grid.Grid hashes by identity): the kernel's zone marks, zeros between calls."""
+    return np.zeros(grid.n_zones, np.uint8)
 
 
 def find_orphans(grid, x: np.ndarray, coverage) -> Orphans:
@@ -121,19 +120,18 @@ def find_orphans(grid, x: np.ndarray, coverage) -> Orphans:
     total = np.asarray(total, dtype=np.float64)
     if total.ndim != 1:   # (per body: any of them)
         total = total.reshape(zones.size, -1).max(axis=1, initial=0.0)
-    lower, upper, h, cells, mark = _grid_arrays(grid)
-    idx = np.flatnonzero(_outside_kernel(x, lower, upper, h, cells, zones, np.ascontiguousarray(total),
+    k = _constants(grid)   # (the grid's arrays as the particle kernels take them, made once)
+    lower, h, cells = k["lower"], k["zone_h"], k["cells"]
+    idx = np.flatnonzero(_outside_kernel(x, lower, k["upper"], h, cells, zones, np.ascontiguousarray(total),
                                          np.ascontiguousarray(coverage.run_start, dtype=np.int64),
-                                         np.ascontiguousarray(coverage.run_length, dtype=np.int64), mark))
-    c = np.arange(2 ** grid.dim)
+                                         np.ascontiguousarray(coverage.run_length, dtype=np.int64),
+                                         _zone_marks(grid)))
+    nc = 2 ** grid.dim
     if idx.size == 0:
-        return Orphans(idx, np.zeros((0, c.size), np.int64), np.zeros((0, c.size)))
+        return Orphans(idx, np.zeros((0, nc), np.int64), np.zeros((0, nc)))
     s = (x[idx] - lower) / h
     ijk = np.minimum(np.floor(s).astype(np.int64), cells - 1)
-    xi = s - ijk                                                   # (no, dim) in [0, 1]
-    bits = (c[:, None] >> np.arange(grid.dim)[None, :]) & 1        # (2^dim, dim): grid.zone_nodes' order
-    w = np.prod(np.where(bits[None, :, :] == 1, xi[:, None, :], 1.0 - xi[:, None, :]), axis=2)
-    return Orphans(idx, grid.zone_nodes(grid.zone_ids(ijk)).reshape(idx.size, c.size), w)
+    return Orphans(idx, grid.zone_nodes(grid.zone_ids(ijk)).reshape(idx.size, nc), corner_weights(s - ijk))
 
 
 def tie(orphans: Orphans, cols: np.ndarray, u_p: np.ndarray, m_p: np.ndarray, rho_p: np.ndarray,

@@ -41,7 +41,6 @@ H_ee' = Hu_ee' n_eÂ·n_e' (Hu = the unstabilised scalar operator) and the same CÌ
 from __future__ import annotations
 
 from dataclasses import dataclass
-
 from typing import TYPE_CHECKING
 
 import numpy as np
