@@ -39,8 +39,11 @@ demo: venv
 
 test: test-serial test-mpi
 
+# the serial suite on one pytest-xdist worker per core (`-n auto`; tests/conftest.py keeps a module's
+# shared fixture and the Slurm tests on one worker): most tests run solver jobs of 2-5 processes, so
+# two workers on 2 cores oversubscribe, and the launcher lets MPICH's waiting ranks sleep then
 test-serial: venv
-	$(PY) -m pytest -q -p no:cacheprovider --durations=25 tests
+	$(PY) -m pytest -q -p no:cacheprovider -n auto --durations=25 tests
 
 test-mpi: venv
 	$(MPIEXEC) -n 2 $(PY) -m pytest -q -p no:cacheprovider -m mpi tests

@@ -1,8 +1,11 @@
-"""Shared fixtures. The suite runs serially (`pytest tests`) and its `mpi` subset under
+"""Shared fixtures. The suite runs as one process per test (`pytest tests`, on xdist workers in
+`make test`: `pytest -n auto tests`) and its `mpi` subset under
 `mpiexec -n 2 python -m pytest -m mpi tests` (each rank runs the same tests on COMM_WORLD)."""
 from __future__ import annotations
 
+import importlib.util
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -45,3 +48,34 @@ def pytest_configure(config):
 
         rank = os.environ.get("PMI_RANK", "0")
         config.option.basetemp = Path(tempfile.gettempdir()) / f"immerse-pytest-mpi-{os.getuid()}-rank{rank}"
+
+
+SHARED_FIXTURE = re.compile(r"""@pytest\.fixture\(\s*scope\s*=\s*["'](?:module|class|package|session)["']""")
+
+
+def _unit_of_work(nodeid: str) -> str:
+    """What one xdist worker runs as a unit: the Slurm tests together (each starts a private cluster as
+    root: one at a time), a module declaring a shared (module/class/...-scoped) fixture as a whole
+    (else each worker would build it: some are a minute of solver runs), every other test alone."""
+    module = nodeid.split("::", 1)[0]
+    if "slurm" in module:
+        return "slurm"
+    try:
+        if SHARED_FIXTURE.search((REPO / module).read_text()):
+            return module
+    except OSError:
+        pass
+    return nodeid
+
+
+if importlib.util.find_spec("xdist") is not None:
+    def pytest_xdist_make_scheduler(config, log):
+        """`make test` runs the serial suite on pytest-xdist workers (`-n auto`), scheduled by
+        `_unit_of_work` (xdist's own --dist loadgroup marks do not reach pytest 9's test ids)."""
+        from xdist.scheduler import LoadScopeScheduling
+
+        class Units(LoadScopeScheduling):
+            def _split_scope(self, nodeid: str) -> str:
+                return _unit_of_work(nodeid)
+
+        return Units(config, log)

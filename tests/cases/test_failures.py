@@ -50,7 +50,7 @@ case = "@CASES/toro123"
 [[series]]
 name = "Taylor bar, impact speed"
 case = "@CASES/taylor_bar"
-set = { "run.end_time" = 2.0e-5, "run.output_interval" = 1.0e-5 }
+set = { "run.end_time" = 1.0e-5, "run.output_interval" = 0.5e-5 }
 [series.axes.push]
 "lagrange.bodies[0].initial_velocity" = [[0.0, 0.0, -287.0], [0.0, 0.0, -5000.0]]
 [[series]]

@@ -255,6 +255,40 @@ def test_launcher_killed(tmp_path):
     assert left == [], left
 
 
+def _environ(pid):
+    with open(f"/proc/{pid}/environ", "rb") as f:
+        return dict(v.split(b"=", 1) for v in f.read().split(b"\0") if b"=" in v)
+
+
+def test_waiting_ranks_sleep_only_when_the_processes_outnumber_the_cores(tmp_path, monkeypatch):
+    """MPICH's heavy yield (a waiting rank sleeps after its idle polls) is set for the job's ranks when
+    coupler + ranks exceed the launcher's cores, never otherwise."""
+    from orchestrator import launch, resources
+
+    make_case, ranks = CASES["lagrange"]
+    case, out = make_case(tmp_path), tmp_path / "out"
+    proc, job = start_run(case, out, ranks, 2)
+    try:
+        envs = [_environ(pid) for pid in _pids(out).values()]
+        proc.send_signal(signal.SIGTERM)
+        proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        kill_survivors(job)
+    want = b"1" if 3 > len(os.sched_getaffinity(0)) else None
+    assert len(envs) == 3 and all(e.get(b"MPIR_CVAR_ENABLE_HEAVY_YIELD") == want for e in envs), want
+
+    from orchestrator.case import load_case
+
+    loaded = load_case(case)
+    for cores, expected in ((2, True), (3, False), (64, False)):
+        monkeypatch.setattr(resources, "machine_cores", lambda: cores)
+        assert launch.oversubscribed(loaded, {"lagrange": 2}) is expected, cores
+    monkeypatch.setattr(resources, "machine_cores", lambda: 2)
+    assert launch.oversubscribed(loaded, {"lagrange": 1, "ale": 7}) is False  # ale is not in the case
+
+
 def test_report_starts_its_own_line_after_a_half_forwarded_one(tmp_path, monkeypatch, capfd):
     """mpiexec ended while forwarding a rank's output leaves half a line on stderr; the launcher's
     report still begins a line of its own (a job standing in for mpiexec writes half a line and a
