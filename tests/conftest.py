@@ -3,6 +3,7 @@
 `mpiexec -n 2 python -m pytest -m mpi tests` (each rank runs the same tests on COMM_WORLD)."""
 from __future__ import annotations
 
+import functools
 import importlib.util
 import os
 import re
@@ -60,12 +61,16 @@ def _unit_of_work(nodeid: str) -> str:
     module = nodeid.split("::", 1)[0]
     if "slurm" in module:
         return "slurm"
+    return module if _declares_shared_fixture(module) else nodeid
+
+
+@functools.cache
+def _declares_shared_fixture(module: str) -> bool:
+    """Read once per module (the scheduler asks for every test id)."""
     try:
-        if SHARED_FIXTURE.search((REPO / module).read_text()):
-            return module
+        return SHARED_FIXTURE.search((REPO / module).read_text()) is not None
     except OSError:
-        pass
-    return nodeid
+        return False
 
 
 if importlib.util.find_spec("xdist") is not None:
