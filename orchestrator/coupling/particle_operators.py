@@ -441,17 +441,24 @@ def _shepard_at(qp, qrow, zones, x, vol, h, norm, planes, cells):
 def _particle_rows(nrows, qrow, qw, sptr, sidx, sval, near):
     """B^f's CSR: row r = sum over its points q (in order) of qw_q S_q (a lone point, ``near[q] >= 0``:
     weight 1 on that particle) -- scipy's ``Z @ S`` (csr_matmat) term for term: each column's sum
-    accumulated over the points in order, columns sorted, exact zero sums dropped."""
+    accumulated over the points in order, columns sorted, exact zero sums dropped.  (The sums in a
+    dense accumulator over the particles, added in that same order: the same bits as sorting every
+    row's terms, which took ~25 % of the 3-D interface kernel.)"""
     nq = qrow.size
     cap = 0
+    ncol = 0
     for q in range(nq):
         if qrow[q] >= 0:
             cap += max(sptr[q + 1] - sptr[q], 1)
+        ncol = max(ncol, near[q] + 1)
+    for t in range(sidx.size):
+        ncol = max(ncol, sidx[t] + 1)
     fptr = np.zeros(nrows + 1, np.int64)
     fcol = np.empty(cap, np.int64)
     fval = np.empty(cap)
-    cols = np.empty(cap, np.int64)
-    vals = np.empty(cap)
+    acc = np.zeros(ncol)
+    seen = np.zeros(ncol, np.uint8)
+    touched = np.empty(min(cap, ncol), np.int64)
     nf = 0
     q = 0
     for r in range(nrows):
@@ -461,26 +468,29 @@ def _particle_rows(nrows, qrow, qw, sptr, sidx, sval, near):
         while q < nq and qrow[q] == r:
             if sptr[q + 1] > sptr[q]:
                 for t in range(sptr[q], sptr[q + 1]):
-                    cols[m] = sidx[t]
-                    vals[m] = qw[q] * sval[t]
-                    m += 1
+                    c = sidx[t]
+                    if seen[c] == 0:
+                        seen[c] = 1
+                        touched[m] = c
+                        m += 1
+                    acc[c] += qw[q] * sval[t]
             elif near[q] >= 0:
-                cols[m] = near[q]
-                vals[m] = qw[q] * 1.0
-                m += 1
+                c = near[q]
+                if seen[c] == 0:
+                    seen[c] = 1
+                    touched[m] = c
+                    m += 1
+                acc[c] += qw[q] * 1.0
             q += 1
-        order = np.argsort(cols[:m], kind="mergesort")
-        t = 0
-        while t < m:
-            c = cols[order[t]]
-            s = 0.0
-            while t < m and cols[order[t]] == c:
-                s += vals[order[t]]
-                t += 1
-            if s != 0.0:
+        cols = np.sort(touched[:m])
+        for t in range(m):
+            c = cols[t]
+            if acc[c] != 0.0:
                 fcol[nf] = c
-                fval[nf] = s
+                fval[nf] = acc[c]
                 nf += 1
+            acc[c] = 0.0
+            seen[c] = 0
         fptr[r + 1] = nf
     return fptr, fcol[:nf], fval[:nf]
 

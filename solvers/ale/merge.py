@@ -138,15 +138,11 @@ def group_components(comm, edges, gids, masses):
     (ids, component = the smallest id in it), and the component's mass from the groups' masses
     ``masses`` (of the groups ``gids`` whose target is real here), summed in group-id order: the
     same bits on every rank."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     e = _allgather(comm, edges.astype(np.float64)).reshape(-1, 2).astype(np.int64)
     gm = _allgather(comm, np.column_stack([gids.astype(np.float64), masses])).reshape(-1, 2)
     ids = np.unique(np.concatenate([e.ravel(), gm[:, 0].astype(np.int64)]))
     a, b = np.searchsorted(ids, e[:, 0]), np.searchsorted(ids, e[:, 1])
-    graph = coo_matrix((np.ones(a.size), (a, b)), shape=(ids.size, ids.size))
-    _, label = connected_components(graph, directed=False)
+    label = _components(ids.size, a, b)
     first = np.full(label.max() + 1 if label.size else 0, np.iinfo(np.int64).max, np.int64)
     np.minimum.at(first, label, ids)
     comp = first[label]
@@ -155,6 +151,40 @@ def group_components(comm, edges, gids, masses):
     cm = np.zeros(first.size)
     np.add.at(cm, label[np.searchsorted(ids, gid_m)], gm[keep, 1])  # (unbuffered: in id order)
     return ids, comp, cm[label]
+
+
+@njit(cache=True)
+def _components(n, a, b):
+    """Connected components of the undirected graph on n vertices with edges (a[t], b[t]): each
+    vertex's component numbered 0, 1, ... in the order of its smallest vertex (union-find with path
+    halving; a few links per step, where scipy's csgraph spent ~1 ms building its matrix)."""
+    parent = np.arange(n)
+    for t in range(a.size):
+        x = a[t]
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        y = b[t]
+        while parent[y] != y:
+            parent[y] = parent[parent[y]]
+            y = parent[y]
+        if x < y:
+            parent[y] = x
+        elif y < x:
+            parent[x] = y
+    label = np.empty(n, np.int64)
+    count = 0
+    for i in range(n):  # a root is its component's smallest vertex: met before the others
+        r = i
+        while parent[r] != r:
+            r = parent[r]
+        parent[i] = r
+        if r == i:
+            label[i] = count
+            count += 1
+        else:
+            label[i] = label[r]
+    return label
 
 
 def _allgather(comm, a) -> np.ndarray:
@@ -394,31 +424,39 @@ def member_materials(members, code, phi, VE, Vg, Vk, Mk, Ek, de, mcode, mpar, zs
     volume changed by O(1) of itself within the step), a stiff trace expanded with its zone would
     have no valid state.  Where that has no solution (void in the group), the carried volumes."""
     nm = vol.shape[1]
-    comp = np.empty(nm)
     vraw = np.empty(nm)
     mk = np.empty(nm)
     ek = np.empty(nm)
+    # one composition per group (its members share it): row slot[t] of comps
+    slot = np.full(vol.shape[0], -1, np.int64)
+    comps = np.empty((members.size, nm))
+    used = 0
     for a in range(members.size):
         z = members[a]
         t = z if code[z] < 0.0 else _target(z, code, zs)
         vz = phi[z] * VE[z]
         w = vz / Vg[t]
-        vs = 0.0
-        for m in range(nm):
-            vs += Vk[t, m]
-            vraw[m] = Vk[t, m]
-            mk[m] = Mk[t, m]
-            ek[m] = Ek[t, m] / Mk[t, m] if Mk[t, m] > 0.0 else 0.0
-        # (the start: the pressure of the material with the most volume, from the group's totals
-        # alone, which every rank holds bit for bit, so any number of ranks gives the same bits)
-        big = 0
-        for m in range(nm):
-            if vraw[m] > vraw[big]:
-                big = m
-        p0 = pressure(mcode[big], mpar[big], mk[big] / vraw[big], ek[big]) if mk[big] > 0.0 else 0.0
-        if not equilibrium_volumes(mcode, mpar, mk, ek, vraw, Vg[t], p0, comp):
+        if slot[t] < 0:
+            slot[t] = used
+            comp = comps[used]
+            used += 1
+            vs = 0.0
             for m in range(nm):
-                comp[m] = Vk[t, m] * (Vg[t] / vs) if vs > 0.0 else 0.0
+                vs += Vk[t, m]
+                vraw[m] = Vk[t, m]
+                mk[m] = Mk[t, m]
+                ek[m] = Ek[t, m] / Mk[t, m] if Mk[t, m] > 0.0 else 0.0
+            # (the start: the pressure of the material with the most volume, from the group's totals
+            # alone, which every rank holds bit for bit, so any number of ranks gives the same bits)
+            big = 0
+            for m in range(nm):
+                if vraw[m] > vraw[big]:
+                    big = m
+            p0 = pressure(mcode[big], mpar[big], mk[big] / vraw[big], ek[big]) if mk[big] > 0.0 else 0.0
+            if not equilibrium_volumes(mcode, mpar, mk, ek, vraw, Vg[t], p0, comp):
+                for m in range(nm):
+                    comp[m] = Vk[t, m] * (Vg[t] / vs) if vs > 0.0 else 0.0
+        comp = comps[slot[t]]
         for m in range(nm):
             vol[z, m] = comp[m] * w
             mass[z, m] = Mk[t, m] * w

@@ -502,13 +502,23 @@ def equilibrium_volumes(code, par, mass, ener, vraw, V, P0, out):
     decreasing function of P, solved by Newton safeguarded by bisection from P0).  Used where a zone's material volumes carry no information (the small cut zones a
     merge joins: their open volume changed by O(1) of itself within the step, mass and energy are
     conserved, the volumes are not); ``vraw``: their volumes as carried (first density guesses).
-    Returns False (out untouched) with void present or when no pressure fits every material."""
+    Returns False (out untouched) with void present or when no pressure fits every material.  One
+    material with mass fills V whatever its state: True at once (most merge groups hold one)."""
     nm = mass.shape[0]
     rk = np.empty(nm)
+    present = 0
+    only = -1
     for m in range(nm):
         if code[m] == VOID and vraw[m] > 0.0:
             return False
         rk[m] = mass[m] / vraw[m] if vraw[m] > 0.0 else 1.0
+        if mass[m] > 0.0 and code[m] != VOID:
+            present += 1
+            only = m
+    if present == 1:  # one material fills V at whatever pressure its own density gives: no solve
+        for m in range(nm):
+            out[m] = V if m == only else 0.0
+        return True
     p_lo = -math.inf
     p_hi = math.inf
     P = P0 if math.isfinite(P0) else 0.0

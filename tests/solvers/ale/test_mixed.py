@@ -484,6 +484,11 @@ def test_equilibrium_volumes_give_one_pressure_and_fill_the_volume():
     code_v = code.copy()
     code_v[2] = VOID
     assert not equilibrium_volumes(code_v, par, np.array([2.0, 0.012, 0.0]), ener, vraw, V, 0.0, out)
+    # one material with mass (the others none): it fills V exactly, at any energy, with no solve
+    # (an energy no density brings to a pressure included: the group's volume is still all its own)
+    for e in (ener, np.array([7.9e5, -1.0, 0.0])):
+        assert equilibrium_volumes(code, par, np.array([0.0, 0.012, 0.0]), e, vraw, V, 0.0, out)
+        assert out.tolist() == [0.0, V, 0.0]
 
 
 @pytest.mark.parametrize("fraction", [5e-7, 2e-6])
