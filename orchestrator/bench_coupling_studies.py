@@ -28,7 +28,10 @@ charts written beside it.
     zones), the plate 2 x 12 x 4 .. 8 x 48 x 16 elements (1.6, 3.2, 6.4 zones thick); the tip node
     at the top of the plate's mid-plane on the symmetry plane.  The same rows and chart as the 2-D
     study (plate_convergence_3d.png).
-    --quick: the cropped tube x in [0.4, 0.9] m, the shock starting at 0.5 m, to 0.7 ms every 0.05 ms.
+    --quick: the cropped tube x in [0.4, 0.9] m, y in [0, 0.45] m, the shock starting at 0.5 m, to
+    0.7 ms every 0.05 ms (the wave the tip sends up reaches y = 0.45 m at ~0.6 ms and is back at the
+    tip after 1 ms: the tip's history within 1.1e-4 mm of the one to y = 0.6 m, measured, at 3/4 of
+    the zones).
 
 `immerse bench penalty_sweep`
     cases/embedded_piston_sod with `method = "penalty"` and `stiffness = k` (Pa/m) over k = 0.1 ..
@@ -380,7 +383,7 @@ def plate3d_text(factor: float, quick: bool, plate_factor: float | None = None) 
     text = (CASES / PLATE3D / "case.toml").read_text()
     pf = factor if plate_factor is None else plate_factor
     h = 0.025 / factor
-    lower, upper, x_shock = (((0.4, 0.0, 0.2), (0.9, 0.6, 0.4), 0.5) if quick
+    lower, upper, x_shock = (((0.4, 0.0, 0.2), (0.9, 0.45, 0.4), 0.5) if quick
                              else ((0.0, 0.0, 0.2), (1.6, 0.6, 0.4), 0.3))
     cells = [(hi - lo) / h for lo, hi in zip(lower, upper)]
     if any(abs(n - round(n)) > 1e-9 for n in cells):

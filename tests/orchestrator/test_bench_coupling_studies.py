@@ -82,17 +82,18 @@ def plate3d(tmp_path_factory):
 
 def test_plate_3d_tip_bends_downstream_and_converges(plate3d):
     """cases/plate_in_shock_3d on its half z >= 0.2 m (the symmetry plane through the plate's middle),
-    cropped tube, to 0.7 ms, zone widths 25, 12.5, 6.25 mm with the plate refined alike (1.6, 3.2, 6.4
+    cropped tube (y up to 0.45 m: the same tip history as to 0.6 m within 1.1e-4 mm, measured), to 0.7
+    ms, zone widths 25, 12.5, 6.25 mm with the plate refined alike (1.6, 3.2, 6.4
     zones thick).  Before the shock's arrival (0.24 ms) the tip moves little: measured at most 5.9 %
     of its final deflection on the coarsest mesh (its shock is smeared over 2-3 zones of 25 mm, which
     reach the plate early), 1.9 and 0.5 % on the others; then downstream (0.31, 0.25, 0.23 mm at 0.7
     ms).  The meshes' differences shrink monotonically: the largest over time 0.062 and 0.021 mm,
     ratio 2.98 (observed order 1.57), asserted > 2 and order > 1; the coupled momentum balance holds
-    to round-off (measured <= 4.4e-16)."""
+    to round-off (measured <= 5.2e-16)."""
     out, doc = plate3d
     assert (out.parent / "plate_convergence_3d.png").read_bytes()[:8] == PNG
     meshes = _rows(doc, "tip_deflection_final", "plate_in_shock_3d")
-    assert [m["params"]["grid_cells"] for m in meshes] == [[20, 24, 8], [40, 48, 16], [80, 96, 32]]
+    assert [m["params"]["grid_cells"] for m in meshes] == [[20, 18, 8], [40, 36, 16], [80, 72, 32]]
     assert [m["params"]["plate_cells"] for m in meshes] == [[2, 12, 4], [4, 24, 8], [8, 48, 16]]
     assert all(m["params"]["tip_node_m"] == pytest.approx([0.62, 0.3, 0.2]) for m in meshes)
     for m in meshes:
