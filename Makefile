@@ -41,12 +41,9 @@ test: test-serial test-mpi
 
 # the serial suite on one pytest-xdist worker per core (`-n auto`; tests/conftest.py keeps a module's
 # shared fixture and the Slurm tests on one worker): most tests run solver jobs of 2-5 processes, so
-# two workers on 2 cores oversubscribe, and the launcher lets MPICH's waiting ranks sleep then.  The
-# launcher counts one job's processes only; beside the other worker's job every job shares the
-# cores, so the suite asks every job's ranks to sleep when idle (37 coupled-case tests on 2 workers:
-# 306 -> 292 s measured).
+# two workers on 2 cores oversubscribe, and the launcher lets MPICH's waiting ranks sleep then
 test-serial: venv
-	MPIR_CVAR_ENABLE_HEAVY_YIELD=1 $(PY) -m pytest -q -p no:cacheprovider -n auto --durations=25 tests
+	$(PY) -m pytest -q -p no:cacheprovider -n auto --durations=25 tests
 
 test-mpi: venv
 	$(MPIEXEC) -n 2 $(PY) -m pytest -q -p no:cacheprovider -m mpi tests

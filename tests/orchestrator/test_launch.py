@@ -265,7 +265,6 @@ def test_waiting_ranks_sleep_only_when_the_processes_outnumber_the_cores(tmp_pat
     coupler + ranks exceed the launcher's cores, never otherwise."""
     from orchestrator import launch, resources
 
-    monkeypatch.delenv("MPIR_CVAR_ENABLE_HEAVY_YIELD", raising=False)   # (make test sets it for the suite)
     make_case, ranks = CASES["lagrange"]
     case, out = make_case(tmp_path), tmp_path / "out"
     proc, job = start_run(case, out, ranks, 2)
