@@ -107,7 +107,7 @@ def serve(adapter_cls, argv=None) -> None:
     cmd = np.empty(P.CMD_LEN)
     work_s = 0.0  # this rank's time in the steps' own work (the waits for the coupler excluded)
     while True:
-        ic.Bcast(cmd, root=0)
+        P.wait(ic.Ibcast(cmd, root=0))  # not a spinning Bcast: the coupler may work a while (solve, output)
         c, dt, step, time, index = cmd[0], cmd[1], int(cmd[2]), cmd[3], int(cmd[4])
         t0 = _time.perf_counter()
         if c == P.CMD_STEP and side == "foreground":

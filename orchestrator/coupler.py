@@ -85,7 +85,7 @@ class Coupler:
         self.coupling = None
         if case.get("coupling"):
             self._start_coupling()
-        self.names = {r: self.inter[r].recv(source=0, tag=6) for r in self.roles}
+        self.names = {r: P.recv_object(self.inter[r], 0, 6) for r in self.roles}
         self.reply = {r: np.zeros(P.REPLY_HEAD + len(self.names[r])) for r in self.roles}
         self.history_t: list[float] = []
         self.history_step: list[int] = []
@@ -259,8 +259,10 @@ class Coupler:
     def _broadcast(self, cmd: np.ndarray) -> None:
         from mpi4py import MPI
 
-        for r in self.roles:
-            self.inter[r].Bcast(cmd, root=MPI.ROOT)
+        # non-blocking on both sides (a blocking and a non-blocking broadcast do not match): the solver
+        # ranks wait for the command without spinning a core (adapters.runtime.serve)
+        for req in [self.inter[r].Ibcast(cmd, root=MPI.ROOT) for r in self.roles]:
+            P.wait(req)
 
     def _receive_all(self) -> None:
         """Wait for every group's reply without spinning a core: MPI's blocking receive busy-polls,
