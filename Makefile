@@ -41,9 +41,10 @@ test: test-serial test-mpi
 
 # the serial suite on one pytest-xdist worker per core (`-n auto`; tests/conftest.py keeps a module's
 # shared fixture and the Slurm tests on one worker): most tests run solver jobs of 2-5 processes, so
-# two workers on 2 cores oversubscribe, and the launcher lets MPICH's waiting ranks sleep then
+# two workers on 2 cores oversubscribe, and the launcher lets MPICH's waiting ranks sleep then; our
+# own waits sleep after their first polls (adapters/protocol.py SPIN_ENV: every job beside another)
 test-serial: venv
-	$(PY) -m pytest -q -p no:cacheprovider -n auto --durations=25 tests
+	IMMERSE_WAIT_SPIN_S=0 $(PY) -m pytest -q -p no:cacheprovider -n auto --durations=25 tests
 
 test-mpi: venv
 	$(MPIEXEC) -n 2 $(PY) -m pytest -q -p no:cacheprovider -m mpi tests

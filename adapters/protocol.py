@@ -218,16 +218,46 @@ TAG_CORRECT = 24    # coupler -> background: node impulses, the surface's v^{n+1
 TAG_TIMING = 30     # solver -> coupler, after its stop reply: [seconds in its own step work, seconds in its engine (LAMMPS runs) or nan]
 
 
-def wait(req) -> None:
-    """Wait for a request without spinning a core for long: MPI's blocking calls busy-poll, and the
-    ranks share the machine (often oversubscribed)."""
+SPIN_ENV = "IMMERSE_WAIT_SPIN_S"
+"""How long a wait polls MPI at full speed before it sleeps between polls (seconds; default 200e-6).
+With a core per process a reply due within a LAMMPS step or two is then taken at once (sleeping from
+the first polls cost the SPH driver 10 % at one LAMMPS step per coupler step) and a long wait (a
+rank's start-up, the coupler's solve or output) still leaves the core.  With more processes than
+cores every poll takes a working process's core: the launcher sets 0 then, and so does the test
+suite (two jobs at once on 2 cores)."""
+
+
+def _spin_s() -> float:
+    try:
+        v = float(os.environ.get(SPIN_ENV, "200e-6"))
+    except ValueError:
+        return 200e-6
+    return v if v >= 0.0 else 200e-6
+
+
+SPIN_S = _spin_s()
+SLEEP_S = 50e-6  # the sleep between polls after SPIN_S: the latency a long wait adds
+
+
+def poll(done) -> None:
+    """Call ``done()`` until it is true, spinning for SPIN_S and then sleeping SLEEP_S between calls.
+    MPI's blocking calls busy-poll for as long as they wait, and the ranks often share the cores
+    (more processes than cores in small jobs and in the test suite)."""
     import time as _t
 
-    spins = 0
-    while not req.Test():
-        spins += 1
-        if spins > 50:
-            _t.sleep(50e-6)
+    if done():
+        return
+    t0 = _t.perf_counter()
+    polls = 0
+    while not done():
+        polls += 1  # (at least 50 quick polls: a message already on its way)
+        if polls > 50 and _t.perf_counter() - t0 > SPIN_S:
+            _t.sleep(SLEEP_S)
+
+
+def wait(req) -> None:
+    """Wait for a request without spinning a core for long (see poll)."""
+    poll(req.Test)
 
 
 def send(comm, buf, dest: int, tag: int) -> None:
@@ -238,14 +268,8 @@ def recv(comm, source: int, tag: int) -> np.ndarray:
     """A float64 buffer of any length (probed first), waited for without spinning."""
     from mpi4py import MPI
 
-    import time as _t
-
     status = MPI.Status()
-    spins = 0
-    while not comm.Iprobe(source=source, tag=tag, status=status):
-        spins += 1
-        if spins > 50:
-            _t.sleep(50e-6)
+    poll(lambda: comm.Iprobe(source=source, tag=tag, status=status))
     buf = np.empty(status.Get_count(MPI.DOUBLE))
     comm.Recv(buf, source=source, tag=tag)
     return buf
@@ -255,13 +279,7 @@ def recv_object(comm, source: int, tag: int):
     """A pickled object, waited for without spinning: the coupler waits for the solver ranks' start-up
     (imports, the kernels loaded from their cache: a second or more), and a blocking receive would
     busy-poll a core through all of it (sod: the coupler's CPU 2.2 -> 0.9 s)."""
-    import time as _t
-
-    spins = 0
-    while not comm.Iprobe(source=source, tag=tag):
-        spins += 1
-        if spins > 50:
-            _t.sleep(50e-6)
+    poll(lambda: comm.Iprobe(source=source, tag=tag))
     return comm.recv(source=source, tag=tag)
 
 

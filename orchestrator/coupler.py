@@ -26,7 +26,6 @@ from adapters import protocol as P
 from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
 from orchestrator.restart import check_restart
 
-WAIT_SLICE_S = 50e-6  # sleep slice of the coupler while solver groups compute
 COUPLING = "coupling"  # the coupler's own diagnostics in the history (coupled runs)
 
 
@@ -271,11 +270,7 @@ class Coupler:
         from mpi4py import MPI
 
         reqs = [self.inter[r].Irecv(self.reply[r], source=0, tag=7) for r in self.roles]
-        spins = 0
-        while not MPI.Request.Testall(reqs):
-            spins += 1
-            if spins > 50:
-                _time.sleep(WAIT_SLICE_S)
+        P.poll(lambda: MPI.Request.Testall(reqs))
         for r in self.roles:
             if self.reply[r][0] != 0.0:
                 raise RuntimeError(f"{r} reported failure status {self.reply[r][0]}")

@@ -360,6 +360,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         # after POLLS_BEFORE_YIELD idle polls instead: two 3-process jobs on 2 cores 15.6 -> 9.5 s
         # (one alone 5.7 s, unchanged).  Not with a core per process: the sleep would add latency.
         env.setdefault("MPIR_CVAR_ENABLE_HEAVY_YIELD", "1")
+        env.setdefault(P.SPIN_ENV, "0")  # and our own waits sleep after their first polls
     env["PYTHONUNBUFFERED"] = "1"
     env[P.LAUNCH_HOST_ENV] = socket.gethostname()  # only ranks on this host record their pids
     if sys.stderr.isatty():

@@ -262,9 +262,12 @@ def _environ(pid):
 
 def test_waiting_ranks_sleep_only_when_the_processes_outnumber_the_cores(tmp_path, monkeypatch):
     """MPICH's heavy yield (a waiting rank sleeps after its idle polls) is set for the job's ranks when
-    coupler + ranks exceed the launcher's cores, never otherwise."""
+    coupler + ranks exceed the launcher's cores, never otherwise; so is our own waits' rule (no spin
+    before they sleep, adapters.protocol.SPIN_ENV), unless the caller set it (make test does)."""
+    from adapters.protocol import SPIN_ENV
     from orchestrator import launch, resources
 
+    monkeypatch.delenv(SPIN_ENV, raising=False)
     make_case, ranks = CASES["lagrange"]
     case, out = make_case(tmp_path), tmp_path / "out"
     proc, job = start_run(case, out, ranks, 2)
@@ -278,6 +281,7 @@ def test_waiting_ranks_sleep_only_when_the_processes_outnumber_the_cores(tmp_pat
         kill_survivors(job)
     want = b"1" if 3 > resources.machine_cores() else None
     assert len(envs) == 3 and all(e.get(b"MPIR_CVAR_ENABLE_HEAVY_YIELD") == want for e in envs), want
+    assert all(e.get(SPIN_ENV.encode()) == (b"0" if want else None) for e in envs)
 
     from orchestrator.case import load_case
 
