@@ -337,9 +337,9 @@ def _ask_coupler_where(watch: RankWatch, timeout: float = 1.0) -> None:
 def oversubscribed(case: dict, ranks: dict[str, int]) -> bool:
     """More processes (the coupler and every solver rank) than cores this launcher may run on."""
     from orchestrator.case import solvers_used
-    from orchestrator.resources import machine_cores
+    from orchestrator.resources import job_processes, machine_cores
 
-    return 1 + sum(int(ranks[r]) for r in solvers_used(case)) > machine_cores()
+    return job_processes({r: ranks[r] for r in solvers_used(case)}) > machine_cores()
 
 
 def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None,

@@ -54,9 +54,9 @@ ALE_BYTES_PER_SAMPLE = {2: 77, 3: 110}
 ALE_OBSTACLE_BYTES_PER_ZONE = {2: 78, 3: 94}
 """Static obstacles: blocked fractions, apertures, wall nodes, per zone (78.4, 94.1)."""
 RANK_BYTES = 300 << 20
-"""One solver rank before its data: Python, numpy, mpi4py, h5py, numba and the loaded kernels
-(VmHWM 248 MiB for the Lagrangian rank of elastic_bar_wave, 309 MiB for an ALE rank of sedov_2d on
-2 ranks, read from /proc during `immerse run`)."""
+"""One solver rank before its data: Python, numpy, mpi4py, h5py, the JIT compiler and its loaded
+kernels (VmHWM 248 MiB for the Lagrangian rank of elastic_bar_wave, 309 MiB for an ALE rank of
+sedov_2d on 2 ranks, read from /proc during `immerse run`)."""
 COUPLER_BYTES = 130 << 20
 """The coupler process (VmHWM 78-131 MiB, same runs)."""
 
@@ -106,6 +106,12 @@ def machine_memory() -> int:
     except (OSError, StopIteration, IndexError):
         pass
     return total
+
+
+def job_processes(ranks: dict[str, int]) -> int:
+    """The processes of one job: the coupler and every solver rank (``ranks``: ranks_for's, the used
+    roles only)."""
+    return 1 + sum(int(n) for n in ranks.values())
 
 
 def machine_cores() -> int:
@@ -265,7 +271,7 @@ def estimate(case: dict, ranks: dict[str, int], overridden=()) -> list[tuple[str
     for role, n in ranks.items():
         if role in ROLES and case.get(role):
             parts += ROLES[role][0](case, int(n))
-    nproc = 1 + sum(int(n) for n in ranks.values())
+    nproc = job_processes(ranks)
     most = max(ranks, key=lambda r: ranks[r]) if ranks else None
     parts.append((_rank_key(most, overridden) if most else "ranks", ranks.get(most),
                   f"{nproc} processes", COUPLER_BYTES + (nproc - 1) * RANK_BYTES))
@@ -286,7 +292,7 @@ def check_resources(case: dict, ranks: dict[str, int], machine: Machine, overrid
         if why:
             raise CaseError(_rank_key(role, overridden), n, why)
     # processes against cores
-    nproc = 1 + sum(ranks.values())
+    nproc = job_processes(ranks)
     limit = PROCESSES_PER_CORE * machine.cores
     if nproc > limit and not machine.oversubscribe:
         role = max(ranks, key=lambda r: ranks[r])

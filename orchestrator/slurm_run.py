@@ -63,12 +63,13 @@ def submit_run(args, case: dict, ranks: dict[str, int]) -> int:
     from orchestrator import outdir
     from orchestrator.fingerprint import case_fingerprint
     from orchestrator.restart import check_restart
+    from orchestrator.resources import job_processes
 
     out = Path(args.out) if args.out is not None else Path(case["case_dir"]) / "out"
     out = out.absolute()
     ck = check_restart(args.restart, case) if args.restart is not None else None
     plan = outdir.plan(out, case, case_fingerprint(case), replace=args.replace, restart=ck)
-    procs = 1 + sum(ranks.values())
+    procs = job_processes(ranks)
     cpus = node_cpus()
     overcommit = cpus is not None and procs > cpus * (int(args.nodes) if args.nodes else 1)
     inner = [sys.executable, "-m", "orchestrator.cli", "run", str(case["case_dir"]), "--out", str(out)]
