@@ -94,6 +94,7 @@ class ForegroundCouplings:
         first = self.members[0]
         self.dim, self.method = first.dim, first.method
         self._rows = None
+        self._nb = self._nc = 0
 
     # (what the coupler reads: the smallest limit, the worst conditioning, the sums of the exchange)
     @property
@@ -124,6 +125,9 @@ class ForegroundCouplings:
         if len(geoms) == 1:
             return geoms[0]
         merged, self._rows = merge_geometries(geoms, self.roles, [m.ops.bnodes for m in self.members])
+        # the sizes of the merged lists the background's packet spans: not the sums of the members'
+        # (a node tying only orphan particles may be in two members' lists, merge_geometries)
+        self._nb, self._nc = merged.nodes.size, merged.cut.size
         return merged
 
     def load_kernels(self) -> None:
@@ -136,8 +140,7 @@ class ForegroundCouplings:
         if len(self.members) == 1:
             return [self.members[0].solve(dt, dt_avg, vstars[0], background)]
         dim = self.dim
-        nb = sum(r[1].size for r in self._rows)
-        nc = sum(r[0].size for r in self._rows)
+        nb, nc = self._nb, self._nc
         v_b = background[: nb * dim].reshape(nb, dim)
         m_b = background[nb * dim: nb * (dim + 1)]
         a = nb * (dim + 1)
@@ -155,8 +158,7 @@ class ForegroundCouplings:
         if len(self.members) == 1:
             return self.members[0].take_state(states[0])
         dim = self.dim
-        nb = sum(r[1].size for r in self._rows)
-        nc = sum(r[0].size for r in self._rows)
+        nb, nc = self._nb, self._nc
         imp = np.zeros((nb, dim))
         vh, vb = np.zeros((nc, dim)), np.zeros((nc, dim))
         for m, (ic, inode), st in zip(self.members, self._rows, states):

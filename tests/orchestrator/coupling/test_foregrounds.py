@@ -79,3 +79,55 @@ def test_the_members_diagnostics_combine_into_the_couplings():
                  Member([-1.0, 0.5, 5, 2e-3, -2.0, 3.0, 0.05, 7.0, 0.1, 0.4, 2], 7.0)]
     assert c.diagnostics() == [0.0, 2.5, 5, 2e-3, -3.0, 5.0, 0.05, 7.0, 0.2, 0.4, 3]
     assert c.cond_H == 7.0
+
+
+def test_each_member_gets_its_rows_of_the_packet_when_a_node_is_shared():
+    """The background's interface packet spans the merged lists ([v_b (nb, 2), m_b (nb), R (nc, 2),
+    fill (nc)]); each member's solve gets exactly its own rows, and the members' corrections come
+    back at theirs, the shared node's impulses added.  The merged node list holds the shared orphan
+    node once: sizing the packet by the sum of the members' lists (5 nodes, not 4) read v_b, m_b and R
+    shifted by rows."""
+    from types import SimpleNamespace
+
+    from orchestrator.coupling.foregrounds import ForegroundCouplings
+
+    geoms = [_geom([5], [0.5], [5], [5, 6, 7], [[1.0, 0.0]]), _geom([7], [0.25], [7], [7, 8], [[0.0, 1.0]])]
+    constraint = [np.array([5, 6]), np.array([7, 8])]
+    got = []
+
+    class Member:
+        def __init__(self, g, bnodes):
+            self.g, self.ops = g, SimpleNamespace(bnodes=bnodes)
+
+        def geometry(self):
+            return self.g
+
+        def solve(self, dt, dt_avg, vstar, packet):
+            got.append(packet)
+            return vstar
+
+        def take_state(self, state):  # [node impulses (its nodes), v_half (its cut), v_mean (its cut)]
+            return state
+
+    fc = ForegroundCouplings.__new__(ForegroundCouplings)
+    fc.roles, fc.dim, fc._rows = ["sph", "lagrange"], 2, None
+    fc.members = [Member(g, c) for g, c in zip(geoms, constraint)]
+    merged = fc.geometry()
+    nodes, cut = merged.nodes, merged.cut                       # [5, 6, 7, 8], [5, 7]
+    v_b = np.column_stack([nodes * 10.0, nodes * 10.0 + 1.0])   # each value names its node
+    m_b = nodes * 100.0
+    R = np.column_stack([cut * 1000.0, cut * 1000.0 + 1.0])
+    fill = cut * 1e4
+    fc.solve(1e-3, 1e-3, [None, None], np.concatenate([v_b.ravel(), m_b, R.ravel(), fill]))
+    for g, packet in zip(geoms, got):
+        n, c = g.nodes.astype(float), g.cut.astype(float)
+        want = np.concatenate([np.column_stack([n * 10.0, n * 10.0 + 1.0]).ravel(), n * 100.0,
+                               np.column_stack([c * 1000.0, c * 1000.0 + 1.0]).ravel(), c * 1e4])
+        assert np.array_equal(packet, want)
+    # corrections: node impulses 1 per node and component, surface velocities naming their zone
+    states = [np.concatenate([np.ones(2 * g.nodes.size), np.repeat(g.cut * 1.0, 2), np.repeat(g.cut * 2.0, 2)])
+              for g in geoms]
+    out = fc.take_state(states)
+    imp, vh, vb = out[:8].reshape(4, 2), out[8:12].reshape(2, 2), out[12:].reshape(2, 2)
+    assert imp[:, 0].tolist() == [1.0, 1.0, 2.0, 1.0]            # node 7 in both members' lists
+    assert vh[:, 0].tolist() == [5.0, 7.0] and vb[:, 0].tolist() == [10.0, 14.0] and out.size == 16
