@@ -265,8 +265,8 @@ class Coupler:
 
     def _receive_all(self) -> None:
         """Wait for every group's reply without spinning a core: MPI's blocking receive busy-polls,
-        and the coupler shares the machine with the solver ranks (often oversubscribed). Test a
-        few times at once, then sleep in short slices; the latency added is bounded by the slice."""
+        and the coupler shares the machine with the solver ranks (often oversubscribed). Polled for
+        protocol.SPIN_S, then in sleeps of protocol.SLEEP_S, which bound the latency added."""
         from mpi4py import MPI
 
         reqs = [self.inter[r].Irecv(self.reply[r], source=0, tag=7) for r in self.roles]
