@@ -20,6 +20,7 @@ def parse_args(argv=None):
     ap.add_argument("--roles", required=True, help="comma-separated: coupler first")
     ap.add_argument("--role", required=True)
     ap.add_argument("--restart", default=None)
+    ap.add_argument("--case-sha256", default=None, help="the case file's hash as the launcher checked it")
     return ap.parse_args(argv)
 
 
@@ -74,7 +75,7 @@ def serve(adapter_cls, argv=None) -> None:
     P.install_fault_handler(out, args.role, rank)
     P.register_process(out, args.role, rank)
 
-    case = load_case(args.case)
+    case = load_case(args.case, checked_sha256=args.case_sha256)
     adapter = adapter_cls(place.comm, case, out)
     ic = place.inter[P.COUPLER]
     side = coupling_side(args.role) if case.get("coupling") else None

@@ -51,6 +51,7 @@ Normalised layout (all keys always present)::
 from __future__ import annotations
 
 import copy
+import hashlib
 import itertools
 import math
 import os
@@ -59,10 +60,7 @@ import stat
 import tomllib
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
-
-import jsonschema
-from jsonschema.exceptions import ValidationError, best_match, relevance
+from typing import TYPE_CHECKING, Any
 
 from adapters import registry as _roles
 
@@ -88,6 +86,9 @@ from .schema_rules import file_kind as _file_kind
 from .schema_rules import fmt_num as _fmt_num
 from .schema_rules import stat_regular as _stat_regular
 from .schema_rules import to_float as _f
+
+if TYPE_CHECKING:
+    from jsonschema.exceptions import ValidationError
 
 __all__ = [
     "CaseError",
@@ -120,14 +121,32 @@ than a valid one costs to accept."""
 def _relevance(err: ValidationError):
     """jsonschema's relevance without its sibling order (which prefers the LAST sibling): among
     equally relevant errors the first in the file wins."""
+    from jsonschema.exceptions import relevance
+
     key = relevance(err)
     return key[:1] + key[2:]
 
 
-_VALIDATOR = jsonschema.Draft202012Validator
-# (the schema itself is validated against the metaschema by the tests, not at every import: that
-# took 0.3-0.6 s of every `immerse` command and every rank's start)
-_SCHEMA_VALIDATOR = _VALIDATOR(CASE_SCHEMA)
+_VALIDATORS: dict[int, tuple] = {}
+"""id(schema) -> (schema, its Draft 2020-12 validator), built on first use (the schema is kept so
+that its id is not reused)."""
+
+
+def _best_schema_error(schema: Mapping | None, data: Any):
+    """The most relevant of the first ``_MAX_SCHEMA_ERRORS`` errors of ``data`` against ``schema``
+    (the case schema when None), or None.  jsonschema is imported here, where a schema is checked
+    (the CLI), not at import: the ranks load a case the launcher has checked
+    (``load_case(checked_sha256=...)``) and skip its 0.07-0.12 s.  (The schema itself is validated
+    against the metaschema by the tests, not here: that took 0.3-0.6 s of every `immerse` command.)"""
+    from jsonschema import Draft202012Validator
+    from jsonschema.exceptions import best_match
+
+    schema = CASE_SCHEMA if schema is None else schema
+    if id(schema) not in _VALIDATORS:
+        _VALIDATORS[id(schema)] = (schema, Draft202012Validator(schema))
+    errors = itertools.islice(_VALIDATORS[id(schema)][1].iter_errors(data), _MAX_SCHEMA_ERRORS)
+    return best_match(errors, key=_relevance)
+
 
 _TYPE_WORDS = {
     "number": "a number",
@@ -303,10 +322,15 @@ def ranks_for(case: Mapping, overrides: Mapping[str, Any] | Iterable[str] | None
     return result
 
 
-def load_case(case_dir: str | os.PathLike) -> dict:
-    """Parse and validate ``<case_dir>/case.toml``; return the normalised case dict.
+def load_case(case_dir: str | os.PathLike, checked_sha256: str | None = None) -> dict:
+    """Parse and validate ``<case_dir>/case.toml``; return the normalised case dict, with
+    ``case["case_sha256"]``, the SHA-256 of the bytes it was read from.
 
     ``case_dir`` may also be the path of the ``case.toml`` file itself.
+    ``checked_sha256``: the hash of a case the launcher has already checked (its coupler and ranks
+    load it again, ``--case-sha256``): the same bytes skip the schema validation (the normalising
+    and the cross-field checks still run); other bytes mean the file changed since the launch was
+    checked, and are refused.
     Raises :class:`CaseError` (one-line message) for any problem.
     """
     given = Path(case_dir).expanduser()
@@ -319,19 +343,23 @@ def load_case(case_dir: str | os.PathLike) -> dict:
         case_dir = given.resolve()
         toml_path = case_dir / CASE_FILE
     try:
-        data = _read_toml(toml_path)
-
-        errors = itertools.islice(_SCHEMA_VALIDATOR.iter_errors(data), _MAX_SCHEMA_ERRORS)
-        err = best_match(errors, key=_relevance)
-        if err is not None:
-            raise _schema_error_to_case_error(err)
+        data, sha = _read_toml(toml_path)
+        if checked_sha256 is not None and sha != checked_sha256:
+            raise CaseError(CASE_FILE, str(toml_path), "changed since the run was checked and launched "
+                            "(a case file must stay as it is while its run starts)")
+        schema = checked_sha256 is None
+        if schema:
+            err = _best_schema_error(None, data)
+            if err is not None:
+                raise _schema_error_to_case_error(err)
         _check_finite(data)
 
         case = _normalise(data, case_dir)
-        _check(case, data)
+        _check(case, data, schema)
     except RecursionError:  # a structure nested past Python's limit anywhere in the pipeline
         raise CaseError(CASE_FILE, str(toml_path), "nested too deeply (arrays or tables inside "
                         "each other beyond what can be read)") from None
+    case["case_sha256"] = sha   # (after the tables' hooks: they see the documented layout)
     return case
 
 
@@ -372,14 +400,16 @@ def _read_regular(path: Path, key: str, value: Any, limit: int, what: str) -> by
     return b"".join(chunks)
 
 
-def _read_toml(path: Path) -> dict:
+def _read_toml(path: Path) -> tuple[dict, str]:
+    """The parsed file and the SHA-256 (hex) of its bytes."""
     raw = _read_regular(path, CASE_FILE, str(path), MAX_CASE_BYTES, "TOML file")
+    sha = hashlib.sha256(raw).hexdigest()
     try:
         text = raw.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise CaseError(CASE_FILE, str(path), f"not UTF-8 text (byte {exc.start})") from None
     try:
-        return tomllib.loads(text)
+        return tomllib.loads(text), sha
     except tomllib.TOMLDecodeError as exc:
         msg = str(exc)
         m = _TOML_POS.search(msg)
@@ -463,9 +493,10 @@ def _normalise(data: dict, case_dir: Path) -> dict:
     return case
 
 
-def _check(case: dict, data: dict) -> None:
+def _check(case: dict, data: dict, schema: bool = True) -> None:
     """Cross-field checks; fills ``case["ranks"]``.  ``data`` is the raw TOML (for
-    reporting values exactly as written).  Order: [run], the registered tables' checks by order,
+    reporting values exactly as written); ``schema``: also the check kind's params against their
+    schema (False: a case the launcher has checked).  Order: [run], the registered tables' checks by order,
     [ranks], [check], the registered tables' file checks (schema_registry, hooks 3 and 4)."""
     run = case["run"]
 
@@ -502,7 +533,7 @@ def _check(case: dict, data: dict) -> None:
             raise CaseError("check.kind", kind, "unknown check kind; registered: "
                             + ", ".join(sorted(CHECKS)))
         # the kind's params: unknown keys, types, ranges, what it needs (before anything runs)
-        err = best_match(_VALIDATOR(PARAMS[kind]).iter_errors(data["check"].get("params", {})), key=_relevance)
+        err = _best_schema_error(PARAMS[kind], data["check"].get("params", {})) if schema else None
         if err is not None:
             raise _schema_error_to_case_error(err, ("check", "params"))
 

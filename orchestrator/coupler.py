@@ -511,6 +511,7 @@ def main(argv=None) -> None:
     ap.add_argument("--roles", required=True)
     ap.add_argument("--role", default=P.COUPLER)
     ap.add_argument("--restart", default=None)
+    ap.add_argument("--case-sha256", default=None, help="the case file's hash as the launcher checked it")
     args = ap.parse_args(argv)
     out = Path(args.out)
     running: list[Coupler] = []
@@ -526,7 +527,7 @@ def main(argv=None) -> None:
     place = P.join(P.COUPLER, args.roles.split(","))
     P.install_fault_handler(out, P.COUPLER, 0)
     P.register_process(out, P.COUPLER, 0)
-    case = load_case(args.case)
+    case = load_case(args.case, checked_sha256=args.case_sha256)
     running.append(Coupler(place, case, out, args.restart))
     running[0].run()
     (P.run_dir(out) / "pids" / str(os.getpid())).unlink(missing_ok=True)

@@ -7,7 +7,8 @@ by the SHA-256 of its bytes, so a case whose mesh file was edited is another cas
 case copied or moved elsewhere (another case directory, the mesh under another name) is the same.
 
 Left out, because a restart may legitimately change them (as LS-DYNA's and ALE3D's restarts let
-an analyst extend a run): where the case lives and what it is called (``name``, ``case_dir``), how
+an analyst extend a run): where the case lives and what it is called (``name``, ``case_dir``), the
+hash of its file's bytes (``case_sha256``: an edited comment is not another case), how
 far and how often the run goes and writes (``run.end_time``, ``run.max_steps``,
 ``run.output_interval``, ``run.checkpoint_interval``, ``run.diagnostics_every``), the rank counts
 (``ranks``: both solvers restart on another rank count) and the case's own check (``check``: it
@@ -29,7 +30,7 @@ FORMAT = "immerse-case-1"
 
 # keys that may change between a checkpoint and its restart (paths into the normalised case)
 RESTART_MAY_CHANGE = (
-    ("name",), ("case_dir",), ("ranks",), ("check",),
+    ("name",), ("case_dir",), ("case_sha256",), ("ranks",), ("check",),
     ("run", "end_time"), ("run", "max_steps"), ("run", "output_interval"),
     ("run", "checkpoint_interval"), ("run", "diagnostics_every"),
 )

@@ -37,6 +37,8 @@ def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | N
 
     roles = [P.COUPLER] + solvers_used(case)
     common = ["--case", str(case["case_dir"]), "--out", str(out), "--roles", ",".join(roles)]
+    if case.get("case_sha256"):  # the bytes checked here: the processes skip the schema (case.load_case)
+        common += ["--case-sha256", case["case_sha256"]]
     if restart:
         common += ["--restart", str(restart)]
     py = sys.executable

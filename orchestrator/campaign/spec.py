@@ -193,7 +193,7 @@ def read_campaign(path: str | Path) -> dict:
         raise CaseError("CAMPAIGN", str(path), "campaign file not found (a CAMPAIGN.toml, or a "
                         "directory holding campaign.toml)")
     try:
-        data = case_mod._read_toml(p.resolve())
+        data, _ = case_mod._read_toml(p.resolve())
     except CaseError as e:  # the reader names case.toml: this is the campaign file
         raise CaseError(p.name, e.value, e.allowed) from None
     err = best_match(itertools.islice(_VALIDATOR.iter_errors(data), 100), key=case_mod._relevance)
@@ -262,7 +262,7 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
         if not (case_dir / CASE_FILE).is_file():
             raise CaseError(format_key(["series", si, "case"]), s["case"],
                             f"must be a case directory (holding {CASE_FILE}) relative to the campaign file")
-        raw = _read_toml(case_dir / CASE_FILE)
+        raw, _ = _read_toml(case_dir / CASE_FILE)
         extra = s.get("axes", {})
         for aname, keys in extra.items():
             if aname not in axes:

@@ -113,35 +113,6 @@ def test_immersed_wall_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
     assert_same_steps(a, b)
 
 
-def test_moving_piston_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
-    """A free body moving through the grid (zones it uncovers and covers, small cut zones merged
-    with their neighbours across the ranks' cut at x = 0.5): 2 + 2 ranks equal 1 + 1 bit for bit."""
-    case = tmp_path / "case"
-    shutil.copytree(CASES / "embedded_piston_sod", case, ignore=shutil.ignore_patterns("out"))
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace("end_time = 0.2", "end_time = 0.05").replace("output_interval = 0.05",
-                                                                                    "output_interval = 0.025"))
-    outs = {}
-    for ranks in (("ale=1", "lagrange=1"), ("ale=2", "lagrange=2")):
-        out = tmp_path / "_".join(ranks)
-        r = immerse("run", case, "--out", out, "--ranks", *ranks)
-        assert r.returncode in (0, 1), r.stdout + r.stderr  # (the check is for t = 0.2)
-        outs[ranks[0]] = out
-    a, b = outs["ale=1"], outs["ale=2"]
-    assert_same_steps(a, b)
-    # the diagnostics are sums over the ranks (another order): equal within 1e-12 relative, the
-    # balance residuals both at round-off (the largest, the gas's momentum against its gross momentum
-    # m|v|: measured 4.8e-14, 1.4e-13 and 2.4e-13 with three round-off orders of the multiplier solve)
-    sa = json.loads((a / "summary.json").read_text())["final"]
-    sb = json.loads((b / "summary.json").read_text())["final"]
-    assert sa.keys() == sb.keys()
-    for k in sa:
-        if k.endswith("_rel"):
-            assert abs(sa[k]) < 5e-13 and abs(sb[k]) < 5e-13, k
-        else:
-            assert sa[k] == pytest.approx(sb[k], rel=1e-12, abs=1e-300), k
-
-
 def restarted_equals_full(tmp_path, name, end_time, roles=("ale", "lagrange")):
     """Shipped case ``name`` run to ``end_time`` (outputs every 0.02, one checkpoint at 0.03; exit 1
     allowed: its check judges t = 0.2), then again from the checkpoint in a copy of its output: the
@@ -167,10 +138,28 @@ def restarted_equals_full(tmp_path, name, end_time, roles=("ale", "lagrange")):
     return ckpts[0]
 
 
-def test_moving_piston_restart_is_bitwise(tmp_path):
-    """A checkpoint of a coupled run (both solvers' state, the coupler's multipliers for the warm
-    start and its totals) continues bit for bit: fields and diagnostics equal the run without it."""
+def test_moving_piston_on_two_plus_two_ranks_equals_one_plus_one_and_restarts_bitwise(tmp_path):
+    """A free body moving through the grid (zones it uncovers and covers, small cut zones merged
+    with their neighbours across the ranks' cut at x = 0.5): 2 + 2 ranks equal 1 + 1 bit for bit.
+    And a checkpoint of the 1 + 1 run (both solvers' state, the coupler's multipliers for the warm
+    start and its totals) continues bit for bit: fields and diagnostics equal the run without it.
+    (One 1 + 1 run serves both.)"""
     restarted_equals_full(tmp_path, "embedded_piston_sod", 0.06)
+    a, b = tmp_path / "full", tmp_path / "ale=2"
+    r = immerse("run", tmp_path / "case", "--out", b, "--ranks", "ale=2", "lagrange=2")
+    assert r.returncode in (0, 1), r.stdout + r.stderr  # (the check is for t = 0.2)
+    assert_same_steps(a, b)
+    # the diagnostics are sums over the ranks (another order): equal within 1e-12 relative, the
+    # balance residuals both at round-off (the largest, the gas's momentum against its gross momentum
+    # m|v|: measured 4.8e-14, 1.4e-13 and 2.4e-13 with three round-off orders of the multiplier solve)
+    sa = json.loads((a / "summary.json").read_text())["final"]
+    sb = json.loads((b / "summary.json").read_text())["final"]
+    assert sa.keys() == sb.keys()
+    for k in sa:
+        if k.endswith("_rel"):
+            assert abs(sa[k]) < 5e-13 and abs(sb[k]) < 5e-13, k
+        else:
+            assert sa[k] == pytest.approx(sb[k], rel=1e-12, abs=1e-300), k
 
 
 def test_embedded_piston_water_air(tmp_path):
@@ -225,35 +214,24 @@ def test_water_air_box_body(tmp_path):
     coupled_balances(s)
 
 
-def test_water_air_box_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
+def test_water_air_box_on_two_plus_two_ranks_equals_one_plus_one_and_restarts_bitwise(tmp_path):
     """Several materials in the small cut zones' merge across the background ranks' cut (the block
     moved onto the cut at x = 0.5; the groups' material totals handed to the ghost layers like the
     zone totals) and the block on 2 ranks (its cut nodes' sums in the one-rank order,
     solvers/lagrange/shared_sums.py): 2 + 2 ranks equal 1 + 1 bit for bit.  (With each rank's partial
     sums added, the block's velocities differed by one ulp from step 4 and the difference grew to
-    1e-5 of the velocities within 200 steps, with one water material as well.)"""
-    case = _water_air_box(tmp_path, 1.0e-3)
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace("lower = [0.2, 0.2], upper = [0.4, 0.3]", "lower = [0.42, 0.2], upper = [0.62, 0.3]"))
-    outs = {}
-    for ranks in (("ale=1", "lagrange=1"), ("ale=2", "lagrange=2")):
-        out = tmp_path / "_".join(ranks)
-        r = immerse("run", case, "--out", out, "--ranks", *ranks, "--oversubscribe")
-        assert r.returncode == 0, r.stdout + r.stderr
-        outs[ranks[0]] = out
-    assert_same_steps(outs["ale=1"], outs["ale=2"])
-
-
-def test_water_air_box_restart_on_two_plus_two_ranks_is_bitwise(tmp_path):
-    """A checkpoint of the coupled run with two background materials (1 + 1 ranks, the block across
-    the background's cut at x = 0.5) continued on 2 + 2 ranks: the fields end bit for bit as in the
-    run without it, the diagnostics (sums over the ranks, in another order) within 1e-12."""
+    1e-5 of the velocities within 200 steps, with one water material as well.)  And a checkpoint of
+    the 1 + 1 run continued on 2 + 2 ranks: the fields end bit for bit as in the run without it, the
+    diagnostics (sums over the ranks, in another order) within 1e-12.  (One 1 + 1 run serves both.)"""
     case = _water_air_box(tmp_path, 1.0e-3, "\ncheckpoint_interval = 4.0e-4")
     p = case / "case.toml"
     p.write_text(p.read_text().replace("lower = [0.2, 0.2], upper = [0.4, 0.3]", "lower = [0.42, 0.2], upper = [0.62, 0.3]"))
-    full = tmp_path / "full"
+    full, two = tmp_path / "full", tmp_path / "two"
     r = immerse("run", case, "--out", full)
     assert r.returncode == 0, r.stdout + r.stderr
+    r = immerse("run", case, "--out", two, "--ranks", "ale=2", "lagrange=2", "--oversubscribe")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert_same_steps(full, two)
     ckpts = sorted((full / "checkpoints").glob("checkpoint_*.h5"))
     assert len(ckpts) == 2
     cont = tmp_path / "cont"
