@@ -6,7 +6,8 @@ Normalised layout::
 
     "materials": {name: {model, density, youngs_modulus, poisson_ratio, [johnson_cook keys]}}
     "lagrange": {hourglass, bulk_viscosity_linear, bulk_viscosity_quadratic,
-                 "bodies": [{name, material, mesh, size, initial_velocity, initial_temperature}]}
+                 "bodies": [{name, material, mesh, size, initial_velocity, initial_temperature,
+                             erosion: None | {strain}}]}
     "boundaries": [ {type, ...} ]
 
 ``materials`` and ``boundaries`` are always present (empty without bodies); ``lagrange`` when the
@@ -120,6 +121,10 @@ BODY = table(
         "mesh": MESH,
         "initial_velocity": vector("m/s", {"type": ["number", "string"]}),
         "initial_temperature": number("K", exclusiveMinimum=0),
+        # element erosion (LS-DYNA's MAT_ADD_EROSION, effective strain): an element whose effective
+        # strain (sqrt(2/3 d':d') integrated over the steps) reaches this, or that would invert,
+        # erodes: no force from then on, its nodes keep their mass, its internal energy is booked
+        "erosion": table({"strain": number("dimensionless", exclusiveMinimum=0)}, required=("strain",)),
     },
     required=("name", "material", "mesh"),
 )
@@ -222,6 +227,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             "initial_velocity": ([num_or_expression(v) for v in b["initial_velocity"]]
                                  if "initial_velocity" in b else [0.0] * dim),
             "initial_temperature": to_float(t0),
+            "erosion": {"strain": to_float(b["erosion"]["strain"])} if "erosion" in b else None,
         })
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
     lagrange["bodies"] = bodies
@@ -229,8 +235,9 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
 
 
 def check_lagrange(case: dict, data: dict) -> None:
-    """At least one body and a material table; unique body names, defined materials, vector
-    lengths, box extents, 3-D-only meshes, velocity expressions, initial temperature below melt."""
+    """At least one body and a material table; unique body names, no erosion in a coupled case (yet),
+    defined materials, vector lengths, box extents, 3-D-only meshes, velocity expressions, initial
+    temperature below melt."""
     dim = case["run"]["dimension"]
     bodies = case["lagrange"]["bodies"]
     raw_bodies = data.get("lagrange", {}).get("bodies", [])
@@ -246,6 +253,10 @@ def check_lagrange(case: dict, data: dict) -> None:
             raise CaseError(format_key(base + ["name"]), body["name"],
                             f"duplicate body name (also lagrange.bodies[{seen[body['name']]}].name)")
         seen[body["name"]] = i
+        if body["erosion"] is not None and case.get("coupling"):
+            raise CaseError(format_key(base + ["erosion"]), raw["erosion"],
+                            "not yet with [coupling]: the coupler keeps a body's first surface; "
+                            "run the body uncoupled, or as SPH particles ([sph])")
         if body["material"] not in case["materials"]:
             defined = ", ".join(case["materials"]) or "(none)"
             raise CaseError(format_key(base + ["material"]), body["material"],

@@ -97,8 +97,21 @@ def _is_bad(s0, s1, s2, s3, s4, s5):
 
 
 @njit(cache=True)
+def _erode(e, alive, q_out, cut_row, fe_cut):
+    """Element e erodes (LS-DYNA's MAT_ADD_EROSION): it gives no force and no stable step from now
+    on; its nodes keep their mass and momentum, its internal energy stays booked (the eroded energy).
+    Its corner forces at a partition cut are zeroed (the shared sums add that buffer every step)."""
+    alive[e] = 0
+    q_out[e] = 0.0
+    r = cut_row[e]
+    if r >= 0:
+        fe_cut[r, :, :] = 0.0
+    return 1
+
+
+@njit(cache=True)
 def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut):
+                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at):
     ne = conn.shape[0]
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -107,8 +120,11 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     bm = np.empty((8, 3))
     fe = np.empty((8, 3))
     dt_min = np.inf
+    n_eroded = 0
     half_dt = 0.5 * dt
     for e in range(ne):
+        if alive[e] == 0:  # eroded: no force, no stable step (its nodes keep their mass)
+            continue
         for i in range(8):
             nd = conn[e, i]
             for k in range(3):
@@ -116,7 +132,10 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 ve[i, k] = v[nd, k]
         vol, amax = hex_bvectors(xe, b)
         if not (vol > 0.0):
-            return dt_min, e
+            if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
+                n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                continue
+            return dt_min, e, n_eroded
         # velocity gradient at the mid-step configuration
         if dt > 0.0:
             for i in range(8):
@@ -124,7 +143,10 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                     xm[i, k] = xe[i, k] - half_dt * ve[i, k]
             vm, _ = hex_bvectors(xm, bm)
             if not (vm > 0.0):
-                return dt_min, e
+                if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
+                    n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                    continue
+                return dt_min, e, n_eroded
             bg = bm
         else:
             vm = vol
@@ -165,6 +187,15 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
         wyz = 0.5 * (l12 - l21) * ivm
         wzx = 0.5 * (l20 - l02) * ivm
         divv = d0 + d1 + d2
+        if erode_at[e] < np.inf and dt > 0.0:
+            # the effective (von Mises) strain, sqrt(2/3 d':d') integrated over the steps: the
+            # erosion criterion of a body without strength (its plastic strain stays 0)
+            t = divv / 3.0
+            eps_eq[e] += dt * math.sqrt(2.0 / 3.0 * ((d0 - t) ** 2 + (d1 - t) ** 2 + (d2 - t) ** 2
+                                                     + 2.0 * (d3 * d3 + d4 * d4 + d5 * d5)))
+            if eps_eq[e] >= erode_at[e]:
+                n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                continue
 
         # constitutive update
         mid = mat_id[e]
@@ -205,7 +236,10 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             jac, n0, n1, n2, n3, n4, n5 = neo_hookean_stress(f00, f01, f02, f10, f11, f12,
                                                              f20, f21, f22, G, lam)
             if not (jac > 0.0):
-                return dt_min, e
+                if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
+                    n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                    continue
+                return dt_min, e, n_eroded
             if dt > 0.0:
                 s0, s1, s2, s3, s4, s5 = n0, n1, n2, n3, n4, n5
             csq = neo_hookean_modulus(jac, G, lam) / rho
@@ -225,7 +259,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                                                                d2, d3, d4, d5, dt, G, K)
             csq = (K + 4.0 / 3.0 * G) / rho
         if _is_bad(s0, s1, s2, s3, s4, s5):
-            return dt_min, e
+            return dt_min, e, n_eroded
         if dt > 0.0:
             pw = ((o0 + s0) * d0 + (o1 + s1) * d1 + (o2 + s2) * d2
                   + 2.0 * ((o3 + s3) * d3 + (o4 + s4) * d4 + (o5 + s5) * d5))
@@ -307,12 +341,12 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 fe_cut[r, i, 0] = fe[i, 0]
                 fe_cut[r, i, 1] = fe[i, 1]
                 fe_cut[r, i, 2] = fe[i, 2]
-    return dt_min, -1
+    return dt_min, -1, n_eroded
 
 
 @njit(cache=True)
 def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut):
+                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at):
     ne = conn.shape[0]
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
@@ -321,8 +355,11 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
     bm = np.empty((4, 2))
     fe = np.empty((4, 2))
     dt_min = np.inf
+    n_eroded = 0
     half_dt = 0.5 * dt
     for e in range(ne):
+        if alive[e] == 0:  # eroded: no force, no stable step (its nodes keep their mass)
+            continue
         for i in range(4):
             nd = conn[e, i]
             for k in range(2):
@@ -330,14 +367,20 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                 ve[i, k] = v[nd, k]
         vol, dmax = quad_bvectors(xe, b)
         if not (vol > 0.0):
-            return dt_min, e
+            if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
+                n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                continue
+            return dt_min, e, n_eroded
         if dt > 0.0:
             for i in range(4):
                 for k in range(2):
                     xm[i, k] = xe[i, k] - half_dt * ve[i, k]
             vm, _ = quad_bvectors(xm, bm)
             if not (vm > 0.0):
-                return dt_min, e
+                if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
+                    n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                    continue
+                return dt_min, e, n_eroded
             bg = bm
         else:
             vm = vol
@@ -357,6 +400,13 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
         d3 = 0.5 * (l01 + l10) * ivm
         wxy = 0.5 * (l01 - l10) * ivm
         divv = d0 + d1
+        if erode_at[e] < np.inf and dt > 0.0:
+            # the effective strain as in _forces_hex, in plane strain (d_zz = 0)
+            t = divv / 3.0
+            eps_eq[e] += dt * math.sqrt(2.0 / 3.0 * ((d0 - t) ** 2 + (d1 - t) ** 2 + t * t + 2.0 * d3 * d3))
+            if eps_eq[e] >= erode_at[e]:
+                n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                continue
 
         mid = mat_id[e]
         code = mat_code[mid]
@@ -385,7 +435,10 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             jac, n0, n1, n2, n3, n4, n5 = neo_hookean_stress(f00, f01, 0.0, f10, f11, 0.0,
                                                              0.0, 0.0, 1.0, G, lam)
             if not (jac > 0.0):
-                return dt_min, e
+                if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
+                    n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+                    continue
+                return dt_min, e, n_eroded
             if dt > 0.0:
                 s0, s1, s2, s3, s4, s5 = n0, n1, n2, n3, n4, n5
             csq = neo_hookean_modulus(jac, G, lam) / rho
@@ -405,7 +458,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                                                                0.0, d3, 0.0, 0.0, dt, G, K)
             csq = (K + 4.0 / 3.0 * G) / rho
         if _is_bad(s0, s1, s2, s3, s4, s5):
-            return dt_min, e
+            return dt_min, e, n_eroded
         if dt > 0.0:
             pw = (o0 + s0) * d0 + (o1 + s1) * d1 + 2.0 * (o3 + s3) * d3
             e_int[e] += 0.5 * pw * vm * dt
@@ -468,12 +521,13 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             for i in range(4):
                 fe_cut[r, i, 0] = fe[i, 0]
                 fe_cut[r, i, 1] = fe[i, 1]
-    return dt_min, -1
+    return dt_min, -1, n_eroded
 
 
 @njit(cache=True)
 def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
-                       eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut):
+                       eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut,
+                       alive, eps_eq, erode_at):
     """Stress update n-1 -> n, internal + hourglass forces at x^n, stable step.
 
     Parameters
@@ -491,32 +545,39 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     cut_row : (ne,) int64 row of fe_cut for an element at a partition cut, -1 elsewhere;
     fe_cut : (ncut, nen, dim) the corner forces of those elements (written): the solver sums them
     into its shared nodes in global element order, so any partition gives the one-rank bits
+    alive : (ne,) uint8, 0 for an eroded element (skipped; updated in place)
+    eps_eq : (ne,) the effective strain integrated so far (updated where erosion is on)
+    erode_at : (ne,) the effective strain at which the element erodes, inf without erosion; with
+    erosion on, an element that would invert (volume or J) erodes instead of stopping the run
 
-    Returns ``(dt_min, bad)``: the smallest element stable step and the first
-    element with non-positive volume (at x^n or at the mid-step configuration),
-    non-positive neo-Hookean J or non-finite stress (-1 if none).  On ``bad >= 0``
-    the call returns immediately (state and f are partially updated).
+    Returns ``(dt_min, bad, eroded)``: the smallest stable step of the live elements, the first
+    element with non-positive volume (at x^n or at the mid-step configuration), non-positive
+    neo-Hookean J or non-finite stress (-1 if none), and the number of elements eroded in this
+    call.  On ``bad >= 0`` the call returns immediately (state and f are partially updated).
     """
     if x.shape[1] == 3:
-        return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
-                           mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut)
-    return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
-                        mass_e, sig, eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut)
+        return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
+                           temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at)
+    return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
+                        temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at)
 
 
 @njit(cache=True)
 def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
                    eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
-    """element_forces_cut without partition cuts (one rank, kernel tests)."""
-    return element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
-                              eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f,
-                              np.full(conn.shape[0], -1, np.int64), np.zeros((0, conn.shape[1], x.shape[1])))
+    """element_forces_cut without partition cuts or erosion (one rank, kernel tests): (dt_min, bad)."""
+    ne = conn.shape[0]
+    dt_min, bad, _ = element_forces_cut(
+        x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p, temp, e_int, q_out,
+        hg_coef, q_lin, q_quad, f, np.full(ne, -1, np.int64), np.zeros((0, conn.shape[1], x.shape[1])),
+        np.ones(ne, np.uint8), np.zeros(ne), np.full(ne, np.inf))
+    return dt_min, bad
 
 
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _forces_hex, _forces_quad, element_forces_cut, element_forces],
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _forces_hex, _forces_quad, element_forces_cut, element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
 
 

@@ -145,6 +145,16 @@ class LagrangeSolver:
             self.temp[my_body == b_index] = t0
         self.e_int = np.zeros(ne)
         self.q = np.zeros(ne)
+        # element erosion (bodies[i].erosion.strain): the effective strain at which an element of the
+        # body erodes (inf: never); alive 0 once eroded.  The surface is rebuilt from the live
+        # elements after every step that eroded one (surface_version counts the rebuilds).
+        limit = np.array([float(b["erosion"]["strain"]) if b.get("erosion") else np.inf for b in bodies])
+        self.erosion = bool(np.isfinite(limit).any())
+        self.erode_at = limit[my_body].astype(np.float64)
+        self.alive = np.ones(ne, np.uint8)
+        self.eps_eq = np.zeros(ne)
+        self.eroded = 0
+        self.surface_version = 0
         self.f = np.zeros((nn, dim))
         # work arrays of the step (allocated once)
         self.v_old = np.zeros((nn, dim))
@@ -188,10 +198,11 @@ class LagrangeSolver:
     # ---- the step --------------------------------------------------------------------------------
     def _forces(self, dt_prev: float) -> float:
         self.f[:] = 0.0
-        dt_min, bad = kernels.element_forces_cut(
+        dt_min, bad, eroded = kernels.element_forces_cut(
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
             self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
+            self.alive, self.eps_eq, self.erode_at,
         )
         if bad >= 0:
             gid = int(self.part.cells[bad])
@@ -201,6 +212,12 @@ class LagrangeSolver:
                 f"(body {self.body_names[b]!r}, its element {gid - int(self._body_first_cell[b])}; "
                 f"volume or stress not finite/positive)"
             )
+        if self.erosion:
+            eroded = int(self._allsum(float(eroded))) if self.comm.size > 1 else int(eroded)
+            if eroded:  # the surface of the live elements is another one: rebuilt when next asked for
+                self.eroded += eroded
+                self._surface = self._surf = None
+                self.surface_version += 1
         if self._cut:  # the cut nodes' forces in the one-rank order (shared_sums.py)
             self._cut.sum_into(self._fe_cut, self.f)
         return self._min(dt_min)
@@ -257,7 +274,9 @@ class LagrangeSolver:
         self.step, self.time = step, time
         self.first_step = False
         self.dt_prev = self.dt
-        self._dt_stable = self._forces(self.dt)
+        dt = self._forces(self.dt)
+        # (no live element left, every one eroded: the free nodes fly at any step; the last one kept)
+        self._dt_stable = dt if np.isfinite(dt) else self._dt_stable
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
     def surface(self) -> dict[str, np.ndarray]:
@@ -272,9 +291,26 @@ class LagrangeSolver:
             self._build_surface()
         return self._surface
 
+    def _live_cells(self) -> np.ndarray:
+        """Global ids of the elements not eroded (all of them without erosion; collective)."""
+        if not self.erosion:
+            return np.arange(self.n_cells_global)
+        dead = self.part.cells[self.alive == 0]
+        if self.comm.size > 1:
+            dead = np.concatenate(self.comm.allgather(dead))
+        live = np.ones(self.n_cells_global, bool)
+        live[dead] = False
+        return np.flatnonzero(live)
+
     def _build_surface(self) -> None:
-        facets_g, facet_cell = exterior_facets(self.global_cells, self.cell_type, self.n_nodes_global,
-                                               self.global_points)
+        live = self._live_cells()
+        if live.size:
+            facets_g, facet_cell = exterior_facets(self.global_cells[live], self.cell_type, self.n_nodes_global,
+                                                   self.global_points)
+            facet_cell = live[facet_cell]
+        else:  # every element eroded: no surface
+            facets_g = np.zeros((0, 2 if self.dim == 2 else 4), np.int64)
+            facet_cell = np.zeros(0, np.int64)
         node_ids = np.unique(facets_g)
         ns = len(node_ids)
         p = self.part
@@ -406,6 +442,9 @@ class LagrangeSolver:
             "momentum_balance_rel": float(p_err),
             "angular_momentum_balance_rel": float(l_err),
         }
+        if self.erosion:  # the eroded elements' internal energy leaves the body with them
+            d["eroded_elements"] = float(self.eroded)
+            d["eroded_internal_energy"] = float(self._allsum(self.e_int[self.alive == 0].sum()))
         for c, name in enumerate("xyz"[: self.dim]):
             d[f"momentum_{name}"] = float(p[c])
         for c, name in enumerate(("x", "y", "z") if self.dim == 3 else ("z",)):
@@ -442,8 +481,10 @@ class LagrangeSolver:
             "stress": self.sig,
             "plastic_strain": self.eps_p,
             "temperature": self.temp,
-            "density": self.mass_e / vol,
+            # (an eroded element has no density: 0, its volume may have gone through zero)
+            "density": np.divide(self.mass_e, vol, out=np.zeros_like(vol), where=self.alive == 1),
             "bulk_viscosity": self.q,
+            **({"eroded": 1.0 - self.alive} if self.erosion else {}),
         }
 
     # ---- checkpoint / restart (global arrays, so any rank count can read; same count is bitwise) --
@@ -452,16 +493,21 @@ class LagrangeSolver:
     STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0")
     STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0", "impulse_gross")
 
+    STATE_EROSION = ("alive", "eps_eq")   # cells, and the scalars eroded and surface_version
+
+    def _state_cells(self) -> tuple:
+        return self.STATE_CELLS + (self.STATE_EROSION if self.erosion else ())
+
     def checkpoint(self, path: Path) -> None:
         nodes = {k: self.gather_nodes(getattr(self, k)) for k in self.STATE_NODES}
-        cells = {k: self.gather_cells(getattr(self, k)) for k in self.STATE_CELLS}
+        cells = {k: self.gather_cells(getattr(self, k)) for k in self._state_cells()}
         if self.comm.rank != 0:
             return
         tmp = Path(str(path) + ".tmp")
         with h5py.File(tmp, "w") as h:
             for k, a in {**nodes, **cells}.items():
                 h.create_dataset(k, data=a)
-            for k in self.STATE_SCALARS:
+            for k in self.STATE_SCALARS + (("eroded", "surface_version") if self.erosion else ()):
                 h.attrs[k] = getattr(self, k)
             for k in self.STATE_VECTORS:
                 h.create_dataset(k, data=getattr(self, k))
@@ -472,8 +518,11 @@ class LagrangeSolver:
         with h5py.File(path, "r") as h:
             for k in self.STATE_NODES:
                 getattr(self, k)[:] = h[k][...][self.part.nodes]
-            for k in self.STATE_CELLS:
+            for k in self._state_cells():
                 getattr(self, k)[:] = h[k][...][self.part.cells]
+            if self.erosion:
+                self.eroded, self.surface_version = int(h.attrs["eroded"]), int(h.attrs["surface_version"])
+                self._surface = self._surf = None
             for k in self.STATE_SCALARS:
                 setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
             for k in self.STATE_VECTORS:
