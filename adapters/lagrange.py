@@ -38,9 +38,15 @@ class LagrangeAdapter(SolverAdapter):
 
     # ---- the embedded-mesh coupling (collective hooks; every rank returns the same arrays) --------
     def surface(self) -> dict[str, np.ndarray]:
-        """The bodies' exterior surface, fixed for the run: node_ids (ns,), facets (nf, 2|4) indices
-        into node_ids (outward), body (nf,), mass (ns,) full lumped nodal masses."""
+        """The bodies' exterior surface (the live elements' after renew_surface): node_ids (ns,),
+        facets (nf, 2|4) indices into node_ids (outward), body (nf,), mass (ns,) full lumped nodal
+        masses."""
         return self.solver.surface()
+
+    def renew_surface(self) -> bool:
+        """After a step that eroded elements: take the live elements' surface (collective); True if
+        it changed (the runtime then sends it to the coupler, adapters/runtime.py)."""
+        return self.solver.renew_surface()
 
     def interface(self) -> dict[str, np.ndarray]:
         """After predict: {"v": (ns, dim) predictor velocities v* of the surface nodes}."""

@@ -213,7 +213,7 @@ TAG_GEOMETRY = 11   # coupler -> background: the bodies' geometry in the grid (s
 TAG_VSTAR = 20      # foreground -> coupler, after predict: v* of the surface nodes
 TAG_INTERFACE = 21  # background -> coupler, after predict: v*, m of the nodes asked for, cut-zone forces
 TAG_IMPULSE = 22    # coupler -> foreground: surface impulses
-TAG_STATE = 23      # foreground -> coupler, after correct: x^{n+1}, v^{n+1/2} of the surface nodes
+TAG_STATE = 23      # foreground -> coupler, after correct: x^{n+1}, v^{n+1/2} of the surface nodes, then a flag (1: a new surface follows, TAG_SURFACE)
 TAG_CORRECT = 24    # coupler -> background: node impulses, the surface's v^{n+1/2} and mean velocity
 TAG_TIMING = 30     # solver -> coupler, after its stop reply: [seconds in its own step work, seconds in its engine (LAMMPS runs) or nan]
 

@@ -121,10 +121,19 @@ def serve(adapter_cls, argv=None) -> None:
             t0 = _time.perf_counter()
             adapter.correct(imp.reshape(v.shape))
             volumes = getattr(adapter, "volumes", None)  # particles: their volumes too
+            # the state on the surface the coupler's operators were built on, then a flag: 1 when the
+            # surface changed in this step (eroded elements), the new one following as TAG_SURFACE
+            renew = getattr(adapter, "renew_surface", None)
             state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(),
-                                    *([volumes()] if volumes else [])])
+                                    *([volumes()] if volumes else []), [0.0]])
+            changed = bool(renew and renew())
+            state[-1] = float(changed)
             if rank == 0:
                 P.send(ic, state, 0, P.TAG_STATE)
+            if changed:
+                buf = pack_surface(adapter)
+                if rank == 0:
+                    P.send(ic, buf, 0, P.TAG_SURFACE)
             adapter.remap(None)
             answer(bool(cmd[5]))
             work_s += _time.perf_counter() - t0

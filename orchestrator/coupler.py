@@ -142,7 +142,13 @@ class Coupler:
             P.send(fg, impulse, 0, P.TAG_IMPULSE)
         states = [P.recv(fg, 0, P.TAG_STATE) for fg in fgs]
         t0 = _time.perf_counter()
-        P.send(bg, c.take_state(states), 0, P.TAG_CORRECT)
+        # (each state ends with a flag: 1 when that group's surface changed, eroded elements)
+        P.send(bg, c.take_state([st[:-1] for st in states]), 0, P.TAG_CORRECT)
+        for i, (fg, st) in enumerate(zip(fgs, states)):
+            if st[-1] != 0.0:   # the next geometry on the group's new surface
+                from adapters.runtime import unpack_surface
+
+                c.replace_surface(i, unpack_surface(P.recv(fg, 0, P.TAG_SURFACE), c.dim))
         from orchestrator.coupling.geometry import GeometryError
 
         t1 = _time.perf_counter()

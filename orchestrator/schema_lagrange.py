@@ -254,9 +254,12 @@ def check_lagrange(case: dict, data: dict) -> None:
                             f"duplicate body name (also lagrange.bodies[{seen[body['name']]}].name)")
         seen[body["name"]] = i
         if body["erosion"] is not None and case.get("coupling"):
+            # (the coupler takes a new surface, EmbeddedCoupling.replace_surface; the background
+            # cannot yet take the zones a whole eroded element uncovers at once: measured, the air
+            # left in them went to negative internal energy within 6 steps)
             raise CaseError(format_key(base + ["erosion"]), raw["erosion"],
-                            "not yet with [coupling]: the coupler keeps a body's first surface; "
-                            "run the body uncoupled, or as SPH particles ([sph])")
+                            "not yet with [coupling]: the background cannot yet fill the zones an eroded "
+                            "element uncovers at once; run the body uncoupled, or as SPH particles ([sph])")
         if body["material"] not in case["materials"]:
             defined = ", ".join(case["materials"]) or "(none)"
             raise CaseError(format_key(base + ["material"]), body["material"],

@@ -134,6 +134,17 @@ class EmbeddedCoupling:
         # (the lightest particle is the easiest to tie)
         self.find_orphans = bool(self.particles and self.volume.size and may_tie(
             case["ale"], float(np.min(np.asarray(surface["mass"], dtype=np.float64) / self.volume))))
+        self._take_nodes(surface)
+        self.ops = None
+        self.last = StepRecord(np.zeros(self.dim), 0.0)
+        # accumulated over the run (coupler diagnostics)
+        self.momentum_f = np.zeros(self.dim)
+        self.work_f = 0.0
+        self.dissipation = 0.0
+
+    def _take_nodes(self, surface: dict) -> None:
+        """The surface nodes' masses, free components, positions and velocities, and the arrays
+        sized by them."""
         self.mass = np.asarray(surface["mass"], dtype=np.float64)
         free = np.asarray(surface["free"]).reshape(-1, self.dim)
         self.free = (free > 0.0).astype(np.float64)
@@ -141,14 +152,18 @@ class EmbeddedCoupling:
         self.x = np.asarray(surface["x"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.v = np.asarray(surface["v"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.ns = self.x.shape[0]
-        self.ops = None
         self.load_f = np.zeros_like(self.x)
         self.imp_f = np.zeros_like(self.x)
-        self.last = StepRecord(np.zeros(self.dim), 0.0)
-        # accumulated over the run (coupler diagnostics)
-        self.momentum_f = np.zeros(self.dim)
-        self.work_f = 0.0
-        self.dissipation = 0.0
+
+    def replace_surface(self, surface: dict) -> None:
+        """A Lagrangian foreground's surface after elements eroded (its live elements'): the facets
+        and the nodes' arrays; the next geometry() builds the operators on it.  The multipliers' warm
+        start is kept (per cut zone, not per node)."""
+        if self.particles:
+            raise ValueError("a particle foreground's surface is rebuilt every step, never replaced")
+        self.facets = np.ascontiguousarray(surface["facets"], dtype=np.int64)
+        self.body = np.ascontiguousarray(surface["body"], dtype=np.int64)
+        self._take_nodes(surface)
 
     # ---- geometry --------------------------------------------------------------------------------
     def geometry(self):

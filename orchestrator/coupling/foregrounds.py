@@ -152,6 +152,10 @@ class ForegroundCouplings:
             out.append(m.solve(dt, dt_avg, vs, np.concatenate(part)))
         return out
 
+    def replace_surface(self, i: int, surface: dict) -> None:
+        """Member i's foreground surface changed (elements eroded): the next geometry() is on it."""
+        self.members[i].replace_surface(surface)
+
     def take_state(self, states: list) -> np.ndarray:
         """The background's correction: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean
         velocity_e (nc, dim)] over the merged lists."""

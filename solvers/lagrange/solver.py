@@ -154,7 +154,8 @@ class LagrangeSolver:
         self.alive = np.ones(ne, np.uint8)
         self.eps_eq = np.zeros(ne)
         self.eroded = 0
-        self.surface_version = 0
+        self.surface_version = 0   # renewals of the surface so far
+        self.surface_stale = False  # elements eroded since the surface was built
         self.f = np.zeros((nn, dim))
         # work arrays of the step (allocated once)
         self.v_old = np.zeros((nn, dim))
@@ -214,10 +215,9 @@ class LagrangeSolver:
             )
         if self.erosion:
             eroded = int(self._allsum(float(eroded))) if self.comm.size > 1 else int(eroded)
-            if eroded:  # the surface of the live elements is another one: rebuilt when next asked for
+            if eroded:  # the live elements' surface is another one: renew_surface() takes it
                 self.eroded += eroded
-                self._surface = self._surf = None
-                self.surface_version += 1
+                self.surface_stale = True
         if self._cut:  # the cut nodes' forces in the one-rank order (shared_sums.py)
             self._cut.sum_into(self._fe_cut, self.f)
         return self._min(dt_min)
@@ -279,9 +279,22 @@ class LagrangeSolver:
         self._dt_stable = dt if np.isfinite(dt) else self._dt_stable
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
+    def renew_surface(self) -> bool:
+        """After elements eroded (``surface_stale``): the surface of the live elements from now on
+        (collective; surface_version counts the renewals).  Until then surface() keeps the one a
+        coupler built its operators on, so the step's state still goes out on those nodes.  Returns
+        whether it changed."""
+        if not self.surface_stale:
+            return False
+        self._surface = self._surf = None
+        self.surface_stale = False
+        self.surface_version += 1
+        return True
+
     def surface(self) -> dict[str, np.ndarray]:
         """The bodies' exterior surface, the same on every rank; collective on its first call, then
-        cached (the reference mesh and the lumped masses never change in a Lagrangian solver).
+        cached (the reference mesh and the lumped masses never change in a Lagrangian solver; the
+        elements eroded since are left out at the next renew_surface()).
 
         node_ids (ns,): sorted global ids of the surface nodes; facets (nf, 2|4): outward facets
         (surface.exterior_facets, canonical order) as indices into node_ids; body (nf,): the body whose
@@ -522,7 +535,8 @@ class LagrangeSolver:
                 getattr(self, k)[:] = h[k][...][self.part.cells]
             if self.erosion:
                 self.eroded, self.surface_version = int(h.attrs["eroded"]), int(h.attrs["surface_version"])
-                self._surface = self._surf = None
+                self._surface = self._surf = None   # (built from the live elements when asked for)
+                self.surface_stale = False
             for k in self.STATE_SCALARS:
                 setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
             for k in self.STATE_VECTORS:
