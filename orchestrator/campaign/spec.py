@@ -25,9 +25,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import jsonschema
-from jsonschema.exceptions import best_match
-
 from orchestrator.schema_rules import CaseError, MISSING, format_key
 
 CAMPAIGN_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*(\[\d+\]|\.[A-Za-z0-9_-]+)*$")
@@ -101,7 +98,6 @@ SCHEMA = {
         },
     },
 }
-_VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
 
 
 @dataclass
@@ -196,7 +192,7 @@ def read_campaign(path: str | Path) -> dict:
         data, _ = case_mod._read_toml(p.resolve())
     except CaseError as e:  # the reader names case.toml: this is the campaign file
         raise CaseError(p.name, e.value, e.allowed) from None
-    err = best_match(itertools.islice(_VALIDATOR.iter_errors(data), 100), key=case_mod._relevance)
+    err = case_mod._best_schema_error(SCHEMA, data)   # (the case file's rule: first 100 errors, best match)
     if err is not None:
         raise case_mod._schema_error_to_case_error(err)
     return data
