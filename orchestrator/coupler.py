@@ -9,7 +9,6 @@ Constraint coupling between groups (Lagrange multipliers) slots in between predi
 """
 from __future__ import annotations
 
-import argparse
 import functools
 import json
 import os
@@ -509,16 +508,10 @@ class Coupler:
 
 
 def main(argv=None) -> None:
+    from adapters.runtime import parse_args
     from orchestrator.case import load_case
 
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--case", required=True)
-    ap.add_argument("--out", required=True)
-    ap.add_argument("--roles", required=True)
-    ap.add_argument("--role", default=P.COUPLER)
-    ap.add_argument("--restart", default=None)
-    ap.add_argument("--case-sha256", default=None, help="the case file's hash as the launcher checked it")
-    args = ap.parse_args(argv)
+    args = parse_args(argv)   # (the solver ranks' arguments: launch.build_command gives every process the same)
     out = Path(args.out)
     running: list[Coupler] = []
 
