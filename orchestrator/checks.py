@@ -366,6 +366,51 @@ def _main_body(x: np.ndarray, link: float) -> np.ndarray:
     return label == np.argmax(np.bincount(label))
 
 
+def _particle_rod(case, out, ax: int, surface: float):
+    """(times, depths, rear depths, h) of an SPH rod (``penetration``)."""
+    from orchestrator import output
+
+    dx = case["sph"]["spacing"]
+    ts, ds, rs = [], [], []
+    rear = None
+    for t, _, index in output.read_steps(out, "sph"):
+        x = output.read_step(out, "sph", index)[0][:, : case["run"]["dimension"]]
+        if rear is None:
+            rear = x[:, ax] >= x[:, ax].max() - 0.5 * dx
+        ts.append(t)
+        ds.append(surface - float(x[_main_body(x, 2.0 * dx), ax].min()))
+        rs.append(surface - float(x[rear, ax].mean()))
+    return np.array(ts), np.array(ds), np.array(rs), case["sph"]["smoothing_length"]
+
+
+def _element_rod(case, out, ax: int, surface: float):
+    """(times, depths, rear depths, h) of a rod of Lagrangian elements that erode (``penetration``):
+    the lowest node of a live element; the rear, the nodes of the first step's rear face, followed
+    by index; h, the median length of the elements along the axis at the first step.  Once no
+    element is left both depths keep their last values and the rear is put at the tip (used up)."""
+    from orchestrator import output
+
+    cells, _ = output.read_mesh_file(out, "lagrange")
+    ts, ds, rs = [], [], []
+    rear = h = None
+    for t, _, index in output.read_steps(out, "lagrange"):
+        x, _, cd = output.read_step(out, "lagrange", index)
+        eroded = np.asarray(cd.get("eroded", np.zeros(len(cells)))).ravel()
+        if rear is None:
+            ext = x[cells, ax]
+            h = float(np.median(ext.max(axis=1) - ext.min(axis=1)))
+            rear = x[:, ax] >= x[:, ax].max() - 0.5 * h
+        live = np.unique(cells[eroded == 0])
+        ts.append(t)
+        if live.size:
+            ds.append(surface - float(x[live, ax].min()))
+            rs.append(surface - float(x[rear, ax].mean()))
+        else:
+            ds.append(ds[-1] if ds else float("nan"))
+            rs.append(ds[-1] + h)
+    return np.array(ts), np.array(ds), np.array(rs), h
+
+
 @register_check("penetration", params=table(
     {"surface": number("m"), "axis": AXIS, "window": WINDOW, "depth_time": number("s", exclusiveMinimum=0)},
     required=("surface", "axis", "window")))
@@ -381,22 +426,14 @@ def penetration(case, out, history, params):
     smoothing length of the tip, linearly interpolated between the output steps; the time is
     reported as ``consumed_time``.  Not reached by the last step: depth_consumed is NaN (fails).
     With ``depth_time`` (s): ``depth_at_time``, the depth then (interpolated; NaN past the last
-    step), for a model's depth history such as Tate's, U t up to its erosion time L / (v - U)."""
-    from orchestrator import output
-
+    step), for a model's depth history such as Tate's, U t up to its erosion time L / (v - U).
+    A rod of Lagrangian elements (no ``[sph]``): the nodes of its live (not eroded) elements in place
+    of the main body, its element length along ``axis`` in place of the spacing and the smoothing
+    length; once every element has eroded the rod is used up and its depth stays the last one
+    (``_element_rod``)."""
     ax = "xyz".index(params["axis"])
-    dx = case["sph"]["spacing"]
-    h = case["sph"]["smoothing_length"]
-    ts, ds, rs = [], [], []
-    rear = None
-    for t, _, index in output.read_steps(out, "sph"):
-        x = output.read_step(out, "sph", index)[0][:, : case["run"]["dimension"]]
-        if rear is None:
-            rear = x[:, ax] >= x[:, ax].max() - 0.5 * dx
-        ts.append(t)
-        ds.append(float(params["surface"]) - float(x[_main_body(x, 2.0 * dx), ax].min()))
-        rs.append(float(params["surface"]) - float(x[rear, ax].mean()))
-    ts, ds, rs = np.array(ts), np.array(ds), np.array(rs)
+    track = _particle_rod if "sph" in case else _element_rod
+    ts, ds, rs, h = track(case, out, ax, float(params["surface"]))
     lo, hi = params["window"]
     sel = (ts >= lo * (1 - 1e-9)) & (ts <= hi * (1 + 1e-9))
     if np.count_nonzero(sel) < 2:

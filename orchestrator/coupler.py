@@ -65,6 +65,22 @@ def conservation_residuals(hist: dict[str, np.ndarray], roles) -> dict[str, floa
     return rel
 
 
+DT_COLLAPSE = 1e-6
+"""A stable step below this share of the largest step so far stops the run (LS-DYNA's DTMIN): a
+penetrator's background went on at t = 21.4 us with steps of 3e-18 s (a node driven to ~1e14 m/s),
+a job that would have run until killed."""
+
+
+def collapsed_step(stable: dict, dt_max: float) -> str | None:
+    """Why the run must stop, or None: the solver group whose stable step (``stable``: role -> s)
+    fell below DT_COLLAPSE of the largest step so far, ``dt_max`` (0 before the first)."""
+    role = min(stable, key=stable.get)
+    if not stable[role] < DT_COLLAPSE * dt_max:
+        return None
+    return (f"the {role} solver's stable step is {stable[role]:.6g} s, below {DT_COLLAPSE:g} of the largest so "
+            f"far {dt_max:.6g} s (the run would not reach its end time)")
+
+
 class Coupler:
     def __init__(self, place, case: dict, out: Path, restart: str | None):
         self.place = place
@@ -411,6 +427,9 @@ class Coupler:
             dt = self.dt_scale * stable
             if not np.isfinite(dt) or dt <= 0.0:
                 raise RuntimeError(f"stable time step is {dt} at step {self.step}, t={self.t:.6g} s")
+            why = collapsed_step({r: self.reply[r][1] for r in self.roles}, self.dt_max)
+            if why:
+                raise RuntimeError(f"time step collapsed at step {self.step}, t = {self.t:.6g} s: {why}")
             # clip the step to land exactly on the end, output and checkpoint times (never stretch
             # it: the stable step is a limit), so that profiles are written at the stated times
             target = self._next_target()

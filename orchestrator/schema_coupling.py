@@ -48,7 +48,8 @@ def _body_box(mesh: dict, dim: int):
     if "quarter_cylinder" in mesh:
         q = mesh["quarter_cylinder"]
         r, length = float(q["radius"]), float(q["length"])
-        return [0.0, 0.0, 0.0][:dim], ([r, r, length] if dim == 3 else [r, length])
+        b = [float(v) for v in q.get("base", (0.0, 0.0, 0.0))]
+        return b[:dim], [b[0] + r, b[1] + r, b[2] + length][:dim]
     return None
 
 

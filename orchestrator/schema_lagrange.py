@@ -7,7 +7,7 @@ Normalised layout::
     "materials": {name: {model, density, youngs_modulus, poisson_ratio, [johnson_cook keys]}}
     "lagrange": {hourglass, bulk_viscosity_linear, bulk_viscosity_quadratic,
                  "bodies": [{name, material, mesh, size, initial_velocity, initial_temperature,
-                             erosion: None | {strain}}]}
+                             erosion: None | {strain, time_step}}]}
     "boundaries": [ {type, ...} ]
 
 ``materials`` and ``boundaries`` are always present (empty without bodies); ``lagrange`` when the
@@ -15,7 +15,7 @@ file has the table, or no solver table at all (the Lagrangian solver is the defa
 has ``size = {"elements": int, "nodes": int}`` (Python ints, computed without building the mesh,
 or counted after reading a mesh file).  ``mesh`` is exactly one of
 ``{"box": {lower, upper, cells}}``, ``{"quarter_cylinder": {radius, length, radial_cells,
-axial_cells}}`` or ``{"file": Path}`` (resolved, absolute); ``initial_velocity`` holds
+axial_cells, base}}`` or ``{"file": Path}`` (resolved, absolute); ``initial_velocity`` holds
 ``dimension`` items, each a float or an expression string in the coordinates (``x, y`` in 2D,
 ``x, y, z`` in 3D).
 """
@@ -100,6 +100,8 @@ QUARTER_CYLINDER = table(
         "length": number("m", exclusiveMinimum=0),
         "radial_cells": integer(None, minimum=2),  # butterfly grid needs >= 2
         "axial_cells": integer(None, minimum=1),
+        # the centre of its bottom face (default the origin): a rod placed in a background grid
+        "base": {**vector("m"), "minItems": 3},
     },
     required=("radius", "length", "radial_cells", "axial_cells"),
 )
@@ -123,8 +125,13 @@ BODY = table(
         "initial_temperature": number("K", exclusiveMinimum=0),
         # element erosion (LS-DYNA's MAT_ADD_EROSION, effective strain): an element whose effective
         # strain (sqrt(2/3 d':d') integrated over the steps) reaches this, or that would invert,
-        # erodes: no force from then on, its nodes keep their mass, its internal energy is booked
-        "erosion": table({"strain": number("dimensionless", exclusiveMinimum=0)}, required=("strain",)),
+        # erodes: no force from then on, its nodes keep their mass, its internal energy is booked;
+        # time_step: so does one whose stable step falls below this share of the solver's first one
+        # (LS-DYNA's DTMIN with ERODE = 1: a crushed element stops the run by its step long before
+        # it inverts)
+        "erosion": table({"strain": number("dimensionless", exclusiveMinimum=0),
+                          "time_step": number("dimensionless", exclusiveMinimum=0, exclusiveMaximum=1)},
+                         required=("strain",)),
     },
     required=("name", "material", "mesh"),
 )
@@ -213,7 +220,8 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             q = mesh_in["quarter_cylinder"]
             mesh = {"quarter_cylinder": {"radius": to_float(q["radius"]), "length": to_float(q["length"]),
                                          "radial_cells": int(q["radial_cells"]),
-                                         "axial_cells": int(q["axial_cells"])}}
+                                         "axial_cells": int(q["axial_cells"]),
+                                         "base": [to_float(v) for v in q.get("base", (0.0, 0.0, 0.0))]}}
         else:
             mesh = {"file": (case["case_dir"] / mesh_in["file"]).resolve()}
         mat = case["materials"].get(b["material"], {})
@@ -227,7 +235,8 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             "initial_velocity": ([num_or_expression(v) for v in b["initial_velocity"]]
                                  if "initial_velocity" in b else [0.0] * dim),
             "initial_temperature": to_float(t0),
-            "erosion": {"strain": to_float(b["erosion"]["strain"])} if "erosion" in b else None,
+            "erosion": ({"strain": to_float(b["erosion"]["strain"]),
+                         "time_step": to_float(b["erosion"].get("time_step", 0.0))} if "erosion" in b else None),
         })
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
     lagrange["bodies"] = bodies
@@ -235,7 +244,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
 
 
 def check_lagrange(case: dict, data: dict) -> None:
-    """At least one body and a material table; unique body names, no erosion in a coupled case (yet),
+    """At least one body and a material table; unique body names,
     defined materials, vector lengths, box extents, 3-D-only meshes, velocity expressions, initial
     temperature below melt."""
     dim = case["run"]["dimension"]
@@ -253,13 +262,6 @@ def check_lagrange(case: dict, data: dict) -> None:
             raise CaseError(format_key(base + ["name"]), body["name"],
                             f"duplicate body name (also lagrange.bodies[{seen[body['name']]}].name)")
         seen[body["name"]] = i
-        if body["erosion"] is not None and case.get("coupling"):
-            # (the coupler takes a new surface, EmbeddedCoupling.replace_surface; the background
-            # cannot yet take the zones a whole eroded element uncovers at once: measured, the air
-            # left in them went to negative internal energy within 6 steps)
-            raise CaseError(format_key(base + ["erosion"]), raw["erosion"],
-                            "not yet with [coupling]: the background cannot yet fill the zones an eroded "
-                            "element uncovers at once; run the body uncoupled, or as SPH particles ([sph])")
         if body["material"] not in case["materials"]:
             defined = ", ".join(case["materials"]) or "(none)"
             raise CaseError(format_key(base + ["material"]), body["material"],

@@ -105,7 +105,7 @@ from solvers.ale.points import subcell_offsets
 from solvers.ale.hydro import BAD_STATE, BAD_VOLUME, _t4, _t8, hex_volume_sym, zone_dt, zone_q
 from solvers.ale.merge import (PHI_MERGE, _group_sums, group_components, group_material_totals, group_totals,
                                member_materials, merge_members, merge_nodes, merge_targets, merge_velocities,
-                               zone_gids, _split, _zone_around)
+                               opened_zones, zone_gids, _split, _zone_around)
 from solvers.ale.mixed import fit_open_volumes
 from solvers.ale.remap import face_flux, set_positions
 from solvers.sorted_ids import sorted_unique
@@ -614,6 +614,7 @@ class Blocked:
 
         if s.mm is not None:  # the materials onto the (new) open volumes, then pressure relaxation
             fit_open_volumes(s.mm.vol, self.open_volumes(), self._real)
+            s.mm.cut_off_vacuum(s)
             s.mm.relax_pressures(s)
         s.parity ^= 1
         s._pending_remap = False
@@ -712,7 +713,11 @@ class Blocked:
         B = s.block
         if self.A_body is not None:  # a coupled body's exact geometry: small zones merge
             _sync(s)
+            phi_old = self.phi
             self.set_fractions(s, b_new)
+            # zones uncovered at once (an eroded element): they share with a neighbour (merge._is_donor)
+            self._opened = np.empty(phi_old.size, np.uint8)
+            opened_zones(phi_old, self.phi, PHI_MERGE, self._opened)
             gdims = np.ones(3, np.int64)
             gdims[: B.dim] = B.cells
             goff = np.zeros(3, np.int64)
@@ -748,9 +753,10 @@ class Blocked:
         usable = self._usable
         code = np.full(B.nzones, -1.0)
         # candidates: real zones a body covers in part or whole that hold material, or are open
-        # and empty (merge._is_donor)
-        cand = np.flatnonzero((self.b_bodies > 0.0) & ((s.M != 0.0) | (self.phi > 0.0)) & B.real_zone)
-        bad = merge_targets(cand, s.M, self.phi, self.b_bodies, usable, B.zs, dim, PHI_MERGE, code)
+        # and empty, and those the step opened at once (merge._is_donor)
+        cand = np.flatnonzero((((self.b_bodies > 0.0) & ((s.M != 0.0) | (self.phi > 0.0))) | (self._opened != 0))
+                              & B.real_zone)
+        bad = merge_targets(cand, s.M, self.phi, self.b_bodies, self._opened, usable, B.zs, dim, PHI_MERGE, code)
         dec = s.dec
         if not dec.parallel and not (code >= 0.0).any():
             return int(bad)

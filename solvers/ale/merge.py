@@ -3,7 +3,8 @@
 A zone a coupled body cuts to a small open fraction, or covers while it still holds material, hands
 its content to a face neighbour (``PHI_MERGE``), and a zone the body uncovered within the step
 (open, still empty: the remap's apertures are the start of the step's) takes its share from one
-with material: the target's group (the target and its donors) shares one density and one specific
+with material, as does one the step opened at once (a sliver at its start left at least twice as
+open and no longer small, ``opened_zones``: a body's eroded element uncovered it): the target's group (the target and its donors) shares one density and one specific
 energy, in proportion to the open volumes.  Nodal momentum is conserved (a node keeps its velocity
 when its mass falls and hands the momentum of the lost mass to the nodes that gain); groups that
 share a node pool their nodes' momentum together (``group_components``: one group's zones may
@@ -252,13 +253,20 @@ def zone_gids(zones, zs, gdims, goff, gper):
 
 
 @njit(cache=True, inline="always")
-def _is_donor(z, M, phi, b, usable, phi_merge):
+def _is_donor(z, M, phi, b, opened, usable, phi_merge):
     """A zone a body covers in part that must share with a neighbour: small (phi < phi_merge) with
     material, left with negative mass, or open and empty -- uncovered by a body that moved on within
     the step: its faces were closed at the start of the step (the remap's apertures), so the gas that
     followed the body piled up in the neighbour behind it (1 + u dt / h of its density), and the
-    group's one density puts it where the body left room."""
-    if usable[z] == 0 or not (b[z] > 0.0):
+    group's one density puts it where the body left room.  So is a zone ``opened`` in the step (a
+    sliver at its start that the step left at least twice as open, ``opened_zones``: a body's
+    element eroded over it, and the remap brought its few grams onto the whole zone): it shares
+    whatever it holds, or takes its share if empty, even where no body covers it any more."""
+    if usable[z] == 0:
+        return False
+    if opened[z] != 0:
+        return True
+    if not (b[z] > 0.0):
         return False
     if M[z] == 0.0:
         return phi[z] > 0.0
@@ -266,7 +274,18 @@ def _is_donor(z, M, phi, b, usable, phi_merge):
 
 
 @njit(cache=True)
-def _best(z, M, phi, b, usable, zs, dim, phi_merge, filled=False):
+def opened_zones(phi_old, phi_new, phi_merge, out):
+    """out[z] = 1 where a zone was a sliver or covered at the start of the step (phi_old < phi_merge)
+    and is open and at least twice as open after it: uncovered at once (an eroded element; a surface
+    in smooth motion opens a zone by a CFL share of it per step, and one a sliver merges anyway
+    while it stays below phi_merge), else 0."""
+    for z in range(phi_new.size):
+        out[z] = 1 if (phi_old[z] < phi_merge and phi_new[z] >= phi_merge
+                       and phi_new[z] >= 2.0 * phi_old[z]) else 0
+
+
+@njit(cache=True)
+def _best(z, M, phi, b, opened, usable, zs, dim, phi_merge, filled=False):
     """The face neighbour zone z would merge into (module docstring), or -1: open and usable (and
     holding material if ``filled``: an empty zone takes its content from a neighbour with some);
     one that does not merge itself before one that does, then the most open; ties to the first."""
@@ -278,7 +297,7 @@ def _best(z, M, phi, b, usable, zs, dim, phi_merge, filled=False):
             nb = z + sgn * zs[d]
             if usable[nb] == 0 or not (phi[nb] > 0.0) or (filled and not (M[nb] > 0.0)):
                 continue
-            keep = not _is_donor(nb, M, phi, b, usable, phi_merge)
+            keep = not _is_donor(nb, M, phi, b, opened, usable, phi_merge)
             if best < 0 or (keep and not bkeep) or (keep == bkeep and phi[nb] > bphi):
                 best = nb
                 bphi = phi[nb]
@@ -287,7 +306,7 @@ def _best(z, M, phi, b, usable, zs, dim, phi_merge, filled=False):
 
 
 @njit(cache=True)
-def _nearest_keeper(z, M, phi, b, usable, zs, dim, phi_merge):
+def _nearest_keeper(z, M, phi, b, opened, usable, zs, dim, phi_merge):
     """Where the face rule finds no target (a zone with material and no open face neighbour, or a
     pocket: all its open neighbours and their targets merge themselves -- a body's corner closing
     around a sliver): the nearest open zone within two per axis that does not merge itself, the most
@@ -305,7 +324,7 @@ def _nearest_keeper(z, M, phi, b, usable, zs, dim, phi_merge):
         if d2 == 0:
             continue
         nb = z + o0 * zs[0] + o1 * zs[1] + o2 * zs[2]
-        if usable[nb] == 0 or not (phi[nb] > 0.0) or _is_donor(nb, M, phi, b, usable, phi_merge):
+        if usable[nb] == 0 or not (phi[nb] > 0.0) or _is_donor(nb, M, phi, b, opened, usable, phi_merge):
             continue
         if best < 0 or d2 < bd or (d2 == bd and phi[nb] > bphi):
             best = nb
@@ -325,26 +344,26 @@ def _target(z, code, zs):
 
 
 @njit(cache=True)
-def merge_targets(cand, M, phi, b, usable, zs, dim, phi_merge, code):
+def merge_targets(cand, M, phi, b, opened, usable, zs, dim, phi_merge, code):
     """code[z] of the real candidate zones (the others stay -1): the offset of the zone each donor's
     content goes to (module docstring).  Returns -1, or a zone that must pass its content on (covered
     with material, or negative mass) and has nowhere to."""
     for t in range(cand.size):
         z = cand[t]
-        if not _is_donor(z, M, phi, b, usable, phi_merge):
+        if not _is_donor(z, M, phi, b, opened, usable, phi_merge):
             continue
         empty = M[z] == 0.0
-        y = _best(z, M, phi, b, usable, zs, dim, phi_merge, empty)
+        y = _best(z, M, phi, b, opened, usable, zs, dim, phi_merge, empty)
         if y < 0:
             if empty:
                 continue  # open and empty, no neighbour with material (a void behind a body): stays empty
-            y = _nearest_keeper(z, M, phi, b, usable, zs, dim, phi_merge)
+            y = _nearest_keeper(z, M, phi, b, opened, usable, zs, dim, phi_merge)
             if y < 0:
                 return z
-        elif _is_donor(y, M, phi, b, usable, phi_merge):
-            w = _best(y, M, phi, b, usable, zs, dim, phi_merge, empty)
-            if w < 0 or _is_donor(w, M, phi, b, usable, phi_merge):
-                w = -1 if empty else _nearest_keeper(z, M, phi, b, usable, zs, dim, phi_merge)
+        elif _is_donor(y, M, phi, b, opened, usable, phi_merge):
+            w = _best(y, M, phi, b, opened, usable, zs, dim, phi_merge, empty)
+            if w < 0 or _is_donor(w, M, phi, b, opened, usable, phi_merge):
+                w = -1 if empty else _nearest_keeper(z, M, phi, b, opened, usable, zs, dim, phi_merge)
                 if w < 0:
                     if phi[z] > 0.0 and M[z] >= 0.0:
                         continue  # a pocket of small zones: this one keeps its content (or stays empty)

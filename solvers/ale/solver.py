@@ -769,6 +769,7 @@ class AleSolver:
         for d in order:
             self._sweep(d)
         if self.mm is not None:
+            self.mm.cut_off_vacuum(self)
             self.mm.relax_pressures(self)
         remap.set_positions(self.x, B.X)
         self.parity ^= 1

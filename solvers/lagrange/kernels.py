@@ -111,7 +111,7 @@ def _erode(e, alive, q_out, cut_row, fe_cut):
 
 @njit(cache=True)
 def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at):
+                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt):
     ne = conn.shape[0]
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -281,6 +281,9 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             q = rho * lc * qq * (-divv)
         q_out[e] = q
         dte = lc / (qq + math.sqrt(qq * qq + csq))
+        if dte < erode_dt[e]:  # crushed below the body's smallest allowed step: erodes (its work booked)
+            n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+            continue
         if dte < dt_min:
             dt_min = dte
 
@@ -346,7 +349,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
 
 @njit(cache=True)
 def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at):
+                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt):
     ne = conn.shape[0]
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
@@ -478,6 +481,9 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             q = rho * lc * qq * (-divv)
         q_out[e] = q
         dte = lc / (qq + math.sqrt(qq * qq + csq))
+        if dte < erode_dt[e]:  # crushed below the body's smallest allowed step: erodes (its work booked)
+            n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
+            continue
         if dte < dt_min:
             dt_min = dte
 
@@ -527,7 +533,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
 @njit(cache=True)
 def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
                        eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut,
-                       alive, eps_eq, erode_at):
+                       alive, eps_eq, erode_at, erode_dt):
     """Stress update n-1 -> n, internal + hourglass forces at x^n, stable step.
 
     Parameters
@@ -549,6 +555,8 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     eps_eq : (ne,) the effective strain integrated so far (updated where erosion is on)
     erode_at : (ne,) the effective strain at which the element erodes, inf without erosion; with
     erosion on, an element that would invert (volume or J) erodes instead of stopping the run
+    erode_dt : (ne,) the stable step below which the element erodes (LS-DYNA's TSMIN with ERODE = 1:
+    a crushed element would stop the run by its step long before it inverts), 0 for none
 
     Returns ``(dt_min, bad, eroded)``: the smallest stable step of the live elements, the first
     element with non-positive volume (at x^n or at the mid-step configuration), non-positive
@@ -557,9 +565,11 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     """
     if x.shape[1] == 3:
         return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                           temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at)
+                           temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
+                           erode_dt)
     return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                        temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at)
+                        temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
+                        erode_dt)
 
 
 @njit(cache=True)
@@ -570,7 +580,7 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
     dt_min, bad, _ = element_forces_cut(
         x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p, temp, e_int, q_out,
         hg_coef, q_lin, q_quad, f, np.full(ne, -1, np.int64), np.zeros((0, conn.shape[1], x.shape[1])),
-        np.ones(ne, np.uint8), np.zeros(ne), np.full(ne, np.inf))
+        np.ones(ne, np.uint8), np.zeros(ne), np.full(ne, np.inf), np.zeros(ne))
     return dt_min, bad
 
 

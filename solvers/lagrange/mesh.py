@@ -376,7 +376,10 @@ def body_mesh(spec: dict, dim: int) -> Mesh:
         return box_mesh(b["lower"], b["upper"], b["cells"])
     if "quarter_cylinder" in m:
         q = m["quarter_cylinder"]
-        return quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
+        mesh = quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
+        if any(q.get("base", ())):
+            mesh.points += np.asarray(q["base"], np.float64)
+        return mesh
     return read_mesh(m["file"], dim)
 
 

@@ -151,6 +151,8 @@ class LagrangeSolver:
         limit = np.array([float(b["erosion"]["strain"]) if b.get("erosion") else np.inf for b in bodies])
         self.erosion = bool(np.isfinite(limit).any())
         self.erode_at = limit[my_body].astype(np.float64)
+        # (erosion.time_step: a share of the solver's first stable step, set below once it is known)
+        self.erode_dt = np.zeros(ne)
         self.alive = np.ones(ne, np.uint8)
         self.eps_eq = np.zeros(ne)
         self.eroded = 0
@@ -180,6 +182,10 @@ class LagrangeSolver:
         self.p0 = None
         self.l0 = None
         self._dt_stable = self._forces(0.0)
+        # an element crushed below this share of the first stable step (all ranks, every body: LS-DYNA's
+        # TSMIN = DTMIN * the first step, with ERODE = 1) erodes: it would stop the run by its step
+        share = np.array([float(b["erosion"].get("time_step", 0.0)) if b.get("erosion") else 0.0 for b in bodies])
+        self.erode_dt = share[my_body] * self._dt_stable
         self.ke0 = self.kinetic_energy()
         self.p0 = self.momentum()
         self.l0 = self.angular_momentum()
@@ -203,7 +209,7 @@ class LagrangeSolver:
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
             self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
-            self.alive, self.eps_eq, self.erode_at,
+            self.alive, self.eps_eq, self.erode_at, self.erode_dt,
         )
         if bad >= 0:
             gid = int(self.part.cells[bad])
@@ -506,7 +512,9 @@ class LagrangeSolver:
     STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0")
     STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0", "impulse_gross")
 
-    STATE_EROSION = ("alive", "eps_eq")   # cells, and the scalars eroded and surface_version
+    # cells, and the scalars eroded and surface_version (erode_dt follows from the initial state,
+    # which the solver is built on before a restart too)
+    STATE_EROSION = ("alive", "eps_eq")
 
     def _state_cells(self) -> tuple:
         return self.STATE_CELLS + (self.STATE_EROSION if self.erosion else ())

@@ -527,3 +527,59 @@ def test_oblique_slip_wall_mesh_is_the_periodic_strip():
     m = meshio.read(CASES / "oblique_slip_wall" / "wall.vtu")
     assert np.array_equal(m.points, pts) and np.array_equal(m.cells_dict["quad"], quads)
     assert load_case(CASES / "oblique_slip_wall")["ale"]["grid"]["upper"][1] == ly
+
+
+def _variant(tmp_path, name, edits):
+    """A copy of cases/<name> with its case.toml's texts replaced (``edits``: (old, new) pairs)."""
+    case = tmp_path / name
+    shutil.copytree(CASES / name, case, ignore=shutil.ignore_patterns("out"))
+    p = case / "case.toml"
+    text = p.read_text()
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new)
+    p.write_text(text)
+    return case
+
+
+def test_a_coupled_body_that_erodes_away_leaves_its_room_to_the_air(tmp_path):
+    """The clamped plate in a shock (cases/plate_in_shock_2d) eroding at an effective strain of 1e-3:
+    the ambient 1e5 Pa alone strains it that far, so its elements erode within the first steps,
+    every one of them within 3e-4 s, and the coupler takes each new surface.  Every zone an eroded
+    element uncovers at once takes its share of the air next to it (solvers/ale/merge.py,
+    opened_zones): before, the few grams the remap spread over such a zone went to a negative
+    internal energy at step 5 (and so it does with the merge of those zones switched off).  Balances
+    at round-off (measured, 21 steps: energy 1.5e-14 and mass 4.8e-14 of the whole, the coupling's
+    momentum 7.9e-16)."""
+    case = _variant(tmp_path, "plate_in_shock_2d", [
+        ("end_time = 4.0e-3", "end_time = 3.0e-4"), ("output_interval = 0.5e-3", "output_interval = 1.0e-4"),
+        ('material = "rubber"\n', 'material = "rubber"\nerosion = { strain = 1e-3 }\n')])
+    s = run(case, tmp_path / "out")
+    f = s["final"]
+    assert f["lagrange.eroded_elements"] == 90.0, f["lagrange.eroded_elements"]
+    assert f["lagrange.eroded_internal_energy"] > 0.0
+    coupled_balances(s)
+    assert abs(f["ale.energy_balance_rel"]) < 1e-13 and abs(f["ale.mass_balance_rel"]) < 1e-12, f
+
+
+def test_an_eroding_fe_rod_penetrates_aluminium(tmp_path):
+    """cases/penetrator_tate_fe over its first 6 us (its full run, 32 us, goes to the campaign
+    fe_vs_sph_bodies: depth 15.33 mm at Tate's 29.7 us, -10 %, penetration velocity 551 m/s, -4 %):
+    the tip elements erode as the rod enters (91 of 480 by 6 us), the depth grows at about Tate's
+    574 m/s (measured over 2..6 us: 521.8 m/s, -9.1 %: the impact's phase), and the mass and coupling
+    balances stay at round-off through the erosions, the vacuum cut-off and the merges of the zones
+    the eroded elements uncover, the energy's within 1.4e-12 (measured: mass 1.2e-14, energy 1.4e-12, the coupling's momentum 4.7e-16)."""
+    case = _variant(tmp_path, "penetrator_tate_fe", [
+        ("end_time = 3.2e-5", "end_time = 6.0e-6"),
+        ("window = [8.0e-6, 1.6e-5], depth_time = 2.970e-5", "window = [2.0e-6, 6.0e-6]"),
+        ("metrics.depth_at_time = { reference = 0.01705, tolerance = 0.15 }", "")])
+    s = run(case, tmp_path / "out")
+    f = s["final"]
+    assert 0 < f["lagrange.eroded_elements"] < 480, f["lagrange.eroded_elements"]
+    u = s["check"]["metrics"]["penetration_velocity"]["value"]
+    assert abs(u / 574.3 - 1.0) < 0.2, u
+    assert f["coupling.momentum_balance_rel"] < 1e-13, f["coupling.momentum_balance_rel"]
+    c = s["conservation"]
+    # (energy: the kinetic energy of the background nodes between the zones the vacuum cut-off
+    # empties leaves with their mass, unbooked: solvers/ale/mixed.py RHO_CUTOFF; 1.4e-12 measured)
+    assert c["mass_rel"] < 1e-13 and c["energy_rel"] < 5e-12, c

@@ -114,3 +114,16 @@ def test_conservation_residuals_of_a_closed_body():
     rel = conservation_residuals(hist, ["lagrange", "ale"])
     assert rel["mass_rel"] == pytest.approx(3e-16, rel=1e-3)
     assert rel["energy_rel"] == 1e-14
+
+
+def test_a_collapsed_time_step_stops_the_run_naming_the_solver():
+    """coupler.collapsed_step: a stable step below DT_COLLAPSE (1e-6) of the largest so far names the
+    group that gave it (a penetrator's background fell to 3e-18 s against 2.7e-8 s and went on for
+    thousands of steps at one time); just above it, or before the first step (dt_max 0), no stop."""
+    from orchestrator.coupler import DT_COLLAPSE, collapsed_step
+
+    why = collapsed_step({"ale": 3.04e-18, "lagrange": 2.0e-9}, 2.68e-8)
+    assert why is not None and "the ale solver's stable step is 3.04e-18 s" in why and "2.68e-08 s" in why
+    assert collapsed_step({"ale": 1.01 * DT_COLLAPSE * 2.68e-8, "lagrange": 2.0e-9}, 2.68e-8) is None
+    assert collapsed_step({"ale": 0.99 * DT_COLLAPSE * 2.68e-8}, 2.68e-8) is not None
+    assert collapsed_step({"ale": 1e-30}, 0.0) is None

@@ -283,3 +283,19 @@ def test_read_mesh_errors(tmp_path):
     d = tmp_path / "flat.vtu"
     meshio.write(d, meshio.Mesh(degenerate, [("quad", quad.cells)]))
     assert "degenerate" in _one_line_error(d, 2)
+
+
+def test_a_quarter_cylinder_with_a_base_is_the_one_at_the_origin_moved_there():
+    """``quarter_cylinder.base`` (the centre of its bottom face; a rod placed in a background grid,
+    cases/penetrator_tate_fe): the same cells, every point moved by base; without it, at the origin.
+    The coupled case's bounding box (schema_coupling._body_box) moves with it."""
+    from orchestrator.schema_coupling import _body_box
+    from solvers.lagrange.mesh import body_mesh
+
+    q = {"radius": 1e-3, "length": 0.01, "radial_cells": 4, "axial_cells": 5}
+    at0 = body_mesh({"mesh": {"quarter_cylinder": q}}, 3)
+    moved = body_mesh({"mesh": {"quarter_cylinder": {**q, "base": [0.5, 0.25, 0.02506]}}}, 3)
+    assert np.array_equal(moved.cells, at0.cells)
+    assert np.array_equal(moved.points, at0.points + np.array([0.5, 0.25, 0.02506]))
+    lo, hi = _body_box({"quarter_cylinder": {**q, "base": [0.5, 0.25, 0.02506]}}, 3)
+    assert lo == [0.5, 0.25, 0.02506] and hi == [0.501, 0.251, 0.02506 + 0.01]
