@@ -15,7 +15,7 @@ file has the table, or no solver table at all (the Lagrangian solver is the defa
 has ``size = {"elements": int, "nodes": int}`` (Python ints, computed without building the mesh,
 or counted after reading a mesh file).  ``mesh`` is exactly one of
 ``{"box": {lower, upper, cells}}``, ``{"quarter_cylinder": {radius, length, radial_cells,
-axial_cells, base}}`` or ``{"file": Path}`` (resolved, absolute); ``initial_velocity`` holds
+axial_cells[, base]}}`` or ``{"file": Path}`` (resolved, absolute); ``initial_velocity`` holds
 ``dimension`` items, each a float or an expression string in the coordinates (``x, y`` in 2D,
 ``x, y, z`` in 3D).
 """
@@ -221,7 +221,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             mesh = {"quarter_cylinder": {"radius": to_float(q["radius"]), "length": to_float(q["length"]),
                                          "radial_cells": int(q["radial_cells"]),
                                          "axial_cells": int(q["axial_cells"]),
-                                         "base": [to_float(v) for v in q.get("base", (0.0, 0.0, 0.0))]}}
+                                         **({"base": [to_float(v) for v in q["base"]]} if "base" in q else {})}}
         else:
             mesh = {"file": (case["case_dir"] / mesh_in["file"]).resolve()}
         mat = case["materials"].get(b["material"], {})
