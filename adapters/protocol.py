@@ -7,6 +7,7 @@ intercommunicator per solver group (group root = rank 0 of that group).
 """
 from __future__ import annotations
 
+import math
 import os
 import sys
 import traceback
@@ -227,12 +228,21 @@ cores every poll takes a working process's core: the launcher sets 0 then, and s
 suite (two jobs at once on 2 cores)."""
 
 
-def _spin_s() -> float:
-    try:
-        v = float(os.environ.get(SPIN_ENV, "200e-6"))
-    except ValueError:
+def spin_s_from(text: str | None) -> float | None:
+    """SPIN_ENV's value in seconds (default 200e-6 when unset), or None if it is not a finite number
+    >= 0 (immerse check and run refuse it, orchestrator/cli.py, before anything starts)."""
+    if text is None:
         return 200e-6
-    return v if v >= 0.0 else 200e-6
+    try:
+        v = float(text)
+    except ValueError:
+        return None
+    return v if math.isfinite(v) and v >= 0.0 else None
+
+
+def _spin_s() -> float:
+    v = spin_s_from(os.environ.get(SPIN_ENV))
+    return 200e-6 if v is None else v
 
 
 SPIN_S = _spin_s()

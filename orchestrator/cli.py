@@ -16,6 +16,7 @@ nothing written.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -53,9 +54,13 @@ def _admit(args, case: dict, ranks: dict, overridden) -> int:
     """What check and run verify after the case file: rank counts and memory against the machine of
     the flags, then every expression evaluated on the case's own points; the memory estimate.
     Raises CaseError."""
+    from adapters.protocol import SPIN_ENV, spin_s_from
+    from orchestrator.case import CaseError
     from orchestrator.expressions import check_expressions
     from orchestrator.resources import check_resources, this_machine
 
+    if spin_s_from(os.environ.get(SPIN_ENV)) is None:
+        raise CaseError(SPIN_ENV, os.environ[SPIN_ENV], "must be a number of seconds >= 0 (unset: 200e-6)")
     machine = this_machine(args.nodes, args.memory_per_node, args.oversubscribe)
     estimate = check_resources(case, ranks, machine, overridden)
     check_expressions(case)

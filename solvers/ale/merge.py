@@ -4,8 +4,9 @@ A zone a coupled body cuts to a small open fraction, or covers while it still ho
 its content to a face neighbour (``PHI_MERGE``), and a zone the body uncovered within the step
 (open, still empty: the remap's apertures are the start of the step's) takes its share from one
 with material, as does one the step opened at once (a sliver at its start left at least twice as
-open and no longer small, ``opened_zones``: a body's eroded element uncovered it): the target's group (the target and its donors) shares one density and one specific
-energy, in proportion to the open volumes.  Nodal momentum is conserved (a node keeps its velocity
+open and no longer small, ``opened_zones``: a body's eroded element uncovered it): the target's
+group (the target and its donors) shares one density and one specific energy, in proportion to the
+open volumes.  Nodal momentum is conserved (a node keeps its velocity
 when its mass falls and hands the momentum of the lost mass to the nodes that gain); groups that
 share a node pool their nodes' momentum together (``group_components``: one group's zones may
 release at a node what another's gain at the next), and the kinetic energy the exchange removes

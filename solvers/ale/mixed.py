@@ -171,7 +171,7 @@ def cut_off_vacuum(vol, mass, ener, code, void, rho_cut, zlo, zhi, zs, out):
                 if not (mz > 0.0 and mz < rho_cut * vz):
                     continue
                 for m in range(nm):
-                    if code[m] == VOID or m == void:
+                    if code[m] == VOID:
                         continue
                     out[0] += mass[z, m]
                     out[1] += mass[z, m] * ener[z, m]

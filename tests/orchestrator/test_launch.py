@@ -14,7 +14,7 @@ import time
 import h5py
 import pytest
 
-from tests.conftest import REPO
+from tests.conftest import REPO, immerse
 from tests.orchestrator.test_faults import _ale_case, _pids, _spinning_case
 
 CASES = {
@@ -365,3 +365,21 @@ def test_a_failed_mpi_call_is_reported_as_one(tmp_path, monkeypatch):
     sys.excepthook(RuntimeError, RuntimeError("zone 3 inverted"), None)
     assert report.read_text() == "ale rank 0: RuntimeError: zone 3 inverted\n"
     assert aborted == [1, 1, 1]
+
+
+@pytest.mark.parametrize("value", ["abc", "-1", "nan"])
+def test_a_bad_wait_spin_is_refused_before_anything_starts(tmp_path, monkeypatch, value):
+    """IMMERSE_WAIT_SPIN_S (adapters.protocol.SPIN_ENV) that is not a number of seconds >= 0: check
+    and run stop with one line naming it and its value, exit 2, no output directory (the ranks used
+    to fall back to 200e-6 s without a word)."""
+    from adapters.protocol import SPIN_ENV
+
+    monkeypatch.setenv(SPIN_ENV, value)
+    out = tmp_path / "out"
+    sod = REPO / "cases" / "sod"
+    for args in (("check", sod), ("run", sod, "--out", out)):
+        r = immerse(*args)
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1, r.stderr
+        assert lines[0] == f"immerse: {SPIN_ENV} = {value!r}: must be a number of seconds >= 0 (unset: 200e-6)"
+        assert not out.exists()
