@@ -251,6 +251,11 @@ BAD_INPUTS = [
     Bad("erosion_time_step_one", "lagrange.bodies[0].erosion.time_step = 1.0", "must be > 0 and < 1",
         edit(BAR, "initial_velocity = [0.0, 0.0, 0.0]",
              "initial_velocity = [0.0, 0.0, 0.0]\nerosion = { strain = 1.0, time_step = 1.0 }")),
+    Bad("quarter_cylinder_base_of_two", "lagrange.bodies[0].mesh.quarter_cylinder.base = [0.0, 0.0]",
+        "must have 3 items",
+        edit(BAR, "mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = [10, 2, 2] } }",
+             "mesh = { quarter_cylinder = { radius = 0.01, length = 0.1, radial_cells = 2, axial_cells = 4, "
+             "base = [0.0, 0.0] } }")),
     Bad("erosion_without_strain", "lagrange.bodies[0].erosion", "strain",
         edit(BAR, "initial_velocity = [0.0, 0.0, 0.0]", "initial_velocity = [0.0, 0.0, 0.0]\nerosion = { plastic_strain = 1.0 }")),
     Bad("energy_source_inf", "ale.energy_sources[0].energy = inf", "finite", edit(ALE3D, "energy = 0.1", "energy = inf")),
