@@ -718,6 +718,7 @@ def bench_output(out: Path, quick: bool = False) -> Path:
 from orchestrator import bench_coupling  # noqa: E402,F401  (registers "coupling"; its own module)
 from orchestrator import bench_coupling_studies  # noqa: E402,F401  (plate_convergence, penalty_sweep)
 from orchestrator import bench_sph  # noqa: E402,F401  (registers "sph")
+from orchestrator import bench_contact  # noqa: E402,F401  (registers "contact")
 
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
     _worker(int(sys.argv[2]), sys.argv[3])

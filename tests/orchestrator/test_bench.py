@@ -82,3 +82,22 @@ def test_bench_sph_quick(tmp_path):
     emb = rows["embedded_dam_break_2d"]  # the coupled run: the coupler's share of the time loop
     assert emb["metric"] == "coupler_share" and 0.0 < emb["value"] < 1.0
     assert emb["params"]["geometry_s"] > 0.0 and emb["params"]["particles"] == 4050
+
+
+def test_bench_contact_quick(tmp_path):
+    """The contact bench times the search and the dual-pass operators per facet at 10^2 and 10^3
+    facets and the all-pairs test they replace (speed itself is not asserted: `immerse bench contact`
+    measures it)."""
+    out = tmp_path / "bench-contact.json"
+    r = immerse("bench", "contact", "--quick", "--out", out, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(out.read_text())["results"]
+    ops = [x for x in rows if x["name"] == "contact_operators" and x["metric"] == "time_per_facet"]
+    assert [x["params"]["facets_a"] for x in ops] == [100, 1000]
+    for x in ops:
+        p = x["params"]
+        # every node of both faces carries a multiplier (they overlap end to end); a candidate pair
+        # per facet and its neighbours: linear in the facets, not their product
+        assert p["multipliers"] == p["facets_a"] + p["facets_b"] + 2
+        assert p["facets_a"] <= p["candidate_pairs"] <= 4 * p["facets_a"]
+        assert x["value"] > 0 and p["all_pairs_s"] > 0

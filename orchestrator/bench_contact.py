@@ -1,0 +1,89 @@
+"""`immerse bench contact`: the cost of the contact library's geometry (solvers/contact) against the
+number of contact facets, 10^2 ... 10^5 per side (2-D segments).
+
+Two facing wavy faces with non-matching meshes (side b has 0.7 the segments of side a, so nodes never
+line up), a gap of a tenth of a segment. Timed, medians of repeats:
+
+* search: the binned broad phase of both passes (search.candidate_pairs);
+* operators: both passes' integrals assembled, the gap operator G and the stabilization J (what a
+  step needs before its multiplier solve);
+* all pairs: the O(n^2) test the broad phase replaces, up to 10^3 facets (beyond, its n^2 memory).
+
+Reported per facet (µs) and the log-log slope of the total against the facet count (1: linear). The
+issue's share of an explicit impact step comes with the explicit contact step (not yet here).
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from orchestrator.bench import bench, machine
+
+
+def wavy_faces(n: int):
+    """points, seg_a, seg_b: side a y = 0.02 sin(2 pi x) on [0, 1] in n segments (outward +y), side
+    b the same curve raised by a tenth of a segment in int(0.7 n) + 1 segments (outward -y)."""
+    nb = int(0.7 * n) + 1
+    xa, xb = np.linspace(0.0, 1.0, n + 1), np.linspace(0.0, 1.0, nb + 1)
+    pa = np.stack([xa, 0.02 * np.sin(2 * np.pi * xa)], axis=1)
+    pb = np.stack([xb, 0.02 * np.sin(2 * np.pi * xb) + 0.1 / n], axis=1)
+    seg_a = np.stack([np.arange(1, n + 1), np.arange(n)], axis=1)
+    seg_b = np.stack([np.arange(nb), np.arange(1, nb + 1)], axis=1) + n + 1
+    return np.concatenate([pa, pb]), seg_a, seg_b
+
+
+def _median_time(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t0)
+    return float(np.median(times))
+
+
+@bench("contact")
+def bench_contact(out: Path, quick: bool = False) -> Path:
+    from solvers.contact.dual_pass import DualPassContact
+    from solvers.contact.search import candidate_pairs, facet_boxes
+
+    sizes = [100, 1000] if quick else [100, 1000, 10000, 100000]
+    repeats = 3 if quick else 7
+    DualPassContact(*wavy_faces(10), capture=0.1)  # compile the kernel outside the timings
+    results, totals = [], []
+    for n in sizes:
+        pts, sa, sb = wavy_faces(n)
+        capture = 0.5 / n
+        ba, bb = facet_boxes(pts, sa, capture), facet_boxes(pts, sb, capture)
+        t_search = _median_time(lambda: (candidate_pairs(ba, bb), candidate_pairs(bb, ba)), repeats)
+
+        def operators():
+            c = DualPassContact(pts, sa, sb, capture=capture)
+            c.gap_operator()
+            c.stabilization(1e-3, 1.0 / n)
+            return c
+
+        t_ops = _median_time(operators, repeats)
+        c = operators()
+        pairs = len(candidate_pairs(ba, bb))
+        params = {"facets_a": n, "facets_b": len(sb), "candidate_pairs": pairs,
+                  "multipliers": c.n_multipliers, "repeats": repeats}
+        if n <= 1000:
+            def all_pairs():
+                return np.argwhere(np.all((ba[:, None, 0] <= bb[None, :, 1]) & (bb[None, :, 0] <= ba[:, None, 1]), axis=2))
+            params["all_pairs_s"] = _median_time(all_pairs, repeats)
+        results += [
+            {"name": "contact_search", "metric": "time_per_facet", "value": t_search / (n + len(sb)) * 1e6,
+             "unit": "us", "params": {**params, "seconds": t_search}},
+            {"name": "contact_operators", "metric": "time_per_facet", "value": t_ops / (n + len(sb)) * 1e6,
+             "unit": "us", "params": {**params, "seconds": t_ops}},
+        ]
+        totals.append(t_ops)
+    slope = float(np.polyfit(np.log(sizes[1:]), np.log(totals[1:]), 1)[0]) if len(sizes) > 2 else None
+    results.append({"name": "contact_operators", "metric": "loglog_slope_vs_facets", "value": slope, "unit": "",
+                    "params": {"sizes": sizes[1:], "target": "~1 (linear)"}})
+    doc = {"results": results, "machine": machine()}
+    out.write_text(json.dumps(doc, indent=2))
+    return out

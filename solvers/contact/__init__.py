@@ -1,0 +1,11 @@
+"""Contact between Lagrangian bodies: a library the Lagrangian solver calls inside its own group (as
+LLNL's codes call Tribol), independent of the orchestrator.
+
+Order of use at one configuration:
+
+1. search.py          broad phase: facet bounding boxes (grown by a capture distance) binned, the
+                      candidate facet pairs (cost linear in the surface size);
+2. mortar_segments.py the mortar integrals D and M of one pass on the candidate pairs (2-D);
+3. dual_pass.py       both passes assembled: weighted gaps g = G x, the constraint operator B = G/2,
+                      nodal forces B^T p and the stabilization J of Puso & Solberg (2020).
+"""

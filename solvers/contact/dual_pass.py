@@ -1,0 +1,181 @@
+"""The stabilized dual-pass mortar operators of 2-D contact between two surfaces, or a surface and
+itself (Puso & Solberg, "A dual pass mortar approach for unbiased constraints and self contact",
+CMAME 367 (2020); seed slides "Stabilized two pass mortar approach" and "implementation").
+
+Each side is the non-mortar side of one pass and carries its own nodal multipliers (normal contact
+pressures p >= 0 at the nodes with contact area). With the mortar integrals D and M of a pass
+(mortar_segments.py) and the unit nodal normal n_A of its non-mortar side (area-weighted average of
+the outward segment normals at A):
+
+    weighted gap   g_A = n_A . (sum_C M_AC x_C - sum_B D_AB x_B)      (> 0: apart)
+                   g = G x, G row A = n_A (x) (M_A - D_A)
+
+which is the seed's g_A = n_A . integral of phi_A (x^1 - x^2) with n_A pointing into side 1. The
+constraint form is the average of the two passes,
+
+    b(mu, u) = 1/2 (mu^a . G^ab u + mu^b . G^ba u),     B = G / 2,
+
+so no side is preferred (the bias of single-pass mortar) and the nodal forces of pressures p are
+f = B^T p (pushing the sides apart). Each pass's rows balance (sum_C M_AC = sum_B D_AB), so the
+forces sum to zero to round-off. The two passes together have twice the multipliers the interface
+can resolve; the stabilization
+
+    j(mu, lambda) = (gamma h / 2) sum over passes of integral of mu^a . (lambda^a + lambda^b),
+    gamma = alpha / E,
+
+penalises the jump between the two sides' tractions (lambda = p n: lambda^a + lambda^b ~
+(p^a - p^b) n^a on facing sides), J_AB = (gamma h / 2) D_AB n_A . n_B and
+J_AC = (gamma h / 2) M_AC n_A . n_C with C's multiplier of the other pass (none if C has no
+contact area of its own: its pressure is taken as 0 there).
+
+Self contact is one pass of a surface against itself, its own neighbours excluded: every facing pair
+then appears once in each direction, which is the dual pass.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from solvers.contact.mortar_segments import segment_pair_integrals
+from solvers.contact.search import candidate_pairs, facet_boxes
+
+__all__ = ["MortarPass", "mortar_pass", "DualPassContact", "nodal_normals"]
+
+
+def nodal_normals(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
+    """Unit normal at every node of ``points`` (zero at nodes no segment has): the sum of the outward
+    segment normals times length, (dy, -dx), normalised."""
+    x = np.asarray(points, dtype=np.float64)
+    d = x[segments[:, 1]] - x[segments[:, 0]]
+    nl = np.stack([d[:, 1], -d[:, 0]], axis=1)
+    n = np.zeros_like(x)
+    np.add.at(n, segments[:, 0], nl)
+    np.add.at(n, segments[:, 1], nl)
+    norm = np.linalg.norm(n, axis=1)
+    return np.divide(n, norm[:, None], out=np.zeros_like(n), where=norm[:, None] > 0)
+
+
+@dataclass
+class MortarPass:
+    """One pass with side a as the non-mortar side: its multiplier nodes and integrals.
+
+    nodes (nm,) sorted node ids of side a with contact area; D, M (nm, n_nodes) csr: D_AB and M_AC
+    (module docstring) on global node ids; normals (nm, 2) unit nodal normals of side a at ``nodes``;
+    area (nm,) = row sums of D = integral of phi_A over the contact area.
+    """
+    nodes: np.ndarray
+    D: sp.csr_matrix
+    M: sp.csr_matrix
+    normals: np.ndarray
+    area: np.ndarray
+
+    def index_of(self, node_ids: np.ndarray) -> np.ndarray:
+        """Multiplier index of each node id (-1 where the node has no contact area in this pass)."""
+        node_ids = np.asarray(node_ids)
+        if len(self.nodes) == 0:
+            return np.full(node_ids.shape, -1, dtype=np.int64)
+        k = np.searchsorted(self.nodes, node_ids).clip(max=len(self.nodes) - 1)
+        return np.where(self.nodes[k] == node_ids, k, -1)
+
+
+def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, capture: float,
+                penetration: float | None = None, self_contact: bool = False) -> MortarPass:
+    """The pass a -> b: candidate pairs within ``capture`` (search.py), their integrals, assembled.
+
+    A segment of b pairs with one of a where it lies in front of it within ``capture`` or behind it
+    by at most ``penetration`` (default: capture), somewhere on their overlap.
+
+    self_contact: seg_b is seg_a; pairs of a segment with itself or a neighbour (a shared node) are
+    left out.
+    """
+    x = np.asarray(points, dtype=np.float64)
+    n = len(x)
+    seg_a = np.asarray(seg_a, dtype=np.int64)
+    seg_b = np.asarray(seg_b, dtype=np.int64)
+    pairs = candidate_pairs(facet_boxes(x, seg_a, capture), facet_boxes(x, seg_b, capture))
+    if self_contact and len(pairs):
+        a, b = seg_a[pairs[:, 0]], seg_b[pairs[:, 1]]
+        shared = (a[:, :1] == b).any(axis=1) | (a[:, 1:] == b).any(axis=1)
+        pairs = pairs[~shared]
+    d, m, overlap = segment_pair_integrals(x, seg_a, seg_b, pairs, capture,
+                                           capture if penetration is None else penetration)
+    keep = overlap > 0.0
+    pairs, d, m = pairs[keep], d[keep], m[keep]
+    rows = np.repeat(seg_a[pairs[:, 0]], 2, axis=1).ravel()           # A of [A, B] for B in seg_a
+    d_cols = np.tile(seg_a[pairs[:, 0]], (1, 2)).ravel()
+    m_cols = np.tile(seg_b[pairs[:, 1]], (1, 2)).ravel()
+    D = sp.csr_matrix((d.ravel(), (rows, d_cols)), shape=(n, n))
+    M = sp.csr_matrix((m.ravel(), (rows, m_cols)), shape=(n, n))
+    area = np.asarray(D.sum(axis=1)).ravel()
+    nodes = np.flatnonzero(area > 0.0)
+    return MortarPass(nodes=nodes, D=D[nodes], M=M[nodes], normals=nodal_normals(x, seg_a)[nodes],
+                      area=area[nodes])
+
+
+class DualPassContact:
+    """The dual-pass operators of two surfaces (or one against itself) at one configuration.
+
+    points (n, 2) of all bodies; seg_a, seg_b (n_s, 2) outward segments of the two sides (seg_b None:
+    self contact of seg_a); capture: the search distance (a gap larger than it is not paired);
+    penetration: the deepest overlap still paired (default: capture; keep it below the bodies'
+    thickness, or a thin body's far side pairs).
+    Multipliers are numbered pass by pass: pass a -> b's nodes, then pass b -> a's.
+    """
+
+    def __init__(self, points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray | None, capture: float,
+                 penetration: float | None = None):
+        self.points = np.asarray(points, dtype=np.float64)
+        if seg_b is None:
+            self.passes = (mortar_pass(self.points, seg_a, seg_a, capture, penetration, self_contact=True),)
+        else:
+            self.passes = (mortar_pass(self.points, seg_a, seg_b, capture, penetration),
+                           mortar_pass(self.points, seg_b, seg_a, capture, penetration))
+        self.offsets = np.cumsum([0] + [len(p.nodes) for p in self.passes])
+
+    @property
+    def n_multipliers(self) -> int:
+        return int(self.offsets[-1])
+
+    def gap_operator(self) -> sp.csr_matrix:
+        """G (n_multipliers, 2 n): weighted gaps g = G x.ravel() (x (n, 2) positions)."""
+        blocks = []
+        for p in self.passes:
+            diff = (p.M - p.D).tocoo()
+            nrm = p.normals[diff.row]
+            rows = np.concatenate([diff.row, diff.row])
+            cols = np.concatenate([2 * diff.col, 2 * diff.col + 1])
+            vals = np.concatenate([diff.data * nrm[:, 0], diff.data * nrm[:, 1]])
+            blocks.append(sp.csr_matrix((vals, (rows, cols)), shape=(len(p.nodes), 2 * len(self.points))))
+        return sp.vstack(blocks, format="csr")
+
+    def constraint_operator(self) -> sp.csr_matrix:
+        """B = G / 2, the dual pass's b(mu, u) = mu . B u (both passes averaged)."""
+        return 0.5 * self.gap_operator()
+
+    def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
+        """Weighted gaps g_A of every multiplier at positions x (default: the operators' own)."""
+        x = self.points if x is None else np.asarray(x, dtype=np.float64)
+        return self.gap_operator() @ x.ravel()
+
+    def forces(self, pressures: np.ndarray) -> np.ndarray:
+        """Nodal forces (n, 2) of multiplier pressures: B^T p."""
+        return (self.constraint_operator().T @ np.asarray(pressures, dtype=np.float64)).reshape(-1, 2)
+
+    def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:
+        """J (n_multipliers, n_multipliers): j(mu, lambda) = mu . J lambda (module docstring)."""
+        other = (0,) if len(self.passes) == 1 else (1, 0)
+        rows, cols, vals = [], [], []
+        for k, p in enumerate(self.passes):
+            q = self.passes[other[k]]
+            for mat, partner, off in ((p.D, p, self.offsets[k]), (p.M, q, self.offsets[other[k]])):
+                c = mat.tocoo()
+                j = partner.index_of(c.col)
+                ok = j >= 0
+                nn = np.einsum("ij,ij->i", p.normals[c.row[ok]], partner.normals[j[ok]])
+                rows.append(c.row[ok] + self.offsets[k])
+                cols.append(j[ok] + off)
+                vals.append(0.5 * gamma * h * c.data[ok] * nn)
+        n = self.n_multipliers
+        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))

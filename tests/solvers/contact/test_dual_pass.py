@@ -1,0 +1,85 @@
+"""solvers/contact/dual_pass.py: the dual-pass operators on non-matching flat faces (gaps, forces,
+no side preferred, the stabilization) and self contact of a folded surface."""
+import numpy as np
+
+from solvers.contact.dual_pass import DualPassContact, nodal_normals
+from tests.solvers.contact.geometry import facing_faces, hat_integrals
+
+XA = [0.0, 0.3, 0.55, 0.8, 1.0]
+XB = [0.0, 0.4, 0.7, 1.0]
+
+
+def test_weighted_gaps_of_parallel_faces_are_the_gap_times_the_area():
+    d = 0.013
+    pts, sa, sb = facing_faces(XA, XB, gap=d, ya=0.2)
+    c = DualPassContact(pts, sa, sb, capture=0.05)
+    assert c.n_multipliers == len(XA) + len(XB)
+    area = np.concatenate([hat_integrals(np.array(XA)), hat_integrals(np.array(XB))])
+    np.testing.assert_allclose(c.gaps(), d * area, rtol=1e-12)  # measured 8.4e-16
+    # closed up by 2d: negative (penetration) of the same size
+    shut = pts.copy()
+    shut[len(XA):, 1] -= 2 * d
+    np.testing.assert_allclose(c.gaps(shut), -d * area, rtol=1e-12)
+
+
+def test_uniform_pressure_pushes_the_faces_apart_in_balance():
+    pts, sa, sb = facing_faces(XA, XB, gap=0.0)
+    c = DualPassContact(pts, sa, sb, capture=0.05)
+    f = c.forces(np.full(c.n_multipliers, 7.0))
+    na = len(XA)
+    # each pass carries half: the face's total force is p times its length, on b upward
+    np.testing.assert_allclose(f[na:].sum(axis=0), [0.0, 7.0], atol=1e-14)  # measured 8.9e-16
+    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-15)  # measured 0 and 2.2e-16
+    # a uniform pressure gives a's nodes p times their tributary length
+    np.testing.assert_allclose(f[:na, 1], -7.0 * hat_integrals(np.array(XA)), rtol=1e-13)
+
+
+def test_no_side_is_preferred():
+    pts, sa, sb = facing_faces(XA, XB, gap=0.002, tilt=0.01)
+    ab = DualPassContact(pts, sa, sb, capture=0.05)
+    ba = DualPassContact(pts, sb, sa, capture=0.05)
+    na = len(ab.passes[0].nodes)
+    perm = np.r_[np.arange(na, ab.n_multipliers), np.arange(na)]  # ba's multipliers are ab's, swapped
+    assert abs(ab.constraint_operator()[perm] - ba.constraint_operator()).max() == 0.0
+    assert abs(ab.stabilization(2.0, 0.1)[perm][:, perm] - ba.stabilization(2.0, 0.1)).max() == 0.0
+
+
+def test_stabilization_vanishes_for_equal_sides_and_penalises_their_jump():
+    pts, sa, sb = facing_faces(XA, XB, gap=0.0)
+    c = DualPassContact(pts, sa, sb, capture=0.05)
+    gamma, h = 1e-3, 0.3
+    J = c.stabilization(gamma, h)
+    p = np.full(c.n_multipliers, 5.0)
+    # equal uniform pressures on both sides: the tractions p n^a + p n^b cancel pointwise
+    assert np.abs(J @ p).max() <= 1e-17 * 5.0  # measured 0 (a few ulp of gamma h p)
+    # pressure on one side only: j = (gamma h / 2) (its integral of p^2 over the face) > 0
+    q = np.r_[np.full(len(XA), 5.0), np.zeros(len(XB))]
+    np.testing.assert_allclose(q @ J @ q, 0.5 * gamma * h * 25.0 * 1.0, rtol=1e-13)
+
+
+def test_self_contact_of_a_folded_strip_finds_the_facing_arms_only():
+    # a U: outer polygon counter-clockwise; the inner arms x = 0.4 and x = 0.6 face each other
+    # across 0.2 (the slot 0.4 < x < 0.6, 0.2 < y < 1)
+    poly = np.array([[0, 0], [1, 0], [1, 1], [0.6, 1], [0.6, 0.2], [0.4, 0.2], [0.4, 1], [0, 1]], float)
+    k = 4  # every edge in k segments
+    pts = np.concatenate([poly[i] + np.linspace(0, 1, k, endpoint=False)[:, None] * (poly[(i + 1) % 8] - poly[i])
+                          for i in range(8)])
+    seg = np.stack([np.arange(len(pts)), (np.arange(len(pts)) + 1) % len(pts)], axis=1)
+    c = DualPassContact(pts, seg, None, capture=0.25, penetration=0.05)  # the strip is 0.2 thick
+    (p,) = c.passes
+    on_arm = np.isclose(pts[p.nodes, 0], 0.4) | np.isclose(pts[p.nodes, 0], 0.6)
+    assert on_arm.all() and on_arm.sum() == 2 * (k + 1)  # the slot's bottom (y = 0.2) is a neighbour
+    # where both arms overlap the gap is 0.2 times the area, from either arm (the two passes)
+    inner = (pts[p.nodes, 1] > 0.2 + 1e-12) & (pts[p.nodes, 1] < 1 - 1e-12)
+    np.testing.assert_allclose(c.gaps()[inner], 0.2 * p.area[inner], rtol=1e-13)
+    assert np.allclose(c.forces(np.ones(c.n_multipliers)).sum(axis=0), 0.0, atol=1e-15)
+    # allowed to pair 0.25 behind, the strip's bottom pairs with the slot's through its thickness
+    deep = DualPassContact(pts, seg, None, capture=0.25)
+    assert not np.isclose(pts[deep.passes[0].nodes, 0], 0.4).all()
+    assert np.isclose(pts[deep.passes[0].nodes, 1], 0.0).any()
+
+
+def test_nodal_normals_average_the_segment_normals():
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    n = nodal_normals(pts, np.array([[0, 1], [1, 2]]))
+    np.testing.assert_allclose(n, [[0, -1], [np.sqrt(0.5), -np.sqrt(0.5)], [1, 0]], atol=1e-15)
