@@ -4,8 +4,8 @@ CMAME 367 (2020); seed slides "Stabilized two pass mortar approach" and "impleme
 
 Each side is the non-mortar side of one pass and carries its own nodal multipliers (normal contact
 pressures p >= 0 at the nodes with contact area). With the mortar integrals D and M of a pass
-(mortar_segments.py) and the unit nodal normal n_A of its non-mortar side (area-weighted average of
-the outward segment normals at A):
+(mortar_segments.py) and the unit nodal normal n_A of its non-mortar side (length-weighted average
+of the outward normals of the segments at A that have contact area in the pass):
 
     weighted gap   g_A = n_A . (sum_C M_AC x_C - sum_B D_AB x_B)      (> 0: apart)
                    g = G x, G row A = n_A (x) (M_A - D_A)
@@ -62,7 +62,8 @@ class MortarPass:
     """One pass with side a as the non-mortar side: its multiplier nodes and integrals.
 
     nodes (nm,) sorted node ids of side a with contact area; D, M (nm, n_nodes) csr: D_AB and M_AC
-    (module docstring) on global node ids; normals (nm, 2) unit nodal normals of side a at ``nodes``;
+    (module docstring) on global node ids; normals (nm, 2) unit nodal normals of side a's segments
+    with contact area, at ``nodes``;
     area (nm,) = row sums of D = integral of phi_A over the contact area.
     """
     nodes: np.ndarray
@@ -110,8 +111,10 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
     M = sp.csr_matrix((m.ravel(), (rows, m_cols)), shape=(n, n))
     area = np.asarray(D.sum(axis=1)).ravel()
     nodes = np.flatnonzero(area > 0.0)
-    return MortarPass(nodes=nodes, D=D[nodes], M=M[nodes], normals=nodal_normals(x, seg_a)[nodes],
-                      area=area[nodes])
+    # the normals of the contact surface: from the segments with contact area only (a block's corner
+    # would otherwise lean towards its side face and push sideways: the patch test fails)
+    normals = nodal_normals(x, seg_a[np.unique(pairs[:, 0])])
+    return MortarPass(nodes=nodes, D=D[nodes], M=M[nodes], normals=normals[nodes], area=area[nodes])
 
 
 class DualPassContact:

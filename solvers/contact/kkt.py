@@ -1,0 +1,73 @@
+"""Frictionless contact of a linear(ised) problem: the stabilized KKT system of Puso & Solberg (seed
+slide "KKT Conditions") solved by a primal-dual active set (semi-smooth Newton on the complementarity).
+
+With the stiffness K, the loads F, the dual-pass constraint operator B = G/2 (dual_pass.py) and the
+stabilization J, the pressures p >= 0 and the displacements u satisfy
+
+    K u - B^T p = F                          equilibrium (B^T p pushes the sides apart)
+    g~ = B (X + u) + J p >= 0,   p >= 0,   p g~ = 0
+
+(the slide's g(u, mu) = B u + J mu >= 0 with lambda >= 0). On the active set A (g~ = 0) the system
+is the symmetric saddle point [[K, -B_A^T], [-B_A, -J_AA]], which J keeps invertible although the two
+passes carry twice the multipliers the interface resolves. The set is updated from p and g~
+(A = {p - c g~ > 0}, Hintermueller, Ito & Kunisch 2002, c = 1 in units where it compares the two);
+for a linear problem this ends when the set repeats, in a few iterations.
+
+Dirichlet dofs are eliminated: u_d given, equations only for the free dofs.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["ContactSolution", "solve_frictionless"]
+
+
+@dataclass
+class ContactSolution:
+    u: np.ndarray          # (ndof,) displacements
+    p: np.ndarray          # (nm,) multiplier pressures (0 off the active set)
+    gap: np.ndarray        # (nm,) stabilized gaps g~ at the solution
+    active: np.ndarray     # (nm,) bool
+    iterations: int
+
+
+def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spmatrix, X: np.ndarray,
+                       fixed: np.ndarray, u_fixed: np.ndarray, max_iterations: int = 50) -> ContactSolution:
+    """The contact solution (module docstring). K (ndof, ndof); F (ndof,); B (nm, ndof); J (nm, nm);
+    X (ndof,) reference positions (B X: the initial gaps); fixed (ndof,) bool Dirichlet dofs with
+    values u_fixed (ndof,) (read where fixed). Starts with every multiplier active; raises
+    RuntimeError if the active set cycles or does not settle within max_iterations."""
+    K, B, J = sp.csr_matrix(K), sp.csr_matrix(B), sp.csr_matrix(J)
+    ndof, nm = K.shape[0], B.shape[0]
+    fixed = np.asarray(fixed, dtype=bool)
+    free = np.flatnonzero(~fixed)
+    ud = np.where(fixed, u_fixed, 0.0)
+    g0 = B @ (X + ud)                              # the gaps with only the prescribed motion
+    rhs_u = (F - K @ ud)[free]
+    Kff, Bf = K[free][:, free], B[:, free]
+    # scale of the comparison p - c g~: pressures against gaps, by the stiffness over the constraint norm
+    c = float(abs(K.diagonal()).max()) / max(float(abs(B).max()), 1e-300) ** 2 if nm else 1.0
+    active = np.ones(nm, dtype=bool)
+    seen = []
+    for it in range(1, max_iterations + 1):
+        a = np.flatnonzero(active)
+        Ba, Jaa = Bf[a], J[a][:, a]
+        mat = sp.bmat([[Kff, -Ba.T], [-Ba, -Jaa]], format="csc")
+        sol = spla.spsolve(mat, np.concatenate([rhs_u, g0[a]]))
+        u = ud.copy()
+        u[free] = sol[: len(free)]
+        p = np.zeros(nm)
+        p[a] = sol[len(free):]
+        gap = g0 + Bf @ u[free] + J @ p
+        new = (p - c * gap) > 0.0
+        if np.array_equal(new, active):
+            return ContactSolution(u=u, p=p, gap=gap, active=active, iterations=it)
+        if any(np.array_equal(new, s) for s in seen):
+            raise RuntimeError(f"the contact active set cycles (iteration {it})")
+        seen.append(active)
+        active = new
+    raise RuntimeError(f"the contact active set did not settle in {max_iterations} iterations")

@@ -1,0 +1,72 @@
+"""Linear small-strain statics of plane-strain quadrilaterals: the stiffness matrix and the stresses at
+the Gauss points (2 x 2 full integration, the bilinear element that passes the patch test).
+
+The first piece of the implicit quasi-static mode (issue 11): contact patch tests are linear
+small-strain problems (Crisfield's two blocks: E = 1e6, nu = 0, 1 % strain, sigma_y = E eps
+exactly). The explicit solver's one-point quadrature with hourglass control has no stiffness of its
+hourglass modes that a static solve can use, hence full integration here.
+
+Everything is vectorised numpy over elements and Gauss points; the matrix is scipy.sparse.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+__all__ = ["plane_strain_elasticity", "quad_stiffness", "quad_stresses"]
+
+_G = 1.0 / np.sqrt(3.0)
+_XI = np.array([[-_G, -_G], [_G, -_G], [_G, _G], [-_G, _G]])          # 2 x 2 Gauss points, weight 1
+_CORNERS = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=np.float64)  # mesh.py node order
+
+
+def plane_strain_elasticity(youngs_modulus: float, poisson_ratio: float) -> np.ndarray:
+    """D (3, 3) mapping (eps_xx, eps_yy, gamma_xy) to (sigma_xx, sigma_yy, tau_xy), plane strain."""
+    e, nu = float(youngs_modulus), float(poisson_ratio)
+    c = e / ((1 + nu) * (1 - 2 * nu))
+    return c * np.array([[1 - nu, nu, 0.0], [nu, 1 - nu, 0.0], [0.0, 0.0, (1 - 2 * nu) / 2]])
+
+
+def _strain_displacement(points: np.ndarray, cells: np.ndarray):
+    """B (ne, 4, 3, 8) at the Gauss points and the weights det(J) (ne, 4)."""
+    # dN/dxi (4 gauss, 4 nodes, 2): N_a = (1 + xi xi_a)(1 + eta eta_a) / 4
+    xi, eta = _XI[:, 0, None], _XI[:, 1, None]
+    dn = np.stack([_CORNERS[:, 0] * (1 + eta * _CORNERS[:, 1]), _CORNERS[:, 1] * (1 + xi * _CORNERS[:, 0])], axis=2) / 4
+    x = points[cells]                                   # (ne, 4, 2)
+    jac = np.einsum("gan,ead->egnd", dn, x)             # (ne, g, 2 ref, 2 phys): dx_d / dxi_n
+    det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+    if np.any(det <= 0.0):
+        raise ValueError("an element has a non-positive Jacobian at a Gauss point")
+    inv = np.stack([np.stack([jac[..., 1, 1], -jac[..., 0, 1]], -1),
+                    np.stack([-jac[..., 1, 0], jac[..., 0, 0]], -1)], -2) / det[..., None, None]
+    dndx = np.einsum("gan,egdn->egad", dn, inv)         # (ne, g, 4 nodes, 2): dN_a / dx_d = J^-1 dN_a / dxi
+    b = np.zeros(dndx.shape[:2] + (3, 8))
+    b[..., 0, 0::2] = dndx[..., 0]
+    b[..., 1, 1::2] = dndx[..., 1]
+    b[..., 2, 0::2] = dndx[..., 1]
+    b[..., 2, 1::2] = dndx[..., 0]
+    return b, det
+
+
+def _dofs(cells: np.ndarray) -> np.ndarray:
+    return np.stack([2 * cells, 2 * cells + 1], axis=2).reshape(len(cells), 8)
+
+
+def quad_stiffness(points: np.ndarray, cells: np.ndarray, d: np.ndarray) -> sp.csr_matrix:
+    """K (2 n, 2 n) of plane-strain quads (dofs x0, y0, x1, y1, ...), d from plane_strain_elasticity;
+    per unit thickness."""
+    points = np.asarray(points, dtype=np.float64)
+    b, det = _strain_displacement(points, cells)
+    ke = np.einsum("egip,ij,egjq,eg->epq", b, d, b, det)
+    dof = _dofs(cells)
+    rows = np.repeat(dof, 8, axis=1).ravel()
+    cols = np.tile(dof, (1, 8)).ravel()
+    n = 2 * len(points)
+    return sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n, n))
+
+
+def quad_stresses(points: np.ndarray, cells: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """(sigma_xx, sigma_yy, tau_xy) at every Gauss point, (ne, 4, 3), of displacements u (n, 2)."""
+    b, _ = _strain_displacement(np.asarray(points, dtype=np.float64), cells)
+    ue = np.asarray(u, dtype=np.float64).reshape(-1)[_dofs(cells)]
+    return np.einsum("ij,egjq,eq->egi", d, b, ue)
