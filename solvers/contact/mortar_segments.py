@@ -14,7 +14,7 @@ overlap [max(0, min(xi0, xi1)), min(1, max(xi0, xi1))] the mortar coordinate eta
 phi^a phi^b is a quadratic in xi, and the 2-point Gauss rule integrates it exactly. A flat interface
 is therefore integrated exactly for any two meshes (the patch test's geometry).
 
-Only facing segments pair: outward normals with n_a . n_b < 0 (a surface's own next segments in self
+Only facing segments pair: outward normals with n_a . n_b < -FACING_COS (a surface's own next segments in self
 contact are not its partners), with the mortar segment in front of the non-mortar one within the
 capture distance or behind it by at most the allowed penetration (a thin body's far side, facing
 the other way at a thickness behind, is not). Within an overlap the
@@ -31,10 +31,13 @@ from numba import njit
 __all__ = ["segment_pair_integrals"]
 
 _GAUSS_X = np.array([0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0)])  # on [0, 1]
+FACING_COS = 0.1
+"""Segments pair when their outward normals are more than ~84 degrees apart (n_a . n_b < -0.1):
+surfaces in contact are near antiparallel (Hertz: 6 degrees at the contact's edge)."""
 
 
 @njit(cache=True)
-def _pair_integrals(x, seg_a, seg_b, pairs, gx, capture, penetration, d_out, m_out, overlap):
+def _pair_integrals(x, seg_a, seg_b, pairs, gx, capture, penetration, facing_cos, d_out, m_out, overlap):
     for p in range(pairs.shape[0]):
         sa = seg_a[pairs[p, 0]]
         sb = seg_b[pairs[p, 1]]
@@ -47,8 +50,10 @@ def _pair_integrals(x, seg_a, seg_b, pairs, gx, capture, penetration, d_out, m_o
         y1 = x[sb[1]]
         ux = y1[0] - y0[0]
         uy = y1[1] - y0[1]
-        # outward normals (dy, -dx): facing when their dot product is negative
-        if ty * uy + tx * ux >= 0.0 or ll <= 0.0:
+        # outward normals (dy, -dx): facing when their dot product is negative, by more than
+        # FACING_COS of the lengths (a face at a right angle, e.g. a symmetry plane's last segment at
+        # the contact, would pair over a round-off sliver and tilt its node's normal)
+        if ty * uy + tx * ux >= -facing_cos * np.sqrt(ll * (ux * ux + uy * uy)) or ll <= 0.0:
             continue
         s0 = ((y0[0] - x0[0]) * tx + (y0[1] - x0[1]) * ty) / ll
         s1 = ((y1[0] - x0[0]) * tx + (y1[1] - x0[1]) * ty) / ll
@@ -109,5 +114,5 @@ def segment_pair_integrals(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndar
     m = np.zeros((len(pairs), 2, 2))
     overlap = np.zeros(len(pairs))
     _pair_integrals(x, np.ascontiguousarray(seg_a, dtype=np.int64), np.ascontiguousarray(seg_b, dtype=np.int64),
-                    pairs, _GAUSS_X, float(capture), float(penetration), d, m, overlap)
+                    pairs, _GAUSS_X, float(capture), float(penetration), FACING_COS, d, m, overlap)
     return d, m, overlap
