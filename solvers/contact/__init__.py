@@ -7,5 +7,9 @@ Order of use at one configuration:
                       candidate facet pairs (cost linear in the surface size);
 2. mortar_segments.py the mortar integrals D and M of one pass on the candidate pairs (2-D);
 3. dual_pass.py       both passes assembled: weighted gaps g = G x, the constraint operator B = G/2,
-                      nodal forces B^T p and the stabilization J of Puso & Solberg (2020).
+                      nodal forces B^T p and the stabilization J of Puso & Solberg (2020);
+                      methods.py gives it and the comparisons (single-pass mortar, node-to-surface
+                      single and double pass) by name, behind the same interface;
+4. kkt.py             a static solve: K u - B^T p = F with p >= 0, B (X + u) + J p >= 0,
+                      complementary (primal-dual active set).
 """

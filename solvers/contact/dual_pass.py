@@ -182,3 +182,20 @@ class DualPassContact:
                 vals.append(0.5 * gamma * h * c.data[ok] * nn)
         n = self.n_multipliers
         return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+
+
+class SinglePassMortar(DualPassContact):
+    """Standard (biased) mortar: side a is the non-mortar side of the only pass, b = G^ab, no
+    stabilization. Kept as the comparison: swapping the sides changes the answer."""
+
+    def __init__(self, points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, capture: float,
+                 penetration: float | None = None):
+        self.points = np.asarray(points, dtype=np.float64)
+        self.passes = (mortar_pass(self.points, seg_a, seg_b, capture, penetration),)
+        self.offsets = np.cumsum([0, len(self.passes[0].nodes)])
+
+    def constraint_operator(self) -> sp.csr_matrix:
+        return self.gap_operator()
+
+    def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:
+        return sp.csr_matrix((self.n_multipliers, self.n_multipliers))

@@ -40,7 +40,8 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     """The contact solution (module docstring). K (ndof, ndof); F (ndof,); B (nm, ndof); J (nm, nm);
     X (ndof,) reference positions (B X: the initial gaps); fixed (ndof,) bool Dirichlet dofs with
     values u_fixed (ndof,) (read where fixed). Starts with every multiplier active; raises
-    RuntimeError if the active set cycles or does not settle within max_iterations."""
+    RuntimeError if the system is singular on an active set, or the set cycles or does not settle
+    within max_iterations."""
     K, B, J = sp.csr_matrix(K), sp.csr_matrix(B), sp.csr_matrix(J)
     ndof, nm = K.shape[0], B.shape[0]
     fixed = np.asarray(fixed, dtype=bool)
@@ -57,7 +58,15 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
         a = np.flatnonzero(active)
         Ba, Jaa = Bf[a], J[a][:, a]
         mat = sp.bmat([[Kff, -Ba.T], [-Ba, -Jaa]], format="csc")
-        sol = spla.spsolve(mat, np.concatenate([rhs_u, g0[a]]))
+        try:
+            sol = spla.splu(mat).solve(np.concatenate([rhs_u, g0[a]]))
+        except RuntimeError:  # SuperLU: "Factor is exactly singular"
+            sol = np.full(mat.shape[0], np.nan)
+        if not np.all(np.isfinite(sol)):
+            raise RuntimeError(
+                f"the contact KKT system is singular ({len(a)} active multipliers, iteration {it}): more "
+                "independent constraints than the free motion can meet (a single-pass method whose "
+                "slave or non-mortar side is the finer or the rigid one, or double-pass nodes that coincide)")
         u = ud.copy()
         u[free] = sol[: len(free)]
         p = np.zeros(nm)
