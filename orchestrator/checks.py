@@ -124,6 +124,56 @@ def taylor_bar(case, out, history, params):
             "impact_diameter": float(2 * r.max())}
 
 
+@register_check("impact", params=table(
+    {"striker": {"type": "string"}, "target": {"type": "string"}, "axis": AXIS, "height": number("m", exclusiveMinimum=0.0)},
+    required=("striker", "target", "axis", "height")))
+def impact(case, out, history, params):
+    """Two Lagrangian bodies in contact (the [contact] table's first pair; its force is the one the
+    first body takes): the contact's duration (from the start of the step before its force first
+    exceeds 1 % of its peak to the last step above it), the interface stress (median of |force| /
+    height per unit thickness over the middle half of that time), each body's mass-weighted mean
+    velocity along ``axis`` at the last output over the striker's initial one (``velocity_*_rel``),
+    and the energy the contact took out (-contact_work over the initial kinetic energy)."""
+    from orchestrator import output
+    from solvers.lagrange.mesh import body_mesh
+
+    ax = "xyz".index(params["axis"])
+    t = history["time"]
+    force = np.abs(history[f"lagrange.contact_force_{params['axis']}"])
+    on = np.flatnonzero(force > 0.01 * force.max())
+    if not len(on):
+        raise ValueError("the bodies never touched (no contact force)")
+    start, end = t[max(on[0] - 1, 0)], t[on[-1]]
+    middle = (t >= start + 0.25 * (end - start)) & (t <= start + 0.75 * (end - start))
+    dim = case["run"]["dimension"]
+    bodies = case["lagrange"]["bodies"]
+    names = [b["name"] for b in bodies]
+    meshes = [body_mesh(b, dim) for b in bodies]
+    first = np.cumsum([0] + [m.num_points for m in meshes])
+    _, _, index = output.read_steps(out, "lagrange")[-1]
+    _, pd, _ = output.read_step(out, "lagrange", index)
+    v = pd["velocity"][:, ax]
+
+    def mean_velocity(name):
+        k = names.index(name)
+        m = meshes[k]
+        mass = np.zeros(m.num_points)   # lumped: a quarter (eighth) of each cell's volume
+        from solvers.lagrange.mesh import cell_volumes
+        np.add.at(mass, m.cells.ravel(), np.repeat(cell_volumes(m) / m.cells.shape[1], m.cells.shape[1]))
+        return float((mass * v[first[k]:first[k + 1]]).sum() / mass.sum())
+
+    k0 = names.index(params["striker"])
+    v0 = float(bodies[k0].get("initial_velocity", [0.0] * dim)[ax])
+    ke0 = float(history["lagrange.kinetic_energy"][0])
+    return {"contact_duration": float(end - start),
+            "interface_stress": float(np.median(force[middle]) / params["height"]),
+            "velocity_striker_rel": mean_velocity(params["striker"]) / v0,
+            "velocity_target_rel": mean_velocity(params["target"]) / v0,
+            "contact_dissipation_rel": float(-history["lagrange.contact_work"][-1] / ke0),
+            "energy_balance_rel": float(np.max(np.abs(history["lagrange.energy_balance_rel"]))),
+            "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
+
+
 @register_check("momentum")
 def momentum(case, out, history, params):
     """Conservation residuals of a free body: maxima over the whole run."""

@@ -166,6 +166,7 @@ def cases() -> dict[str, str]:
                 dim, ("ideal_gas", "ideal_gas"), q,
                 boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
     out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
+    out["lagrange_2d_contact"] = _contact()
     for dim, model in ((2, "taitwater"), (3, "idealgas")):  # the SPH group (LAMMPS)
         out[f"sph_{dim}d_{model}"] = _sph(dim, model)
     for dim in (2, 3):  # the embedded-mesh coupling: a body moving through the grid
@@ -173,6 +174,16 @@ def cases() -> dict[str, str]:
         out[f"coupled_{dim}d_mixed"] = _coupled(dim, mixed=True)
         out[f"coupled_{dim}d_still"] = _coupled(dim, still=True)  # (a body at rest: blocked.py's held path)
     return out
+
+
+def _contact() -> str:
+    """Two touching 2-D blocks, one moving into the other ([contact]: the mortar kernel)."""
+    text = _RUN2.replace("end_time = 1.0", "end_time = 1.0e-3") + f"[materials.linear_elastic]\n{_MAT['linear_elastic']}"
+    for name, lo, hi, v in (("a", 0.0, 0.01, 50.0), ("b", 0.01, 0.02, 0.0)):
+        text += (f'[[lagrange.bodies]]\nname = "{name}"\nmaterial = "linear_elastic"\n'
+                 f"mesh = {{ box = {{ lower = [{lo}, 0.0], upper = [{hi}, 0.004], cells = [2, 2] }} }}\n"
+                 f"initial_velocity = [{v}, 0.0]\n")
+    return text + '[contact]\npairs = [["a", "b"]]\n'
 
 
 def _sph(dim: int, model: str) -> str:
@@ -346,6 +357,7 @@ def _import_solvers() -> None:
     import orchestrator.coupling.operator_rows  # noqa: F401  (its operators)
     import orchestrator.coupling.particle_surface  # noqa: F401  (particle bodies' surfaces)
     import solvers.particle_sums  # noqa: F401  (the SPH adapter's per-step sums)
+    import solvers.contact.mortar_segments  # noqa: F401  (contact between Lagrangian bodies)
 
 
 def warm(log=print) -> dict:

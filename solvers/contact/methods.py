@@ -4,39 +4,50 @@ gaps, n_multipliers) so that a case or a campaign sets them side by side (issue 
 * ``dual_pass_mortar`` (default): Puso & Solberg's stabilized dual pass (dual_pass.py);
 * ``mortar``: standard single-pass mortar, side a non-mortar (biased);
 * ``node_to_surface``: single pass, side a's nodes on side b (fails the patch test);
-* ``node_to_surface_double``: both sides' nodes (locks).
+* ``node_to_surface_double``: both sides' nodes (over-constrained: locks).
 
-A method is ``build(points, seg_a, seg_b, capture, penetration)``; register a new one with
-``@register("name")``.
+A method is ``build(points, seg_a, seg_b, capture, penetration)``, registered by name with the
+module and class that build it (imported on first use: the case schema reads the names without
+loading the kernels) and whether it handles self contact.
 """
 from __future__ import annotations
 
-from functools import partial
-from typing import Callable
+import importlib
+from dataclasses import dataclass, field
 
-from solvers.contact.dual_pass import DualPassContact, SinglePassMortar
-from solvers.contact.node_to_surface import NodeToSurface
-
-METHODS: dict[str, Callable] = {}
+__all__ = ["METHODS", "Method", "register", "build"]
 
 
-def register(name: str):
-    def deco(build: Callable) -> Callable:
-        if name in METHODS:
-            raise ValueError(f"contact method {name!r} registered twice")
-        METHODS[name] = build
-        return build
-    return deco
+@dataclass(frozen=True)
+class Method:
+    module: str
+    attr: str
+    kwargs: dict = field(default_factory=dict)
+    self_contact: bool = False
 
 
-register("dual_pass_mortar")(DualPassContact)
-register("mortar")(SinglePassMortar)
-register("node_to_surface")(partial(NodeToSurface, passes=1))
-register("node_to_surface_double")(partial(NodeToSurface, passes=2))
+METHODS: dict[str, Method] = {}
+
+
+def register(name: str, method: Method) -> None:
+    if name in METHODS:
+        raise ValueError(f"contact method {name!r} registered twice")
+    METHODS[name] = method
+
+
+register("dual_pass_mortar", Method("solvers.contact.dual_pass", "DualPassContact", self_contact=True))
+register("mortar", Method("solvers.contact.dual_pass", "SinglePassMortar"))
+register("node_to_surface", Method("solvers.contact.node_to_surface", "NodeToSurface", {"passes": 1}))
+register("node_to_surface_double", Method("solvers.contact.node_to_surface", "NodeToSurface", {"passes": 2}))
 
 
 def build(method: str, points, seg_a, seg_b, capture: float, penetration: float | None = None):
-    """The operators of ``method`` (a KeyError names the registered ones)."""
+    """The operators of ``method`` (a KeyError names the registered ones); seg_b None: self contact."""
     if method not in METHODS:
         raise KeyError(f"contact method {method!r}: registered: {', '.join(sorted(METHODS))}")
-    return METHODS[method](points, seg_a, seg_b, capture, penetration)
+    m = METHODS[method]
+    if seg_b is None and not m.self_contact:
+        raise NotImplementedError(f"self contact with {method!r}: only "
+                                  f"{', '.join(k for k, v in METHODS.items() if v.self_contact)}")
+    cls = getattr(importlib.import_module(m.module), m.attr)
+    return cls(points, seg_a, seg_b, capture, penetration, **m.kwargs)

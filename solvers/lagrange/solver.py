@@ -181,6 +181,23 @@ class LagrangeSolver:
         self.ke0 = None
         self.p0 = None
         self.l0 = None
+        # contact between bodies ([contact] pairs: impulses from a multiplier solve every step,
+        # solvers/contact/explicit.py); w_contact: their work on the step's mean velocity (<= 0: the
+        # energy the contact takes out, booked in the energy balance with the other external work)
+        self.contact = None
+        self.w_contact = 0.0
+        self.contact_force = np.zeros(dim)
+        if case.get("contact"):
+            from solvers.contact.explicit import ExplicitContact
+
+            cfg = case["contact"]
+            pairs = [(self.body_names.index(a), self.body_names.index(b)) for a, b in cfg["pairs"]]
+            # default capture: the median element edge of the reference mesh (far more than a
+            # step's approach, less than a body); from the reference so that a restart finds the same
+            edge = np.linalg.norm(self.global_points[self.global_cells[:, 1]] - self.global_points[self.global_cells[:, 0]], axis=1)
+            self.contact = ExplicitContact(pairs, cfg.get("method", "dual_pass_mortar"), cfg.get("alpha", 1.0),
+                                           cfg.get("capture", float(np.median(edge))))
+            self._contact_version = -1
         self._dt_stable = self._forces(0.0)
         # an element crushed below this share of the first stable step (all ranks, every body: LS-DYNA's
         # TSMIN = DTMIN * the first step, with ERODE = 1) erodes: it would stop the run by its step
@@ -256,6 +273,10 @@ class LagrangeSolver:
             impulse = self._surface_impulse_local(surface_impulse)
         if impulse is not None:
             self.v += impulse * self.inv_mass[:, None]
+        if self.contact is not None:
+            contact = self._contact_impulse()
+            self.v += contact * self.inv_mass[:, None]
+            impulse = contact if impulse is None else impulse + contact
         np.copyto(self.v_free, self.v)
         self.bcs.apply(self.x, self.v, self.dt)
         bad = nodal.update_and_account(
@@ -283,6 +304,24 @@ class LagrangeSolver:
         dt = self._forces(self.dt)
         # (no live element left, every one eroded: the free nodes fly at any step; the last one kept)
         self._dt_stable = dt if np.isfinite(dt) else self._dt_stable
+
+    def _contact_impulse(self) -> np.ndarray:
+        """(nn_local, dim) contact impulses of this step on this rank's nodes (collective: the surface
+        is gathered and every rank solves the same contact problem, so the copies agree)."""
+        surf = self.surface()
+        if self._contact_version != self.surface_version:
+            self.contact.set_surface(surf["facets"], surf["body"], surf["mass"], surf["free"])
+            self._contact_version = self.surface_version
+        xs, vs = self.surface_state("x"), self.surface_state("v")
+        imp = self.contact.impulses(xs, vs, self.dt)
+        vo = self._gather_surface(self.v_old)
+        m = np.where(surf["mass"] > 0, surf["mass"], np.inf)[:, None]
+        self.w_contact += float(np.sum(imp * 0.5 * (vo + vs + imp / m)))
+        # the force the first body of the first pair takes from the contact over the step
+        first = np.zeros(len(xs), bool)
+        first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
+        self.contact_force = imp[first].sum(axis=0) / self.dt
+        return self._surface_impulse_local(imp).copy()
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
     def renew_surface(self) -> bool:
@@ -461,6 +500,11 @@ class LagrangeSolver:
             "momentum_balance_rel": float(p_err),
             "angular_momentum_balance_rel": float(l_err),
         }
+        if self.contact is not None:
+            d["contact_work"] = self.w_contact
+            d["contact_active"] = float(self.contact.last_active)
+            for c, name in enumerate("xyz"[: self.dim]):
+                d[f"contact_force_{name}"] = float(self.contact_force[c])
         if self.erosion:  # the eroded elements' internal energy leaves the body with them
             d["eroded_elements"] = float(self.eroded)
             d["eroded_internal_energy"] = float(self._allsum(self.e_int[self.alive == 0].sum()))
@@ -528,7 +572,8 @@ class LagrangeSolver:
         with h5py.File(tmp, "w") as h:
             for k, a in {**nodes, **cells}.items():
                 h.create_dataset(k, data=a)
-            for k in self.STATE_SCALARS + (("eroded", "surface_version") if self.erosion else ()):
+            for k in (self.STATE_SCALARS + (("eroded", "surface_version") if self.erosion else ())
+                      + (("w_contact",) if self.contact is not None else ())):
                 h.attrs[k] = getattr(self, k)
             for k in self.STATE_VECTORS:
                 h.create_dataset(k, data=getattr(self, k))
@@ -547,6 +592,8 @@ class LagrangeSolver:
                 self.surface_stale = False
             for k in self.STATE_SCALARS:
                 setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
+            if self.contact is not None:
+                self.w_contact = float(h.attrs["w_contact"])
             for k in self.STATE_VECTORS:
                 if k in h:  # (impulse_gross: not in checkpoints before the coupling)
                     setattr(self, k, h[k][...])

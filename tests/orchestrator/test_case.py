@@ -228,6 +228,10 @@ BAD_CASES = [
     ("symmetry_axis_z_2d", "boundaries[0].axis", "dimension mismatch"),
     ("boundary_key_of_other_type", "boundaries[0].velocity", "type = 'fixed'"),
     ("duplicate_body_name", "lagrange.bodies[1].name", "duplicate body name"),
+    ("contact_unknown_body", "contact.pairs[0][1]", "not a body; bodies: left, right"),
+    ("contact_self_node_to_surface", "contact.pairs[0]", "self contact needs a method that handles it"),
+    ("contact_unknown_method", "contact.method", "must be one of: 'dual_pass_mortar'"),
+    ("contact_3d", "contact", "contact is 2-D only so far"),
 ]
 
 

@@ -795,7 +795,7 @@ def test_penetration_depth_when_the_rod_is_consumed(tmp_path):
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
-              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration"}
+              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact"}
     assert set(checks.CHECKS) == tested
 
 
@@ -821,3 +821,41 @@ def test_immerse_run_exits_1_when_the_check_fails(tmp_path):
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
     assert not s["check"]["passed"]
     assert [k for k, m in s["check"]["metrics"].items() if not m["passed"]] == ["p_plateau"]
+
+
+# ---- impact (two bodies in contact) ---------------------------------------------------------------
+def impact_run(out, release):
+    """cases/bars_impact's bodies: a contact force of 197.5 MPa x 0.005 m from the first step (t = 0.1
+    us) to ``release``, then none; at the end the striker at rest and the target at 10 m/s;
+    the contact took 0.2 % of the initial kinetic energy."""
+    from solvers.lagrange.mesh import body_mesh, concatenate
+
+    case = load_case(CASES / "bars_impact")
+    mesh, body = concatenate([body_mesh(b, 2) for b in case["lagrange"]["bodies"]])
+    first_target = mesh.cells[body == 1].min()
+    v = np.zeros((mesh.num_points, 2))
+    v[first_target:, 0] = 10.0
+    output.write_mesh(out, "lagrange", mesh.cells, "quad")
+    output.write_step(out, "lagrange", 0, 600, 60e-6, mesh.points, {"velocity": v}, {})
+    h = history("lagrange", n=601)
+    h["time"] = np.linspace(0.0, 60e-6, 601)
+    h["lagrange.contact_force_x"] = np.where((h["time"] > 0) & (h["time"] <= release), -197.5e6 * 0.005, 0.0)
+    h["lagrange.kinetic_energy"] = np.full(601, 195.0)
+    h["lagrange.contact_work"] = np.full(601, -0.002 * 195.0)
+    return case, h
+
+
+def test_impact(tmp_path):
+    """The 1-D bar values themselves pass: duration 2 L / c to one record (0.1 us), stress and
+    velocities exact; a contact released at 30 us fails its duration with that error."""
+    case, h = impact_run(tmp_path / "good", release=39.55e-6)  # (the last record in contact: 39.5 us)
+    r = checks.run_check(case, tmp_path / "good", h)
+    assert r["passed"], r
+    m = r["metrics"]
+    assert m["contact_duration"]["value"] == pytest.approx(39.5e-6, rel=1e-12)
+    assert m["interface_stress"]["rel_error"] < 1e-12 and m["contact_dissipation_rel"]["value"] == pytest.approx(0.002)
+    assert m["velocity_striker_rel"]["value"] == 0.0 and m["velocity_target_rel"]["rel_error"] < 1e-12
+    case, h = impact_run(tmp_path / "short", release=30.05e-6)
+    r = checks.run_check(case, tmp_path / "short", h)
+    assert failed(r) == ["contact_duration"]
+    assert r["metrics"]["contact_duration"]["rel_error"] == pytest.approx(9.5 / 39.5, rel=1e-9)  # 30 us against 39.5

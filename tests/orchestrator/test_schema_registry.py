@@ -20,7 +20,7 @@ from tests.conftest import REPO
 
 def test_the_schema_is_the_core_and_the_registered_tables_by_order():
     names = [t.name for t in R.tables()]
-    assert names == ["materials", "lagrange", "ale", "boundaries", "sph", "coupling"]
+    assert names == ["materials", "lagrange", "contact", "ale", "boundaries", "sph", "coupling"]
     assert list(CASE_SCHEMA["properties"]) == ["run", "ranks", *names, "check"]
     for t in R.tables():
         assert CASE_SCHEMA["properties"][t.name] is t.schema
@@ -135,7 +135,7 @@ def test_a_new_table_is_one_call_and_runs_at_its_place(tmp_path):
     assert out["unknown_key"]["error"] == "probe.bogus = 1: unknown key; allowed: gain, at"
     assert out["unknown_key"]["seen"] == []  # the schema runs before any hook
     assert out["top_level"]["error"] == ("nope = {'x': 1}: unknown key; allowed: run, ranks, materials, "
-                                         "lagrange, ale, probe, boundaries, sph, coupling, check")
+                                         "lagrange, contact, ale, probe, boundaries, sph, coupling, check")
     assert out["short"]["error"] == ("probe.at = [0.5]: dimension mismatch: must have 2 items "
                                      "(run.dimension = 2)")
     # two bad tables: the lower order's check speaks first ([ale] 40 before [probe] 45)
@@ -158,5 +158,6 @@ def test_validating_a_case_imports_no_solver_kernel():
                        env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=120)
     assert r.returncode == 0, r.stderr
     # (solvers.kernel_cache: the numba cache directory's name, hashlib and os only)
-    assert json.loads(r.stdout) == ["solvers", "solvers.expressions", "solvers.kernel_cache", "solvers.lagrange",
-                                    "solvers.lagrange.mesh"]
+    # (solvers.contact.methods: the contact methods' names, no kernel)
+    assert json.loads(r.stdout) == ["solvers", "solvers.contact", "solvers.contact.methods", "solvers.expressions",
+                                    "solvers.kernel_cache", "solvers.lagrange", "solvers.lagrange.mesh"]

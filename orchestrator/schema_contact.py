@@ -1,0 +1,72 @@
+"""The contact table of case.toml, ``[contact]``: which Lagrangian bodies touch which, by what method
+(solvers/contact/methods.py: the methods register themselves by name), enforced by impulses from a
+multiplier solve every step (solvers/contact/explicit.py).
+
+    [contact]
+    pairs = [["striker", "target"], ["ring", "ring"]]   # a body twice: self contact
+    method = "dual_pass_mortar"                        # default; or mortar, node_to_surface, ...
+    alpha = 1.0                                        # stabilization weight (> 0)
+    capture = 1e-3                                     # search distance, m (default: median element edge)
+
+Normalised layout (``case["contact"]``): the same keys with the defaults filled in (capture only when
+given). Cross-field rules: the bodies are [[lagrange.bodies]] names, a pair names two bodies (or one
+twice), no pair twice; self contact only with a method that handles it; 2-D only so far (the 3-D
+facet mortar is to come).
+"""
+from __future__ import annotations
+
+from solvers.contact.methods import METHODS
+
+from .schema_parts import number, table
+from .schema_parts import name as name_schema
+from .schema_registry import register_table
+from .schema_rules import CaseError, format_key
+
+CONTACT = table(
+    {
+        "pairs": {"type": "array", "minItems": 1,
+                  "items": {"type": "array", "items": name_schema(), "minItems": 2, "maxItems": 2}},
+        "method": {"enum": sorted(METHODS)},
+        "alpha": number(exclusiveMinimum=0.0),
+        "capture": number("m", exclusiveMinimum=0.0),
+    },
+    required=("pairs",),
+)
+
+
+def normalise(raw: dict | None, case: dict) -> dict | None:
+    if raw is None:
+        return None
+    out = {"pairs": [list(p) for p in raw["pairs"]], "method": raw.get("method", "dual_pass_mortar"),
+           "alpha": float(raw.get("alpha", 1.0))}
+    if "capture" in raw:
+        out["capture"] = float(raw["capture"])
+    return out
+
+
+def check(case: dict, data: dict) -> None:
+    c = case["contact"]
+    dim = case["run"]["dimension"]
+    if dim != 2:
+        raise CaseError("contact", data.get("contact"), f"contact is 2-D only so far (run.dimension = {dim}; the 3-D facet "
+                        "mortar is to come)")
+    names = [b["name"] for b in case.get("lagrange", {}).get("bodies", [])]
+    if not names:
+        raise CaseError("contact", data.get("contact"), "contact is between Lagrangian bodies: [[lagrange.bodies]] has none")
+    seen = {}
+    for i, pair in enumerate(c["pairs"]):
+        for j, n in enumerate(pair):
+            if n not in names:
+                raise CaseError(format_key(["contact", "pairs", i, j]), n,
+                                f"not a body; bodies: {', '.join(names)}")
+        key = tuple(sorted(pair))
+        if key in seen:
+            raise CaseError(format_key(["contact", "pairs", i]), pair, f"the same pair as contact.pairs[{seen[key]}]")
+        seen[key] = i
+        if pair[0] == pair[1] and not METHODS[c["method"]].self_contact:
+            ok = ", ".join(k for k, m in METHODS.items() if m.self_contact)
+            raise CaseError(format_key(["contact", "pairs", i]), pair,
+                            f"self contact needs a method that handles it ({ok}); method = {c['method']!r}")
+
+
+register_table("contact", CONTACT, normalise, check, order=35)

@@ -1,0 +1,94 @@
+"""Explicit dynamic contact: impulses from a multiplier solve at the end of every step, the same
+operators as the static solve (issue 11, item 3; like the embedded-mesh constraint of the coupling:
+no penalty stiffness, so the stable step is the bodies' own).
+
+After the predictor, the surface nodes would move to x* = x^n + dt v*. The contact impulses I = dt
+B^T p (p >= 0 per multiplier) change the velocities by M^-1 I, so the end-of-step positions are
+x* + u with u = dt^2 M^-1 B^T p, and the constraint is the stabilized gap at the end of the step:
+
+    g~ = B (x* + u) + J p >= 0,   p >= 0,   p g~ = 0.
+
+That is kkt.solve_frictionless with the stiffness K = M / dt^2 (the nodes' inertia over the step)
+and no load: approaching nodes are stopped at the surface within the step (no penetration), and a
+multiplier that would pull is released (no sticking). The impulses of a pass balance (B^T p sums to
+zero), so momentum is exact. Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
+inertia, J_dyn = alpha * median(diag(dt^2 B M^-1 B^T)) / median(diag(J_1)) * J_1, with J_1 the
+operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for the inertia).
+
+Prescribed velocity components (boundary conditions) are fixed dofs of the solve: the contact cannot
+move them.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from solvers.contact import methods
+from solvers.contact.kkt import solve_frictionless
+
+__all__ = ["ExplicitContact"]
+
+
+class ExplicitContact:
+    """Contact impulses of surface nodes (a solver's exterior surface, the same on every rank).
+
+    pairs: [(body_a, body_b), ...] body indices (equal: self contact); method: a name of
+    methods.METHODS; alpha: the stabilization's weight; capture: the search distance (also the
+    deepest penetration still paired).
+    """
+
+    def __init__(self, pairs, method: str = "dual_pass_mortar", alpha: float = 1.0, capture: float | None = None):
+        self.pairs = [(int(a), int(b)) for a, b in pairs]
+        if method not in methods.METHODS:
+            raise KeyError(f"contact method {method!r}: registered: {', '.join(sorted(methods.METHODS))}")
+        self.method = method
+        self.alpha = float(alpha)
+        self.capture = capture
+        self.surface = None
+        self.last_active = 0
+
+    def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
+        """facets (nf, 2) outward segments as indices into the surface nodes; body (nf,); mass (ns,);
+        free (ns, dim) 1 where a velocity component is not prescribed."""
+        if facets.shape[1] != 2:
+            raise NotImplementedError("contact is 2-D only so far (3-D facet mortar: issue 11, to come)")
+        self.facets, self.body = np.asarray(facets), np.asarray(body)
+        self.mass, self.free = np.asarray(mass, float), np.asarray(free, float)
+        self.surface = True
+
+    def _operators(self, x: np.ndarray):
+        if self.capture is None:  # a segment: far more than a step's approach, less than a body
+            self.capture = float(np.median(np.linalg.norm(x[self.facets[:, 1]] - x[self.facets[:, 0]], axis=1)))
+        blocks_b, blocks_j = [], []
+        for a, b in self.pairs:
+            seg_a = self.facets[self.body == a]
+            seg_b = None if a == b else self.facets[self.body == b]
+            c = methods.build(self.method, x, seg_a, seg_b, self.capture, self.capture)
+            if c.n_multipliers:
+                blocks_b.append(c.constraint_operator())
+                blocks_j.append(c.stabilization(1.0, 1.0))
+        if not blocks_b:
+            return None, None
+        return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr")
+
+    def impulses(self, x: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+        """(ns, dim) contact impulses of the step: x = x^n and v = v* (predictor, after any other
+        impulse) of the surface nodes."""
+        x = np.asarray(x, float)
+        ns, dim = x.shape
+        out = np.zeros((ns, dim))
+        B, J1 = self._operators(x)
+        self.last_active = 0
+        if B is None:
+            return out
+        inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
+        inv_m = inv_m * self.free.reshape(-1)
+        w = np.asarray((B.multiply(B)) @ inv_m).ravel() * dt * dt      # diag(dt^2 B M^-1 B^T)
+        j1 = J1.diagonal()
+        scale = self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
+        fixed = self.free.reshape(-1) == 0
+        K = sp.diags(np.where(fixed, 1.0, np.repeat(self.mass, dim)) / (dt * dt), format="csr")
+        xstar = (x + dt * np.asarray(v, float)).reshape(-1)
+        sol = solve_frictionless(K, np.zeros(ns * dim), B, scale * J1, xstar, fixed, np.zeros(ns * dim))
+        self.last_active = int(sol.active.sum())
+        return (np.repeat(self.mass, dim) * sol.u / dt).reshape(ns, dim)
