@@ -14,7 +14,12 @@ What differs from the SPH package's fluids (adapters/lammps_model.py):
   group named ``tlsph`` (the pair style requires it), newton off, ghost velocities (PreCompute's
   smoothed velocity differences read ghosts' v).
 * held particles (a body's ``fixed`` or its ``clamp`` region) stay bonded to their body (they carry
-  stress) but are not integrated: fix smd/integrate_tlsph acts on the free group only.
+  stress) and are integrated with the rest, their force zeroed by a setforce after every other
+  post-force fix: they never move (v = vest = 0, x = x0), and fix smd/integrate_tlsph still adds
+  their share of each bond's energy to their esph (PairTlsph gives each end of a bond half its
+  work, 0.5 f.(vest_j - vest_i)).  Left out of the integration, their esph stayed 0 and the bonds
+  to the clamp lost half their strain energy: a clamped plate set moving at 1 m/s was up to 8.0e-3
+  of its energy short in 400 steps (3.4e-5 with it; tests/adapters/test_sph.py).
 * 2-D: LAMMPS needs z periodic, and PairTlsph::ComputeForces applies the minimum image to a
   reference distance before it is assigned (its first pair on each rank reads an uninitialised
   vector), so a thin periodic z slab can fail with "Atoms have moved too far apart".  The z extent
@@ -183,9 +188,11 @@ def setup_commands(sph: dict, parts: dict) -> list[str]:
     cmds.append(f"group {FREE_GROUP} subtract all {FIXED_GROUP}")
     cmds += pair_commands(sph)
     free = not parts["fixed"].all()
-    if free:
-        cmds.append(f"fix immerse_integrate {FREE_GROUP} smd/integrate_tlsph")
+    if free:  # every particle: the held ones for their esph (module docstring), held by the setforce below
+        cmds.append("fix immerse_integrate all smd/integrate_tlsph")
     cmds += gravity_and_walls(sph, free) + hold_commands(sph, parts)
+    if free and ranges:
+        cmds.append(f"fix immerse_clamp {FIXED_GROUP} setforce 0.0 0.0 0.0")
     cmds += ["compute immerse_stress all smd/tlsph/stress", "compute immerse_rho all smd/rho",
              "compute immerse_dt all smd/tlsph/dt"]
     return cmds

@@ -61,7 +61,7 @@ def test_dam_break(tmp_path):
 
 def test_sph_elastic_bar(tmp_path):
     """A clamped tlsph bar set moving (MACHDYN solid): the free end's triangle wave against 1-D
-    theory, peak and rebound times within 0.8 %, rebound speed 2e-5, energy 0.9 %; the output
+    theory, peak and rebound times within 0.8 %, rebound speed 2e-5, energy 1.7e-4; the output
     carries the solid's stress and plastic strain; LAMMPS's MACHDYN banners stay off stdout."""
     out = tmp_path / "out"
     r = immerse("run", CASES / "sph_elastic_bar", "--out", out)
