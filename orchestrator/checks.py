@@ -174,6 +174,29 @@ def impact(case, out, history, params):
             "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
 
 
+@register_check("sliding", params=table(
+    {"body": {"type": "string"}, "axis": AXIS, "window": WINDOW}, required=("body", "axis", "window")))
+def sliding(case, out, history, params):
+    """A body sliding (or sticking) on a held one: its acceleration along ``axis`` (slope of the
+    solver's momentum over the body's mass, a straight-line fit over ``window`` in s; every other body
+    held, so the momentum is the body's) and its largest speed there."""
+    from solvers.lagrange.mesh import body_mesh, cell_volumes
+
+    ax = "xyz".index(params["axis"])
+    dim = case["run"]["dimension"]
+    body = next(b for b in case["lagrange"]["bodies"] if b["name"] == params["body"])
+    mass = float(cell_volumes(body_mesh(body, dim)).sum() * case["materials"][body["material"]]["density"])
+    t = history["time"]
+    lo, hi = params["window"]
+    w = (t >= lo) & (t <= hi)
+    if w.sum() < 3:
+        raise ValueError(f"check.params.window = {params['window']}: fewer than 3 records in it")
+    v = history[f"lagrange.momentum_{params['axis']}"][w] / mass
+    return {"acceleration": float(np.polyfit(t[w], v, 1)[0]), "speed_max": float(np.abs(v).max()),
+            "energy_balance_rel": float(np.max(np.abs(history["lagrange.energy_balance_rel"]))),
+            "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
+
+
 @register_check("momentum")
 def momentum(case, out, history, params):
     """Conservation residuals of a free body: maxima over the whole run."""

@@ -7,6 +7,7 @@ multiplier solve every step (solvers/contact/explicit.py).
     method = "dual_pass_mortar"                        # default; or mortar, node_to_surface, ...
     alpha = 1.0                                        # stabilization weight (> 0)
     capture = 1e-3                                     # search distance, m (default: median element edge)
+    friction = 0.2                                     # Coulomb's mu (default 0: frictionless)
 
 Normalised layout (``case["contact"]``): the same keys with the defaults filled in (capture only when
 given). Cross-field rules: the bodies are [[lagrange.bodies]] names, a pair names two bodies (or one
@@ -29,6 +30,7 @@ CONTACT = table(
         "method": {"enum": sorted(METHODS)},
         "alpha": number(exclusiveMinimum=0.0),
         "capture": number("m", exclusiveMinimum=0.0),
+        "friction": number("dimensionless", minimum=0.0),
     },
     required=("pairs",),
 )
@@ -38,7 +40,7 @@ def normalise(raw: dict | None, case: dict) -> dict | None:
     if raw is None:
         return None
     out = {"pairs": [list(p) for p in raw["pairs"]], "method": raw.get("method", "dual_pass_mortar"),
-           "alpha": float(raw.get("alpha", 1.0))}
+           "alpha": float(raw.get("alpha", 1.0)), "friction": float(raw.get("friction", 0.0))}
     if "capture" in raw:
         out["capture"] = float(raw["capture"])
     return out
@@ -63,6 +65,9 @@ def check(case: dict, data: dict) -> None:
         if key in seen:
             raise CaseError(format_key(["contact", "pairs", i]), pair, f"the same pair as contact.pairs[{seen[key]}]")
         seen[key] = i
+        if c["friction"] > 0.0 and c["method"] not in ("dual_pass_mortar", "mortar"):
+            raise CaseError("contact.friction", c["friction"], f"friction needs a mortar method (dual_pass_mortar, "
+                            f"mortar); method = {c['method']!r}")
         if pair[0] == pair[1] and not METHODS[c["method"]].self_contact:
             ok = ", ".join(k for k, m in METHODS.items() if m.self_contact)
             raise CaseError(format_key(["contact", "pairs", i]), pair,

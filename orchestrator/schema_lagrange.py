@@ -142,6 +142,7 @@ LAGRANGE = table(
         "hourglass": number("dimensionless", minimum=0, maximum=0.125),
         "bulk_viscosity_linear": number("dimensionless", minimum=0),
         "bulk_viscosity_quadratic": number("dimensionless", minimum=0),
+        "gravity": vector("m/s^2"),
         "bodies": {"type": "array", "items": BODY},
     },
 )
@@ -239,6 +240,8 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
                          "time_step": to_float(b["erosion"].get("time_step", 0.0))} if "erosion" in b else None),
         })
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
+    if "gravity" in raw:
+        lagrange["gravity"] = [to_float(v) for v in raw["gravity"]]
     lagrange["bodies"] = bodies
     return lagrange
 
@@ -250,6 +253,8 @@ def check_lagrange(case: dict, data: dict) -> None:
     dim = case["run"]["dimension"]
     bodies = case["lagrange"]["bodies"]
     raw_bodies = data.get("lagrange", {}).get("bodies", [])
+    if "gravity" in data.get("lagrange", {}):
+        check_length("lagrange.gravity", data["lagrange"]["gravity"], dim)
     if not bodies:
         raise CaseError("lagrange.bodies", data.get("lagrange", {}).get("bodies", MISSING),
                         "at least one body is required ([[lagrange.bodies]]), or a background [ale]")

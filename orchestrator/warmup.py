@@ -177,13 +177,14 @@ def cases() -> dict[str, str]:
 
 
 def _contact() -> str:
-    """Two touching 2-D blocks, one moving into the other ([contact]: the mortar kernel)."""
+    """Two touching 2-D blocks, one moving into the other across it ([contact] with friction: the
+    mortar and friction kernels)."""
     text = _RUN2.replace("end_time = 1.0", "end_time = 1.0e-3") + f"[materials.linear_elastic]\n{_MAT['linear_elastic']}"
-    for name, lo, hi, v in (("a", 0.0, 0.01, 50.0), ("b", 0.01, 0.02, 0.0)):
+    for name, lo, hi, v in (("a", 0.0, 0.01, "50.0, 20.0"), ("b", 0.01, 0.02, "0.0, 0.0")):
         text += (f'[[lagrange.bodies]]\nname = "{name}"\nmaterial = "linear_elastic"\n'
                  f"mesh = {{ box = {{ lower = [{lo}, 0.0], upper = [{hi}, 0.004], cells = [2, 2] }} }}\n"
-                 f"initial_velocity = [{v}, 0.0]\n")
-    return text + '[contact]\npairs = [["a", "b"]]\n'
+                 f"initial_velocity = [{v}]\n")
+    return text + '[contact]\npairs = [["a", "b"]]\nfriction = 0.2\n'
 
 
 def _sph(dim: int, model: str) -> str:
@@ -358,6 +359,7 @@ def _import_solvers() -> None:
     import orchestrator.coupling.particle_surface  # noqa: F401  (particle bodies' surfaces)
     import solvers.particle_sums  # noqa: F401  (the SPH adapter's per-step sums)
     import solvers.contact.mortar_segments  # noqa: F401  (contact between Lagrangian bodies)
+    import solvers.contact.friction  # noqa: F401  (its Coulomb friction)
 
 
 def warm(log=print) -> dict:

@@ -57,6 +57,11 @@ def nodal_normals(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return np.divide(n, norm[:, None], out=np.zeros_like(n), where=norm[:, None] > 0)
 
 
+def _tangent(n: np.ndarray) -> np.ndarray:
+    """The tangent t = (n_y, -n_x) of unit normals n (n, 2)."""
+    return np.stack([n[:, 1], -n[:, 0]], axis=1)
+
+
 @dataclass
 class MortarPass:
     """One pass with side a as the non-mortar side: its multiplier nodes and integrals.
@@ -143,10 +148,14 @@ class DualPassContact:
 
     def gap_operator(self) -> sp.csr_matrix:
         """G (n_multipliers, 2 n): weighted gaps g = G x.ravel() (x (n, 2) positions)."""
+        return self._directed_operator(lambda n: n)
+
+    def _directed_operator(self, direction) -> sp.csr_matrix:
+        """Rows d_A (x) (M_A - D_A) with d_A = direction(normals) of each pass."""
         blocks = []
         for p in self.passes:
             diff = (p.M - p.D).tocoo()
-            nrm = p.normals[diff.row]
+            nrm = direction(p.normals)[diff.row]
             rows = np.concatenate([diff.row, diff.row])
             cols = np.concatenate([2 * diff.col, 2 * diff.col + 1])
             vals = np.concatenate([diff.data * nrm[:, 0], diff.data * nrm[:, 1]])
@@ -156,6 +165,11 @@ class DualPassContact:
     def constraint_operator(self) -> sp.csr_matrix:
         """B = G / 2, the dual pass's b(mu, u) = mu . B u (both passes averaged)."""
         return 0.5 * self.gap_operator()
+
+    def tangent_operator(self) -> sp.csr_matrix:
+        """T: the constraint operator with each multiplier's tangent t_A = (n_y, -n_x) in place of its
+        normal (the weighted tangential slip of the friction, friction.py)."""
+        return 0.5 * self._directed_operator(_tangent)
 
     def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
         """Weighted gaps g_A of every multiplier at positions x (default: the operators' own)."""
@@ -196,6 +210,9 @@ class SinglePassMortar(DualPassContact):
 
     def constraint_operator(self) -> sp.csr_matrix:
         return self.gap_operator()
+
+    def tangent_operator(self) -> sp.csr_matrix:
+        return self._directed_operator(_tangent)
 
     def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:
         return sp.csr_matrix((self.n_multipliers, self.n_multipliers))

@@ -16,7 +16,7 @@ inertia, J_dyn = alpha * median(diag(dt^2 B M^-1 B^T)) / median(diag(J_1)) * J_1
 operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for the inertia).
 
 Prescribed velocity components (boundary conditions) are fixed dofs of the solve: the contact cannot
-move them.
+move them. With friction (mu > 0) the tangential impulses follow the normal ones (friction.py).
 """
 from __future__ import annotations
 
@@ -37,8 +37,10 @@ class ExplicitContact:
     deepest penetration still paired).
     """
 
-    def __init__(self, pairs, method: str = "dual_pass_mortar", alpha: float = 1.0, capture: float | None = None):
+    def __init__(self, pairs, method: str = "dual_pass_mortar", alpha: float = 1.0, capture: float | None = None,
+                 friction: float = 0.0):
         self.pairs = [(int(a), int(b)) for a, b in pairs]
+        self.friction = float(friction)  # Coulomb's mu (friction.py); 0: frictionless
         if method not in methods.METHODS:
             raise KeyError(f"contact method {method!r}: registered: {', '.join(sorted(methods.METHODS))}")
         self.method = method
@@ -46,6 +48,7 @@ class ExplicitContact:
         self.capture = capture
         self.surface = None
         self.last_active = 0
+        self.last_sliding = 0
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
         """facets (nf, 2) outward segments as indices into the surface nodes; body (nf,); mass (ns,);
@@ -59,7 +62,7 @@ class ExplicitContact:
     def _operators(self, x: np.ndarray):
         if self.capture is None:  # a segment: far more than a step's approach, less than a body
             self.capture = float(np.median(np.linalg.norm(x[self.facets[:, 1]] - x[self.facets[:, 0]], axis=1)))
-        blocks_b, blocks_j = [], []
+        blocks_b, blocks_j, blocks_t = [], [], []
         for a, b in self.pairs:
             seg_a = self.facets[self.body == a]
             seg_b = None if a == b else self.facets[self.body == b]
@@ -67,9 +70,14 @@ class ExplicitContact:
             if c.n_multipliers:
                 blocks_b.append(c.constraint_operator())
                 blocks_j.append(c.stabilization(1.0, 1.0))
+                if self.friction > 0.0:
+                    if not hasattr(c, "tangent_operator"):
+                        raise NotImplementedError(f"friction with {self.method!r}: only the mortar methods")
+                    blocks_t.append(c.tangent_operator())
         if not blocks_b:
-            return None, None
-        return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr")
+            return None, None, None
+        T = sp.vstack(blocks_t, format="csr") if blocks_t else None
+        return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr"), T
 
     def impulses(self, x: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
         """(ns, dim) contact impulses of the step: x = x^n and v = v* (predictor, after any other
@@ -77,8 +85,9 @@ class ExplicitContact:
         x = np.asarray(x, float)
         ns, dim = x.shape
         out = np.zeros((ns, dim))
-        B, J1 = self._operators(x)
+        B, J1, T = self._operators(x)
         self.last_active = 0
+        self.last_sliding = 0
         if B is None:
             return out
         inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
@@ -91,4 +100,19 @@ class ExplicitContact:
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
         sol = solve_frictionless(K, np.zeros(ns * dim), B, scale * J1, xstar, fixed, np.zeros(ns * dim))
         self.last_active = int(sol.active.sum())
-        return (np.repeat(self.mass, dim) * sol.u / dt).reshape(ns, dim)
+        m = np.repeat(self.mass, dim)
+        impulse = m * sol.u / dt
+        if T is not None and self.last_active:
+            # Coulomb: the tangential impulses on the velocities after the normal ones, bounded by mu
+            # times each row's normal impulse dt p_A (friction.py)
+            from solvers.contact.friction import box_qp_gauss_seidel
+
+            v1 = np.asarray(v, float).reshape(-1) + sol.u / dt
+            wt = np.asarray((T.multiply(T)) @ inv_m).ravel()
+            st = self.alpha * np.median(wt[wt > 0]) / np.median(j1[j1 > 0]) if np.any(wt > 0) and np.any(j1 > 0) else 0.0
+            W = (T @ sp.diags(inv_m) @ T.T + st * J1).tocsr()
+            bound = self.friction * dt * sol.p
+            q, _ = box_qp_gauss_seidel(W, T @ v1, bound)
+            self.last_sliding = int(np.sum((bound > 0) & (np.abs(q) >= bound * (1 - 1e-9))))
+            impulse = impulse + T.T @ q
+        return impulse.reshape(ns, dim)

@@ -181,6 +181,12 @@ class LagrangeSolver:
         self.ke0 = None
         self.p0 = None
         self.l0 = None
+        # gravity ([lagrange] gravity): m g on every node, added to the element forces; its work
+        # w_gravity (on the step's mean velocity, like the elements') is taken out of the internal
+        # work the node kernel books and reported with the external work
+        self.gravity = np.array(opts.get("gravity", [0.0] * dim), dtype=np.float64)
+        self.has_gravity = bool(np.any(self.gravity != 0.0))
+        self.w_gravity = 0.0
         # contact between bodies ([contact] pairs: impulses from a multiplier solve every step,
         # solvers/contact/explicit.py); w_contact: their work on the step's mean velocity (<= 0: the
         # energy the contact takes out, booked in the energy balance with the other external work)
@@ -196,7 +202,7 @@ class LagrangeSolver:
             # step's approach, less than a body); from the reference so that a restart finds the same
             edge = np.linalg.norm(self.global_points[self.global_cells[:, 1]] - self.global_points[self.global_cells[:, 0]], axis=1)
             self.contact = ExplicitContact(pairs, cfg.get("method", "dual_pass_mortar"), cfg.get("alpha", 1.0),
-                                           cfg.get("capture", float(np.median(edge))))
+                                           cfg.get("capture", float(np.median(edge))), cfg.get("friction", 0.0))
             self._contact_version = -1
         self._dt_stable = self._forces(0.0)
         # an element crushed below this share of the first stable step (all ranks, every body: LS-DYNA's
@@ -243,6 +249,8 @@ class LagrangeSolver:
                 self.surface_stale = True
         if self._cut:  # the cut nodes' forces in the one-rank order (shared_sums.py)
             self._cut.sum_into(self._fe_cut, self.f)
+        if self.has_gravity:  # (every copy of a node has its full mass: the copies agree)
+            self.f += self.mass[:, None] * self.gravity
         return self._min(dt_min)
 
     def _min(self, value: float) -> float:
@@ -287,6 +295,15 @@ class LagrangeSolver:
             b = int(self.body_of_node[node])
             raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s "
                               f"(body {self.body_names[b]!r}, its node {node - int(self._body_first_node[b])})")
+        if self.has_gravity:  # its work on the mean velocity, as the node kernel books it; its impulse
+            w = self.part.owned   # m g dt_avg and torque x^n x m g dt_avg (x^n = x^{n+1} - dt v)
+            mg = self.mass[w, None] * self.gravity * self.dt_avg
+            vbar = 0.5 * (self.v_old[w] + self.v[w])
+            xn = self.x[w] - self.dt * self.v[w]
+            tot = self._allsum(np.concatenate([[np.sum(mg * vbar)], mg.sum(axis=0), self._cross(xn, mg).sum(axis=0)]))
+            self.w_gravity += float(tot[0])
+            self.impulse += tot[1:1 + self.dim]
+            self.ang_impulse += tot[1 + self.dim:]
         # exact discrete work, impulse and torque of this step (shared nodes counted once)
         # the gross size of the impulses (scale of the momentum balance: a clamped body's coupling
         # impulses and reactions cancel, its momentum stays 0)
@@ -493,16 +510,21 @@ class LagrangeSolver:
         d = {
             "mass": mass,
             "kinetic_energy": ke,
-            "internal_work": self.w_int,
-            "external_work": self.w_ext,
+            # (gravity's work, in the kernel's W_int, moved to the external work: the sum is unchanged)
+            "internal_work": self.w_int + self.w_gravity,
+            "external_work": self.w_ext + self.w_gravity,
             "stress_power_energy": e_int,
             "energy_balance_rel": float(e_err),
             "momentum_balance_rel": float(p_err),
             "angular_momentum_balance_rel": float(l_err),
         }
+        if self.has_gravity:
+            d["gravity_work"] = self.w_gravity
         if self.contact is not None:
             d["contact_work"] = self.w_contact
             d["contact_active"] = float(self.contact.last_active)
+            if self.contact.friction > 0.0:
+                d["contact_sliding"] = float(self.contact.last_sliding)
             for c, name in enumerate("xyz"[: self.dim]):
                 d[f"contact_force_{name}"] = float(self.contact_force[c])
         if self.erosion:  # the eroded elements' internal energy leaves the body with them
@@ -573,7 +595,8 @@ class LagrangeSolver:
             for k, a in {**nodes, **cells}.items():
                 h.create_dataset(k, data=a)
             for k in (self.STATE_SCALARS + (("eroded", "surface_version") if self.erosion else ())
-                      + (("w_contact",) if self.contact is not None else ())):
+                      + (("w_contact",) if self.contact is not None else ())
+                      + (("w_gravity",) if self.has_gravity else ())):
                 h.attrs[k] = getattr(self, k)
             for k in self.STATE_VECTORS:
                 h.create_dataset(k, data=getattr(self, k))
@@ -594,6 +617,8 @@ class LagrangeSolver:
                 setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
             if self.contact is not None:
                 self.w_contact = float(h.attrs["w_contact"])
+            if self.has_gravity:
+                self.w_gravity = float(h.attrs["w_gravity"])
             for k in self.STATE_VECTORS:
                 if k in h:  # (impulse_gross: not in checkpoints before the coupling)
                     setattr(self, k, h[k][...])

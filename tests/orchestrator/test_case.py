@@ -232,6 +232,8 @@ BAD_CASES = [
     ("contact_self_node_to_surface", "contact.pairs[0]", "self contact needs a method that handles it"),
     ("contact_unknown_method", "contact.method", "must be one of: 'dual_pass_mortar'"),
     ("contact_3d", "contact", "contact is 2-D only so far"),
+    ("contact_friction_node_to_surface", "contact.friction", "friction needs a mortar method"),
+    ("lagrange_gravity_length", "lagrange.gravity", "dimension mismatch"),
 ]
 
 

@@ -795,7 +795,7 @@ def test_penetration_depth_when_the_rod_is_consumed(tmp_path):
 def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
-              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact"}
+              "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact", "sliding"}
     assert set(checks.CHECKS) == tested
 
 
@@ -859,3 +859,21 @@ def test_impact(tmp_path):
     r = checks.run_check(case, tmp_path / "short", h)
     assert failed(r) == ["contact_duration"]
     assert r["metrics"]["contact_duration"]["rel_error"] == pytest.approx(9.5 / 39.5, rel=1e-9)  # 30 us against 39.5
+
+
+def test_sliding(tmp_path):
+    """A body whose momentum grows as m a t: its acceleration to round-off and its largest speed in the
+    window; 10 % faster fails with that error; a window with fewer than 3 records is an error."""
+    case = load_case(CASES / "block_on_incline")
+    m = 1000.0 * 0.1 * 0.05
+    h = history("lagrange", n=101)
+    h["time"] = np.linspace(0.0, 0.1, 101)
+    h["lagrange.momentum_x"] = m * 1.511541 * h["time"]
+    r = checks.run_check(case, tmp_path, h)
+    assert r["passed"], r
+    assert r["metrics"]["acceleration"]["rel_error"] < 1e-9 and r["reported"]["speed_max"] == pytest.approx(0.1511541)
+    h["lagrange.momentum_x"] = 1.1 * m * 1.511541 * h["time"]
+    r = checks.run_check(case, tmp_path, h)
+    assert failed(r) == ["acceleration"] and r["metrics"]["acceleration"]["rel_error"] == pytest.approx(0.1, rel=1e-9)
+    with pytest.raises(ValueError, match="fewer than 3 records"):
+        checks.run_check(case_with("block_on_incline", window=[0.0405, 0.0415]), tmp_path, h)
