@@ -9,7 +9,8 @@ x* + u with u = dt^2 M^-1 B^T p, and the constraint is the stabilized gap at the
     g~ = B (x* + u) + J p >= 0,   p >= 0,   p g~ = 0.
 
 That is kkt.solve_frictionless with the stiffness K = M / dt^2 (the nodes' inertia over the step)
-and no load: approaching nodes are stopped at the surface within the step (no penetration), and a
+and no load; K being diagonal, u is eliminated and the multipliers' system S p = -B x* on the active
+set, S = dt^2 B M^-1 B^T + J (kkt.solve_schur_complement), is all that is solved: approaching nodes are stopped at the surface within the step (no penetration), and a
 multiplier that would pull is released (no sticking). The impulses of a pass balance (B^T p sums to
 zero), so momentum is exact. Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
 inertia, J_dyn = alpha * median(diag(dt^2 B M^-1 B^T)) / median(diag(J_1)) * J_1, with J_1 the
@@ -24,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from solvers.contact import methods
-from solvers.contact.kkt import solve_frictionless
+from solvers.contact.kkt import solve_schur_complement
 
 __all__ = ["ExplicitContact"]
 
@@ -95,19 +96,19 @@ class ExplicitContact:
         w = np.asarray((B.multiply(B)) @ inv_m).ravel() * dt * dt      # diag(dt^2 B M^-1 B^T)
         j1 = J1.diagonal()
         scale = self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
-        fixed = self.free.reshape(-1) == 0
-        K = sp.diags(np.where(fixed, 1.0, np.repeat(self.mass, dim)) / (dt * dt), format="csr")
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
-        sol = solve_frictionless(K, np.zeros(ns * dim), B, scale * J1, xstar, fixed, np.zeros(ns * dim))
+        # K = M/dt^2 is diagonal: the displacements u = dt^2 M^-1 B^T p eliminate, leaving the
+        # multipliers' own system (the Schur complement of the KKT matrix, kkt.py's equations)
+        sol = solve_schur_complement(((dt * dt) * (B @ sp.diags(inv_m) @ B.T) + scale * J1).tocsc(), B @ xstar)
         self.last_active = int(sol.active.sum())
-        m = np.repeat(self.mass, dim)
-        impulse = m * sol.u / dt
+        u = (dt * dt) * inv_m * (B.T @ sol.p)
+        impulse = np.repeat(self.mass, dim) * u / dt
         if T is not None and self.last_active:
             # Coulomb: the tangential impulses on the velocities after the normal ones, bounded by mu
             # times each row's normal impulse dt p_A (friction.py)
             from solvers.contact.friction import box_qp_gauss_seidel
 
-            v1 = np.asarray(v, float).reshape(-1) + sol.u / dt
+            v1 = np.asarray(v, float).reshape(-1) + u / dt
             wt = np.asarray((T.multiply(T)) @ inv_m).ravel()
             st = self.alpha * np.median(wt[wt > 0]) / np.median(j1[j1 > 0]) if np.any(wt > 0) and np.any(j1 > 0) else 0.0
             W = (T @ sp.diags(inv_m) @ T.T + st * J1).tocsr()

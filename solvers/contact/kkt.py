@@ -23,7 +23,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["ContactSolution", "solve_frictionless"]
+__all__ = ["ContactSolution", "solve_frictionless", "solve_schur_complement"]
 
 
 @dataclass
@@ -75,6 +75,37 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
         new = (p - c * gap) > 0.0
         if np.array_equal(new, active):
             return ContactSolution(u=u, p=p, gap=gap, active=active, iterations=it)
+        if any(np.array_equal(new, s) for s in seen):
+            raise RuntimeError(f"the contact active set cycles (iteration {it})")
+        seen.append(active)
+        active = new
+    raise RuntimeError(f"the contact active set did not settle in {max_iterations} iterations")
+
+
+def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int = 50) -> ContactSolution:
+    """The same complementarity with the displacements eliminated (a diagonal K: the explicit step):
+    gaps g~ = g0 + S p with S (nm, nm) sparse symmetric positive (semi)definite; p >= 0, g~ >= 0,
+    p g~ = 0, by the same primal-dual active set (c = 1 / mean of diag S). Returns u empty."""
+    S = sp.csc_matrix(S)
+    nm = S.shape[0]
+    d = S.diagonal()
+    c = 1.0 / max(float(d[d > 0].mean()) if np.any(d > 0) else 1.0, 1e-300)
+    active = np.ones(nm, dtype=bool)
+    seen = []
+    for it in range(1, max_iterations + 1):
+        a = np.flatnonzero(active)
+        p = np.zeros(nm)
+        if len(a):
+            try:
+                p[a] = spla.splu(S[a][:, a].tocsc()).solve(-g0[a])
+            except RuntimeError:  # SuperLU: "Factor is exactly singular"
+                p[a] = np.nan
+            if not np.all(np.isfinite(p)):
+                raise RuntimeError(f"the contact system is singular ({len(a)} active multipliers, iteration {it})")
+        gap = g0 + S @ p
+        new = (p - c * gap) > 0.0
+        if np.array_equal(new, active):
+            return ContactSolution(u=np.zeros(0), p=p, gap=gap, active=active, iterations=it)
         if any(np.array_equal(new, s) for s in seen):
             raise RuntimeError(f"the contact active set cycles (iteration {it})")
         seen.append(active)

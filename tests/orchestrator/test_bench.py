@@ -101,3 +101,7 @@ def test_bench_contact_quick(tmp_path):
         assert p["multipliers"] == p["facets_a"] + p["facets_b"] + 2
         assert p["facets_a"] <= p["candidate_pairs"] <= 4 * p["facets_a"]
         assert x["value"] > 0 and p["all_pairs_s"] > 0
+    (step,) = [x for x in rows if x["name"] == "contact_step"]
+    # the quick size: 10^4 elements, 999 contact facets, all of the interface in contact
+    assert step["params"]["elements"] == 9990 and step["params"]["active_multipliers"] == 1001
+    assert 0.0 < step["value"] < 1.0 and step["params"]["step_with_s"] > step["params"]["step_without_s"]
