@@ -43,7 +43,7 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     RuntimeError if the system is singular on an active set, or the set cycles or does not settle
     within max_iterations."""
     K, B, J = sp.csr_matrix(K), sp.csr_matrix(B), sp.csr_matrix(J)
-    ndof, nm = K.shape[0], B.shape[0]
+    nm = B.shape[0]
     fixed = np.asarray(fixed, dtype=bool)
     free = np.flatnonzero(~fixed)
     ud = np.where(fixed, u_fixed, 0.0)
@@ -52,26 +52,41 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     Kff, Bf = K[free][:, free], B[:, free]
     # scale of the comparison p - c g~: pressures against gaps, by the stiffness over the constraint norm
     c = float(abs(K.diagonal()).max()) / max(float(abs(B).max()), 1e-300) ** 2 if nm else 1.0
-    active = np.ones(nm, dtype=bool)
-    seen = []
-    for it in range(1, max_iterations + 1):
-        a = np.flatnonzero(active)
-        Ba, Jaa = Bf[a], J[a][:, a]
-        mat = sp.bmat([[Kff, -Ba.T], [-Ba, -Jaa]], format="csc")
-        try:
-            sol = spla.splu(mat).solve(np.concatenate([rhs_u, g0[a]]))
-        except RuntimeError:  # SuperLU: "Factor is exactly singular"
-            sol = np.full(mat.shape[0], np.nan)
-        if not np.all(np.isfinite(sol)):
-            raise RuntimeError(
-                f"the contact KKT system is singular ({len(a)} active multipliers, iteration {it}): more "
-                "independent constraints than the free motion can meet (a single-pass method whose "
-                "slave or non-mortar side is the finer or the rigid one, or double-pass nodes that coincide)")
+
+    def solve_on(a: np.ndarray, it: int):
+        mat = sp.bmat([[Kff, -Bf[a].T], [-Bf[a], -J[a][:, a]]], format="csc")
+        sol = _lu_solve(mat, np.concatenate([rhs_u, g0[a]]), len(a), it,
+                        "more independent constraints than the free motion can meet (a single-pass method "
+                        "whose slave or non-mortar side is the finer or the rigid one, or double-pass nodes "
+                        "that coincide)")
         u = ud.copy()
         u[free] = sol[: len(free)]
         p = np.zeros(nm)
         p[a] = sol[len(free):]
-        gap = g0 + Bf @ u[free] + J @ p
+        return u, p, g0 + Bf @ u[free] + J @ p
+
+    return _active_set(nm, c, solve_on, max_iterations)
+
+
+def _lu_solve(mat: sp.spmatrix, rhs: np.ndarray, n_active: int, it: int, why: str) -> np.ndarray:
+    """mat^-1 rhs by SuperLU; a singular system (SuperLU's "Factor is exactly singular", or a
+    non-finite result) raises one RuntimeError naming the active multipliers and ``why``."""
+    try:
+        sol = spla.splu(sp.csc_matrix(mat)).solve(rhs)
+    except RuntimeError:
+        sol = np.full(mat.shape[0], np.nan)
+    if not np.all(np.isfinite(sol)):
+        raise RuntimeError(f"the contact KKT system is singular ({n_active} active multipliers, iteration {it}): {why}")
+    return sol
+
+
+def _active_set(nm: int, c: float, solve_on, max_iterations: int) -> ContactSolution:
+    """The primal-dual active set: from every multiplier active, solve_on(active ids, iteration) ->
+    (u, p, g~) until A = {p - c g~ > 0} repeats (a set seen before: cycling, an error)."""
+    active = np.ones(nm, dtype=bool)
+    seen = []
+    for it in range(1, max_iterations + 1):
+        u, p, gap = solve_on(np.flatnonzero(active), it)
         new = (p - c * gap) > 0.0
         if np.array_equal(new, active):
             return ContactSolution(u=u, p=p, gap=gap, active=active, iterations=it)
@@ -90,24 +105,11 @@ def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int =
     nm = S.shape[0]
     d = S.diagonal()
     c = 1.0 / max(float(d[d > 0].mean()) if np.any(d > 0) else 1.0, 1e-300)
-    active = np.ones(nm, dtype=bool)
-    seen = []
-    for it in range(1, max_iterations + 1):
-        a = np.flatnonzero(active)
+
+    def solve_on(a: np.ndarray, it: int):
         p = np.zeros(nm)
         if len(a):
-            try:
-                p[a] = spla.splu(S[a][:, a].tocsc()).solve(-g0[a])
-            except RuntimeError:  # SuperLU: "Factor is exactly singular"
-                p[a] = np.nan
-            if not np.all(np.isfinite(p)):
-                raise RuntimeError(f"the contact system is singular ({len(a)} active multipliers, iteration {it})")
-        gap = g0 + S @ p
-        new = (p - c * gap) > 0.0
-        if np.array_equal(new, active):
-            return ContactSolution(u=np.zeros(0), p=p, gap=gap, active=active, iterations=it)
-        if any(np.array_equal(new, s) for s in seen):
-            raise RuntimeError(f"the contact active set cycles (iteration {it})")
-        seen.append(active)
-        active = new
-    raise RuntimeError(f"the contact active set did not settle in {max_iterations} iterations")
+            p[a] = _lu_solve(S[a][:, a], -g0[a], len(a), it, "the multipliers' system has no unique solution")
+        return np.zeros(0), p, g0 + S @ p
+
+    return _active_set(nm, c, solve_on, max_iterations)
