@@ -81,6 +81,9 @@ class LagrangeAdapter(SolverAdapter):
         v = s.gather_nodes(s.v)
         X = s.gather_nodes(s.X)
         cells = {k: s.gather_cells(a) for k, a in s.cell_fields().items()}
+        points = {}
+        if s.contact is not None:  # (collective: the surface; every rank holds the same values)
+            points["contact_pressure"] = s.contact_pressure()
         if self.comm.rank == 0:
             # scalars of the stress for ParaView users (no calculator needed); pressure = -trace/3
             cells["von_mises_stress"] = output.von_mises(cells["stress"])
@@ -89,7 +92,7 @@ class LagrangeAdapter(SolverAdapter):
             # Vector with it would deform twice)
             output.write_step(
                 self.out_dir, self.role, index, step, time, _pad3(x),
-                point_data={"velocity": _pad3(v), "displacement": _pad3(x - X)},
+                point_data={"velocity": _pad3(v), "displacement": _pad3(x - X), **points},
                 cell_data=cells,
             )
 

@@ -50,6 +50,8 @@ class ExplicitContact:
         self.surface = None
         self.last_active = 0
         self.last_sliding = 0
+        self.multiplier_nodes = np.zeros(0, np.int64)   # the surface node of each multiplier
+        self.last_pressure = np.zeros(0)                # each multiplier's pressure of the last step
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
         """facets (nf, 2) outward segments as indices into the surface nodes; body (nf,); mass (ns,);
@@ -63,32 +65,38 @@ class ExplicitContact:
     def _operators(self, x: np.ndarray):
         if self.capture is None:  # a segment: far more than a step's approach, less than a body
             self.capture = float(np.median(np.linalg.norm(x[self.facets[:, 1]] - x[self.facets[:, 0]], axis=1)))
-        blocks_b, blocks_j, blocks_t = [], [], []
+        blocks_b, blocks_j, blocks_t, nodes = [], [], [], []
         for a, b in self.pairs:
             seg_a = self.facets[self.body == a]
             seg_b = None if a == b else self.facets[self.body == b]
             c = methods.build(self.method, x, seg_a, seg_b, self.capture, self.capture)
             if c.n_multipliers:
+                nodes.append(np.concatenate([q.nodes for q in c.passes]) if hasattr(c, "passes") else c.nodes)
                 blocks_b.append(c.constraint_operator())
                 blocks_j.append(c.stabilization(1.0, 1.0))
                 if self.friction > 0.0:
                     if not hasattr(c, "tangent_operator"):
                         raise NotImplementedError(f"friction with {self.method!r}: only the mortar methods")
                     blocks_t.append(c.tangent_operator())
+        self.multiplier_nodes = np.concatenate(nodes).astype(np.int64) if nodes else np.zeros(0, np.int64)
         if not blocks_b:
             return None, None, None
         T = sp.vstack(blocks_t, format="csr") if blocks_t else None
         return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr"), T
 
-    def impulses(self, x: np.ndarray, v: np.ndarray, dt: float) -> np.ndarray:
+    def impulses(self, x: np.ndarray, v: np.ndarray, dt: float, dt_force: float | None = None) -> np.ndarray:
         """(ns, dim) contact impulses of the step: x = x^n and v = v* (predictor, after any other
-        impulse) of the surface nodes."""
+        impulse) of the surface nodes.  dt_force: the time the step's forces act over in the central
+        difference ((dt_prev + dt) / 2; default dt), by which the reported pressures are impulses
+        (the impulses are dt B^T p: a step shortened to land on an output time would otherwise show
+        its pressure dt_force / dt too high)."""
         x = np.asarray(x, float)
         ns, dim = x.shape
         out = np.zeros((ns, dim))
         B, J1, T = self._operators(x)
         self.last_active = 0
         self.last_sliding = 0
+        self.last_pressure = np.zeros(len(self.multiplier_nodes))
         if B is None:
             return out
         inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
@@ -101,6 +109,7 @@ class ExplicitContact:
         # multipliers' own system (the Schur complement of the KKT matrix, kkt.py's equations)
         sol = solve_schur_complement(((dt * dt) * (B @ sp.diags(inv_m) @ B.T) + scale * J1).tocsc(), B @ xstar)
         self.last_active = int(sol.active.sum())
+        self.last_pressure = sol.p * (dt / (dt_force or dt))
         u = (dt * dt) * inv_m * (B.T @ sol.p)
         impulse = np.repeat(self.mass, dim) * u / dt
         if T is not None and self.last_active:
@@ -117,3 +126,13 @@ class ExplicitContact:
             self.last_sliding = int(np.sum((bound > 0) & (np.abs(q) >= bound * (1 - 1e-9))))
             impulse = impulse + T.T @ q
         return impulse.reshape(ns, dim)
+
+    def nodal_pressure(self, ns: int) -> np.ndarray:
+        """(ns,) the last step's contact pressure at the surface nodes: the mean of the multipliers a
+        node carries (both passes of the dual pass), 0 where it carries none (node-to-surface methods:
+        their multipliers are forces per unit thickness, reported as they are)."""
+        total = np.zeros(ns)
+        count = np.zeros(ns)
+        np.add.at(total, self.multiplier_nodes, self.last_pressure)
+        np.add.at(count, self.multiplier_nodes, 1.0)
+        return np.divide(total, count, out=np.zeros(ns), where=count > 0)

@@ -330,15 +330,23 @@ class LagrangeSolver:
             self.contact.set_surface(surf["facets"], surf["body"], surf["mass"], surf["free"])
             self._contact_version = self.surface_version
         xs, vs = self.surface_state("x"), self.surface_state("v")
-        imp = self.contact.impulses(xs, vs, self.dt)
+        imp = self.contact.impulses(xs, vs, self.dt, self.dt_avg)
         vo = self._gather_surface(self.v_old)
         m = np.where(surf["mass"] > 0, surf["mass"], np.inf)[:, None]
         self.w_contact += float(np.sum(imp * 0.5 * (vo + vs + imp / m)))
         # the force the first body of the first pair takes from the contact over the step
         first = np.zeros(len(xs), bool)
         first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
-        self.contact_force = imp[first].sum(axis=0) / self.dt
+        self.contact_force = imp[first].sum(axis=0) / self.dt_avg  # (the central difference's force time)
         return self._surface_impulse_local(imp).copy()
+
+    def contact_pressure(self) -> np.ndarray:
+        """(n_nodes_global,) the last step's contact pressure at every node (0 off the contact), the
+        same on every rank (the contact is solved on the gathered surface)."""
+        out = np.zeros(self.n_nodes_global)
+        surf = self.surface()
+        out[surf["node_ids"]] = self.contact.nodal_pressure(len(surf["node_ids"]))
+        return out
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
     def renew_surface(self) -> bool:
