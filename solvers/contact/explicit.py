@@ -9,9 +9,10 @@ x* + u with u = dt^2 M^-1 B^T p, and the constraint is the stabilized gap at the
     g~ = B (x* + u) + J p >= 0,   p >= 0,   p g~ = 0.
 
 That is kkt.solve_frictionless with the stiffness K = M / dt^2 (the nodes' inertia over the step)
-and no load; K being diagonal, u is eliminated and the multipliers' system S p = -B x* on the active
-set, S = dt^2 B M^-1 B^T + J (kkt.solve_schur_complement), is all that is solved: approaching nodes are stopped at the surface within the step (no penetration), and a
-multiplier that would pull is released (no sticking). The impulses of a pass balance (B^T p sums to
+and no load. K being diagonal, u is eliminated: what is solved is the multipliers' system
+S p = -B x* on the active set, S = dt^2 B M^-1 B^T + J (kkt.solve_schur_complement). Approaching
+nodes are stopped at the surface within the step (no penetration), and a multiplier that would pull
+is released (no sticking). The impulses of a pass balance (B^T p sums to
 zero), so momentum is exact. Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
 inertia, J_dyn = alpha * median(diag(dt^2 B M^-1 B^T)) / median(diag(J_1)) * J_1, with J_1 the
 operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for the inertia).
@@ -47,7 +48,6 @@ class ExplicitContact:
         self.method = method
         self.alpha = float(alpha)
         self.capture = capture
-        self.surface = None
         self.last_active = 0
         self.last_sliding = 0
         self.multiplier_nodes = np.zeros(0, np.int64)   # the surface node of each multiplier
@@ -60,7 +60,6 @@ class ExplicitContact:
             raise NotImplementedError("contact is 2-D only so far (3-D facet mortar: issue 11, to come)")
         self.facets, self.body = np.asarray(facets), np.asarray(body)
         self.mass, self.free = np.asarray(mass, float), np.asarray(free, float)
-        self.surface = True
 
     def _operators(self, x: np.ndarray):
         if self.capture is None:  # a segment: far more than a step's approach, less than a body
@@ -101,9 +100,14 @@ class ExplicitContact:
             return out
         inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
         inv_m = inv_m * self.free.reshape(-1)
-        w = np.asarray((B.multiply(B)) @ inv_m).ravel() * dt * dt      # diag(dt^2 B M^-1 B^T)
         j1 = J1.diagonal()
-        scale = self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
+
+        def weight(op, factor):
+            """J's scale: alpha times the median of diag(factor op M^-1 op^T) over J_1's (module docstring)."""
+            w = np.asarray(op.multiply(op) @ inv_m).ravel() * factor
+            return self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
+
+        scale = weight(B, dt * dt)
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
         # K = M/dt^2 is diagonal: the displacements u = dt^2 M^-1 B^T p eliminate, leaving the
         # multipliers' own system (the Schur complement of the KKT matrix, kkt.py's equations)
@@ -118,9 +122,7 @@ class ExplicitContact:
             from solvers.contact.friction import box_qp_gauss_seidel
 
             v1 = np.asarray(v, float).reshape(-1) + u / dt
-            wt = np.asarray((T.multiply(T)) @ inv_m).ravel()
-            st = self.alpha * np.median(wt[wt > 0]) / np.median(j1[j1 > 0]) if np.any(wt > 0) and np.any(j1 > 0) else 0.0
-            W = (T @ sp.diags(inv_m) @ T.T + st * J1).tocsr()
+            W = (T @ sp.diags(inv_m) @ T.T + weight(T, 1.0) * J1).tocsr()
             bound = self.friction * dt * sol.p
             q, _ = box_qp_gauss_seidel(W, T @ v1, bound)
             self.last_sliding = int(np.sum((bound > 0) & (np.abs(q) >= bound * (1 - 1e-9))))

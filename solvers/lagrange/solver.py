@@ -200,7 +200,8 @@ class LagrangeSolver:
             pairs = [(self.body_names.index(a), self.body_names.index(b)) for a, b in cfg["pairs"]]
             # default capture: the median element edge of the reference mesh (far more than a
             # step's approach, less than a body); from the reference so that a restart finds the same
-            edge = np.linalg.norm(self.global_points[self.global_cells[:, 1]] - self.global_points[self.global_cells[:, 0]], axis=1)
+            P, E = self.global_points, self.global_cells
+            edge = np.linalg.norm(P[E[:, 1]] - P[E[:, 0]], axis=1)
             self.contact = ExplicitContact(pairs, cfg.get("method", "dual_pass_mortar"), cfg.get("alpha", 1.0),
                                            cfg.get("capture", float(np.median(edge))), cfg.get("friction", 0.0))
             self._contact_version = -1
