@@ -131,8 +131,8 @@ def test_multiplier_stabilisation_keeps_cond_h_constant_and_the_multipliers_smoo
 @pytest.mark.timeout(600)
 def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immerse):
     """The plate in a shock as FE quads (3 x 30, 6 x 60) and tlsph particles (dx 5, 2.5 mm): the tip
-    history against FE 24 x 240.  Measured: FE 8.8e-2, 5.0e-2; SPH 7.5e-2, 3.2e-2 (wall 6.0, 8.5,
-    6.4, 24 s).  Asserted: both errors fall with the resolution, both within 10 % at the second
+    history against FE 24 x 240.  Measured: FE 8.8e-2, 5.0e-2; SPH 8.7e-2, 3.1e-2 at the case's cfl
+    0.15 (7.5e-2, 3.2e-2 at 0.25, where tlsph's viscosity rang; wall 1.8, 3.3, 6.0, 17.7 s).  Asserted: both errors fall with the resolution, both within 10 % at the second
     level (cases/sph_vs_fe_plate as shipped: their own checks pass, and their tip histories agree
     within 10 %), and the cost chart is drawn.  (The campaign's penetrator series: the next test.)"""
     out = tmp_path / "out"
@@ -147,7 +147,8 @@ def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immer
     assert max(e["FE_quads-refinement2"], e["tlsph_particles-refinement2"]) < 0.1, e
     assert (out / "figures" / "fe_vs_sph_bodies_cost.png").is_file()
     # level 2 is cases/sph_vs_fe_plate/{fe,sph} as shipped: their checks pass, and the two tip
-    # histories agree within 10 % of the largest deflection (the issue's bound; measured 4.6e-2)
+    # histories agree within 10 % of the largest deflection (the issue's bound; measured 5.6e-2, 4.6e-2
+    # at cfl 0.25)
     assert rows["FE_quads-refinement2"]["status"] == rows["tlsph_particles-refinement2"]["status"] == "passed"
     from tests.cases.test_sph_coupled import _tip_history
 
