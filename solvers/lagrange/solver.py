@@ -330,15 +330,16 @@ class LagrangeSolver:
         if self._contact_version != self.surface_version:
             self.contact.set_surface(surf["facets"], surf["body"], surf["mass"], surf["free"])
             self._contact_version = self.surface_version
+            # the surface nodes of the first body of the first pair: the contact_force diagnostic's
+            self._contact_first = np.zeros(len(surf["node_ids"]), bool)
+            self._contact_first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
         xs, vs = self.surface_state("x"), self.surface_state("v")
         imp = self.contact.impulses(xs, vs, self.dt, self.dt_avg)
         vo = self._gather_surface(self.v_old)
         m = np.where(surf["mass"] > 0, surf["mass"], np.inf)[:, None]
         self.w_contact += float(np.sum(imp * 0.5 * (vo + vs + imp / m)))
         # the force the first body of the first pair takes from the contact over the step
-        first = np.zeros(len(xs), bool)
-        first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
-        self.contact_force = imp[first].sum(axis=0) / self.dt_avg  # (the central difference's force time)
+        self.contact_force = imp[self._contact_first].sum(axis=0) / self.dt_avg  # (the central difference's force time)
         return self._surface_impulse_local(imp).copy()
 
     def contact_pressure(self) -> np.ndarray:
@@ -591,6 +592,10 @@ class LagrangeSolver:
     # which the solver is built on before a restart too)
     STATE_EROSION = ("alive", "eps_eq")
 
+    def _work_scalars(self) -> tuple:
+        """The accumulated works a checkpoint holds when the case has them (contact, gravity)."""
+        return (("w_contact",) if self.contact is not None else ()) + (("w_gravity",) if self.has_gravity else ())
+
     def _state_cells(self) -> tuple:
         return self.STATE_CELLS + (self.STATE_EROSION if self.erosion else ())
 
@@ -604,8 +609,7 @@ class LagrangeSolver:
             for k, a in {**nodes, **cells}.items():
                 h.create_dataset(k, data=a)
             for k in (self.STATE_SCALARS + (("eroded", "surface_version") if self.erosion else ())
-                      + (("w_contact",) if self.contact is not None else ())
-                      + (("w_gravity",) if self.has_gravity else ())):
+                      + self._work_scalars()):
                 h.attrs[k] = getattr(self, k)
             for k in self.STATE_VECTORS:
                 h.create_dataset(k, data=getattr(self, k))
@@ -624,10 +628,8 @@ class LagrangeSolver:
                 self.surface_stale = False
             for k in self.STATE_SCALARS:
                 setattr(self, k, h.attrs[k].item() if hasattr(h.attrs[k], "item") else h.attrs[k])
-            if self.contact is not None:
-                self.w_contact = float(h.attrs["w_contact"])
-            if self.has_gravity:
-                self.w_gravity = float(h.attrs["w_gravity"])
+            for k in self._work_scalars():
+                setattr(self, k, float(h.attrs[k]))
             for k in self.STATE_VECTORS:
                 if k in h:  # (impulse_gross: not in checkpoints before the coupling)
                     setattr(self, k, h[k][...])
