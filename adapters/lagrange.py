@@ -1,5 +1,5 @@
-"""Adapter of the explicit Lagrangian FE solver (solvers.lagrange). Run by the launcher as
-`python -m adapters.lagrange --case DIR --out DIR --roles coupler,lagrange --role lagrange`."""
+"""Adapter of the Lagrangian FE solver (solvers.lagrange; its integrator by name:
+solvers.lagrange.integrators). Run by the launcher as `python -m adapters.lagrange --case DIR --out DIR --roles coupler,lagrange --role lagrange`."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -22,9 +22,9 @@ class LagrangeAdapter(SolverAdapter):
 
     def setup(self) -> None:
         from orchestrator import output
-        from solvers.lagrange.solver import LagrangeSolver
+        from solvers.lagrange.integrators import solver_class
 
-        self.solver = LagrangeSolver(self.comm, self.case)
+        self.solver = solver_class(self.case["lagrange"].get("integrator", "explicit"))(self.comm, self.case)
         self._dt = None
         if self.comm.rank == 0:
             output.write_mesh(self.out_dir, self.role, self.solver.global_cells, self.solver.cell_type)
@@ -81,9 +81,7 @@ class LagrangeAdapter(SolverAdapter):
         v = s.gather_nodes(s.v)
         X = s.gather_nodes(s.X)
         cells = {k: s.gather_cells(a) for k, a in s.cell_fields().items()}
-        points = {}
-        if s.contact is not None:  # (collective: the surface; every rank holds the same values)
-            points["contact_pressure"] = s.contact_pressure()
+        points = s.point_fields()  # (collective: the contact surface; every rank holds the same values)
         if self.comm.rank == 0:
             # scalars of the stress for ParaView users (no calculator needed); pressure = -trace/3
             cells["von_mises_stress"] = output.von_mises(cells["stress"])

@@ -197,6 +197,94 @@ def sliding(case, out, history, params):
             "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
 
 
+VOIGT = {"xx": 0, "yy": 1, "zz": 2, "xy": 3, "yz": 4, "zx": 5}
+
+
+@register_check("uniform_stress", params=table(
+    {"component": {"type": "string", "enum": list(VOIGT)}}, required=("component",)))
+def uniform_stress(case, out, history, params):
+    """A patch test: the stress of every element at the last output should be one uniform uniaxial
+    state. ``stress_mean``: the mean of ``component`` (Pa); ``stress_deviation_rel``: its largest
+    departure from that mean, and ``other_stress_rel``: the largest of the other components, both
+    over |mean|; ``contact_pressure_mean`` and ``contact_pressure_deviation_rel``: the same of the
+    contact pressure over the nodes that carry one (when the run writes it)."""
+    from orchestrator import output
+
+    _, _, index = _last_step(out, "lagrange")
+    _, pd, cd = output.read_step(out, "lagrange", index)
+    s = cd["stress"]
+    k = VOIGT[params["component"]]
+    mean = float(s[:, k].mean())
+    scale = max(abs(mean), 1e-300)
+    vals = {"stress_mean": mean, "stress_deviation_rel": float(np.abs(s[:, k] - mean).max() / scale),
+            "other_stress_rel": float(np.abs(np.delete(s, k, axis=1)).max() / scale)}
+    if "contact_pressure" in pd:
+        p = pd["contact_pressure"][pd["contact_pressure"] > 0.0]
+        if len(p):
+            vals["contact_pressure_mean"] = float(p.mean())
+            vals["contact_pressure_deviation_rel"] = float(np.abs(p - p.mean()).max() / p.mean())
+    return vals
+
+
+@register_check("hertz", params=table(
+    {"body": {"type": "string"}, "axis": AXIS}, required=("body", "axis")))
+def hertz(case, out, history, params):
+    """A cylinder (``body``) in contact with a flat, half model (the symmetry plane at ``axis`` = 0),
+    at the last output, on the reference geometry. On each side of the first contact pair the contact pressure p of its
+    surface nodes, piecewise linear along its exterior facets, is integrated along ``axis`` (Simpson
+    on each facet: exact for p s^2); the two sides' integrals are averaged (the dual pass's force is
+    the mean of its two passes' pressures). ``pressure_load`` = integral of p ds, ``load`` the
+    contact force the body takes (the largest component of the solver's contact_force, the one
+    along the flat's normal: equilibrium with the applied load),
+    ``half_width`` from the second moment (Hertz: integral p s^2 / integral p = a^2 / 4
+    over 0 <= s <= a), ``peak_pressure`` the mean of the two sides' p at their node nearest the
+    symmetry plane."""
+    from orchestrator import output
+    from solvers.lagrange.mesh import body_mesh
+    from solvers.lagrange.surface import exterior_facets
+
+    ax = "xyz".index(params["axis"])
+    dim = case["run"]["dimension"]
+    bodies = case["lagrange"]["bodies"]
+    names = [b["name"] for b in bodies]
+    pair = case["contact"]["pairs"][0]
+    if params["body"] not in pair:
+        raise ValueError(f"check.params.body = {params['body']!r} is not in the first contact pair {pair}")
+    meshes = [body_mesh(b, dim) for b in bodies]
+    first = np.cumsum([0] + [m.num_points for m in meshes])
+    _, _, index = _last_step(out, "lagrange")
+    points, pd, _ = output.read_step(out, "lagrange", index)
+    loads, moments, peaks, count = [], [], [], 0
+    for name in pair:
+        k = names.index(name)
+        m = meshes[k]
+        # (the reference positions: Hertz's, and the small-strain contact's, gaps are those of the
+        # undeformed profiles)
+        x = (points - pd["displacement"])[first[k]:first[k + 1], :dim]
+        p = pd["contact_pressure"][first[k]:first[k + 1]]
+        facets, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)
+        # the facets carrying pressure on the model's side of the symmetry plane (a flat reaching
+        # across it has no contact beyond it: its pressure falls to 0 there only by interpolation)
+        tol = 1e-9 * float(np.ptp(x[:, ax]))
+        facets = facets[(p[facets] > 0.0).any(axis=1) & (x[facets, ax] >= -tol).all(axis=1)]
+        s0, s1 = np.abs(x[facets[:, 0], ax]), np.abs(x[facets[:, 1], ax])
+        p0, p1 = p[facets[:, 0]], p[facets[:, 1]]
+        ds = np.abs(s1 - s0)
+        sm, pm = 0.5 * (s0 + s1), 0.5 * (p0 + p1)
+        loads.append(float((ds * pm).sum()))
+        moments.append(float((ds / 6 * (p0 * s0**2 + 4 * pm * sm**2 + p1 * s1**2)).sum()))
+        on = np.flatnonzero(p > 0.0)
+        peaks.append(float(p[on[np.argmin(np.abs(x[on, ax]))]]) if len(on) else 0.0)
+        count += len(on) if name == params["body"] else 0
+    load = float(np.mean(loads))
+    if load <= 0.0:
+        raise ValueError("no contact pressure at the last output")
+    force = np.array([history[f"lagrange.contact_force_{c}"][-1] for c in "xyz"[:dim]])
+    return {"load": float(np.abs(force).max()), "pressure_load": load,
+            "half_width": 2.0 * np.sqrt(np.mean(moments) / load),
+            "peak_pressure": float(np.mean(peaks)), "contact_nodes": float(count)}
+
+
 @register_check("momentum")
 def momentum(case, out, history, params):
     """Conservation residuals of a free body: maxima over the whole run."""

@@ -37,10 +37,11 @@ from .case import CaseError, format_bytes, format_key
 LAGRANGE_BYTES_PER_ELEMENT = {2: 514, 3: 896}
 """Lagrangian solver on one rank, per element (box meshes: quads 150^2 -> 300^2: 514.0, hexahedra
 20^3 -> 40^3: 896.1; linear elastic and Johnson-Cook within 1 B)."""
-LAGRANGE_MESH_BYTES_PER_ELEMENT = {"box": {2: 254, 3: 428}, "built": {3: 940},
+LAGRANGE_MESH_BYTES_PER_ELEMENT = {"box": {2: 254, 3: 428}, "built": {2: 940, 3: 940},
                                    "file": {2: 1084, 3: 1084}}
 """Held by EVERY Lagrangian rank (each builds the global mesh and its partition), per element:
-box meshes (253.5, 427.8); quarter cylinders (939.6: the generator's orientation pass); mesh files
+box meshes (253.5, 427.8); quarter cylinders (939.6: the generator's orientation pass; 2-D quarter
+disks are charged that figure, not measured); mesh files
 (read_mesh of 50^3 hexahedra: Gmsh 2.2 ASCII 1068.0, binary 1059.5, VTU 1083.5; 2-D files are
 charged the 3-D figure)."""
 ALE_BYTES_PER_ZONE = {2: 483, 3: 719}
@@ -178,7 +179,7 @@ def _mesh_kind(body: dict) -> str:
 
 def _mesh_key(i: int, body: dict) -> str:
     m = body["mesh"]
-    sub = ["box", "cells"] if "box" in m else ["quarter_cylinder"] if "quarter_cylinder" in m else ["file"]
+    sub = ["box", "cells"] if "box" in m else [k for k in ("quarter_cylinder", "quarter_disk", "file") if k in m][:1]
     return format_key(["lagrange", "bodies", i, "mesh", *sub])
 
 
@@ -186,8 +187,9 @@ def _mesh_value(body: dict):
     m = body["mesh"]
     if "box" in m:
         return m["box"]["cells"]
-    if "quarter_cylinder" in m:
-        return m["quarter_cylinder"]
+    for k in ("quarter_cylinder", "quarter_disk"):
+        if k in m:
+            return m[k]
     return m["file"].name
 
 

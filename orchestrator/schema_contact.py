@@ -65,6 +65,10 @@ def check(case: dict, data: dict) -> None:
         if key in seen:
             raise CaseError(format_key(["contact", "pairs", i]), pair, f"the same pair as contact.pairs[{seen[key]}]")
         seen[key] = i
+        integrator = (case.get("lagrange") or {}).get("integrator", "explicit")
+        if c["friction"] > 0.0 and integrator != "explicit":
+            raise CaseError("contact.friction", c["friction"], f"friction is enforced by the explicit step's "
+                            f"impulses; lagrange.integrator = {integrator!r} is frictionless: allowed 0")
         if c["friction"] > 0.0 and c["method"] not in ("dual_pass_mortar", "mortar"):
             raise CaseError("contact.friction", c["friction"], f"friction needs a mortar method (dual_pass_mortar, "
                             f"mortar); method = {c['method']!r}")

@@ -26,6 +26,7 @@ import os
 from pathlib import Path
 
 from solvers.expressions import BOOL, NUM
+from solvers.lagrange.integrators import INTEGRATORS
 from solvers.lagrange.mesh import body_mesh_size
 
 from .schema_parts import BOX, NAME_PATTERN, integer, name, number, table, variants, vector
@@ -35,7 +36,7 @@ from .schema_rules import (MISSING, CaseError, check_expression, check_extent, c
                            num_or_expression, stat_regular, to_float)
 
 MATERIAL_MODELS = ("linear_elastic", "neo_hookean", "johnson_cook")
-BOUNDARY_TYPES = ("fixed", "velocity", "symmetry", "rigid_wall")
+BOUNDARY_TYPES = ("fixed", "velocity", "symmetry", "rigid_wall", "traction")
 
 LAGRANGE_DEFAULTS = {
     "hourglass": 0.1,
@@ -105,16 +106,26 @@ QUARTER_CYLINDER = table(
     },
     required=("radius", "length", "radial_cells", "axial_cells"),
 )
+QUARTER_DISK = table(
+    {
+        "radius": number("m", exclusiveMinimum=0),
+        "radial_cells": integer(None, minimum=2),
+        # the disk's centre (default the origin)
+        "base": {**vector("m"), "minItems": 2, "maxItems": 2},
+    },
+    required=("radius", "radial_cells"),
+)
 MESH = table(
     {
         "box": BOX,
         "quarter_cylinder": QUARTER_CYLINDER,
+        "quarter_disk": QUARTER_DISK,
         "file": {"type": "string", "minLength": 1},
     },
     minProperties=1,
     maxProperties=1,
 )
-MESH["x-allowed"] = "must have exactly one of: box, quarter_cylinder, file"
+MESH["x-allowed"] = "must have exactly one of: box, quarter_cylinder, quarter_disk, file"
 
 BODY = table(
     {
@@ -143,6 +154,10 @@ LAGRANGE = table(
         "bulk_viscosity_linear": number("dimensionless", minimum=0),
         "bulk_viscosity_quadratic": number("dimensionless", minimum=0),
         "gravity": vector("m/s^2"),
+        # the time integrator (solvers/lagrange/integrators.py registers them by name);
+        # quasi_static: equilibrium states, time a load parameter, load_steps of end_time / load_steps
+        "integrator": {"enum": sorted(INTEGRATORS)},
+        "load_steps": integer(None, minimum=1),
         "bodies": {"type": "array", "items": BODY},
     },
 )
@@ -150,6 +165,9 @@ LAGRANGE = table(
 BOUNDARY_KEYS = {
     "fixed": ("type", "region"),
     "velocity": ("type", "region", "velocity"),
+    # a uniform traction (Pa) on the exterior facets whose nodes all lie in the region (quasi-static
+    # mode: ramped with the load factor t / end_time)
+    "traction": ("type", "region", "traction"),
     "symmetry": ("type", "axis", "at"),
     "rigid_wall": ("type", "point", "normal"),
 }
@@ -160,6 +178,10 @@ BOUNDARY = {
         "region": {"type": "string", "minLength": 1},
         "velocity": table(
             {c: number("m/s") for c in ("x", "y", "z")},
+            minProperties=1,
+        ),
+        "traction": table(
+            {c: number("Pa") for c in ("x", "y", "z")},
             minProperties=1,
         ),
         "axis": {"type": "string", "enum": ["x", "y", "z"]},
@@ -217,6 +239,10 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             mesh = {"box": {"lower": [to_float(v) for v in box["lower"]],
                             "upper": [to_float(v) for v in box["upper"]],
                             "cells": [int(v) for v in box["cells"]]}}
+        elif "quarter_disk" in mesh_in:
+            q = mesh_in["quarter_disk"]
+            mesh = {"quarter_disk": {"radius": to_float(q["radius"]), "radial_cells": int(q["radial_cells"]),
+                                     **({"base": [to_float(v) for v in q["base"]]} if "base" in q else {})}}
         elif "quarter_cylinder" in mesh_in:
             q = mesh_in["quarter_cylinder"]
             mesh = {"quarter_cylinder": {"radius": to_float(q["radius"]), "length": to_float(q["length"]),
@@ -242,8 +268,15 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
     if "gravity" in raw:
         lagrange["gravity"] = [to_float(v) for v in raw["gravity"]]
+    lagrange["integrator"] = raw.get("integrator", "explicit")
+    if "load_steps" in raw:
+        lagrange["load_steps"] = int(raw["load_steps"])
     lagrange["bodies"] = bodies
     return lagrange
+
+
+def mat_model(case: dict, body: dict) -> str:
+    return case["materials"][body["material"]]["model"]
 
 
 def check_lagrange(case: dict, data: dict) -> None:
@@ -260,6 +293,15 @@ def check_lagrange(case: dict, data: dict) -> None:
                         "at least one body is required ([[lagrange.bodies]]), or a background [ale]")
     if not case["materials"]:
         raise CaseError("materials", MISSING, "required key missing: the bodies' materials, e.g. [materials.steel]")
+    integrator = case["lagrange"].get("integrator", "explicit")
+    static = not INTEGRATORS[integrator].dynamic
+    if static and case.get("coupling"):
+        raise CaseError("lagrange.integrator", integrator, "a static solve has no inertia to couple with a flow "
+                        "([coupling]); allowed with [coupling]: " + ", ".join(k for k, v in INTEGRATORS.items() if v.dynamic))
+    if "load_steps" in case["lagrange"] and not static:
+        raise CaseError("lagrange.load_steps", case["lagrange"]["load_steps"],
+                        f"load steps are the quasi-static mode's (lagrange.integrator = {integrator!r}); allowed: "
+                        "leave it out")
     seen: dict[str, int] = {}
     for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
         base = ["lagrange", "bodies", i]
@@ -282,11 +324,24 @@ def check_lagrange(case: dict, data: dict) -> None:
                                     f"must be > lower component-wise (component {j}: "
                                     f"{fmt_num(hi)} <= {fmt_num(lo)})")
             check_extent(format_key(base + ["mesh", "box"]), body["mesh"]["box"], box)
+        elif "quarter_disk" in mesh:
+            if dim != 2:
+                raise CaseError(format_key(base + ["mesh", "quarter_disk"]), mesh["quarter_disk"],
+                                f"quarter_disk meshes are 2D only (run.dimension = {dim}; in 3D: quarter_cylinder)")
         elif "quarter_cylinder" in mesh:
             if dim != 3:
                 raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
                                 mesh["quarter_cylinder"],
                                 f"quarter_cylinder meshes are 3D only (run.dimension = {dim})")
+        if static and mat_model(case, body) != "linear_elastic":
+            raise CaseError(format_key(["materials", body["material"], "model"]), mat_model(case, body),
+                            f"lagrange.integrator = {integrator!r} solves small-strain elasticity; allowed: "
+                            "linear_elastic")
+        for key in ("initial_velocity", "erosion"):
+            if static and key in raw:
+                raise CaseError(format_key(base + [key]), raw[key],
+                                f"not with lagrange.integrator = {integrator!r} (a static solve: no motion "
+                                "of its own, no erosion); allowed: leave it out")
         if "initial_velocity" in raw:
             v = raw["initial_velocity"]
             check_length(format_key(base + ["initial_velocity"]), v, dim)
@@ -362,7 +417,7 @@ def normalise_boundaries(raw: list | None, case: dict) -> list:
         for k, v in bc.items():
             if k == "type" or k == "region" or k == "axis":
                 out[k] = v
-            elif k == "velocity":
+            elif k in ("velocity", "traction"):
                 out[k] = {c: to_float(x) for c, x in v.items()}
             elif k == "at":
                 out[k] = to_float(v)
@@ -380,12 +435,23 @@ def check_boundaries(case: dict, data: dict) -> None:
         base = ["boundaries", i]
         if "region" in raw:
             check_expression(format_key(base + ["region"]), raw["region"], dim, BOOL)
-        if "velocity" in raw:
-            for c in raw["velocity"]:
+        for key in ("velocity", "traction"):
+            for c in raw.get(key, {}):
                 if c not in comps:
-                    raise CaseError(format_key(base + ["velocity", c]), raw["velocity"][c],
+                    raise CaseError(format_key(base + [key, c]), raw[key][c],
                                     f"dimension mismatch: no {c} component in a {dim}D case; "
                                     f"allowed: {', '.join(comps)}")
+        integrator = (case.get("lagrange") or {}).get("integrator", "explicit")
+        static = integrator in INTEGRATORS and not INTEGRATORS[integrator].dynamic
+        if bc["type"] == "traction" and not static:
+            raise CaseError(format_key(base + ["type"]), raw["type"],
+                            f"traction boundaries are loads of the quasi-static mode; allowed with "
+                            f"lagrange.integrator = {integrator!r}: fixed, velocity, symmetry, rigid_wall")
+        if bc["type"] == "rigid_wall" and static:
+            raise CaseError(format_key(base + ["type"]), raw["type"],
+                            f"rigid_wall boundaries are velocity conditions; allowed with lagrange.integrator = "
+                            f"{integrator!r}: fixed, velocity (a displacement rate), symmetry, traction "
+                            "(a wall: a held body in contact)")
         if "axis" in raw and raw["axis"] not in comps:
             raise CaseError(format_key(base + ["axis"]), raw["axis"],
                             f"dimension mismatch: must be one of {', '.join(comps)} in a "

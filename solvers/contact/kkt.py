@@ -36,12 +36,17 @@ class ContactSolution:
 
 
 def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spmatrix, X: np.ndarray,
-                       fixed: np.ndarray, u_fixed: np.ndarray, max_iterations: int = 50) -> ContactSolution:
+                       fixed: np.ndarray, u_fixed: np.ndarray, max_iterations: int = 50,
+                       active: np.ndarray | None = None) -> ContactSolution:
     """The contact solution (module docstring). K (ndof, ndof); F (ndof,); B (nm, ndof); J (nm, nm);
     X (ndof,) reference positions (B X: the initial gaps); fixed (ndof,) bool Dirichlet dofs with
-    values u_fixed (ndof,) (read where fixed). Starts with every multiplier active; raises
-    RuntimeError if the system is singular on an active set, or the set cycles or does not settle
-    within max_iterations."""
+    values u_fixed (ndof,) (read where fixed). Starts from ``active`` (nm,) bool (default: every
+    multiplier active); raises RuntimeError if the system is singular on an active set, or the set
+    cycles or does not settle within max_iterations.
+
+    A gap counts as closed down to round-off: a multiplier joins the set when its gap is below
+    -1e-12 of the scale |B| |X + u| (a gap of -1e-17 on a released node is zero, and taking it in
+    would make the set cycle), and leaves it when its pressure falls below c times that."""
     K, B, J = sp.csr_matrix(K), sp.csr_matrix(B), sp.csr_matrix(J)
     nm = B.shape[0]
     fixed = np.asarray(fixed, dtype=bool)
@@ -50,8 +55,13 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     g0 = B @ (X + ud)                              # the gaps with only the prescribed motion
     rhs_u = (F - K @ ud)[free]
     Kff, Bf = K[free][:, free], B[:, free]
-    # scale of the comparison p - c g~: pressures against gaps, by the stiffness over the constraint norm
-    c = float(abs(K.diagonal()).max()) / max(float(abs(B).max()), 1e-300) ** 2 if nm else 1.0
+    # scale of the comparison p - c g~: pressures against gaps, by the stiffness over the constraint
+    # norm (a pushed node: g ~ |B|^2 p / k); k of the softest dof the constraints move, which sets the
+    # gaps of two bodies in series (a stiff side's k would make c g~ swamp p: the set cycles)
+    touched = np.flatnonzero(np.asarray(abs(B).sum(axis=0)).ravel() > 0) if nm else np.zeros(0, np.int64)
+    kd = abs(K.diagonal())[touched]
+    kd = kd[kd > 0]
+    c = (float(kd.min()) if len(kd) else 1.0) / max(float(abs(B).max()), 1e-300) ** 2 if nm else 1.0
 
     def solve_on(a: np.ndarray, it: int):
         mat = sp.bmat([[Kff, -Bf[a].T], [-Bf[a], -J[a][:, a]]], format="csc")
@@ -65,7 +75,8 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
         p[a] = sol[len(free):]
         return u, p, g0 + Bf @ u[free] + J @ p
 
-    return _active_set(nm, c, solve_on, max_iterations)
+    gap_tol = 1e-12 * float((abs(B) @ abs(X + ud)).max()) if nm else 0.0
+    return _active_set(nm, c, solve_on, max_iterations, active, c * gap_tol)
 
 
 def _lu_solve(mat: sp.spmatrix, rhs: np.ndarray, n_active: int, it: int, why: str) -> np.ndarray:
@@ -80,14 +91,15 @@ def _lu_solve(mat: sp.spmatrix, rhs: np.ndarray, n_active: int, it: int, why: st
     return sol
 
 
-def _active_set(nm: int, c: float, solve_on, max_iterations: int) -> ContactSolution:
-    """The primal-dual active set: from every multiplier active, solve_on(active ids, iteration) ->
-    (u, p, g~) until A = {p - c g~ > 0} repeats (a set seen before: cycling, an error)."""
-    active = np.ones(nm, dtype=bool)
+def _active_set(nm: int, c: float, solve_on, max_iterations: int, active: np.ndarray | None = None,
+                tol: float = 0.0) -> ContactSolution:
+    """The primal-dual active set: from ``active`` (default every multiplier), solve_on(active ids,
+    iteration) -> (u, p, g~) until A = {p - c g~ > tol} repeats (a set seen before: cycling, an error)."""
+    active = np.ones(nm, dtype=bool) if active is None else np.asarray(active, dtype=bool).copy()
     seen = []
     for it in range(1, max_iterations + 1):
         u, p, gap = solve_on(np.flatnonzero(active), it)
-        new = (p - c * gap) > 0.0
+        new = (p - c * gap) > tol
         if np.array_equal(new, active):
             return ContactSolution(u=u, p=p, gap=gap, active=active, iterations=it)
         if any(np.array_equal(new, s) for s in seen):

@@ -3,6 +3,9 @@
 Each condition overwrites some velocity components of some nodes; the solver turns the change into a
 reaction impulse m (v_after - v_before), which enters the momentum and energy balances. Conditions
 apply in case order, so a later one wins where two overlap.
+
+``traction`` conditions are loads, not velocities: kept as (node mask, traction) for the quasi-static
+mode (quasi_static.py, loads.py); the explicit solver's case check refuses them.
 """
 from __future__ import annotations
 
@@ -27,6 +30,7 @@ class BoundaryConditions:
         dim = X.shape[1]
         self.prescribed = []  # (node indices, component, value)
         self.walls = []       # (point, unit normal)
+        self.tractions = []   # (node mask, traction (dim,)): loads of the quasi-static mode (loads.py)
         for spec in specs:
             kind = spec["type"]
             if kind == "fixed":
@@ -43,6 +47,9 @@ class BoundaryConditions:
                 n = np.asarray(spec["normal"], dtype=np.float64)
                 p = np.asarray(spec["point"], dtype=np.float64)
                 self.walls.append((p[:dim].copy(), (n / np.linalg.norm(n))[:dim].copy()))
+            elif kind == "traction":
+                t = np.array([float(spec["traction"].get(c, 0.0)) for c in NAMES[:dim]])
+                self.tractions.append((_region(spec["region"], X), t))
             else:  # the schema admits nothing else
                 raise ValueError(f"boundaries.type = {kind!r}: unknown")
 

@@ -374,6 +374,12 @@ def body_mesh(spec: dict, dim: int) -> Mesh:
     if "box" in m:
         b = m["box"]
         return box_mesh(b["lower"], b["upper"], b["cells"])
+    if "quarter_disk" in m:
+        q = m["quarter_disk"]
+        mesh = quarter_disk_mesh(q["radius"], q["radial_cells"])
+        if any(q.get("base", ())):
+            mesh.points += np.asarray(q["base"], np.float64)
+        return mesh
     if "quarter_cylinder" in m:
         q = m["quarter_cylinder"]
         mesh = quarter_cylinder_mesh(q["radius"], q["length"], q["radial_cells"], q["axial_cells"])
@@ -398,6 +404,10 @@ def body_mesh_size(spec: dict) -> tuple[int, int] | None:
     if "box" in m:
         cells = [int(c) for c in m["box"]["cells"]]
         return math.prod(cells), math.prod(c + 1 for c in cells)
+    if "quarter_disk" in m:
+        n = int(m["quarter_disk"]["radial_cells"])
+        core = _core_cells(n)
+        return core * core + (n - core) * 2 * core, (core + 1) ** 2 + (n - core) * (2 * core + 1)
     if "quarter_cylinder" in m:
         q = m["quarter_cylinder"]
         n, layers = int(q["radial_cells"]), int(q["axial_cells"])

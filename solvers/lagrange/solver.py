@@ -350,6 +350,11 @@ class LagrangeSolver:
         out[surf["node_ids"]] = self.contact.nodal_pressure(len(surf["node_ids"]))
         return out
 
+    def point_fields(self) -> dict[str, np.ndarray]:
+        """Nodal output fields beyond the motion: the contact pressure when the case has contact
+        (collective)."""
+        return {"contact_pressure": self.contact_pressure()} if self.contact is not None else {}
+
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
     def renew_surface(self) -> bool:
         """After elements eroded (``surface_stale``): the surface of the live elements from now on

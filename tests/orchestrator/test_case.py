@@ -210,7 +210,7 @@ BAD_CASES = [
     ("jc_missing_yield_stress", "materials.copper.yield_stress", "required key missing"),
     ("jc_melt_below_room", "materials.copper.melt_temperature", "room_temperature"),
     ("quarter_cylinder_2d", "lagrange.bodies[0].mesh.quarter_cylinder", "3D only"),
-    ("two_mesh_kinds", "lagrange.bodies[0].mesh", "exactly one of: box, quarter_cylinder, file"),
+    ("two_mesh_kinds", "lagrange.bodies[0].mesh", "exactly one of: box, quarter_cylinder, quarter_disk, file"),
     ("no_bodies", "lagrange.bodies", "at least one body"),
     ("ale_periodic_one_side", "ale.boundaries.x_lower", "periodic must be set on both"),
     ("ale_piston_eulerian", "ale.boundaries.x_lower.piston", "piston faces need ale.mode = \"lagrangian\""),

@@ -158,6 +158,8 @@ def test_validating_a_case_imports_no_solver_kernel():
                        env=dict(os.environ, PYTHONPATH=str(REPO)), timeout=120)
     assert r.returncode == 0, r.stderr
     # (solvers.kernel_cache: the numba cache directory's name, hashlib and os only)
-    # (solvers.contact.methods: the contact methods' names, no kernel)
+    # (solvers.contact.methods, solvers.lagrange.integrators: the names of the contact methods and of
+    # the integrators, no kernel)
     assert json.loads(r.stdout) == ["solvers", "solvers.contact", "solvers.contact.methods", "solvers.expressions",
-                                    "solvers.kernel_cache", "solvers.lagrange", "solvers.lagrange.mesh"]
+                                    "solvers.kernel_cache", "solvers.lagrange", "solvers.lagrange.integrators",
+                                    "solvers.lagrange.mesh"]

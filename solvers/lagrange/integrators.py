@@ -1,0 +1,42 @@
+"""The Lagrangian solver's time integrators by name (``[lagrange] integrator``), each a solver class
+with the explicit solver's interface (solver.LagrangeSolver: stable_dt, predict, correct,
+diagnostics, output and checkpoint hooks), registered with the module that holds it so that the case
+schema reads the names without importing the solvers:
+
+* ``explicit`` (default): central differences, lumped mass (solver.py);
+* ``quasi_static``: equilibrium under loads ramped with time, frictionless contact (quasi_static.py).
+"""
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+
+__all__ = ["INTEGRATORS", "Integrator", "register", "solver_class"]
+
+
+@dataclass(frozen=True)
+class Integrator:
+    module: str
+    attr: str
+    dynamic: bool = True   # False: no inertia (no coupling with the fluid, no initial velocities)
+
+
+INTEGRATORS: dict[str, Integrator] = {}
+
+
+def register(name: str, integrator: Integrator) -> None:
+    if name in INTEGRATORS:
+        raise ValueError(f"integrator {name!r} registered twice")
+    INTEGRATORS[name] = integrator
+
+
+register("explicit", Integrator("solvers.lagrange.solver", "LagrangeSolver"))
+register("quasi_static", Integrator("solvers.lagrange.quasi_static", "QuasiStaticSolver", dynamic=False))
+
+
+def solver_class(name: str):
+    """The solver class of integrator ``name`` (a KeyError names the registered ones)."""
+    if name not in INTEGRATORS:
+        raise KeyError(f"integrator {name!r}: registered: {', '.join(sorted(INTEGRATORS))}")
+    it = INTEGRATORS[name]
+    return getattr(importlib.import_module(it.module), it.attr)

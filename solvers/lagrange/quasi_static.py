@@ -1,0 +1,235 @@
+"""Quasi-static mode of the Lagrangian solver (``[lagrange] integrator = "quasi_static"``): a sequence
+of equilibrium states under loads ramped with the run's time, with frictionless contact (issue 11,
+item 2: patch tests and Hertz).
+
+Time is a load parameter: at time t the load factor is s = t / end_time; a ``velocity`` boundary
+prescribes the displacement u = v t of its nodes (its "velocity" is the displacement rate), a
+``traction`` boundary applies s times its traction, gravity s times m g. The orchestrator's steps
+are the load steps (``[lagrange] load_steps``, dt = end_time / load_steps).
+
+Each load step solves the static equilibrium with the contact conditions (seed slide "KKT
+Conditions"):
+
+    K u - B^T p = F(s),   g~ = B (X + u) + J p >= 0,   p >= 0,   p g~ = 0,
+
+with the contact operators B, J of the case's method (solvers.contact.methods) built once on the
+reference configuration X: geometrically linear, the gap linearised about the initial geometry, which
+is the theory of the small-strain patch tests and of Hertz (whose gap is that of the undeformed
+profiles; evaluating the contact on the deformed one instead moves Hertz's peak pressure by 2 % at
+E = 1, P' = 0.01, where the strains reach 6 %). Large sliding needs the finite-strain mode (to come).
+The complementarity is solved by the primal-dual active set (a semi-smooth Newton method,
+solvers.contact.kkt), warm-started from the previous load step's set; the material being linear,
+each set's solve is exact (one Newton step).
+
+Materials: ``linear_elastic`` as Hooke's law in small strain (the reference of the patch tests and
+of Hertz's theory), full-integration bilinear quads (plane strain) and trilinear hexahedra
+(solvers.lagrange.small_strain), whose stiffness is the consistent tangent of this linear problem.
+
+Parallel: a gathered solve. Every rank assembles and solves the whole system (scipy's SuperLU) from
+the global mesh it already holds and keeps its own nodes' and elements' share of the answer: the
+ranks agree bit for bit, nothing is communicated, and the problem size is bounded by one rank's memory
+(about 1e5 - 1e6 dofs in 2-D); more ranks make it no faster.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from solvers.lagrange import small_strain
+from solvers.lagrange.boundary import BoundaryConditions
+from solvers.lagrange.loads import traction_loads
+from solvers.lagrange.solver import LagrangeSolver, SolverError
+from solvers.lagrange.surface import exterior_facets
+
+__all__ = ["QuasiStaticSolver"]
+
+def _elasticity(dim: int, mat: dict) -> np.ndarray:
+    e, nu = mat["youngs_modulus"], mat["poisson_ratio"]
+    return small_strain.plane_strain_elasticity(e, nu) if dim == 2 else small_strain.elasticity_3d(e, nu)
+
+
+class QuasiStaticSolver(LagrangeSolver):
+    """The explicit solver's bodies, mesh, partition, output and checkpoints; steps are load steps
+    (module docstring)."""
+
+    def __init__(self, comm, case: dict):
+        super().__init__(comm, case)
+        self.contact = None  # (the explicit solver's impulses are not used: the static contact below)
+        dim = self.dim
+        opts = case["lagrange"]
+        self.end_time = float(case["run"]["end_time"])
+        # the coupler takes run.dt_scale times the step asked for and clips it to land on the end and
+        # output times: ask for a hair more than dt_scale's share so the load steps are end / load_steps
+        self._dt_stable = (self.end_time / int(opts.get("load_steps", 1))
+                           / float(case["run"].get("dt_scale", 0.9)) * (1.0 + 1e-12))
+        P, C = self.global_points, self.global_cells
+        n = len(P)
+        # the stiffness of every body (its material's Hooke matrix) and the stresses' matrices
+        self._d = {}
+        blocks = []
+        bodies = case["lagrange"]["bodies"]
+        for k, b in enumerate(bodies):
+            cells = C[self.body_of_cell == k]
+            d = _elasticity(dim, case["materials"][b["material"]])
+            self._d[k] = (d, case["materials"][b["material"]]["poisson_ratio"])
+            blocks.append(self._stiffness(P, cells, d))
+        self.K = sp.csr_matrix(sum(blocks))
+        # prescribed displacement components (global dofs): values per unit time (u = rate * t)
+        span = float(np.max(np.ptp(P, axis=0)))
+        bcs = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
+        if bcs.walls:
+            raise ValueError("quasi_static: rigid_wall boundaries are not supported (model the wall as a held body in contact)")
+        self.fixed = np.zeros((n, dim), bool)
+        self.rate = np.zeros((n, dim))
+        for nodes, c, val in bcs.prescribed:   # case order: a later condition wins
+            self.fixed[nodes, c] = True
+            self.rate[nodes, c] = val
+        facets, _ = exterior_facets(C, self.cell_type, n, P)
+        self.load = traction_loads(P, facets, bcs.tractions)
+        if self.has_gravity:
+            mass = np.zeros(n)
+            mass[self.part.nodes[self.part.owned]] = self.mass[self.part.owned]
+            mass = self._allsum(mass)
+            self.load = self.load + mass[:, None] * self.gravity
+        # contact: each pair's facets on the global exterior surface
+        self.pairs = []
+        self._cfg = case.get("contact") or None
+        if self._cfg:
+            _, fcell = exterior_facets(C, self.cell_type, n, P)
+            fbody = self.body_of_cell[fcell]
+            for a, b in self._cfg["pairs"]:
+                ia, ib = self.body_names.index(a), self.body_names.index(b)
+                # Puso & Solberg's gamma = alpha / E with the softer side's modulus: the
+                # stabilization is weighed against the compliance that sets the pressures
+                e = min(case["materials"][bodies[k]["material"]]["youngs_modulus"] for k in (ia, ib))
+                self.pairs.append((facets[fbody == ia], None if ia == ib else facets[fbody == ib], ia, e))
+            edge = np.linalg.norm(P[C[:, 1]] - P[C[:, 0]], axis=1)
+            self.h = float(np.median(edge))
+            self.capture = float(self._cfg.get("capture", self.h))
+            self.alpha = float(self._cfg.get("alpha", 1.0))
+        self._B, self._J, self.multiplier_nodes = self._contact_operators(P)
+        self._active = None
+        self.u = np.zeros((n, dim))
+        self.p = np.zeros(self._B.shape[0])
+        self.iterations = 0
+        self.active = 0
+        self.residual = 0.0
+        self.contact_force = np.zeros(dim)
+        self.reaction = np.zeros(dim)
+
+    @staticmethod
+    def _stiffness(points, cells, d):
+        if cells.shape[1] == 4:
+            return small_strain.quad_stiffness(points, cells, d)
+        return small_strain.hex_stiffness(points, cells, d)
+
+    def _stresses(self, u: np.ndarray) -> np.ndarray:
+        """(n_cells, 6) Voigt xx yy zz xy yz zx: the mean over each element's Gauss points (plane
+        strain: sigma_zz = nu (sigma_xx + sigma_yy))."""
+        P, C = self.global_points, self.global_cells
+        out = np.zeros((len(C), 6))
+        for k, (d, nu) in self._d.items():
+            sel = self.body_of_cell == k
+            if self.dim == 2:
+                s = small_strain.quad_stresses(P, C[sel], d, u).mean(axis=1)
+                out[sel] = np.stack([s[:, 0], s[:, 1], nu * (s[:, 0] + s[:, 1]), s[:, 2],
+                                     np.zeros(len(s)), np.zeros(len(s))], axis=1)
+            else:
+                out[sel] = small_strain.hex_stresses(P, C[sel], d, u).mean(axis=1)
+        return out
+
+    # ---- the step --------------------------------------------------------------------------------
+    def stable_dt(self) -> float:
+        return self._dt_stable
+
+    def predict(self, dt: float) -> None:
+        self.dt = dt
+
+    def correct(self, impulse=None, step: int = 0, time: float = 0.0, surface_impulse=None) -> None:
+        if impulse is not None or surface_impulse is not None:
+            raise ValueError("quasi_static: no coupling impulses (a static solve has no inertia)")
+        from solvers.contact.kkt import solve_frictionless
+
+        s = time / self.end_time
+        P = self.global_points
+        F = s * self.load.ravel()
+        u_fixed = (time * self.rate).ravel()
+        fixed = self.fixed.ravel()
+        B, J = self._B, self._J
+        # warm start: the last step's active set (the loads grow monotonically in most cases)
+        start = self._active if self._active is not None else None
+        try:
+            sol = solve_frictionless(self.K, F, B, J, P.ravel(), fixed, u_fixed, active=start)
+        except RuntimeError as err:
+            raise SolverError(f"quasi_static step {step} (t={time:.6g}): {err}") from None
+        u = sol.u
+        self.iterations, self.p = sol.iterations, sol.p
+        self._active = sol.active
+        self.active = int(np.count_nonzero(sol.active))
+        # equilibrium: the reactions on the prescribed dofs, the residual on the free ones
+        fc = B.T @ sol.p
+        r = self.K @ u - F - fc
+        scale = max(float(np.abs(F).max()), float(np.abs(fc).max(initial=0.0)),
+                    float(np.abs(r[fixed]).max(initial=0.0)), 1e-300)
+        self.residual = float(np.abs(r[~fixed]).max(initial=0.0)) / scale
+        held = self.fixed.any(axis=1)
+        self.reaction = r.reshape(P.shape)[held].sum(axis=0)
+        if self.pairs:
+            self.contact_force = fc.reshape(P.shape)[self.body_of_node == self.pairs[0][2]].sum(axis=0)
+        self.u = u.reshape(P.shape)
+        self.strain_energy = 0.5 * float(u @ (self.K @ u))
+        self.x = self.X + self.u[self.part.nodes]
+        self.sig[:] = self._stresses(self.u)[self.part.cells]
+        self.step, self.time = step, time
+        self.first_step = False
+
+    def _contact_operators(self, x: np.ndarray):
+        """B, J (every pair's, stacked) at positions x (n, dim), and each multiplier's key: its node
+        + pair index * n."""
+        from solvers.contact import methods
+
+        n_dof = x.size
+        if not self.pairs:
+            return sp.csr_matrix((0, n_dof)), sp.csr_matrix((0, 0)), np.zeros(0, np.int64)
+        bs, js, nodes = [], [], []
+        for seg_a, seg_b, _, e in self.pairs:
+            c = methods.build(self._cfg.get("method", "dual_pass_mortar"), x, seg_a, seg_b, self.capture, self.capture)
+            bs.append(c.constraint_operator())
+            js.append(c.stabilization(self.alpha / e, self.h))
+            # (a multiplier's key: its node, offset by its pair: a body may be in two pairs)
+            ids = np.concatenate([q.nodes for q in c.passes]) if hasattr(c, "passes") else c.nodes
+            nodes.append(ids + len(nodes) * len(x))
+        return (sp.vstack(bs, format="csr"), sp.block_diag(js, format="csr"),
+                np.concatenate(nodes).astype(np.int64))
+
+    def contact_pressure(self) -> np.ndarray:
+        """(n_nodes_global,) contact pressure at every node: the mean of the multipliers it carries
+        (both passes of the dual pass), 0 off the contact."""
+        n = self.n_nodes_global
+        total, count = np.zeros(n), np.zeros(n)
+        np.add.at(total, self.multiplier_nodes % n, self.p)
+        np.add.at(count, self.multiplier_nodes % n, 1.0)
+        return np.divide(total, count, out=np.zeros(n), where=count > 0)
+
+    def point_fields(self) -> dict[str, np.ndarray]:
+        return {"contact_pressure": self.contact_pressure()} if self.pairs else {}
+
+    def diagnostics(self) -> dict[str, float]:
+        d = {"load_factor": self.time / self.end_time, "iterations": float(self.iterations),
+             "strain_energy": float(getattr(self, "strain_energy", 0.0)),
+             "equilibrium_residual_rel": self.residual}
+        for c, name in enumerate("xyz"[: self.dim]):
+            d[f"reaction_{name}"] = float(self.reaction[c])
+        if self.pairs:
+            d["contact_active"] = float(self.active)
+            for c, name in enumerate("xyz"[: self.dim]):
+                d[f"contact_force_{name}"] = float(self.contact_force[c])
+        return d
+
+    # ---- checkpoint / restart: the displacements are the state -----------------------------------
+    def restart(self, path) -> None:
+        super().restart(path)
+        u_local = self.x - self.X
+        u = np.zeros((self.n_nodes_global, self.dim))
+        u[self.part.nodes[self.part.owned]] = u_local[self.part.owned]
+        self.u = self._allsum(u)

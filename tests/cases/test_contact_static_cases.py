@@ -1,0 +1,81 @@
+"""Static contact cases (issue 11; the Lagrangian solver's quasi-static mode, quasi_static.py), each
+checked against its analytic reference by its own [check]: Crisfield's patch test with either block
+on top and with single-pass node-to-surface failing it; Hertz at three meshes; 2 ranks equal to 1."""
+import json
+import shutil
+
+import pytest
+
+from tests.cases.test_cases import CASES, assert_check_passed, run_case
+from tests.conftest import immerse
+
+
+def _variant(tmp_path, name, *replacements):
+    case = tmp_path / "case"
+    shutil.copytree(CASES / name, case)
+    p = case / "case.toml"
+    text = p.read_text()
+    for old, new in replacements:
+        assert old in text, old
+        text = text.replace(old, new)
+    p.write_text(text)
+    return case
+
+
+def _run(case, out, *extra):
+    r = immerse("run", case, "--out", out, *extra)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return json.loads((out / "summary.json").read_text())
+
+
+def test_contact_patch_2d(tmp_path):
+    """sigma_y = -1e4 Pa uniform, sigma_x = tau_xy = 0, contact pressure 1e4 uniform (tolerances in the
+    case: measured 1e-14); the contact force on the lower block is the 1e4 N/m the blocks carry."""
+    _, s = run_case("contact_patch_2d", tmp_path)
+    assert s["final"]["lagrange.contact_force_y"] == pytest.approx(-1.0e4, rel=1e-13)  # measured 3e-15
+    assert s["final"]["lagrange.equilibrium_residual_rel"] < 1e-13                      # measured 2e-15
+
+
+def test_contact_patch_2d_either_block_on_top(tmp_path):
+    """The dual pass is unbiased: the coarser mesh below instead of above passes as well (measured
+    sigma_y 1e-15, spread 1e-14)."""
+    case = _variant(tmp_path, "contact_patch_2d", ("cells = [4, 2]", "cells = [@, 2]"),
+                    ("cells = [3, 2]", "cells = [4, 2]"), ("cells = [@, 2]", "cells = [3, 2]"))
+    assert_check_passed(_run(case, tmp_path / "out"))
+
+
+def test_single_pass_node_to_surface_fails_the_patch_test(tmp_path):
+    """Single-pass node-to-surface (the lower block's nodes on the upper's segments) cannot carry a
+    uniform pressure on non-matching meshes: its stress is off by more than 1e-3 (measured: see the
+    assertion's message)."""
+    case = _variant(tmp_path, "contact_patch_2d", ("pairs = [[\"lower\", \"upper\"]]",
+                                                   "pairs = [[\"lower\", \"upper\"]]\nmethod = \"node_to_surface\""))
+    r = immerse("run", case, "--out", tmp_path / "out")
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    m = s["check"]["metrics"]
+    err = max(m["stress_deviation_rel"]["value"], m["other_stress_rel"]["value"])
+    assert r.returncode != 0 and not s["check"]["passed"]  # (a failed check exits non-zero)
+    assert err > 1e-3, err  # measured 4.9e-2
+
+
+@pytest.mark.timeout(300)
+def test_hertz_cylinder_at_three_meshes(tmp_path):
+    """Half-width a = 0.107641 and peak pressure p0 = 0.059143 within the issue's 3 % at 40, 80 and 160
+    arc segments, a closer at the finest (measured -1.5 / -1.3 / -0.16 %; p0 -0.87 / +1.0 / +0.49 %);
+    the contact force equals the load (2e-12, measured 3.6e-13)."""
+    errors = []
+    for n in (40, 80, 160):
+        case = _variant(tmp_path / str(n), "hertz_cylinder", ("radial_cells = 80", f"radial_cells = {n}"))
+        s = _run(case, tmp_path / str(n) / "out")
+        assert_check_passed(s)
+        errors.append(abs(s["check"]["metrics"]["half_width"]["rel_error"]))
+    assert errors[2] < errors[1] < errors[0] < 0.03, errors
+
+
+def test_static_contact_on_two_ranks_equals_one(tmp_path):
+    """The gathered solve: every rank solves the whole system, so 2 ranks give 1 rank's answer bit
+    for bit."""
+    one = _run(CASES / "hertz_cylinder", tmp_path / "one", "--ranks", "lagrange=1")
+    two = _run(CASES / "hertz_cylinder", tmp_path / "two", "--ranks", "lagrange=2")
+    assert one["final"] == two["final"]
+    assert one["check"]["metrics"] == two["check"]["metrics"]
