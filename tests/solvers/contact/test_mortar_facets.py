@@ -6,6 +6,7 @@ import pytest
 
 from solvers.contact.dual_pass import mortar_pass
 from solvers.contact.mortar_facets import TRIANGLE_RULE, facet_pair_integrals
+from tests.solvers.contact.geometry import grid_face, rotation
 
 SQUARE = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
 ONE = np.array([[0, 0]])
@@ -27,10 +28,6 @@ def by_corner(m, fb):
     out = np.zeros((4, 4))
     out[:, fb[0] - 4] = m
     return out
-
-
-def rotation(t):
-    return np.array([[np.cos(t), -np.sin(t)], [np.sin(t), np.cos(t)]])
 
 
 def test_the_triangle_rule_is_exact_to_degree_5():
@@ -182,21 +179,6 @@ def test_a_facet_pairs_only_within_capture_in_front_and_penetration_behind():
     assert abs(ov[0] - 1.0) <= 1e-14  # measured 0
     pts, fa, fb = facing_quads(SQUARE, SQUARE, gap=0.45, tilt=-0.2)   # 0.25 at its nearest
     assert facet_pair_integrals(pts, fa, fb, ONE, 0.2, 0.05)[2][0] == 0.0
-
-
-def grid_face(n, z, turn=0.0, up=True):
-    """A flat n x n grid of quadrilaterals on [0, 1]^2 at height z; turn: its interior nodes turned
-    about the centre (the boundary nodes stay on the square's edges). up: facets with normal +z
-    (else -z). Returns points (nn, 3), facets (n^2, 4)."""
-    t = np.linspace(0.0, 1.0, n + 1)
-    x, y = np.meshgrid(t, t, indexing="xy")
-    p = np.c_[x.ravel(), y.ravel()]
-    inner = (p > 1e-12).all(axis=1) & (p < 1 - 1e-12).all(axis=1)
-    p[inner] = 0.5 + (p[inner] - 0.5) @ rotation(turn).T
-    i, j = np.meshgrid(np.arange(n), np.arange(n), indexing="xy")
-    base = (j * (n + 1) + i).ravel()
-    quads = np.stack([base, base + 1, base + n + 2, base + n + 1], axis=1)
-    return np.c_[p, np.full(len(p), z)], (quads if up else quads[:, ::-1])
 
 
 def test_a_pass_of_non_matching_grids_integrates_the_shape_functions_of_a():
