@@ -1,14 +1,15 @@
 """Mortar integrals of 3-D contact: bilinear quadrilateral facets of a non-mortar side a against those
 of a mortar side b (the 3-D analogue of mortar_segments.py; Puso & Solberg, CMAME 367 (2020), the
-integrals of one pass, with the 3-D segmentation of Puso & Laursen, "A mortar segment-to-segment
-contact method for large deformation solid mechanics", CMAME 193 (2004), section 3.1).
+integrals of one pass, with the 3-D segmentation, the overlaps found in a projection plane, of Puso
+& Laursen, "A mortar segment-to-segment contact method for large deformation solid mechanics", CMAME
+193 (2004)).
 
 For one pass a -> b and the bilinear shape functions phi of the 4-node facets on both sides:
 
     D_AB = integral over Gamma^ab of phi^a_A phi^a_B          (A, B nodes of facet a)
     M_AC = integral over Gamma^ab of phi^a_A phi^b_C          (C nodes of facet b)
 
-Gamma^ab, the mortar segment of the pair, is found in a plane (Puso & Laursen 2004, eqs. 20-23):
+Gamma^ab, the mortar segment of the pair, is found in a plane (as in Puso & Laursen 2004):
 
 1. the plane of facet a through its centre c_a (the mean of its corners), normal to its unit normal
    n_a at the centre (the direction of (x_2 - x_0) x (x_3 - x_1), which is dx/dxi x dx/deta at
@@ -36,15 +37,18 @@ for flat parallel facets of such meshes. A general flat quadrilateral (non-paral
 has rational phi in the plane; the rule is then accurate, not exact (tests measure it). Wherever the
 inversion converges, the mortar shape functions sum to one at every quadrature point, so
 sum_C M_AC = sum_B D_AB row by row to round-off (the forces of a pass balance: linear momentum), and
-a field linear in the plane coordinates is reproduced pointwise (isoparametric facets), which is
-what the contact patch test needs.
+a field linear in the plane coordinates is reproduced pointwise (isoparametric facets): the weighted
+gaps of a linear motion are consistent on any flat mesh. The nodal forces of a uniform pressure are
+as exact as the integrals (the 3-D patch test: round-off on rectangular grids, 1.7e-7 in the
+displacements with a grid turned 25 degrees, tests/solvers/contact/test_patch_3d.py).
 
 Filters, as in 2-D: only facing facets pair (unit centre normals with n_a . n_b < -FACING_COS of
 mortar_segments.py), and only where b's separation from a along n_a lies within [-penetration,
 capture] somewhere on the overlap (checked at the clipped polygon's vertices; exact for flat facets,
 where the separation is affine in the plane).
 
-Numba kernel, one pass over the candidate pairs (no Python loop over facets or pairs).
+Numba kernel, one pass over the candidate pairs (no Python loop over facets or pairs): measured
+0.65 us per candidate pair, 2.7 us per overlapping one (60 x 60 facets against 47 x 47, one core).
 """
 from __future__ import annotations
 
@@ -69,7 +73,8 @@ TRIANGLE_RULE = (
 )
 """(points (7, 3) barycentric, weights (7,)): exact for polynomials of degree <= 5."""
 
-_MAX_VERTICES = 64  # Sutherland-Hodgman adds at most n vertices per clip edge: 4 * 2^4 (8 when convex)
+_MAX_VERTICES = 64  # a clip edge at most doubles the vertices (inside ones + crossings): 4 * 2^4
+                    # (at most 8 when both polygons are convex)
 _MIN_AREA = 1e-12   # overlaps below this fraction of a's projected area are dropped (shared edges)
 _NEWTON_STEPS = 12
 _NEWTON_TOL = 1e-14  # on a step in the reference coordinates (range [-1, 1]): quadratic, so one more
@@ -185,7 +190,7 @@ def _facet_pair_integrals(x, fac_a, fac_b, pairs, bary, wts, capture, penetratio
         e2[0] = na[1] * e1[2] - na[2] * e1[1]
         e2[1] = na[2] * e1[0] - na[0] * e1[2]
         e2[2] = na[0] * e1[1] - na[1] * e1[0]
-        # corners projected along n_a: plane coordinates and separations (Puso & Laursen 2004, eq. 21)
+        # corners projected along n_a: plane coordinates and separations (step 2 of the docstring)
         for i in range(4):
             ra0 = x[fa[i], 0] - cen[0]
             ra1 = x[fa[i], 1] - cen[1]

@@ -1,5 +1,6 @@
 """solvers/contact/dual_pass.py: the dual-pass operators on non-matching flat faces (gaps, forces,
-no side preferred, the stabilization) and self contact of a folded surface."""
+no side preferred, the stabilization) and self contact of a folded surface; in 2-D (segments) and
+3-D (quadrilateral facets)."""
 import numpy as np
 import pytest
 
@@ -125,3 +126,28 @@ def test_3d_friction_is_refused_and_nodal_normals_weigh_by_area():
     np.testing.assert_allclose(n[1], want / np.linalg.norm(want), atol=1e-15)
     np.testing.assert_allclose(n[0], [0, 0, 1], atol=1e-15)
     np.testing.assert_allclose(n[4], [-1 / s, 0, 1 / s], atol=1e-15)
+
+
+def test_3d_self_contact_of_a_slotted_block_finds_the_facing_walls_only():
+    from solvers.lagrange.mesh import box_mesh
+    from solvers.lagrange.surface import exterior_facets
+    # a 1 x 0.2 x 1 block of 5 x 1 x 5 hexahedra with the slot 0.4 < x < 0.6, z > 0.2 cut out: its walls
+    # x = 0.4 and x = 0.6 face each other across 0.2
+    m = box_mesh([0.0, 0.0, 0.0], [1.0, 0.2, 1.0], [5, 1, 5])
+    ix, iz = np.arange(25) % 5, np.arange(25) // 5
+    cells = m.cells[~((ix == 2) & (iz >= 1))]
+    facets, _ = exterior_facets(cells, "hexahedron", m.num_points, m.points)
+    c = DualPassContact(m.points, facets, None, capture=0.25, penetration=0.05)  # the arms are 0.4 thick
+    (p,) = c.passes
+    x = m.points[p.nodes]
+    on_wall = np.isclose(x[:, 0], 0.4) | np.isclose(x[:, 0], 0.6)
+    assert on_wall.all() and len(p.nodes) == 2 * 5 * 2   # the slot's bottom (z = 0.2) is a neighbour
+    np.testing.assert_allclose(np.abs(p.normals[:, 0]), 1.0, rtol=0, atol=1e-15)
+    # the walls overlap fully: every gap is 0.2 times the area, from either wall (the two passes)
+    np.testing.assert_allclose(c.gaps(), 0.2 * p.area, rtol=3e-15)  # measured 6.7e-16
+    np.testing.assert_allclose(p.area.sum(), 2 * 0.8 * 0.2, rtol=1e-15)  # measured 2.2e-16
+    assert np.allclose(c.forces(np.ones(c.n_multipliers)).sum(axis=0), 0.0, atol=1e-16)  # measured 0
+    # allowed to pair 0.25 behind, the block's bottom (z = 0) pairs with the slot's (z = 0.2) through
+    # the 0.2 under the slot
+    deep = DualPassContact(m.points, facets, None, capture=0.25)
+    assert np.isclose(m.points[deep.passes[0].nodes, 2], 0.0).any()
