@@ -110,10 +110,11 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
     """The pass a -> b: candidate pairs within ``capture`` (search.py), their integrals, assembled.
 
     seg_a, seg_b: (n, 2) segments with points (n, 2), or (n, 4) quadrilateral facets with points
-    (n, 3) (mortar_segments.py or mortar_facets.py integrates them). A facet of b pairs with one of a where it lies in front of it within ``capture`` or behind it
-    by at most ``penetration`` (default: capture), somewhere on their overlap.
+    (n, 3) (mortar_segments.py or mortar_facets.py integrates them). A facet of b pairs with one of a
+    where it lies in front of it within ``capture`` or behind it by at most ``penetration`` (default:
+    capture), somewhere on their overlap.
 
-    self_contact: seg_b is seg_a; pairs of a segment with itself or a neighbour (a shared node) are
+    self_contact: seg_b is seg_a; pairs of a facet with itself or a neighbour (a shared node) are
     left out.
     """
     x = np.asarray(points, dtype=np.float64)
@@ -150,7 +151,8 @@ class DualPassContact:
     """The dual-pass operators of two surfaces (or one against itself) at one configuration.
 
     points (n, dim) of all bodies; seg_a, seg_b outward facets of the two sides, (n_s, 2) segments in
-    2-D or (n_s, 4) quadrilaterals in 3-D (seg_b None: self contact of seg_a); capture: the search distance (a gap larger than it is not paired);
+    2-D or (n_s, 4) quadrilaterals in 3-D (seg_b None: self contact of seg_a); capture: the search
+    distance (a gap larger than it is not paired);
     penetration: the deepest overlap still paired (default: capture; keep it below the bodies'
     thickness, or a thin body's far side pairs).
     Multipliers are numbered pass by pass: pass a -> b's nodes, then pass b -> a's.

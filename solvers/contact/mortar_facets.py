@@ -206,7 +206,9 @@ def _facet_pair_integrals(x, fac_a, fac_b, pairs, bary, wts, capture, penetratio
             sb[i] = rb0 * na[0] + rb1 * na[1] + rb2 * na[2]
         _coefficients(pa, ca)
         _coefficients(pb, cb)
-        area_a = 0.5 * ((pa[2, 0] - pa[0, 0]) * (pa[3, 1] - pa[1, 1]) - (pa[2, 1] - pa[0, 1]) * (pa[3, 0] - pa[1, 0]))
+        # a's projected area: half the cross product of its diagonals
+        area_a = 0.5 * ((pa[2, 0] - pa[0, 0]) * (pa[3, 1] - pa[1, 1])
+                        - (pa[2, 1] - pa[0, 1]) * (pa[3, 0] - pa[1, 0]))
         # Sutherland-Hodgman: b's polygon (reversed: counter-clockwise about n_a) cut by the inner
         # half-plane of each of a's edges in turn (the left side: a runs counter-clockwise)
         nv = 4
