@@ -151,3 +151,13 @@ def test_3d_self_contact_of_a_slotted_block_finds_the_facing_walls_only():
     # the 0.2 under the slot
     deep = DualPassContact(m.points, facets, None, capture=0.25)
     assert np.isclose(m.points[deep.passes[0].nodes, 2], 0.0).any()
+
+
+def test_3d_self_contact_leaves_out_facets_that_share_a_node():
+    # a sheet folded back on itself along x = 1: the two facets face each other 0 to 0.1 apart, but
+    # share the fold's edge (nodes 1 and 2): neighbours, not contact partners
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 0.1], [0, 1, 0.1]], float)
+    sheet = np.array([[0, 1, 2, 3], [1, 4, 5, 2]])
+    assert DualPassContact(pts, sheet, None, capture=0.2).n_multipliers == 0
+    # the same facets as two surfaces do pair
+    assert DualPassContact(pts, sheet[:1], sheet[1:], capture=0.2).n_multipliers > 0
