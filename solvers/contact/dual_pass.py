@@ -1,11 +1,12 @@
-"""The stabilized dual-pass mortar operators of 2-D contact between two surfaces, or a surface and
-itself (Puso & Solberg, "A dual pass mortar approach for unbiased constraints and self contact",
+"""The stabilized dual-pass mortar operators of 2-D and 3-D contact between two surfaces, or a surface
+and itself (Puso & Solberg, "A dual pass mortar approach for unbiased constraints and self contact",
 CMAME 367 (2020); seed slides "Stabilized two pass mortar approach" and "implementation").
 
 Each side is the non-mortar side of one pass and carries its own nodal multipliers (normal contact
 pressures p >= 0 at the nodes with contact area). With the mortar integrals D and M of a pass
-(mortar_segments.py) and the unit nodal normal n_A of its non-mortar side (length-weighted average
-of the outward normals of the segments at A that have contact area in the pass):
+(mortar_segments.py for 2-D segments, mortar_facets.py for 3-D quadrilateral facets) and the unit
+nodal normal n_A of its non-mortar side (length- or area-weighted average of the outward normals of
+the facets at A that have contact area in the pass):
 
     weighted gap   g_A = n_A . (sum_C M_AC x_C - sum_B D_AB x_B)      (> 0: apart)
                    g = G x, G row A = n_A (x) (M_A - D_A)
@@ -30,6 +31,10 @@ contact area of its own: its pressure is taken as 0 there).
 
 Self contact is one pass of a surface against itself, its own neighbours excluded: every facing pair
 then appears once in each direction, which is the dual pass.
+
+The dimension follows the facets: (n, 2) segments in 2-D, (n, 4) quadrilaterals in 3-D (points
+(n, 3)); every operator above is the same in both, with dim unknowns per node (columns
+dim * node + k). Only the tangent operator of the friction is 2-D (one tangent per node).
 """
 from __future__ import annotations
 
@@ -38,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from solvers.contact.mortar_facets import facet_pair_integrals
 from solvers.contact.mortar_segments import segment_pair_integrals
 from solvers.contact.search import candidate_pairs, facet_boxes
 
@@ -45,16 +51,29 @@ __all__ = ["MortarPass", "mortar_pass", "DualPassContact", "nodal_normals"]
 
 
 def nodal_normals(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
-    """Unit normal at every node of ``points`` (zero at nodes no segment has): the sum of the outward
-    segment normals times length, (dy, -dx), normalised."""
+    """Unit normal at every node of ``points`` (zero at nodes no facet has): the sum of the outward
+    facet normals times length (2-D segments: (dy, -dx)) or times area (3-D quadrilaterals
+    (a, b, c, d): (c - a) x (d - b) / 2, the integral of the normal over the bilinear facet,
+    lagrange.surface.facet_area_vectors) of the facets at the node, normalised."""
     x = np.asarray(points, dtype=np.float64)
-    d = x[segments[:, 1]] - x[segments[:, 0]]
-    nl = np.stack([d[:, 1], -d[:, 0]], axis=1)
+    segments = np.asarray(segments, dtype=np.int64)
+    if segments.shape[1] == 2:
+        d = x[segments[:, 1]] - x[segments[:, 0]]
+        nl = np.stack([d[:, 1], -d[:, 0]], axis=1)
+    else:
+        f = x[segments]
+        nl = 0.5 * np.cross(f[:, 2] - f[:, 0], f[:, 3] - f[:, 1])
     n = np.zeros_like(x)
-    np.add.at(n, segments[:, 0], nl)
-    np.add.at(n, segments[:, 1], nl)
+    for k in range(segments.shape[1]):  # the facet's 2 or 4 corners
+        np.add.at(n, segments[:, k], nl)
     norm = np.linalg.norm(n, axis=1)
     return np.divide(n, norm[:, None], out=np.zeros_like(n), where=norm[:, None] > 0)
+
+
+def _require_2d(points: np.ndarray, what: str) -> None:
+    if points.shape[1] != 2:
+        raise NotImplementedError(f"{what} is 2-D only: a 3-D contact node has two tangent directions "
+                                  "(a 3-D friction law is not built yet)")
 
 
 def _tangent(n: np.ndarray) -> np.ndarray:
@@ -67,7 +86,7 @@ class MortarPass:
     """One pass with side a as the non-mortar side: its multiplier nodes and integrals.
 
     nodes (nm,) sorted node ids of side a with contact area; D, M (nm, n_nodes) csr: D_AB and M_AC
-    (module docstring) on global node ids; normals (nm, 2) unit nodal normals of side a's segments
+    (module docstring) on global node ids; normals (nm, dim) unit nodal normals of side a's facets
     with contact area, at ``nodes``;
     area (nm,) = row sums of D = integral of phi_A over the contact area.
     """
@@ -90,28 +109,34 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
                 penetration: float | None = None, self_contact: bool = False) -> MortarPass:
     """The pass a -> b: candidate pairs within ``capture`` (search.py), their integrals, assembled.
 
-    A segment of b pairs with one of a where it lies in front of it within ``capture`` or behind it
-    by at most ``penetration`` (default: capture), somewhere on their overlap.
+    seg_a, seg_b: (n, 2) segments with points (n, 2), or (n, 4) quadrilateral facets with points
+    (n, 3) (mortar_segments.py or mortar_facets.py integrates them). A facet of b pairs with one of a
+    where it lies in front of it within ``capture`` or behind it by at most ``penetration`` (default:
+    capture), somewhere on their overlap.
 
-    self_contact: seg_b is seg_a; pairs of a segment with itself or a neighbour (a shared node) are
+    self_contact: seg_b is seg_a; pairs of a facet with itself or a neighbour (a shared node) are
     left out.
     """
     x = np.asarray(points, dtype=np.float64)
     n = len(x)
     seg_a = np.asarray(seg_a, dtype=np.int64)
     seg_b = np.asarray(seg_b, dtype=np.int64)
+    k = seg_a.shape[1]  # nodes per facet: 2 (segments, 2-D) or 4 (quadrilaterals, 3-D)
+    if seg_b.shape[1] != k or (k, x.shape[1]) not in ((2, 2), (4, 3)):
+        raise ValueError(f"mortar_pass: facets of {k} and {seg_b.shape[1]} nodes with {x.shape[1]}-D points "
+                         "(2-D: segments of 2 nodes; 3-D: quadrilaterals of 4)")
     pairs = candidate_pairs(facet_boxes(x, seg_a, capture), facet_boxes(x, seg_b, capture))
     if self_contact and len(pairs):
         a, b = seg_a[pairs[:, 0]], seg_b[pairs[:, 1]]
-        shared = (a[:, :1] == b).any(axis=1) | (a[:, 1:] == b).any(axis=1)
+        shared = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
         pairs = pairs[~shared]
-    d, m, overlap = segment_pair_integrals(x, seg_a, seg_b, pairs, capture,
-                                           capture if penetration is None else penetration)
+    integrals = segment_pair_integrals if k == 2 else facet_pair_integrals
+    d, m, overlap = integrals(x, seg_a, seg_b, pairs, capture, capture if penetration is None else penetration)
     keep = overlap > 0.0
     pairs, d, m = pairs[keep], d[keep], m[keep]
-    rows = np.repeat(seg_a[pairs[:, 0]], 2, axis=1).ravel()           # A of [A, B] for B in seg_a
-    d_cols = np.tile(seg_a[pairs[:, 0]], (1, 2)).ravel()
-    m_cols = np.tile(seg_b[pairs[:, 1]], (1, 2)).ravel()
+    rows = np.repeat(seg_a[pairs[:, 0]], k, axis=1).ravel()           # A of [A, B] for B in seg_a
+    d_cols = np.tile(seg_a[pairs[:, 0]], (1, k)).ravel()
+    m_cols = np.tile(seg_b[pairs[:, 1]], (1, k)).ravel()
     D = sp.csr_matrix((d.ravel(), (rows, d_cols)), shape=(n, n))
     M = sp.csr_matrix((m.ravel(), (rows, m_cols)), shape=(n, n))
     area = np.asarray(D.sum(axis=1)).ravel()
@@ -125,8 +150,9 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
 class DualPassContact:
     """The dual-pass operators of two surfaces (or one against itself) at one configuration.
 
-    points (n, 2) of all bodies; seg_a, seg_b (n_s, 2) outward segments of the two sides (seg_b None:
-    self contact of seg_a); capture: the search distance (a gap larger than it is not paired);
+    points (n, dim) of all bodies; seg_a, seg_b outward facets of the two sides, (n_s, 2) segments in
+    2-D or (n_s, 4) quadrilaterals in 3-D (seg_b None: self contact of seg_a); capture: the search
+    distance (a gap larger than it is not paired);
     penetration: the deepest overlap still paired (default: capture; keep it below the bodies'
     thickness, or a thin body's far side pairs).
     Multipliers are numbered pass by pass: pass a -> b's nodes, then pass b -> a's.
@@ -147,19 +173,21 @@ class DualPassContact:
         return int(self.offsets[-1])
 
     def gap_operator(self) -> sp.csr_matrix:
-        """G (n_multipliers, 2 n): weighted gaps g = G x.ravel() (x (n, 2) positions)."""
+        """G (n_multipliers, dim n): weighted gaps g = G x.ravel() (x (n, dim) positions)."""
         return self._directed_operator(lambda n: n)
 
     def _directed_operator(self, direction) -> sp.csr_matrix:
-        """Rows d_A (x) (M_A - D_A) with d_A = direction(normals) of each pass."""
+        """Rows d_A (x) (M_A - D_A) with d_A = direction(normals) of each pass: column dim * C + k
+        holds (M_AC - D_AC) d_A[k]."""
+        dim = self.points.shape[1]
         blocks = []
         for p in self.passes:
             diff = (p.M - p.D).tocoo()
             nrm = direction(p.normals)[diff.row]
-            rows = np.concatenate([diff.row, diff.row])
-            cols = np.concatenate([2 * diff.col, 2 * diff.col + 1])
-            vals = np.concatenate([diff.data * nrm[:, 0], diff.data * nrm[:, 1]])
-            blocks.append(sp.csr_matrix((vals, (rows, cols)), shape=(len(p.nodes), 2 * len(self.points))))
+            rows = np.concatenate([diff.row] * dim)
+            cols = np.concatenate([dim * diff.col + k for k in range(dim)])
+            vals = np.concatenate([diff.data * nrm[:, k] for k in range(dim)])
+            blocks.append(sp.csr_matrix((vals, (rows, cols)), shape=(len(p.nodes), dim * len(self.points))))
         return sp.vstack(blocks, format="csr")
 
     def constraint_operator(self) -> sp.csr_matrix:
@@ -168,7 +196,8 @@ class DualPassContact:
 
     def tangent_operator(self) -> sp.csr_matrix:
         """T: the constraint operator with each multiplier's tangent t_A = (n_y, -n_x) in place of its
-        normal (the weighted tangential slip of the friction, friction.py)."""
+        normal (the weighted tangential slip of the friction, friction.py). 2-D only."""
+        _require_2d(self.points, "the tangent operator (friction)")
         return 0.5 * self._directed_operator(_tangent)
 
     def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
@@ -177,8 +206,9 @@ class DualPassContact:
         return self.gap_operator() @ x.ravel()
 
     def forces(self, pressures: np.ndarray) -> np.ndarray:
-        """Nodal forces (n, 2) of multiplier pressures: B^T p."""
-        return (self.constraint_operator().T @ np.asarray(pressures, dtype=np.float64)).reshape(-1, 2)
+        """Nodal forces (n, dim) of multiplier pressures: B^T p."""
+        dim = self.points.shape[1]
+        return (self.constraint_operator().T @ np.asarray(pressures, dtype=np.float64)).reshape(-1, dim)
 
     def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:
         """J (n_multipliers, n_multipliers): j(mu, lambda) = mu . J lambda (module docstring)."""
@@ -212,6 +242,7 @@ class SinglePassMortar(DualPassContact):
         return self.gap_operator()
 
     def tangent_operator(self) -> sp.csr_matrix:
+        _require_2d(self.points, "the tangent operator (friction)")
         return self._directed_operator(_tangent)
 
     def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:

@@ -1,9 +1,11 @@
 """solvers/contact/dual_pass.py: the dual-pass operators on non-matching flat faces (gaps, forces,
-no side preferred, the stabilization) and self contact of a folded surface."""
+no side preferred, the stabilization) and self contact of a folded surface; in 2-D (segments) and
+3-D (quadrilateral facets)."""
 import numpy as np
+import pytest
 
 from solvers.contact.dual_pass import DualPassContact, nodal_normals
-from tests.solvers.contact.geometry import facing_faces, hat_integrals
+from tests.solvers.contact.geometry import facing_faces, grid_face, hat_integrals
 
 XA = [0.0, 0.3, 0.55, 0.8, 1.0]
 XB = [0.0, 0.4, 0.7, 1.0]
@@ -83,3 +85,79 @@ def test_nodal_normals_average_the_segment_normals():
     pts = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
     n = nodal_normals(pts, np.array([[0, 1], [1, 2]]))
     np.testing.assert_allclose(n, [[0, -1], [np.sqrt(0.5), -np.sqrt(0.5)], [1, 0]], atol=1e-15)
+
+
+# ----------------------------------------------------------------------------- 3-D (quadrilateral facets)
+def _grids_3d(gap):
+    """A 4 x 4 grid (normal +z, z = 0) under a 3 x 3 grid turned 25 degrees inside (normal -z, z = gap),
+    both on [0, 1]^2."""
+    pa, qa = grid_face(4, 0.0)
+    pb, qb = grid_face(3, gap, turn=np.radians(25), up=False)
+    return np.r_[pa, pb], qa, qb + len(pa)
+
+
+def test_3d_weighted_gaps_forces_and_stabilization_of_parallel_faces():
+    d = 0.013
+    pts, qa, qb = _grids_3d(d)
+    c = DualPassContact(pts, qa, qb, capture=0.05)
+    assert c.n_multipliers == 25 + 16 and c.gap_operator().shape == (41, 3 * len(pts))
+    area = np.concatenate([p.area for p in c.passes])
+    np.testing.assert_allclose(area.sum(), 2.0, rtol=1e-15)  # each face's area 1: measured 1.1e-16
+    np.testing.assert_allclose(c.gaps(), d * area, rtol=2e-15)  # measured 3.3e-16
+    # a uniform pressure: each pass carries half, the upper face is pushed up by p times its area
+    f = c.forces(np.full(c.n_multipliers, 7.0))
+    np.testing.assert_allclose(f[25:].sum(axis=0), [0.0, 0.0, 7.0], atol=5e-15)  # measured 8.9e-16
+    np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=5e-15)  # measured 8.0e-16
+    # equal uniform pressures on both sides: the stabilization's traction jump vanishes
+    J = c.stabilization(1e-3, 0.3)
+    assert np.abs(J @ np.full(c.n_multipliers, 5.0)).max() <= 1e-19  # measured 1.5e-20 (gamma h p = 1.5e-3)
+
+
+def test_3d_friction_is_refused_and_nodal_normals_weigh_by_area():
+    pts, qa, qb = _grids_3d(0.0)
+    c = DualPassContact(pts, qa, qb, capture=0.05)
+    with pytest.raises(NotImplementedError, match="2-D only"):
+        c.tangent_operator()
+    # a roof: a 2 x 1 facet in the plane z = 0 and a 1 x 1 facet sloping up at 45 degrees along x
+    roof = np.array([[-2, 0, 0], [0, 0, 0], [0, 1, 0], [-2, 1, 0], [1, 0, 1], [1, 1, 1]], float)
+    n = nodal_normals(roof, np.array([[0, 1, 2, 3], [1, 4, 5, 2]]))
+    s = np.sqrt(2.0)  # the sloping facet's area, with its normal (-1, 0, 1) / sqrt 2
+    want = np.array([0.0, 0.0, 2.0]) + np.array([-1.0, 0.0, 1.0])  # area-weighted sum at the ridge
+    np.testing.assert_allclose(n[1], want / np.linalg.norm(want), atol=1e-15)
+    np.testing.assert_allclose(n[0], [0, 0, 1], atol=1e-15)
+    np.testing.assert_allclose(n[4], [-1 / s, 0, 1 / s], atol=1e-15)
+
+
+def test_3d_self_contact_of_a_slotted_block_finds_the_facing_walls_only():
+    from solvers.lagrange.mesh import box_mesh
+    from solvers.lagrange.surface import exterior_facets
+    # a 1 x 0.2 x 1 block of 5 x 1 x 5 hexahedra with the slot 0.4 < x < 0.6, z > 0.2 cut out: its walls
+    # x = 0.4 and x = 0.6 face each other across 0.2
+    m = box_mesh([0.0, 0.0, 0.0], [1.0, 0.2, 1.0], [5, 1, 5])
+    ix, iz = np.arange(25) % 5, np.arange(25) // 5
+    cells = m.cells[~((ix == 2) & (iz >= 1))]
+    facets, _ = exterior_facets(cells, "hexahedron", m.num_points, m.points)
+    c = DualPassContact(m.points, facets, None, capture=0.25, penetration=0.05)  # the arms are 0.4 thick
+    (p,) = c.passes
+    x = m.points[p.nodes]
+    on_wall = np.isclose(x[:, 0], 0.4) | np.isclose(x[:, 0], 0.6)
+    assert on_wall.all() and len(p.nodes) == 2 * 5 * 2   # the slot's bottom (z = 0.2) is a neighbour
+    np.testing.assert_allclose(np.abs(p.normals[:, 0]), 1.0, rtol=0, atol=1e-15)
+    # the walls overlap fully: every gap is 0.2 times the area, from either wall (the two passes)
+    np.testing.assert_allclose(c.gaps(), 0.2 * p.area, rtol=3e-15)  # measured 6.7e-16
+    np.testing.assert_allclose(p.area.sum(), 2 * 0.8 * 0.2, rtol=1e-15)  # measured 2.2e-16
+    assert np.allclose(c.forces(np.ones(c.n_multipliers)).sum(axis=0), 0.0, atol=1e-16)  # measured 0
+    # allowed to pair 0.25 behind, the block's bottom (z = 0) pairs with the slot's (z = 0.2) through
+    # the 0.2 under the slot
+    deep = DualPassContact(m.points, facets, None, capture=0.25)
+    assert np.isclose(m.points[deep.passes[0].nodes, 2], 0.0).any()
+
+
+def test_3d_self_contact_leaves_out_facets_that_share_a_node():
+    # a sheet folded back on itself along x = 1: the two facets face each other 0 to 0.1 apart, but
+    # share the fold's edge (nodes 1 and 2): neighbours, not contact partners
+    pts = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 0.1], [0, 1, 0.1]], float)
+    sheet = np.array([[0, 1, 2, 3], [1, 4, 5, 2]])
+    assert DualPassContact(pts, sheet, None, capture=0.2).n_multipliers == 0
+    # the same facets as two surfaces do pair
+    assert DualPassContact(pts, sheet[:1], sheet[1:], capture=0.2).n_multipliers > 0
