@@ -33,6 +33,10 @@ of h / 100 per unit length of body in series; the KKT system stays well conditio
   penetration carries a uniform stress: the penalty mortar passes the patch test but for its
   compliance, an error (h / kappa) / (1 + h / kappa) in Crisfield's test (tests: test_penalty.py).
   Self contact (one pass of a surface on itself, B = G / 2, every pair twice) is the same formula.
+  The limit kappa -> infinity is the two passes without stabilization, which over-constrain (both
+  passes' weighted gaps zero make the gap field vanish: a sliding stack of beams held shut locks,
+  test_method_failures.py: 0.26 of the dual pass's deflection at kappa 1e10, 0.9998 at the default);
+  keep kappa well below ~1e5 on bending problems.
 
 * ``PenaltyNodeToSurface`` (``node_to_surface_penalty``, passes=1; ``node_to_surface_double_penalty``,
   passes=2): node_to_surface.py's geometric gaps, a multiplier being a nodal force (per unit
