@@ -4,8 +4,9 @@ multiplier solve every step (solvers/contact/explicit.py).
 
     [contact]
     pairs = [["striker", "target"], ["ring", "ring"]]   # a body twice: self contact
-    method = "dual_pass_mortar"                        # default; or mortar, node_to_surface, ...
-    alpha = 1.0                                        # stabilization weight (> 0)
+    method = "dual_pass_mortar"                        # default; or mortar, node_to_surface, penalty, ...
+    alpha = 1.0                                        # stabilization weight (> 0); penalty methods:
+                                                       # compliance factor, k = 100 E / (alpha h)
     capture = 1e-3                                     # search distance, m (default: median element edge)
     friction = 0.2                                     # Coulomb's mu (default 0: frictionless)
 

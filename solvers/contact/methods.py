@@ -4,7 +4,12 @@ gaps, n_multipliers) so that a case or a campaign sets them side by side (issue 
 * ``dual_pass_mortar`` (default): Puso & Solberg's stabilized dual pass (dual_pass.py);
 * ``mortar``: standard single-pass mortar, side a non-mortar (biased);
 * ``node_to_surface``: single pass, side a's nodes on side b (fails the patch test);
-* ``node_to_surface_double``: both sides' nodes (over-constrained: locks).
+* ``node_to_surface_double``: both sides' nodes (over-constrained: locks);
+* ``penalty``: the dual pass's mortar gaps with a penalty law instead of the stabilization
+  (penalty.py: J is the compliance h / (kappa E), kappa = 100 / alpha);
+* ``node_to_surface_penalty``, ``node_to_surface_double_penalty``: node-to-surface, single and
+  double pass, with the same penalty law per tributary length (the double pass's locking as a
+  stiff penalty rather than a singular system).
 
 A method is ``build(points, seg_a, seg_b, capture, penetration)``, registered by name with the
 module and class that build it (imported on first use: the case schema reads the names without
@@ -39,6 +44,9 @@ register("dual_pass_mortar", Method("solvers.contact.dual_pass", "DualPassContac
 register("mortar", Method("solvers.contact.dual_pass", "SinglePassMortar"))
 register("node_to_surface", Method("solvers.contact.node_to_surface", "NodeToSurface", {"passes": 1}))
 register("node_to_surface_double", Method("solvers.contact.node_to_surface", "NodeToSurface", {"passes": 2}))
+register("penalty", Method("solvers.contact.penalty", "PenaltyMortar", self_contact=True))
+register("node_to_surface_penalty", Method("solvers.contact.penalty", "PenaltyNodeToSurface", {"passes": 1}))
+register("node_to_surface_double_penalty", Method("solvers.contact.penalty", "PenaltyNodeToSurface", {"passes": 2}))
 
 
 def build(method: str, points, seg_a, seg_b, capture: float, penetration: float | None = None):

@@ -18,7 +18,8 @@ def _with_method(monkeypatch, module, method, swap=False):
 
 
 def test_registered_names_and_an_unknown_one():
-    assert set(methods.METHODS) == {"dual_pass_mortar", "mortar", "node_to_surface", "node_to_surface_double"}
+    assert set(methods.METHODS) == {"dual_pass_mortar", "mortar", "node_to_surface", "node_to_surface_double",
+                                    "penalty", "node_to_surface_penalty", "node_to_surface_double_penalty"}
     with pytest.raises(KeyError, match="registered: dual_pass_mortar, mortar"):
         methods.build("penalty_magic", np.zeros((2, 2)), np.zeros((0, 2), int), np.zeros((0, 2), int), 0.1)
 
