@@ -54,10 +54,10 @@ class ExplicitContact:
         self.last_pressure = np.zeros(0)                # each multiplier's pressure of the last step
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
-        """facets (nf, 2) outward segments as indices into the surface nodes; body (nf,); mass (ns,);
+        """facets (nf, 2 | 4) outward segments or quadrilaterals as indices into the surface nodes; body (nf,); mass (ns,);
         free (ns, dim) 1 where a velocity component is not prescribed."""
-        if facets.shape[1] != 2:
-            raise NotImplementedError("contact is 2-D only so far (3-D facet mortar: issue 11, to come)")
+        if facets.shape[1] != 2 and self.friction > 0.0:
+            raise NotImplementedError("friction is 2-D only so far (the 3-D tangent operator is to come)")
         self.facets, self.body = np.asarray(facets), np.asarray(body)
         self.mass, self.free = np.asarray(mass, float), np.asarray(free, float)
 

@@ -29,6 +29,7 @@ class Method:
     attr: str
     kwargs: dict = field(default_factory=dict)
     self_contact: bool = False
+    three_d: bool = False   # has quadrilateral facets (mortar_facets.py); tested in 3-D
 
 
 METHODS: dict[str, Method] = {}
@@ -40,7 +41,7 @@ def register(name: str, method: Method) -> None:
     METHODS[name] = method
 
 
-register("dual_pass_mortar", Method("solvers.contact.dual_pass", "DualPassContact", self_contact=True))
+register("dual_pass_mortar", Method("solvers.contact.dual_pass", "DualPassContact", self_contact=True, three_d=True))
 register("mortar", Method("solvers.contact.dual_pass", "SinglePassMortar"))
 register("node_to_surface", Method("solvers.contact.node_to_surface", "NodeToSurface", {"passes": 1}))
 register("node_to_surface_double", Method("solvers.contact.node_to_surface", "NodeToSurface", {"passes": 2}))

@@ -124,10 +124,8 @@ def test_two_pass_mortar_multipliers_without_stabilization_on_hertz():
     """Hertz (test_hertz_2d.py, 80 arc segments): how the load splits between the passes (the
     cylinder's and the flat's multipliers) and how far each pass's pressure is from Hertz's inside
     |x| < 0.8 a, against alpha. test_methods.py shows the same freedom on the patch test."""
-    with pytest.raises(RuntimeError, match="cycles"):  # alpha 1e-12: the active set cycles (iteration 38)
-        hertz.cylinder_on_flat(80, 1e-12)
     measured = {}
-    for alpha in (1e-6, 1e-3, 1.0):
+    for alpha in (1e-12, 1e-6, 1e-3, 1.0):
         x, nq, contact, sol = hertz.cylinder_on_flat(80, alpha)
         share, dev = [], []
         for xs, p, area in _pass_pressures(x, contact, sol):
@@ -138,6 +136,10 @@ def test_two_pass_mortar_multipliers_without_stabilization_on_hertz():
         measured[alpha] = (share[0] / sum(share), dev)
         # the forces do not see the split: the contact carries P'/2 at every alpha (measured 1.1e-13)
         assert abs(contact.forces(sol.p)[:nq, 1].sum() - hertz.P / 2) <= 1e-11 * hertz.P
+    # alpha 1e-12 (the active set settles in 24 iterations since kkt.py takes gaps of -1e-17 as closed;
+    # it cycled before): the cylinder's pass carries nothing, the flat's pressures are off Hertz's by
+    # 9.4 p0 (measured), wild node-to-node oscillation
+    assert measured[1e-12][0] < 1e-6 and measured[1e-12][1][1] > 5.0, measured
     # the cylinder's pass's share of the load: measured 0 (alpha 1e-6), 0.053 (1e-3), 0.484 (1);
     # the passes' pressures off Hertz's by (1.0, 1.06) p0 at 1e-6 (the flat's oscillating node to
     # node: its neighbours' second difference 0.79 p0), (0.98, 1.0) p0 at 1e-3, (0.068, 0.116) at 1
