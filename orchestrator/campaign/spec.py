@@ -85,8 +85,12 @@ SCHEMA = {
                 "charts": {"type": "object", "additionalProperties": {
                     "type": "object", "additionalProperties": False,
                     "properties": {"error_label": {"type": "string", "minLength": 1},
-                                   "reference": {"type": "string", "minLength": 1}}},
-                    "x-allowed": "must be a table of chart names, each { error_label, reference }"},
+                                   "reference": {"type": "string", "minLength": 1},
+                                   # the chart's own x axis (its series vary another axis)
+                                   "resolution": {"type": "string", "minLength": 1},
+                                   "resolution_label": {"type": "string", "minLength": 1}}},
+                    "x-allowed": "must be a table of chart names, each { error_label, reference, resolution, "
+                                 "resolution_label }"},
                 "plots": {"type": "array", "items": {
                     "type": "object", "required": ["value", "label"], "additionalProperties": False,
                     "properties": {"value": {"type": "string", "minLength": 1},
