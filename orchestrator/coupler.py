@@ -65,6 +65,30 @@ def conservation_residuals(hist: dict[str, np.ndarray], roles) -> dict[str, floa
     return rel
 
 
+def contact_balances(hist: dict[str, np.ndarray], roles) -> dict[str, dict[str, float]]:
+    """summary.json's `contact`, per solver role that has contact: the work the contact did on the
+    bodies over the run (`work`, J; <= 0: the energy it took, booked in the energy balance), that work
+    over the role's initial kinetic energy (`dissipated_rel`, when it had any), the largest contact
+    force (`force_max`, the norm of the contact_force components: N, per unit thickness in 2-D) and
+    the most multipliers active at once (`active_max`)."""
+    out: dict[str, dict[str, float]] = {}
+    for r in roles:
+        comps = [hist[f"{r}.contact_force_{c}"] for c in "xyz" if f"{r}.contact_force_{c}" in hist]
+        if not comps or not len(comps[0]):
+            continue
+        d = {"force_max": float(np.sqrt(sum(a**2 for a in comps)).max())}
+        if f"{r}.contact_active" in hist:
+            d["active_max"] = float(hist[f"{r}.contact_active"].max())
+        w = hist.get(f"{r}.contact_work")
+        if w is not None and len(w):
+            d["work"] = float(w[-1])
+            ke0 = hist.get(f"{r}.kinetic_energy")
+            if ke0 is not None and len(ke0) and ke0[0] > 0:
+                d["dissipated_rel"] = float(-w[-1] / ke0[0])
+        out[r] = d
+    return out
+
+
 DT_COLLAPSE = 1e-6
 """A stable step below this share of the largest step so far stops the run (LS-DYNA's DTMIN): a
 penetrator's background went on at t = 21.4 us with steps of 3e-18 s (a node driven to ~1e14 m/s),
@@ -506,6 +530,7 @@ class Coupler:
             "dt": {"min": self.dt_min if np.isfinite(self.dt_min) else None, "max": self.dt_max},
             "ranks": {r: self.inter[r].Get_remote_size() for r in self.roles},
             "conservation": conservation,
+            **({"contact": contact} if (contact := contact_balances(hist, list(self.history))) else {}),
             "final": final,
             "machine": {"host": socket.gethostname(), "cores": os.cpu_count()},
         }

@@ -21,6 +21,12 @@ def test_bars_impact(tmp_path):
     assert set(s["check"]["metrics"]) == {"contact_duration", "interface_stress", "velocity_striker_rel",
                                           "velocity_target_rel", "contact_dissipation_rel",
                                           "momentum_balance_rel", "energy_balance_rel"}
+    # summary.json's contact balances: the energy the contact took (the check's figure), the largest
+    # force (measured 1.26 x the plateau rho c v0 / 2 x 0.005 m: the first step in contact stops the
+    # interface nodes within one step), the 7 multipliers
+    c = s["contact"]["lagrange"]
+    assert c["dissipated_rel"] == s["check"]["metrics"]["contact_dissipation_rel"]["value"]
+    assert c["work"] < 0 and 1.0 < c["force_max"] / (197.5e6 * 0.005) < 1.4 and c["active_max"] == 7
     with h5py.File(out / "diagnostics.h5") as h:
         t, active = h["time"][...], h["lagrange.contact_active"][...]
     # the 3 + 4 interface nodes of both passes are active in contact, none after the release
