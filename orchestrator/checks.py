@@ -292,6 +292,116 @@ def hertz(case, out, history, params):
             "peak_pressure": float(np.mean(peaks)), "contact_nodes": float(count)}
 
 
+def _inside_cells(x: np.ndarray, nodes: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Which of the points x[nodes] lie strictly inside a quad of ``cells`` (counter-clockwise, ids
+    into x) that does not have the point as a corner: (nodes,) bool. A point on a cell's edge (a
+    closed contact, gap 0) is not inside; the cells are taken as convex (their edges' half-planes)."""
+    from solvers.contact.search import candidate_pairs, facet_boxes
+
+    if len(nodes) == 0 or len(cells) == 0:
+        return np.zeros(len(nodes), bool)
+    pts = x[nodes]
+    pairs = candidate_pairs(np.stack([pts, pts], axis=1), facet_boxes(x, cells))
+    i, c = pairs[:, 0], pairs[:, 1]
+    corner = (cells[c] == nodes[i, None]).any(axis=1)
+    i, c = i[~corner], c[~corner]
+    q = x[cells[c]]                                    # (np, 4, 2)
+    e = np.roll(q, -1, axis=1) - q                     # the edges a -> b
+    r = pts[i, None, :] - q
+    cross = e[..., 0] * r[..., 1] - e[..., 1] * r[..., 0]
+    inside = np.zeros(len(nodes), bool)
+    inside[i[(cross > 0.0).all(axis=1)]] = True
+    return inside
+
+
+def _segment_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distances of the points p (n, 2) to every segment a-b (m, 2): (n, m)."""
+    d = b - a
+    t = np.einsum("nmk,mk->nm", p[:, None, :] - a[None], d) / np.maximum(np.einsum("mk,mk->m", d, d), 1e-300)
+    foot = a[None] + np.clip(t, 0.0, 1.0)[..., None] * d[None]
+    return np.linalg.norm(p[:, None, :] - foot, axis=2)
+
+
+@register_check("self_contact", params=table(
+    {"body": {"type": "string"}, "thickness": number("m", exclusiveMinimum=0.0)}, required=("body", "thickness")))
+def self_contact(case, out, history, params):
+    """A 2-D body in contact with itself and with other bodies ([contact] pairs naming ``body``).
+
+    At every output, on the deformed meshes: a surface node of one body of a pair that lies strictly
+    inside a cell of the other (of its own body, for the self pair: a cell it is not a corner of)
+    has interpenetrated; its depth is its distance to the nearest exterior facet of that body that
+    does not have it as a node. ``penetration_rel``: the deepest over the run over ``thickness``
+    (``penetration_self_rel`` and ``penetration_other_rel`` split by pair; ``penetration_time``).
+    ``self_contact_nodes``: surface nodes of ``body`` that carry contact pressure at the last output
+    and whose nearest exterior facet (of the bodies paired with it, its own not counting the two at
+    the node) is its own: the self contact, both sides of it (the dual pass puts multipliers on both);
+    ``self_contact_pressure`` their mean pressure. ``energy_balance_rel``: the largest |solver's
+    energy balance| over the run (it books the boundaries' reactions and the contact's work)."""
+    from orchestrator import output
+    from solvers.lagrange.mesh import body_mesh
+    from solvers.lagrange.surface import exterior_facets
+
+    dim = case["run"]["dimension"]
+    if dim != 2:
+        raise ValueError(f"check kind self_contact is 2-D (run.dimension = {dim})")
+    bodies = case["lagrange"]["bodies"]
+    names = [b["name"] for b in bodies]
+    name = params["body"]
+    pairs = [tuple(p) for p in case.get("contact", {}).get("pairs", []) if name in p]
+    if (name, name) not in pairs:
+        raise ValueError(f"check.params.body = {name!r}: no self contact pair [{name!r}, {name!r}] in [contact] pairs")
+    meshes = [body_mesh(b, dim) for b in bodies]
+    first = np.cumsum([0] + [m.num_points for m in meshes])
+    cells, facets = [], []
+    for k, m in enumerate(meshes):
+        f, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)
+        cells.append(m.cells + first[k])
+        facets.append(f + first[k])
+    surf = [np.unique(f) for f in facets]
+
+    def depth(x, nodes, k):
+        """Distance of the points x[nodes] to body k's exterior facets that do not have them as a node."""
+        f = facets[k]
+        dist = _segment_distances(x[nodes], x[f[:, 0]], x[f[:, 1]])
+        dist[(f[None, :, :] == nodes[:, None, None]).any(axis=2)] = np.inf
+        return dist.min(axis=1)
+
+    worst = {"self": 0.0, "other": 0.0}
+    worst_time = 0.0
+    steps = output.read_steps(out, "lagrange")
+    for time, _, index in steps:
+        x = output.read_step(out, "lagrange", index)[0][:, :2]
+        for a, b in pairs:
+            ka, kb = names.index(a), names.index(b)
+            for src, dst in ((ka, kb),) if ka == kb else ((ka, kb), (kb, ka)):
+                nodes = surf[src]
+                hit = nodes[_inside_cells(x, nodes, cells[dst])]
+                if len(hit):
+                    d = float(depth(x, hit, dst).max())
+                    key = "self" if ka == kb else "other"
+                    if d > max(worst.values()):
+                        worst_time = time
+                    worst[key] = max(worst[key], d)
+    # the last output: the self contact's nodes
+    x, pd, _ = output.read_step(out, "lagrange", steps[-1][2])
+    x = x[:, :2]
+    k = names.index(name)
+    nodes = surf[k]
+    p = pd["contact_pressure"][nodes]
+    pressed = nodes[p > 0.0]
+    partners = sorted({names.index(q) for pair in pairs for q in pair} - {k})
+    own = depth(x, pressed, k)
+    other = (np.min([depth(x, pressed, j) for j in partners], axis=0) if partners and len(pressed)
+             else np.full(len(pressed), np.inf))
+    mine = own < other
+    t = float(params["thickness"])
+    return {"penetration_rel": max(worst.values()) / t, "penetration_self_rel": worst["self"] / t,
+            "penetration_other_rel": worst["other"] / t, "penetration_time": float(worst_time),
+            "self_contact_nodes": float(np.count_nonzero(mine)),
+            "self_contact_pressure": float(p[p > 0.0][mine].mean()) if mine.any() else 0.0,
+            "energy_balance_rel": float(np.max(np.abs(history["lagrange.energy_balance_rel"])))}
+
+
 @register_check("momentum")
 def momentum(case, out, history, params):
     """Conservation residuals of a free body: maxima over the whole run."""

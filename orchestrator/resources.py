@@ -41,7 +41,7 @@ LAGRANGE_MESH_BYTES_PER_ELEMENT = {"box": {2: 254, 3: 428}, "built": {2: 940, 3:
                                    "file": {2: 1084, 3: 1084}}
 """Held by EVERY Lagrangian rank (each builds the global mesh and its partition), per element:
 box meshes (253.5, 427.8); quarter cylinders (939.6: the generator's orientation pass; 2-D quarter
-disks are charged that figure, not measured); mesh files
+disks and rings are charged that figure, not measured); mesh files
 (read_mesh of 50^3 hexahedra: Gmsh 2.2 ASCII 1068.0, binary 1059.5, VTU 1083.5; 2-D files are
 charged the 3-D figure)."""
 ALE_BYTES_PER_ZONE = {2: 483, 3: 719}
@@ -179,7 +179,7 @@ def _mesh_kind(body: dict) -> str:
 
 def _mesh_key(i: int, body: dict) -> str:
     m = body["mesh"]
-    sub = ["box", "cells"] if "box" in m else [k for k in ("quarter_cylinder", "quarter_disk", "file") if k in m][:1]
+    sub = ["box", "cells"] if "box" in m else [k for k in ("quarter_cylinder", "quarter_disk", "ring", "file") if k in m][:1]
     return format_key(["lagrange", "bodies", i, "mesh", *sub])
 
 
@@ -187,7 +187,7 @@ def _mesh_value(body: dict):
     m = body["mesh"]
     if "box" in m:
         return m["box"]["cells"]
-    for k in ("quarter_cylinder", "quarter_disk"):
+    for k in ("quarter_cylinder", "quarter_disk", "ring"):
         if k in m:
             return m[k]
     return m["file"].name

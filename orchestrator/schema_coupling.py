@@ -50,6 +50,10 @@ def _body_box(mesh: dict, dim: int):
         r, length = float(q["radius"]), float(q["length"])
         b = [float(v) for v in q.get("base", (0.0, 0.0, 0.0))]
         return b[:dim], [b[0] + r, b[1] + r, b[2] + length][:dim]
+    if "ring" in mesh:
+        q = mesh["ring"]
+        r, c = float(q["outer_radius"]), [float(v) for v in q["centre"]]
+        return [c[0] - r, c[1] - r], [c[0] + r, c[1] + r]
     return None
 
 

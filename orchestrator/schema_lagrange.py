@@ -15,7 +15,9 @@ file has the table, or no solver table at all (the Lagrangian solver is the defa
 has ``size = {"elements": int, "nodes": int}`` (Python ints, computed without building the mesh,
 or counted after reading a mesh file).  ``mesh`` is exactly one of
 ``{"box": {lower, upper, cells}}``, ``{"quarter_cylinder": {radius, length, radial_cells,
-axial_cells[, base]}}`` or ``{"file": Path}`` (resolved, absolute); ``initial_velocity`` holds
+axial_cells[, base]}}``, ``{"quarter_disk": {radius, radial_cells[, base]}}``, ``{"ring":
+{inner_radius, outer_radius, radial_cells, angular_cells, centre}}`` or ``{"file": Path}``
+(resolved, absolute); ``initial_velocity`` holds
 ``dimension`` items, each a float or an expression string in the coordinates (``x, y`` in 2D,
 ``x, y, z`` in 3D).
 """
@@ -115,17 +117,29 @@ QUARTER_DISK = table(
     },
     required=("radius", "radial_cells"),
 )
+RING = table(
+    {
+        "inner_radius": number("m", exclusiveMinimum=0),
+        "outer_radius": number("m", exclusiveMinimum=0),
+        "radial_cells": integer(None, minimum=1),
+        "angular_cells": integer(None, minimum=3),  # fewer would be flat (zero area)
+        # the ring's centre (default the origin)
+        "centre": {**vector("m"), "minItems": 2, "maxItems": 2},
+    },
+    required=("inner_radius", "outer_radius", "radial_cells", "angular_cells"),
+)
 MESH = table(
     {
         "box": BOX,
         "quarter_cylinder": QUARTER_CYLINDER,
         "quarter_disk": QUARTER_DISK,
+        "ring": RING,
         "file": {"type": "string", "minLength": 1},
     },
     minProperties=1,
     maxProperties=1,
 )
-MESH["x-allowed"] = "must have exactly one of: box, quarter_cylinder, quarter_disk, file"
+MESH["x-allowed"] = "must have exactly one of: box, quarter_cylinder, quarter_disk, ring, file"
 
 BODY = table(
     {
@@ -243,6 +257,11 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             q = mesh_in["quarter_disk"]
             mesh = {"quarter_disk": {"radius": to_float(q["radius"]), "radial_cells": int(q["radial_cells"]),
                                      **({"base": [to_float(v) for v in q["base"]]} if "base" in q else {})}}
+        elif "ring" in mesh_in:
+            q = mesh_in["ring"]
+            mesh = {"ring": {"inner_radius": to_float(q["inner_radius"]), "outer_radius": to_float(q["outer_radius"]),
+                             "radial_cells": int(q["radial_cells"]), "angular_cells": int(q["angular_cells"]),
+                             "centre": [to_float(v) for v in q.get("centre", (0.0, 0.0))]}}
         elif "quarter_cylinder" in mesh_in:
             q = mesh_in["quarter_cylinder"]
             mesh = {"quarter_cylinder": {"radius": to_float(q["radius"]), "length": to_float(q["length"]),
@@ -328,6 +347,14 @@ def check_lagrange(case: dict, data: dict) -> None:
             if dim != 2:
                 raise CaseError(format_key(base + ["mesh", "quarter_disk"]), mesh["quarter_disk"],
                                 f"quarter_disk meshes are 2D only (run.dimension = {dim}; in 3D: quarter_cylinder)")
+        elif "ring" in mesh:
+            if dim != 2:
+                raise CaseError(format_key(base + ["mesh", "ring"]), mesh["ring"],
+                                f"ring meshes are 2D only (run.dimension = {dim})")
+            ring = body["mesh"]["ring"]
+            if not ring["inner_radius"] < ring["outer_radius"]:
+                raise CaseError(format_key(base + ["mesh", "ring", "outer_radius"]), mesh["ring"]["outer_radius"],
+                                f"must be > inner_radius ({fmt_num(ring['inner_radius'])})")
         elif "quarter_cylinder" in mesh:
             if dim != 3:
                 raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),

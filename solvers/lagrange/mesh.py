@@ -29,6 +29,7 @@ __all__ = [
     "body_mesh_size",
     "quarter_disk_mesh",
     "quarter_cylinder_mesh",
+    "ring_mesh",
     "extrude",
     "read_mesh",
     "concatenate",
@@ -272,6 +273,43 @@ def quarter_disk_mesh(radius: float, radial_cells: int, *, core_fraction: float 
     return Mesh(points, cells)
 
 
+def ring_mesh(inner_radius: float, outer_radius: float, radial_cells: int, angular_cells: int,
+              centre: Sequence[float] = (0.0, 0.0)) -> Mesh:
+    """Full annulus inner_radius <= |x - centre| <= outer_radius as a polar grid of quads.
+
+    Nodes (k, j) at radius r_k = inner + k (outer - inner) / radial_cells, k = 0..radial_cells, and
+    angle 2 pi j / angular_cells, j = 0..angular_cells-1 (the seam at angle 0 is one column of nodes:
+    the last cells close onto j = 0), id = j + angular_cells k (angle fastest). Cell (k, j) is
+    (k, j), (k+1, j), (k+1, j+1), (k, j+1): counter-clockwise, as (r, theta) -> (x, y) has Jacobian r
+    > 0. Every boundary node lies on its circle, so the area is that of the two inscribed polygons:
+    angular_cells / 2 sin(2 pi / angular_cells) (outer^2 - inner^2).
+    """
+    radial_cells, angular_cells = int(radial_cells), int(angular_cells)
+    ri, ro = float(inner_radius), float(outer_radius)
+    if radial_cells < 1:
+        raise MeshError(f"ring needs radial_cells >= 1, got {radial_cells}")
+    if angular_cells < 3:  # (two cells around would be flat: zero area)
+        raise MeshError(f"ring needs angular_cells >= 3, got {angular_cells}")
+    if not (np.isfinite(ri) and np.isfinite(ro) and 0.0 < ri < ro):
+        raise MeshError(f"ring needs 0 < inner_radius < outer_radius, got {ri}, {ro}")
+    c = np.asarray(centre, dtype=np.float64)
+    if c.shape != (2,) or not np.all(np.isfinite(c)):
+        raise MeshError(f"ring needs a centre of 2 finite coordinates, got {list(np.ravel(centre))}")
+    na = angular_cells
+    r = np.linspace(ri, ro, radial_cells + 1)
+    r[-1] = ro  # (exactly on the outer circle)
+    theta = 2.0 * np.pi * np.arange(na) / na
+    points = c + (r[:, None, None] * np.stack([np.cos(theta), np.sin(theta)], axis=1)[None]).reshape(-1, 2)
+    k, j = np.meshgrid(np.arange(radial_cells), np.arange(na), indexing="ij")
+    k, j = k.ravel(), j.ravel()
+    j1 = (j + 1) % na  # the seam: the last column of cells closes onto the first column of nodes
+    cells = np.stack([j + na * k, j + na * (k + 1), j1 + na * (k + 1), j1 + na * k], axis=1)
+    vol = cell_volumes(points, cells)
+    if np.any(vol <= 0):  # (not for any valid input: the guard of the orientation claimed above)
+        raise MeshError("ring: a cell is not counter-clockwise")
+    return Mesh(points, cells)
+
+
 def extrude(mesh2d: Mesh, length: float, layers: int, z0: float = 0.0) -> Mesh:
     """Extrude a 2D quad mesh along +z into hexahedra (z0 .. z0 + length, ``layers`` cells)."""
     if mesh2d.dim != 2:
@@ -386,6 +424,10 @@ def body_mesh(spec: dict, dim: int) -> Mesh:
         if any(q.get("base", ())):
             mesh.points += np.asarray(q["base"], np.float64)
         return mesh
+    if "ring" in m:
+        q = m["ring"]
+        return ring_mesh(q["inner_radius"], q["outer_radius"], q["radial_cells"], q["angular_cells"],
+                         q.get("centre", (0.0, 0.0)))
     return read_mesh(m["file"], dim)
 
 
@@ -397,9 +439,9 @@ def _core_cells(radial_cells: int, core_fraction: float = 0.5) -> int:
 
 
 def body_mesh_size(spec: dict) -> tuple[int, int] | None:
-    """(cells, nodes) of the generated mesh of a body (box or quarter_cylinder) without building
-    it, in Python integers (no overflow however large); None for a mesh file (known after reading).
-    The counts follow box_mesh and quarter_disk_mesh/extrude exactly (tests compare them)."""
+    """(cells, nodes) of the generated mesh of a body (box, quarter_disk, quarter_cylinder or ring)
+    without building it, in Python integers (no overflow however large); None for a mesh file (known after reading).
+    The counts follow box_mesh, quarter_disk_mesh/extrude and ring_mesh exactly (tests compare them)."""
     m = spec["mesh"]
     if "box" in m:
         cells = [int(c) for c in m["box"]["cells"]]
@@ -416,6 +458,9 @@ def body_mesh_size(spec: dict) -> tuple[int, int] | None:
         cells2d = core * core + ring * 2 * core
         nodes2d = (core + 1) ** 2 + ring * (2 * core + 1)
         return cells2d * layers, nodes2d * (layers + 1)
+    if "ring" in m:
+        n, na = int(m["ring"]["radial_cells"]), int(m["ring"]["angular_cells"])
+        return n * na, (n + 1) * na  # (the seam merged: angular_cells columns of nodes)
     return None
 
 

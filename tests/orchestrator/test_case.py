@@ -210,7 +210,7 @@ BAD_CASES = [
     ("jc_missing_yield_stress", "materials.copper.yield_stress", "required key missing"),
     ("jc_melt_below_room", "materials.copper.melt_temperature", "room_temperature"),
     ("quarter_cylinder_2d", "lagrange.bodies[0].mesh.quarter_cylinder", "3D only"),
-    ("two_mesh_kinds", "lagrange.bodies[0].mesh", "exactly one of: box, quarter_cylinder, quarter_disk, file"),
+    ("two_mesh_kinds", "lagrange.bodies[0].mesh", "exactly one of: box, quarter_cylinder, quarter_disk, ring, file"),
     ("no_bodies", "lagrange.bodies", "at least one body"),
     ("ale_periodic_one_side", "ale.boundaries.x_lower", "periodic must be set on both"),
     ("ale_piston_eulerian", "ale.boundaries.x_lower.piston", "piston faces need ale.mode = \"lagrangian\""),
@@ -241,6 +241,8 @@ BAD_CASES = [
     ("lagrange_quarter_disk_3d", "lagrange.bodies[0].mesh.quarter_disk", "quarter_disk meshes are 2D only"),
     ("contact_friction_node_to_surface", "contact.friction", "friction needs a mortar method"),
     ("lagrange_gravity_length", "lagrange.gravity", "dimension mismatch"),
+    ("lagrange_ring_inner_beyond_outer", "lagrange.bodies[0].mesh.ring.outer_radius", "must be > inner_radius (0.1)"),
+    ("lagrange_ring_3d", "lagrange.bodies[0].mesh.ring", "ring meshes are 2D only"),
 ]
 
 

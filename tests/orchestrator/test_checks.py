@@ -796,7 +796,7 @@ def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
               "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact", "sliding",
-              "uniform_stress", "hertz"}
+              "uniform_stress", "hertz", "self_contact"}
     assert set(checks.CHECKS) == tested
 
 
@@ -942,3 +942,60 @@ def test_hertz(tmp_path):
     assert r["metrics"]["load"]["rel_error"] == 0.0
     case, h = hertz_output(tmp_path / "wide", 1.05 * a, p0, -0.005)
     assert failed(checks.run_check(case, tmp_path / "wide", h)) == ["half_width"]
+
+
+# ---- self_contact (a ring crushed onto itself) ---------------------------------------------------
+def ring_output(out, move=None, plate_down=0.0, pressed=(50, 150)):
+    """cases/ring_self_contact's bodies at their reference positions (the ring 0.1 mm from each plate),
+    contact pressure on the ring's inner nodes ``pressed`` (ids j of angle 2 pi j / 200: the top and
+    bottom of the hole); ``move`` = (node, target): one node moved there; ``plate_down``: the top plate
+    lowered by that much (m)."""
+    from solvers.lagrange.mesh import body_mesh, concatenate
+
+    case = load_case(CASES / "ring_self_contact")
+    mesh, body = concatenate([body_mesh(b, 2) for b in case["lagrange"]["bodies"]])
+    x = mesh.points.copy()
+    top = np.unique(mesh.cells[body == 2])
+    x[top, 1] -= plate_down
+    if move is not None:
+        x[move[0]] = move[1]
+    p = np.zeros(mesh.num_points)
+    p[list(pressed)] = 1.0e5
+    write(out, "lagrange", mesh.cells, [(0.0, mesh.points, {"contact_pressure": np.zeros(mesh.num_points)}, {}),
+                                        (0.05, x, {"contact_pressure": p}, {})])
+    return case, mesh
+
+
+def test_self_contact(tmp_path):
+    """Nothing inside anything: no penetration, the 2 pressed inner nodes counted as the self contact
+    (their nearest facet is the ring's own); the top plate 0.5 mm down (the ring's top node 0.4 mm
+    inside it) fails penetration_rel by 0.4 / 4.5; the ring's top inner node moved into a cell of the
+    bottom wall fails penetration_self_rel (its depth: the distance to the nearer wall face); no
+    pressure fails self_contact_nodes; an energy residual of 1e-13 fails its metric."""
+    case, mesh = ring_output(tmp_path / "good")
+    r = checks.run_check(case, tmp_path / "good", history("lagrange"))
+    assert r["passed"], r
+    assert r["metrics"]["penetration_rel"]["value"] == 0.0 and r["metrics"]["self_contact_nodes"]["value"] == 2.0
+    assert r["reported"]["self_contact_pressure"] == pytest.approx(1.0e5)
+
+    case, _ = ring_output(tmp_path / "plate", plate_down=5e-4)
+    r = checks.run_check(case, tmp_path / "plate", history("lagrange"))
+    assert failed(r) == ["penetration_rel"]
+    assert r["metrics"]["penetration_rel"]["value"] == pytest.approx(4e-4 / 0.0045, rel=1e-6)
+    assert r["reported"]["penetration_time"] == 0.05
+
+    cell = mesh.cells[150 + 200]            # radial layer 1 (of 3), at the bottom (angle 3 pi / 2)
+    centre = mesh.points[cell].mean(axis=0)
+    case, _ = ring_output(tmp_path / "self", move=(50, centre))
+    r = checks.run_check(case, tmp_path / "self", history("lagrange"))
+    assert failed(r) == ["penetration_rel", "penetration_self_rel"]
+    # its depth: to the nearer of the wall's faces, the chords at distance r cos(pi / 200) from the
+    # centre across the cell's mid-angle (where the centre lies)
+    r_c, cos = np.hypot(*centre), np.cos(np.pi / 200)
+    assert r["reported"]["penetration_other_rel"] == 0.0
+    assert r["metrics"]["penetration_self_rel"]["value"] == pytest.approx(
+        min(r_c - 0.0955 * cos, 0.1 * cos - r_c) / 0.0045, rel=1e-9)
+
+    case, _ = ring_output(tmp_path / "none", pressed=())
+    r = checks.run_check(case, tmp_path / "none", history("lagrange", energy=1e-13))
+    assert failed(r) == ["energy_balance_rel", "self_contact_nodes"]

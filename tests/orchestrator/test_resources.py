@@ -59,6 +59,15 @@ def test_quarter_cylinder_size_without_building(radial, axial):
     assert body_mesh_size(spec) == (len(m.cells), len(m.points))
 
 
+@pytest.mark.parametrize("radial, angular", [(1, 3), (3, 200), (4, 17)])
+def test_ring_size_without_building(radial, angular):
+    from solvers.lagrange.mesh import ring_mesh
+
+    m = ring_mesh(0.5, 1.0, radial, angular)
+    spec = {"mesh": {"ring": {"inner_radius": 0.5, "outer_radius": 1.0, "radial_cells": radial, "angular_cells": angular}}}
+    assert body_mesh_size(spec) == (len(m.cells), len(m.points))
+
+
 def test_box_size_in_python_integers():
     m = box_mesh([0, 0, 0], [1, 1, 1], [3, 4, 5])
     assert body_mesh_size({"mesh": {"box": {"cells": [3, 4, 5]}}}) == (len(m.cells), len(m.points))

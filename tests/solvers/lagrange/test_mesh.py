@@ -299,3 +299,63 @@ def test_a_quarter_cylinder_with_a_base_is_the_one_at_the_origin_moved_there():
     assert np.array_equal(moved.points, at0.points + np.array([0.5, 0.25, 0.02506]))
     lo, hi = _body_box({"quarter_cylinder": {**q, "base": [0.5, 0.25, 0.02506]}}, 3)
     assert lo == [0.5, 0.25, 0.02506] and hi == [0.501, 0.251, 0.02506 + 0.01]
+
+
+# ----------------------------------------------------------------------------- ring
+@pytest.mark.parametrize("radial, angular", [(1, 3), (2, 7), (3, 200), (5, 64)])
+def test_ring_polygon_area_counts_orientation_and_two_loops(radial, angular):
+    """The annulus: area of its two inscribed polygons exactly, n/2 sin(2 pi/n) (ro^2 - ri^2) (it tends
+    to pi (ro^2 - ri^2)); the counts of body_mesh_size; every Jacobian positive; the seam merged (no
+    node twice); the exterior facets two closed loops, the outer one outward, the inner one pointing
+    into the hole (towards the centre)."""
+    from solvers.lagrange.mesh import _jacobian_dets, body_mesh, body_mesh_size, ring_mesh
+    from solvers.lagrange.surface import exterior_facets
+
+    ri, ro, c = 0.7, 1.3, np.array([0.25, -2.0])
+    spec = {"mesh": {"ring": {"inner_radius": ri, "outer_radius": ro, "radial_cells": radial,
+                              "angular_cells": angular, "centre": list(c)}}}
+    m = body_mesh(spec, 2)
+    assert np.array_equal(m.points, ring_mesh(ri, ro, radial, angular, c).points)
+    assert body_mesh_size(spec) == (m.num_cells, m.num_points) == (radial * angular, (radial + 1) * angular)
+    area = angular / 2 * np.sin(2 * np.pi / angular) * (ro**2 - ri**2)
+    assert cell_volumes(m).sum() == pytest.approx(area, rel=1e-13)
+    if angular >= 64:
+        assert cell_volumes(m).sum() == pytest.approx(np.pi * (ro**2 - ri**2), rel=(2 * np.pi / angular) ** 2 / 6)
+    assert np.all(_jacobian_dets(m.points, m.cells) > 0)
+    assert len(np.unique(np.round(m.points, 12), axis=0)) == m.num_points
+    r = np.hypot(*(m.points - c).T)
+    assert r.min() == pytest.approx(ri, rel=1e-14) and r.max() == pytest.approx(ro, rel=1e-14)
+
+    facets, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)
+    assert len(facets) == 2 * angular
+    # every boundary node starts one facet and ends one: the facets chain into closed loops
+    assert np.array_equal(np.sort(facets[:, 0]), np.sort(facets[:, 1]))
+    nxt = dict(zip(facets[:, 0].tolist(), facets[:, 1].tolist()))
+    loops, left = [], set(nxt)
+    while left:
+        a = start = left.pop()
+        loop = [a]
+        while (a := nxt[a]) != start:
+            loop.append(a)
+            left.discard(a)
+        loops.append(loop)
+    assert sorted(len(lp) for lp in loops) == [angular, angular]
+    x = m.points[facets]
+    d = x[:, 1] - x[:, 0]
+    normal = np.stack([d[:, 1], -d[:, 0]], axis=1)          # outward of the cells
+    radial_dir = 0.5 * (x[:, 0] + x[:, 1]) - c
+    outer = np.hypot(*(x[:, 0] - c).T) > 0.5 * (ri + ro)   # (its nodes on the outer circle)
+    assert outer.sum() == angular
+    dots = np.einsum("fi,fi->f", normal, radial_dir)
+    assert np.all(dots[outer] > 0) and np.all(dots[~outer] < 0)  # the inner loop points into the hole
+
+
+@pytest.mark.parametrize("args, match", [((1.0, 1.0, 2, 8), "inner_radius < outer_radius"),
+                                         ((0.0, 1.0, 2, 8), "inner_radius < outer_radius"),
+                                         ((0.5, 1.0, 0, 8), "radial_cells >= 1"),
+                                         ((0.5, 1.0, 2, 2), "angular_cells >= 3")])
+def test_ring_refuses_bad_input(args, match):
+    from solvers.lagrange.mesh import ring_mesh
+
+    with pytest.raises(MeshError, match=match):
+        ring_mesh(*args)
