@@ -197,6 +197,99 @@ def sliding(case, out, history, params):
             "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
 
 
+def surface_penetration(points: np.ndarray, facets: np.ndarray, nodes: np.ndarray, depth: float) -> np.ndarray:
+    """(len(nodes),) how far each of ``nodes`` lies behind the surface ``facets`` (outward
+    quadrilaterals or segments of ``points``), 0 where it lies in front or off it.
+
+    A node is measured against the facets whose plane (line) it projects into the inside of, up to
+    ``depth`` on either side; of those the nearest along its normal is the surface it belongs to (a
+    node behind a plate's top face is also behind its bottom face's plane, by the thickness: the
+    nearer face decides). The facets are taken as planar (centroid, unit area vector): the deformed
+    quadrilaterals of an impact warp by round-off-to-micrometres, far below an element."""
+    from solvers.contact.search import candidate_pairs, facet_boxes
+    from solvers.lagrange.surface import facet_area_vectors
+
+    points = np.asarray(points, float)
+    dim = points.shape[1]
+    x = points[facets]                                   # (nf, k, dim)
+    n = facet_area_vectors(points, facets)
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    p = points[nodes]
+    pairs = candidate_pairs(facet_boxes(points, nodes[:, None]), facet_boxes(points, facets, depth))
+    i, j = pairs[:, 0], pairs[:, 1]
+    d = np.einsum("ij,ij->i", p[i] - x[j].mean(axis=1), n[j])   # signed: < 0 behind the facet
+    q = p[i] - d[:, None] * n[j]                                # the projection into its plane
+    e0 = x[j]
+    e1 = np.roll(x[j], -1, axis=1)
+    # inside: on the inner side of every edge (a little slack: a node over a shared edge counts for both)
+    edge = e1 - e0
+    rel = q[:, None, :] - e0
+    if dim == 3:
+        side = np.einsum("ikc,ic->ik", np.cross(edge, rel), n[j])
+    else:  # a segment, its two "edges" a->b and b->a: the projection between its ends
+        side = np.einsum("ikc,ikc->ik", edge, rel)
+    scale = np.einsum("ikc,ikc->ik", edge, edge)
+    inside = np.all(side >= -1e-9 * scale, axis=1) & (np.abs(d) <= depth)
+    i, d = i[inside], d[inside]
+    order = np.lexsort((np.abs(d), i))                 # per node, the nearest facet first
+    i, d = i[order], d[order]
+    first = np.r_[True, i[1:] != i[:-1]] if len(i) else np.zeros(0, bool)
+    out = np.zeros(len(nodes))
+    out[i[first]] = np.maximum(-d[first], 0.0)
+    return out
+
+
+@register_check("no_penetration", params=table({"depth": number(exclusiveMinimum=0.0)}))
+def no_penetration(case, out, history, params):
+    """Bodies in contact (every pair of the [contact] table, both ways; self contact is not measured)
+    at every output step: how far the surface nodes of one body lie behind the deformed exterior
+    facets of the other (surface_penetration), the largest over the run relative to the median edge
+    of the penetrated body's facets (``penetration_max_rel``; ``penetration_max`` in m; ``depth``
+    the deepest still measured, in those edges, default 1: a node deeper sits nearer another face).
+    With the contact's record: ``contact_impulse`` (N s, |the time integral of the force the first
+    pair's first body takes|), ``contact_force_peak`` (N), ``contact_time`` (from the record before
+    the force first exceeds 1 % of its peak to the last record above it), ``contact_dissipation_rel``
+    (-contact_work over the initial kinetic energy) and the balances' largest residuals."""
+    from orchestrator import output
+    from solvers.lagrange.mesh import body_mesh
+    from solvers.lagrange.surface import exterior_facets
+
+    dim = case["run"]["dimension"]
+    bodies = case["lagrange"]["bodies"]
+    names = [b["name"] for b in bodies]
+    meshes = [body_mesh(b, dim) for b in bodies]
+    first = np.cumsum([0] + [m.num_points for m in meshes])
+    surfaces = []
+    for k, m in enumerate(meshes):
+        f, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)
+        edge = np.linalg.norm(m.points[f] - m.points[np.roll(f, -1, axis=1)], axis=2)
+        surfaces.append((f + first[k], np.unique(f) + first[k], float(np.median(edge))))
+    pairs = [(names.index(a), names.index(b)) for a, b in case["contact"]["pairs"] if a != b]
+    worst, worst_rel = 0.0, 0.0
+    for _, _, index in output.read_steps(out, "lagrange"):
+        points = output.read_step(out, "lagrange", index)[0][:, :dim]
+        for a, b in pairs:
+            for s, t in ((a, b), (b, a)):   # t's nodes behind s's facets
+                facets, _, h = surfaces[s]
+                pen = surface_penetration(points, facets, surfaces[t][1], float(params.get("depth", 1.0)) * h)
+                worst, worst_rel = max(worst, float(pen.max())), max(worst_rel, float(pen.max()) / h)
+    t = history["time"]
+    force = np.stack([history[f"lagrange.contact_force_{c}"] for c in "xyz"[:dim]], axis=1)
+    mag = np.linalg.norm(force, axis=1)
+    on = np.flatnonzero(mag > 0.01 * mag.max()) if mag.max() > 0 else np.zeros(0, int)
+    # the force is each step's impulse over the central difference's (dt_prev + dt) / 2: the
+    # trapezoid of the records (every step) sums those impulses up to the first and last half steps
+    impulse = np.trapezoid(force, t, axis=0)
+    vals = {"penetration_max_rel": worst_rel, "penetration_max": worst,
+            "contact_impulse": float(np.linalg.norm(impulse)), "contact_force_peak": float(mag.max()),
+            "contact_time": float(t[on[-1]] - t[max(on[0] - 1, 0)]) if len(on) else 0.0,
+            "contact_dissipation_rel": float(-history["lagrange.contact_work"][-1] / history["lagrange.kinetic_energy"][0])}
+    for k, a in history.items():
+        if k.endswith("_balance_rel"):
+            vals[k.split(".", 1)[1]] = float(np.max(np.abs(a)))
+    return vals
+
+
 VOIGT = {"xx": 0, "yy": 1, "zz": 2, "xy": 3, "yz": 4, "zx": 5}
 
 

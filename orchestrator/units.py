@@ -22,6 +22,7 @@ FIELD_UNITS: dict[str, str] = {
     "temperature": "K",
     "density": "kg/m^3",
     "bulk_viscosity": "Pa",
+    "contact_pressure": "Pa",
     # ALE zones
     "specific_internal_energy": "J/kg",
     "sound_speed": "m/s",

@@ -106,7 +106,8 @@ class MortarPass:
 
 
 def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, capture: float,
-                penetration: float | None = None, self_contact: bool = False) -> MortarPass:
+                penetration: float | None = None, self_contact: bool = False,
+                pairs: np.ndarray | None = None) -> MortarPass:
     """The pass a -> b: candidate pairs within ``capture`` (search.py), their integrals, assembled.
 
     seg_a, seg_b: (n, 2) segments with points (n, 2), or (n, 4) quadrilateral facets with points
@@ -116,6 +117,8 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
 
     self_contact: seg_b is seg_a; pairs of a facet with itself or a neighbour (a shared node) are
     left out.
+
+    pairs: the candidate pairs when known (the other pass's, swapped: DualPassContact), else searched.
     """
     x = np.asarray(points, dtype=np.float64)
     n = len(x)
@@ -125,7 +128,8 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
     if seg_b.shape[1] != k or (k, x.shape[1]) not in ((2, 2), (4, 3)):
         raise ValueError(f"mortar_pass: facets of {k} and {seg_b.shape[1]} nodes with {x.shape[1]}-D points "
                          "(2-D: segments of 2 nodes; 3-D: quadrilaterals of 4)")
-    pairs = candidate_pairs(facet_boxes(x, seg_a, capture), facet_boxes(x, seg_b, capture))
+    if pairs is None:
+        pairs = candidate_pairs(facet_boxes(x, seg_a, capture), facet_boxes(x, seg_b, capture))
     if self_contact and len(pairs):
         a, b = seg_a[pairs[:, 0]], seg_b[pairs[:, 1]]
         shared = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
@@ -164,8 +168,13 @@ class DualPassContact:
         if seg_b is None:
             self.passes = (mortar_pass(self.points, seg_a, seg_a, capture, penetration, self_contact=True),)
         else:
-            self.passes = (mortar_pass(self.points, seg_a, seg_b, capture, penetration),
-                           mortar_pass(self.points, seg_b, seg_a, capture, penetration))
+            # one search for both passes: box overlap is symmetric, so pass b -> a's candidates are
+            # pass a -> b's swapped, put in candidate_pairs' order (by the first index, then the
+            # second): the same array its own search returns, so the same sums in the same order
+            ab = candidate_pairs(facet_boxes(self.points, seg_a, capture), facet_boxes(self.points, seg_b, capture))
+            ba = ab[np.lexsort((ab[:, 0], ab[:, 1]))][:, ::-1]
+            self.passes = (mortar_pass(self.points, seg_a, seg_b, capture, penetration, pairs=ab),
+                           mortar_pass(self.points, seg_b, seg_a, capture, penetration, pairs=np.ascontiguousarray(ba)))
         self.offsets = np.cumsum([0] + [len(p.nodes) for p in self.passes])
 
     @property

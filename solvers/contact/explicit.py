@@ -111,7 +111,13 @@ class ExplicitContact:
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
         # K = M/dt^2 is diagonal: the displacements u = dt^2 M^-1 B^T p eliminate, leaving the
         # multipliers' own system (the Schur complement of the KKT matrix, kkt.py's equations)
-        sol = solve_schur_complement(((dt * dt) * (B @ sp.diags(inv_m) @ B.T) + scale * J1).tocsc(), B @ xstar)
+        g0 = B @ xstar
+        # the active set starts from the multipliers whose gap the predictor closes (the set the first
+        # iteration from p = 0 would pick), not from all of them: the first factorisation is of the
+        # approaching surface's rows only, not the whole system's (mostly gaps that stay open). The
+        # solution (p > 0 exactly where its set settles) is the same: the same last factorisation.
+        sol = solve_schur_complement(((dt * dt) * (B @ sp.diags(inv_m) @ B.T) + scale * J1).tocsc(), g0,
+                                     active=g0 < 0.0)
         self.last_active = int(sol.active.sum())
         self.last_pressure = sol.p * (dt / (dt_force or dt))
         u = (dt * dt) * inv_m * (B.T @ sol.p)

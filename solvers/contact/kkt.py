@@ -79,11 +79,13 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     return _active_set(nm, c, solve_on, max_iterations, active, c * gap_tol)
 
 
-def _lu_solve(mat: sp.spmatrix, rhs: np.ndarray, n_active: int, it: int, why: str) -> np.ndarray:
-    """mat^-1 rhs by SuperLU; a singular system (SuperLU's "Factor is exactly singular", or a
-    non-finite result) raises one RuntimeError naming the active multipliers and ``why``."""
+def _lu_solve(mat: sp.spmatrix, rhs: np.ndarray, n_active: int, it: int, why: str,
+              permc_spec: str = "COLAMD") -> np.ndarray:
+    """mat^-1 rhs by SuperLU (column ordering ``permc_spec``); a singular system (SuperLU's "Factor
+    is exactly singular", or a non-finite result) raises one RuntimeError naming the active
+    multipliers and ``why``."""
     try:
-        sol = spla.splu(sp.csc_matrix(mat)).solve(rhs)
+        sol = spla.splu(sp.csc_matrix(mat), permc_spec=permc_spec).solve(rhs)
     except RuntimeError:
         sol = np.full(mat.shape[0], np.nan)
     if not np.all(np.isfinite(sol)):
@@ -109,10 +111,12 @@ def _active_set(nm: int, c: float, solve_on, max_iterations: int, active: np.nda
     raise RuntimeError(f"the contact active set did not settle in {max_iterations} iterations")
 
 
-def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int = 50) -> ContactSolution:
+def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int = 50,
+                           active: np.ndarray | None = None) -> ContactSolution:
     """The same complementarity with the displacements eliminated (a diagonal K: the explicit step):
     gaps g~ = g0 + S p with S (nm, nm) sparse symmetric positive (semi)definite; p >= 0, g~ >= 0,
-    p g~ = 0, by the same primal-dual active set (c = 1 / mean of diag S). Returns u empty."""
+    p g~ = 0, by the same primal-dual active set (c = 1 / mean of diag S), from ``active`` (default
+    every multiplier). Returns u empty."""
     S = sp.csc_matrix(S)
     nm = S.shape[0]
     d = S.diagonal()
@@ -121,7 +125,12 @@ def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int =
     def solve_on(a: np.ndarray, it: int):
         p = np.zeros(nm)
         if len(a):
-            p[a] = _lu_solve(S[a][:, a], -g0[a], len(a), it, "the multipliers' system has no unique solution")
+            # S is symmetric: a minimum-degree ordering of S + S^T fills in less than SuperLU's
+            # default COLAMD (the 10^4 multipliers of `immerse bench contact`: 5.8 against 14 ms a
+            # factorisation, the same p to 2.6e-15); all active: S itself, not an indexed copy
+            sub = S if len(a) == nm else S[a][:, a]
+            p[a] = _lu_solve(sub, -g0[a], len(a), it, "the multipliers' system has no unique solution",
+                             permc_spec="MMD_AT_PLUS_A")
         return np.zeros(0), p, g0 + S @ p
 
-    return _active_set(nm, c, solve_on, max_iterations)
+    return _active_set(nm, c, solve_on, max_iterations, active)

@@ -796,7 +796,7 @@ def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
               "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact", "sliding",
-              "uniform_stress", "hertz", "self_contact"}
+              "uniform_stress", "hertz", "self_contact", "no_penetration"}
     assert set(checks.CHECKS) == tested
 
 
@@ -878,6 +878,64 @@ def test_sliding(tmp_path):
     assert failed(r) == ["acceleration"] and r["metrics"]["acceleration"]["rel_error"] == pytest.approx(0.1, rel=1e-9)
     with pytest.raises(ValueError, match="fewer than 3 records"):
         checks.run_check(case_with("block_on_incline", window=[0.0405, 0.0415]), tmp_path, h)
+
+
+
+# ---- no_penetration (3-D plates) ----------------------------------------------------------------
+def plates_output(out, drop, tilt=0.0):
+    """cases/impacting_plates's meshes: at step 0 as built (the striker 1 mm above the plate), at
+    step 1 the striker lowered by ``drop`` less ``tilt`` per metre of y above its edge y = -0.03 (a
+    sheared striker: its edge deepest); a contact force of 1e4 N along z for 1 us of a 2 us record."""
+    from solvers.lagrange.mesh import body_mesh, concatenate
+
+    case = load_case(CASES / "impacting_plates")
+    # (only the penetration judged: the other metrics' references are the run's)
+    case["check"]["metrics"] = {"penetration_max_rel": case["check"]["metrics"]["penetration_max_rel"]}
+    meshes = [body_mesh(b, 3) for b in case["lagrange"]["bodies"]]
+    mesh, _ = concatenate(meshes)
+    moved = mesh.points.copy()
+    s = slice(0, meshes[0].num_points)  # the striker: the first body
+    moved[s, 2] -= drop - tilt * (moved[s, 1] + 0.03)
+    write(out, "lagrange", mesh.cells, [(0.0, mesh.points, {}, {}), (1e-6, moved, {}, {})])
+    h = history("lagrange", n=21)
+    h["time"] = np.linspace(0.0, 2e-6, 21)
+    for c in "xy":
+        h[f"lagrange.contact_force_{c}"] = np.zeros(21)
+    h["lagrange.contact_force_z"] = np.where((h["time"] > 0.5e-6) & (h["time"] <= 1.5e-6 + 1e-12), 1e4, 0.0)
+    h["lagrange.kinetic_energy"] = np.full(21, 10.0)
+    h["lagrange.contact_work"] = np.full(21, -0.1)
+    return case, h
+
+
+def test_no_penetration(tmp_path):
+    """Plates 1 mm apart, then touching: no penetration (0 exactly: nodes on the surface are not
+    behind it); lowered 1.2 mm, each plate's face 0.2 mm behind the other's: 2e-4 m, over the
+    striker's median edge (5 mm, its own facets the plate's nodes are behind) 0.04, failing the case's
+    tolerance; a sheared striker whose edge dips 0.1 mm: that edge's depth, 1e-4 / 6.25e-3 (the plate's
+    edge); the contact record's impulse (1e4 N over 1 us), peak, time and dissipation."""
+    case, h = plates_output(tmp_path / "apart", drop=1e-3)
+    r = checks.run_check(case, tmp_path / "apart", h)
+    assert r["metrics"]["penetration_max_rel"]["value"] == 0.0
+    v = {**r["reported"], **{k: m["value"] for k, m in r["metrics"].items()}}
+    assert v["contact_impulse"] == pytest.approx(1e-2, rel=1e-9) and v["contact_force_peak"] == 1e4
+    assert v["contact_time"] == pytest.approx(1.0e-6, rel=1e-9) and v["contact_dissipation_rel"] == pytest.approx(0.01)
+    case, h = plates_output(tmp_path / "deep", drop=1.2e-3)
+    r = checks.run_check(case, tmp_path / "deep", h)
+    assert failed(r) == ["penetration_max_rel"]
+    assert r["reported"]["penetration_max"] == pytest.approx(2e-4, rel=1e-9)
+    assert r["metrics"]["penetration_max_rel"]["value"] == pytest.approx(2e-4 / 5e-3, rel=1e-9)
+    case, h = plates_output(tmp_path / "edge", drop=1.1e-3, tilt=1e-3 / 5e-3)
+    r = checks.run_check(case, tmp_path / "edge", h)
+    assert r["reported"]["penetration_max"] == pytest.approx(1e-4, rel=1e-9)
+    assert r["metrics"]["penetration_max_rel"]["value"] == pytest.approx(1e-4 / 6.25e-3, rel=1e-9)
+    # a node beyond the other body's faces (the striker 2 mm aside of the plate's edge, below its top)
+    # is not behind them: 0
+    case, h = plates_output(tmp_path / "aside", drop=1.5e-3)
+    pts = output.read_step(tmp_path / "aside", "lagrange", 1)[0]
+    pts[:13 * 13 * 4, 0] += 0.082   # (the striker's 13 x 13 x 4 nodes first)
+    write(tmp_path / "aside", "lagrange", output.read_mesh_file(tmp_path / "aside", "lagrange")[0],
+          [(0.0, pts, {}, {}), (1e-6, pts, {}, {})])
+    assert checks.run_check(case, tmp_path / "aside", h)["metrics"]["penetration_max_rel"]["value"] == 0.0
 
 
 # ---- static contact: uniform_stress (patch test), hertz ------------------------------------------
