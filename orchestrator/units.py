@@ -23,6 +23,7 @@ FIELD_UNITS: dict[str, str] = {
     "density": "kg/m^3",
     "bulk_viscosity": "Pa",
     "contact_pressure": "Pa",
+    "contact_gap": "m",
     # ALE zones
     "specific_internal_energy": "J/kg",
     "sound_speed": "m/s",

@@ -28,7 +28,7 @@ import scipy.sparse as sp
 from solvers.contact import methods
 from solvers.contact.kkt import solve_schur_complement
 
-__all__ = ["ExplicitContact"]
+__all__ = ["ExplicitContact", "constraint_weights", "nodal_mean"]
 
 
 class ExplicitContact:
@@ -52,6 +52,7 @@ class ExplicitContact:
         self.last_sliding = 0
         self.multiplier_nodes = np.zeros(0, np.int64)   # the surface node of each multiplier
         self.last_pressure = np.zeros(0)                # each multiplier's pressure of the last step
+        self.last_gap = np.zeros(0)                     # each multiplier's gap at the last step's end (m)
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
         """facets (nf, 2 | 4) outward segments or quadrilaterals as indices into the surface nodes; body (nf,); mass (ns,);
@@ -96,6 +97,7 @@ class ExplicitContact:
         self.last_active = 0
         self.last_sliding = 0
         self.last_pressure = np.zeros(len(self.multiplier_nodes))
+        self.last_gap = np.zeros(len(self.multiplier_nodes))
         if B is None:
             return out
         inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
@@ -121,6 +123,7 @@ class ExplicitContact:
         self.last_active = int(sol.active.sum())
         self.last_pressure = sol.p * (dt / (dt_force or dt))
         u = (dt * dt) * inv_m * (B.T @ sol.p)
+        self.last_gap = (g0 + B @ u) / constraint_weights(B, dim)
         impulse = np.repeat(self.mass, dim) * u / dt
         if T is not None and self.last_active:
             # Coulomb: the tangential impulses on the velocities after the normal ones, bounded by mu
@@ -135,6 +138,12 @@ class ExplicitContact:
             impulse = impulse + T.T @ q
         return impulse.reshape(ns, dim)
 
+    def nodal_gap(self, ns: int) -> np.ndarray:
+        """(ns,) the gap (m) at the end of the last step at the surface nodes: the mean over the
+        multipliers a node carries, the capture distance where it carries none (nothing facing it
+        within reach)."""
+        return nodal_mean(self.multiplier_nodes, self.last_gap, ns, self.capture or 0.0)
+
     def nodal_pressure(self, ns: int) -> np.ndarray:
         """(ns,) the last step's contact pressure at the surface nodes: the mean of the multipliers a
         node carries (both passes of the dual pass), 0 where it carries none (node-to-surface methods:
@@ -144,3 +153,27 @@ class ExplicitContact:
         np.add.at(total, self.multiplier_nodes, self.last_pressure)
         np.add.at(count, self.multiplier_nodes, 1.0)
         return np.divide(total, count, out=np.zeros(ns), where=count > 0)
+
+
+def constraint_weights(B: sp.spmatrix, dim: int) -> np.ndarray:
+    """(nm,) what turns a row's weighted gap B x into a distance: half the sum over the row's nodes of
+    |its coefficient| (each node's block is coefficient x normal). A mortar row A has -D on its own
+    side and +M on the other, each summing to its area (B = G/2 of the dual pass: area / 2, single
+    pass: the area); a node-to-surface row has +1 on the node and -1 shared by the segment: 1."""
+    B = sp.csr_matrix(B)
+    per_dof = B.multiply(B).tocsc()
+    n_nodes = B.shape[1] // dim
+    gather = sp.csr_matrix((np.ones(B.shape[1]), (np.arange(B.shape[1]), np.repeat(np.arange(n_nodes), dim))),
+                           shape=(B.shape[1], n_nodes))
+    node = (per_dof @ gather).tocsr()
+    node.data = np.sqrt(node.data)
+    w = 0.5 * np.asarray(node.sum(axis=1)).ravel()
+    return np.where(w > 0, w, 1.0)
+
+
+def nodal_mean(nodes: np.ndarray, values: np.ndarray, n: int, empty: float) -> np.ndarray:
+    """(n,) the mean of ``values`` over the entries of each node in ``nodes``, ``empty`` where none."""
+    total, count = np.zeros(n), np.zeros(n)
+    np.add.at(total, nodes, values)
+    np.add.at(count, nodes, 1.0)
+    return np.divide(total, count, out=np.full(n, float(empty)), where=count > 0)

@@ -212,7 +212,16 @@ class QuasiStaticSolver(LagrangeSolver):
         return np.divide(total, count, out=np.zeros(n), where=count > 0)
 
     def point_fields(self) -> dict[str, np.ndarray]:
-        return {"contact_pressure": self.contact_pressure()} if self.pairs else {}
+        """The contact pressure and gap (m: of the linearised contact, B (X + u) over each row's
+        weight; the capture distance where nothing faces a node), when the case has contact."""
+        if not self.pairs:
+            return {}
+        from solvers.contact.explicit import constraint_weights, nodal_mean
+
+        n = self.n_nodes_global
+        gap = (self._B @ (self.global_points + self.u).ravel()) / constraint_weights(self._B, self.dim)
+        return {"contact_pressure": self.contact_pressure(),
+                "contact_gap": nodal_mean(self.multiplier_nodes % n, gap, n, self.capture)}
 
     def diagnostics(self) -> dict[str, float]:
         d = {"load_factor": self.time / self.end_time, "iterations": float(self.iterations),

@@ -351,9 +351,14 @@ class LagrangeSolver:
         return out
 
     def point_fields(self) -> dict[str, np.ndarray]:
-        """Nodal output fields beyond the motion: the contact pressure when the case has contact
-        (collective)."""
-        return {"contact_pressure": self.contact_pressure()} if self.contact is not None else {}
+        """Nodal output fields beyond the motion, when the case has contact (collective): the contact
+        pressure and the gap (m; 0 off the surface, the capture distance where nothing faces a node)."""
+        if self.contact is None:
+            return {}
+        out = np.zeros(self.n_nodes_global)
+        surf = self.surface()
+        out[surf["node_ids"]] = self.contact.nodal_gap(len(surf["node_ids"]))
+        return {"contact_pressure": self.contact_pressure(), "contact_gap": out}
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
     def renew_surface(self) -> bool:

@@ -35,12 +35,20 @@ def test_bars_impact(tmp_path):
     # contact (measured 0.29 % at worst), nowhere after the release
     from orchestrator import output
 
+    # and the gap: closed on them in contact (the stabilized gap is 0: measured |g| 2.4e-10 m at most),
+    # opening at the bars' relative speed after (measured 10.00 m/s over the last two outputs)
+    gaps = []
     for time, _, index in output.read_steps(out, "lagrange")[1:]:
-        p = output.read_step(out, "lagrange", index)[1]["contact_pressure"]
+        pd = output.read_step(out, "lagrange", index)[1]
+        p, g = pd["contact_pressure"], pd["contact_gap"]
         if time < 39e-6:
             assert np.count_nonzero(p) == 7 and np.abs(p[p != 0] / 197.5e6 - 1).max() < 0.01, time
+            assert np.abs(g[p != 0]).max() < 1e-9, time
+            on = p != 0
         else:
             assert not p.any(), time
+            gaps.append(g[on])
+    assert np.abs((gaps[-1] - gaps[-2]) / 5e-6 / 10.0 - 1).max() < 1e-3
 
 
 def test_bars_impact_on_two_ranks_and_from_a_checkpoint(tmp_path):

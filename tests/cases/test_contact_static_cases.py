@@ -4,6 +4,7 @@ on top and with single-pass node-to-surface failing it; Hertz at three meshes; 2
 import json
 import shutil
 
+import numpy as np
 import pytest
 
 from tests.cases.test_cases import CASES, assert_check_passed, run_case
@@ -31,9 +32,16 @@ def _run(case, out, *extra):
 def test_contact_patch_2d(tmp_path):
     """sigma_y = -1e4 Pa uniform, sigma_x = tau_xy = 0, contact pressure 1e4 uniform (tolerances in the
     case: measured 1e-14); the contact force on the lower block is the 1e4 N/m the blocks carry."""
-    _, s = run_case("contact_patch_2d", tmp_path)
+    out, s = run_case("contact_patch_2d", tmp_path)
     assert s["final"]["lagrange.contact_force_y"] == pytest.approx(-1.0e4, rel=1e-13)  # measured 3e-15
     assert s["final"]["lagrange.equilibrium_residual_rel"] < 1e-13                      # measured 2e-15
+    # the output's gap: closed where the pressure acts (equal pressures: J p = 0; measured 1.4e-16 m)
+    from orchestrator import output
+
+    _, _, index = output.read_steps(out, "lagrange")[-1]
+    pd = output.read_step(out, "lagrange", index)[1]
+    assert np.count_nonzero(pd["contact_pressure"]) == 9
+    assert np.abs(pd["contact_gap"][pd["contact_pressure"] > 0]).max() < 1e-14
 
 
 def test_contact_patch_2d_either_block_on_top(tmp_path):
@@ -83,8 +91,6 @@ def test_static_contact_on_two_ranks_equals_one(tmp_path):
 
 def _turned_mesh():
     """upper_turned.msh's nodes and cells, regenerated (cases/contact_patch_3d/case.toml)."""
-    import numpy as np
-
     from solvers.lagrange.mesh import box_mesh
 
     m = box_mesh([0.0, 0.0, 0.95], [1.0, 1.0, 2.0], [3, 3, 2])
@@ -98,8 +104,6 @@ def _turned_mesh():
 def test_contact_patch_3d_turned_meshes(tmp_path):
     """5 x 5 against the turned 3 x 3: uniaxial stress and a uniform pressure (tolerances in the case:
     measured 4.8e-8 and 8.3e-7; the issue's bound 5e-4). The mesh file is what its recipe makes."""
-    import numpy as np
-
     from solvers.lagrange.mesh import read_mesh
 
     x, cells = _turned_mesh()
@@ -111,8 +115,6 @@ def test_contact_patch_3d_turned_meshes(tmp_path):
 def test_contact_patch_3d_aligned_meshes_are_exact(tmp_path):
     """The same 3 x 3 x 2 grid on both sides: the linear displacement field to 1e-10 of its largest
     value (the issue's bound; measured 1.7e-13), sigma_zz uniform to round-off."""
-    import numpy as np
-
     from orchestrator import output
 
     case = _variant(tmp_path, "contact_patch_3d", ("cells = [5, 5, 2]", "cells = [3, 3, 2]"),
