@@ -19,18 +19,36 @@ constraint form is the average of the two passes,
 so no side is preferred (the bias of single-pass mortar) and the nodal forces of pressures p are
 f = B^T p (pushing the sides apart). Each pass's rows balance (sum_C M_AC = sum_B D_AB), so the
 forces sum to zero to round-off. The two passes together have twice the multipliers the interface
-can resolve; the stabilization
+can resolve; the stabilization penalises the jump between the two sides' tractions (lambda = p n:
+lambda^a + lambda^b ~ (p^a - p^b) n^a on facing sides). Per pass a -> b it is the full jump form on
+that pass's own overlap,
 
-    j(mu, lambda) = (gamma h / 2) sum over passes of integral of mu^a . (lambda^a + lambda^b),
+    j_ab(mu, lambda) = (gamma h / 2) integral over Gamma^ab of
+                       (mu^a n^a phi^a + mu^b n^b phi^b) . (lambda^a n^a phi^a + lambda^b n^b phi^b),
     gamma = alpha / E,
 
-penalises the jump between the two sides' tractions (lambda = p n: lambda^a + lambda^b ~
-(p^a - p^b) n^a on facing sides), J_AB = (gamma h / 2) D_AB n_A . n_B and
-J_AC = (gamma h / 2) M_AC n_A . n_C with C's multiplier of the other pass (none if C has no
-contact area of its own: its pressure is taken as 0 there).
+with side a's multipliers (this pass's) interpolated by a's shape functions and side b's (those of
+the other pass, at the mortar nodes C) by b's at the projected points; the dual pass averages its
+passes, J = (j_ab + j_ba) / 2, as B = G / 2 does. In matrix form pass a -> b contributes
+
+    (gamma h / 4) [[D_AB n_A.n_B,  M_AC n_A.n_C ],
+                   [M_AC n_C.n_A,  E_CC' n_C.n_C']],   E_CC' = integral over Gamma^ab of phi^b_C phi^b_C'
+
+(E from the same kernels as D and M). A node C with no multiplier in the other pass (no contact
+area of its own) drops its rows and columns: its pressure is taken as 0 there. Each block is
+sum over quadrature points w_q v_q v_q^T with v_q the functions phi n of both sides at that point (a
+Gram matrix on the pass's own quadrature), so J is symmetric positive semidefinite by construction,
+whatever the meshes: the explicit step's multiplier system dt^2 B M^-1 B^T + J stays positive
+(semi)definite and the active set (kkt.py) cannot cycle on an indefinite J. (The earlier form,
+rows of a's multipliers only, integral of mu^a . (lambda^a + lambda^b) per pass, was not symmetric
+on non-matching or curved meshes and its symmetric part could be indefinite: in the crushed ring's
+self contact its smallest eigenvalue was -7e-3 of its largest.) Equal pressures on facing flat sides
+still give lambda^a + lambda^b = 0 pointwise, so J p = 0: the patch test is unchanged.
 
 Self contact is one pass of a surface against itself, its own neighbours excluded: every facing pair
-then appears once in each direction, which is the dual pass.
+then appears once in each direction, which is the dual pass. Its J is the same formula with one
+multiplier set (C's multiplier is of the same pass): the pass's Gram matrix over all its pairs, each
+direction once, times gamma h / 4, which is what two separate bodies give.
 
 The dimension follows the facets: (n, 2) segments in 2-D, (n, 4) quadrilaterals in 3-D (points
 (n, 3)); every operator above is the same in both, with dim unknowns per node (columns
@@ -86,7 +104,8 @@ class MortarPass:
     """One pass with side a as the non-mortar side: its multiplier nodes and integrals.
 
     nodes (nm,) sorted node ids of side a with contact area; D, M (nm, n_nodes) csr: D_AB and M_AC
-    (module docstring) on global node ids; normals (nm, dim) unit nodal normals of side a's facets
+    (module docstring) on global node ids; E (n_nodes, n_nodes) csr: E_CC' of the mortar nodes on
+    global node ids (the stabilization's); normals (nm, dim) unit nodal normals of side a's facets
     with contact area, at ``nodes``;
     area (nm,) = row sums of D = integral of phi_A over the contact area.
     """
@@ -95,6 +114,7 @@ class MortarPass:
     M: sp.csr_matrix
     normals: np.ndarray
     area: np.ndarray
+    E: sp.csr_matrix | None = None
 
     def index_of(self, node_ids: np.ndarray) -> np.ndarray:
         """Multiplier index of each node id (-1 where the node has no contact area in this pass)."""
@@ -135,20 +155,22 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
         shared = (a[:, :, None] == b[:, None, :]).any(axis=(1, 2))
         pairs = pairs[~shared]
     integrals = segment_pair_integrals if k == 2 else facet_pair_integrals
-    d, m, overlap = integrals(x, seg_a, seg_b, pairs, capture, capture if penetration is None else penetration)
+    d, m, overlap, e = integrals(x, seg_a, seg_b, pairs, capture, capture if penetration is None else penetration,
+                                 mortar_mass=True)
     keep = overlap > 0.0
-    pairs, d, m = pairs[keep], d[keep], m[keep]
+    pairs, d, m, e = pairs[keep], d[keep], m[keep], e[keep]
     rows = np.repeat(seg_a[pairs[:, 0]], k, axis=1).ravel()           # A of [A, B] for B in seg_a
     d_cols = np.tile(seg_a[pairs[:, 0]], (1, k)).ravel()
     m_cols = np.tile(seg_b[pairs[:, 1]], (1, k)).ravel()
     D = sp.csr_matrix((d.ravel(), (rows, d_cols)), shape=(n, n))
     M = sp.csr_matrix((m.ravel(), (rows, m_cols)), shape=(n, n))
+    E = sp.csr_matrix((e.ravel(), (np.repeat(seg_b[pairs[:, 1]], k, axis=1).ravel(), m_cols)), shape=(n, n))
     area = np.asarray(D.sum(axis=1)).ravel()
     nodes = np.flatnonzero(area > 0.0)
     # the normals of the contact surface: from the segments with contact area only (a block's corner
     # would otherwise lean towards its side face and push sideways: the patch test fails)
     normals = nodal_normals(x, seg_a[np.unique(pairs[:, 0])])
-    return MortarPass(nodes=nodes, D=D[nodes], M=M[nodes], normals=normals[nodes], area=area[nodes])
+    return MortarPass(nodes=nodes, D=D[nodes], M=M[nodes], normals=normals[nodes], area=area[nodes], E=E)
 
 
 class DualPassContact:
@@ -220,21 +242,37 @@ class DualPassContact:
         return (self.constraint_operator().T @ np.asarray(pressures, dtype=np.float64)).reshape(-1, dim)
 
     def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:
-        """J (n_multipliers, n_multipliers): j(mu, lambda) = mu . J lambda (module docstring)."""
+        """J (n_multipliers, n_multipliers): j(mu, lambda) = mu . J lambda, symmetric positive
+        semidefinite (module docstring): per pass the Gram blocks D n.n, M n.n (and its transpose),
+        E n.n, times gamma h / 4 (the passes averaged; self contact's one pass holds both directions)."""
         other = (0,) if len(self.passes) == 1 else (1, 0)
         rows, cols, vals = [], [], []
+
+        def add(mat, p_row, off_row, p_col, off_col, row_ids, transpose=False):
+            """mat's entries (row ids: local if not row_ids else global node ids; cols global) times
+            the nodal normals' dot product, where both nodes carry a multiplier of their pass."""
+            c = mat.tocoo()
+            i = p_row.index_of(c.row) if row_ids else c.row
+            j = p_col.index_of(c.col)
+            ok = (i >= 0) & (j >= 0)
+            i, j = i[ok], j[ok]
+            v = c.data[ok] * np.einsum("ij,ij->i", p_row.normals[i], p_col.normals[j])
+            r, s = i + off_row, j + off_col
+            rows.append(s if transpose else r)
+            cols.append(r if transpose else s)
+            vals.append(v)
+
         for k, p in enumerate(self.passes):
-            q = self.passes[other[k]]
-            for mat, partner, off in ((p.D, p, self.offsets[k]), (p.M, q, self.offsets[other[k]])):
-                c = mat.tocoo()
-                j = partner.index_of(c.col)
-                ok = j >= 0
-                nn = np.einsum("ij,ij->i", p.normals[c.row[ok]], partner.normals[j[ok]])
-                rows.append(c.row[ok] + self.offsets[k])
-                cols.append(j[ok] + off)
-                vals.append(0.5 * gamma * h * c.data[ok] * nn)
+            q, op, oq = self.passes[other[k]], self.offsets[k], self.offsets[other[k]]
+            add(p.D, p, op, p, op, row_ids=False)                   # a-a: D_AB n_A.n_B
+            add(p.M, p, op, q, oq, row_ids=False)                   # a-b: M_AC n_A.n_C
+            add(p.M, p, op, q, oq, row_ids=False, transpose=True)   # b-a: its transpose
+            add(p.E, q, oq, q, oq, row_ids=True)                    # b-b: E_CC' n_C.n_C'
         n = self.n_multipliers
-        return sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        J = sp.csr_matrix((0.25 * gamma * h * np.concatenate(vals),
+                           (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+        # symmetric in exact arithmetic; the duplicates' sums in csr order can differ by an ulp
+        return (0.5 * (J + J.T)).tocsr()
 
 
 class SinglePassMortar(DualPassContact):

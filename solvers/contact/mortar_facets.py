@@ -8,6 +8,8 @@ For one pass a -> b and the bilinear shape functions phi of the 4-node facets on
 
     D_AB = integral over Gamma^ab of phi^a_A phi^a_B          (A, B nodes of facet a)
     M_AC = integral over Gamma^ab of phi^a_A phi^b_C          (C nodes of facet b)
+    E_CC' = integral over Gamma^ab of phi^b_C phi^b_C'       (the mortar side's mass on the overlap;
+                                                               only the dual pass's stabilization uses it)
 
 Gamma^ab, the mortar segment of the pair, is found in a plane (as in Puso & Laursen 2004):
 
@@ -32,7 +34,7 @@ covers it with positively oriented triangles.
 
 Exactness: where both projected facets are parallelograms (any flat rectangular, sheared or rotated
 grid), the bilinear maps are affine, the phi are polynomials of degree 2 in the plane coordinates,
-phi^a phi^b has degree 4 and the degree-5 rule integrates it exactly: D and M are exact to round-off
+phi^a phi^b has degree 4 and the degree-5 rule integrates it exactly: D, M and E are exact to round-off
 for flat parallel facets of such meshes. A general flat quadrilateral (non-parallel opposite sides)
 has rational phi in the plane; the rule is then accurate, not exact (tests measure it). Wherever the
 inversion converges, the mortar shape functions sum to one at every quadrature point, so
@@ -142,7 +144,7 @@ def _centre_normal(x, f, n):
 
 @njit(cache=True)
 def _facet_pair_integrals(x, fac_a, fac_b, pairs, bary, wts, capture, penetration, facing_cos,
-                          d_out, m_out, overlap):
+                          d_out, m_out, e_out, overlap):
     pa = np.empty((4, 2))
     pb = np.empty((4, 2))
     ca = np.empty((4, 2))
@@ -296,11 +298,14 @@ def _facet_pair_integrals(x, fac_a, fac_b, pairs, bary, wts, capture, penetratio
                     for s in range(4):
                         d_out[p, r, s] += wr * phia[s]
                         m_out[p, r, s] += wr * phib[s]
+                    wr = w * phib[r]
+                    for s in range(4):
+                        e_out[p, r, s] += wr * phib[s]
 
 
 def facet_pair_integrals(points: np.ndarray, fac_a: np.ndarray, fac_b: np.ndarray, pairs: np.ndarray,
-                         capture: float = np.inf, penetration: float = np.inf):
-    """D and M of every candidate pair of one pass a -> b of quadrilateral facets (module docstring).
+                         capture: float = np.inf, penetration: float = np.inf, mortar_mass: bool = False):
+    """D and M (and E) of every candidate pair of one pass a -> b of quadrilateral facets (module docstring).
 
     A pair counts where the facets face each other and the mortar facet's separation from the
     non-mortar one, along the latter's centre normal, lies within [-penetration, capture] somewhere
@@ -311,7 +316,9 @@ def facet_pair_integrals(points: np.ndarray, fac_a: np.ndarray, fac_b: np.ndarra
     (search.candidate_pairs). Returns d (np, 4, 4) with d[p, i, j] the integral of the non-mortar
     facet's shape functions i and j over the overlap, m (np, 4, 4) with m[p, i, k] that of its shape
     function i and the mortar facet's k, and the overlap area in a's plane (np,) (0 for pairs that do
-    not face each other, do not overlap or are out of reach).
+    not face each other, do not overlap or are out of reach). mortar_mass: also e (np, 4, 4),
+    e[p, k, l] the integral of the mortar facet's shape functions k and l over the overlap, returned
+    last.
     """
     x = np.ascontiguousarray(points, dtype=np.float64)
     if x.ndim != 2 or x.shape[1] != 3:
@@ -319,9 +326,10 @@ def facet_pair_integrals(points: np.ndarray, fac_a: np.ndarray, fac_b: np.ndarra
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
     d = np.zeros((len(pairs), 4, 4))
     m = np.zeros((len(pairs), 4, 4))
+    e = np.zeros((len(pairs), 4, 4))
     overlap = np.zeros(len(pairs))
     bary, wts = TRIANGLE_RULE
     _facet_pair_integrals(x, np.ascontiguousarray(fac_a, dtype=np.int64).reshape(-1, 4),
                           np.ascontiguousarray(fac_b, dtype=np.int64).reshape(-1, 4), pairs, bary, wts,
-                          float(capture), float(penetration), FACING_COS, d, m, overlap)
-    return d, m, overlap
+                          float(capture), float(penetration), FACING_COS, d, m, e, overlap)
+    return (d, m, overlap, e) if mortar_mass else (d, m, overlap)

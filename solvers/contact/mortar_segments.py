@@ -6,12 +6,16 @@ For one pass a -> b and piecewise-linear shape functions phi on both sides:
 
     D_AB = integral over Gamma^ab of phi^a_A phi^a_B          (A, B nodes of side a)
     M_AC = integral over Gamma^ab of phi^a_A phi^b_C          (C nodes of side b)
+    E_CC' = integral over Gamma^ab of phi^b_C phi^b_C'       (the mortar side's mass on the overlap)
+
+E enters only the dual pass's stabilization (dual_pass.py: with D and M it makes each pass's
+stabilization a Gram matrix, on the same quadrature points).
 
 Gamma^ab is the part of side a onto which side b projects. The projection is along the normal of
 the non-mortar segment: a point y of a mortar segment lands at xi = (y - x0) . t / L on the segment
 x0 -> x1 (t its unit tangent, L its length). Orthogonal projection onto a line is affine, so on the
 overlap [max(0, min(xi0, xi1)), min(1, max(xi0, xi1))] the mortar coordinate eta is affine in xi,
-phi^a phi^b is a quadratic in xi, and the 2-point Gauss rule integrates it exactly. A flat interface
+phi^a phi^b (and phi^b phi^b) is a quadratic in xi, and the 2-point Gauss rule integrates it exactly. A flat interface
 is therefore integrated exactly for any two meshes (the patch test's geometry).
 
 Only facing segments pair: outward normals with n_a . n_b < -FACING_COS (a surface's own next segments in self
@@ -37,7 +41,7 @@ surfaces in contact are near antiparallel (Hertz: 6 degrees at the contact's edg
 
 
 @njit(cache=True)
-def _pair_integrals(x, seg_a, seg_b, pairs, gx, capture, penetration, facing_cos, d_out, m_out, overlap):
+def _pair_integrals(x, seg_a, seg_b, pairs, gx, capture, penetration, facing_cos, d_out, m_out, e_out, overlap):
     for p in range(pairs.shape[0]):
         sa = seg_a[pairs[p, 0]]
         sb = seg_b[pairs[p, 1]]
@@ -92,11 +96,15 @@ def _pair_integrals(x, seg_a, seg_b, pairs, gx, capture, penetration, facing_cos
             m_out[p, 0, 1] += w * pa0 * pb1
             m_out[p, 1, 0] += w * pa1 * pb0
             m_out[p, 1, 1] += w * pa1 * pb1
+            e_out[p, 0, 0] += w * pb0 * pb0
+            e_out[p, 0, 1] += w * pb0 * pb1
+            e_out[p, 1, 0] += w * pb1 * pb0
+            e_out[p, 1, 1] += w * pb1 * pb1
 
 
 def segment_pair_integrals(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, pairs: np.ndarray,
-                           capture: float = np.inf, penetration: float = np.inf):
-    """D and M of every candidate pair of one pass a -> b (module docstring).
+                           capture: float = np.inf, penetration: float = np.inf, mortar_mass: bool = False):
+    """D and M (and E) of every candidate pair of one pass a -> b (module docstring).
 
     A pair counts where the mortar segment's separation from the non-mortar one, along the latter's
     normal, lies within [-penetration, capture] somewhere on their overlap.
@@ -106,13 +114,15 @@ def segment_pair_integrals(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndar
     (search.candidate_pairs). Returns d (np, 2, 2) with d[p, i, j] the integral of the non-mortar
     segment's shape functions i and j over the overlap, m (np, 2, 2) with m[p, i, k] that of its
     shape function i and the mortar segment's k, and the overlap length (np,) (0 for pairs that do
-    not face each other or do not overlap).
+    not face each other or do not overlap). mortar_mass: also e (np, 2, 2), e[p, k, l] the integral
+    of the mortar segment's shape functions k and l over the overlap, returned last.
     """
     x = np.ascontiguousarray(points, dtype=np.float64)
     pairs = np.ascontiguousarray(pairs, dtype=np.int64).reshape(-1, 2)
     d = np.zeros((len(pairs), 2, 2))
     m = np.zeros((len(pairs), 2, 2))
+    e = np.zeros((len(pairs), 2, 2))
     overlap = np.zeros(len(pairs))
     _pair_integrals(x, np.ascontiguousarray(seg_a, dtype=np.int64), np.ascontiguousarray(seg_b, dtype=np.int64),
-                    pairs, _GAUSS_X, float(capture), float(penetration), FACING_COS, d, m, overlap)
-    return d, m, overlap
+                    pairs, _GAUSS_X, float(capture), float(penetration), FACING_COS, d, m, e, overlap)
+    return (d, m, overlap, e) if mortar_mass else (d, m, overlap)

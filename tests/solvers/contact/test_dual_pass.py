@@ -161,3 +161,71 @@ def test_3d_self_contact_leaves_out_facets_that_share_a_node():
     assert DualPassContact(pts, sheet, None, capture=0.2).n_multipliers == 0
     # the same facets as two surfaces do pair
     assert DualPassContact(pts, sheet[:1], sheet[1:], capture=0.2).n_multipliers > 0
+
+
+# ----------------------------------------------------------------------- the stabilization's sign
+def _assert_symmetric_psd(J):
+    """J symmetric to round-off and positive semidefinite: its smallest eigenvalue >= -1e-12 of its
+    largest (the Gram form of the module docstring)."""
+    J = J.toarray()
+    assert J.shape[0] > 0 and np.abs(J).max() > 0
+    assert np.abs(J - J.T).max() <= 1e-15 * np.abs(J).max()
+    ev = np.linalg.eigvalsh(J)
+    assert ev[0] >= -1e-12 * ev[-1], (ev[0], ev[-1])
+    return ev
+
+
+def test_stabilization_is_symmetric_psd_on_non_matching_tilted_faces():
+    pts, sa, sb = facing_faces(XA, XB, gap=0.002, tilt=0.01)
+    c = DualPassContact(pts, sa, sb, capture=0.05)
+    _assert_symmetric_psd(c.stabilization(2.0, 0.1))
+
+
+def test_stabilization_is_symmetric_psd_on_the_hertz_geometry():
+    from tests.solvers.contact import test_hertz_2d as hertz
+    x, nq, contact, sol = hertz.cylinder_on_flat(40)
+    _assert_symmetric_psd(contact.stabilization(1.0, 0.04))
+
+
+def test_stabilization_is_symmetric_psd_in_self_contact_of_a_curved_fold():
+    # a flat elliptic hole (semi-axes 1 and 0.03, clockwise: the body's outward normals point into
+    # it), its upper and lower walls facing across up to 0.06, nodes unevenly spaced (non-matching)
+    t = np.linspace(0.0, 2 * np.pi, 61)[:-1]
+    t = t + 0.3 * np.sin(3 * t) / 3  # uneven, still increasing
+    pts = np.stack([np.cos(t), -0.03 * np.sin(t)], axis=1)  # clockwise
+    seg = np.stack([np.arange(len(pts)), (np.arange(len(pts)) + 1) % len(pts)], axis=1)
+    c = DualPassContact(pts, seg, None, capture=0.1)
+    assert c.n_multipliers > 30
+    ev = _assert_symmetric_psd(c.stabilization(1.0, 0.1))
+    # J's null space is the equal pressures of facing sides: a uniform p has j(p, p) small against
+    # one wall's pressure alone
+    p = np.ones(c.n_multipliers)
+    up = (pts[c.passes[0].nodes, 1] < 0).astype(float)
+    J = c.stabilization(1.0, 0.1)
+    assert p @ J @ p < 0.1 * (up @ J @ up)
+    # self contact gives what two separate bodies give: the walls without the segments near the ends
+    # (no longer joined) as one surface in self contact, and as two surfaces
+    inner = seg[(np.abs(pts[seg, 0]) < 0.9).all(axis=1)]
+    top, bot = inner[pts[inner[:, 0], 1] < 0], inner[pts[inner[:, 0], 1] >= 0]
+    one = DualPassContact(pts, inner, None, capture=0.1)
+    two = DualPassContact(pts, top, bot, capture=0.1)
+    assert two.n_multipliers == one.n_multipliers > 30
+    k = np.argsort(np.concatenate([q.nodes for q in two.passes]))  # two's multipliers in one's order
+    J1, J2 = one.stabilization(1.0, 0.1), two.stabilization(1.0, 0.1)[k][:, k]
+    _assert_symmetric_psd(J1)
+    np.testing.assert_allclose(J2.toarray(), J1.toarray(), rtol=0, atol=1e-15 * abs(J1).max())
+
+
+def test_3d_stabilization_is_symmetric_psd_on_turned_grids_and_in_self_contact():
+    pts, qa, qb = _grids_3d(0.013)
+    _assert_symmetric_psd(DualPassContact(pts, qa, qb, capture=0.05).stabilization(1e-3, 0.3))
+    # tilted: the upper grid sloping 0.02 along x
+    tilted = pts.copy()
+    tilted[25:, 2] += 0.02 * tilted[25:, 0]
+    _assert_symmetric_psd(DualPassContact(tilted, qa, qb, capture=0.05).stabilization(1e-3, 0.3))
+    from solvers.lagrange.mesh import box_mesh
+    from solvers.lagrange.surface import exterior_facets
+    m = box_mesh([0.0, 0.0, 0.0], [1.0, 0.2, 1.0], [5, 1, 5])   # the slotted block (above)
+    ix, iz = np.arange(25) % 5, np.arange(25) // 5
+    facets, _ = exterior_facets(m.cells[~((ix == 2) & (iz >= 1))], "hexahedron", m.num_points, m.points)
+    _assert_symmetric_psd(DualPassContact(m.points, facets, None, capture=0.25, penetration=0.05).stabilization(1.0, 0.2))

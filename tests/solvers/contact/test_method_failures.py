@@ -95,10 +95,12 @@ def test_the_two_passes_unstabilized_lock_the_stack_too():
     The stabilization (alpha ~ 1) is what keeps it out; the penalty mortar (J = compliance, no jump
     term) approaches it only at a far stiffer penalty than its default."""
     w_dp, _, _ = beams(*MESH, "dual_pass_mortar", 1.0)
-    # measured w / W_STACK: dual pass alpha 1e-3 0.8652, 1e-6 0.8222, 1e-12 0.1196 (against 0.8672
-    # at alpha 1: ratios 0.998, 0.948, 0.138); penalty mortar kappa 1e6 0.8096, 1e10 0.2268 (0.262)
+    # measured w / W_STACK with the symmetric J: dual pass alpha 1e-3 0.8652, 1e-6 0.8222, 1e-9 0.2556,
+    # 1e-12 0.2734 (against 0.8672 at alpha 1: ratios 0.998, 0.948, 0.295, 0.315; the earlier,
+    # non-symmetric J gave 0.1196 (0.138) at 1e-12, the rest the same to 4 digits: near J = 0 the
+    # locked level depends on J's form); penalty mortar kappa 1e6 0.8096, 1e10 0.2268 (0.262)
     ratios = [beams(*MESH, "dual_pass_mortar", a)[0] / w_dp for a in (1e-3, 1e-6, 1e-12)]
-    assert ratios[0] > 0.99 and 0.92 < ratios[1] < 0.97 and ratios[2] < 0.2, ratios
+    assert ratios[0] > 0.99 and 0.92 < ratios[1] < 0.97 and ratios[2] < 0.4, ratios
     assert beams(*MESH, "penalty", 1e-8)[0] / w_dp < 0.3
 
 
@@ -136,13 +138,15 @@ def test_two_pass_mortar_multipliers_without_stabilization_on_hertz():
         measured[alpha] = (share[0] / sum(share), dev)
         # the forces do not see the split: the contact carries P'/2 at every alpha (measured 1.1e-13)
         assert abs(contact.forces(sol.p)[:nq, 1].sum() - hertz.P / 2) <= 1e-11 * hertz.P
-    # alpha 1e-12 (the active set settles in 24 iterations since kkt.py takes gaps of -1e-17 as closed;
+    # alpha 1e-12 (the active set settles in 27 iterations since kkt.py takes gaps of -1e-17 as closed;
     # it cycled before): the cylinder's pass carries nothing, the flat's pressures are off Hertz's by
-    # 9.4 p0 (measured), wild node-to-node oscillation
+    # 7.2 p0 (measured with the symmetric J; 9.4 p0 in 24 iterations with the earlier J), wild
+    # node-to-node oscillation
     assert measured[1e-12][0] < 1e-6 and measured[1e-12][1][1] > 5.0, measured
     # the cylinder's pass's share of the load: measured 0 (alpha 1e-6), 0.053 (1e-3), 0.484 (1);
     # the passes' pressures off Hertz's by (1.0, 1.06) p0 at 1e-6 (the flat's oscillating node to
-    # node: its neighbours' second difference 0.79 p0), (0.98, 1.0) p0 at 1e-3, (0.068, 0.116) at 1
+    # node: its neighbours' second difference 0.79 p0), (0.98, 1.0) p0 at 1e-3, (0.066, 0.117) at 1
+    # (with the symmetric J; the earlier J: the same but (0.068, 0.116) at 1)
     assert measured[1e-6][0] < 1e-6 and min(measured[1e-6][1]) > 0.9, measured
     assert measured[1e-3][0] < 0.1 and min(measured[1e-3][1]) > 0.9, measured
     assert 0.4 < measured[1.0][0] < 0.6 and max(measured[1.0][1]) < 0.15, measured

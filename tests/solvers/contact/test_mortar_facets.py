@@ -197,3 +197,29 @@ def test_a_pass_of_non_matching_grids_integrates_the_shape_functions_of_a():
     # a field linear in x, y on b's nodes, against a's shape functions, is the same field on a's
     f = 2.0 + 3.0 * pts[:, 0] - 1.5 * pts[:, 1]
     np.testing.assert_allclose(p.M @ f, p.D @ f, rtol=3e-15)  # measured 4.4e-16
+
+
+def _by_corners(e, fb):
+    """e (4, 4) of a pair with rows and columns in fb's order -> both by b's counter-clockwise corner."""
+    out = np.zeros((4, 4))
+    out[np.ix_(fb[0] - 4, fb[0] - 4)] = e
+    return out
+
+
+@pytest.mark.parametrize("sx, sy", [(0.0, 0.0), (0.3, 0.2), (-0.45, 0.1)])
+def test_mortar_side_mass_against_separable_integrals(sx, sy):
+    # E_CC' = integral over the overlap of b's shape functions C and C': separable, each factor the
+    # integral of two shifted hats L_k(x - s) L_l(x - s) over the overlap, i.e. of L_k L_l over the
+    # overlap moved back by s
+    pts, fa, fb = facing_quads(SQUARE, SQUARE + [sx, sy], gap=0.01)
+    d, m, ov, e = facet_pair_integrals(pts, fa, fb, ONE, mortar_mass=True)
+    px = _hat_products_1d(max(0, sx) - sx, min(1, 1 + sx) - sx, 0.0)
+    py = _hat_products_1d(max(0, sy) - sy, min(1, 1 + sy) - sy, 0.0)
+    want = np.array([[px[i, k] * py[j, l] for k, l in CORNER_IJ] for i, j in CORNER_IJ])
+    np.testing.assert_allclose(_by_corners(e[0], fb), want, rtol=0, atol=2e-16)  # measured 4.2e-17
+    if sx == sy == 0.0:
+        np.testing.assert_allclose(_by_corners(e[0], fb), MASS, rtol=0, atol=1e-16)
+    # the default return is unchanged
+    d0, m0, ov0 = facet_pair_integrals(pts, fa, fb, ONE)
+    np.testing.assert_array_equal(d0, d)
+    np.testing.assert_array_equal(m0, m)

@@ -58,3 +58,24 @@ def test_a_segment_pairs_only_within_capture_in_front_and_penetration_behind():
     # a tilted b counts if any part of the overlap is within reach: from gap 0.3 at x=0 to 0.1 at x=1
     pts, sa, sb = facing_faces([0.0, 1.0], [0.0, 1.0], gap=0.3, tilt=-0.2)
     assert segment_pair_integrals(pts, sa, sb, pairs, 0.2, 0.05)[2][0] == 1.0
+
+
+def test_mortar_side_mass_integrates_bs_shape_functions_over_the_overlap():
+    # b on 0.5..1.5 over a on 0..1: the overlap 0.5..1 is b's first half; with t = x - 0.5, b's shape
+    # functions are 1 - t (node 2) and t (node 3): integrals (1 - t)^2 = 7/24, (1 - t) t = 1/12,
+    # t^2 = 1/24 over t in [0, 0.5]
+    pts, sa, sb = facing_faces([0.0, 1.0], [0.5, 1.5], gap=0.01)
+    d, m, ov, e = segment_pair_integrals(pts, sa, sb, np.array([[0, 0]]), mortar_mass=True)
+    want = np.array([[7 / 24, 1 / 12], [1 / 12, 1 / 24]])
+    np.testing.assert_allclose(e[0], want, rtol=0, atol=1e-16)  # measured 5.6e-17
+    np.testing.assert_array_equal(segment_pair_integrals(pts, sa, sb, np.array([[0, 0]]))[0], d)
+    # assembled on global ids in the pass (rows and columns: b's nodes 2 and 3)
+    p = mortar_pass(pts, sa, sb, capture=0.05)
+    np.testing.assert_allclose(p.E[2:, 2:].toarray(), want, rtol=0, atol=1e-16)
+    assert p.E[:2].nnz == 0 and p.E[:, :2].nnz == 0
+    # over a whole face b's E is b's consistent mass matrix (b covers a exactly)
+    pts, sa, sb = facing_faces(XA, XB, gap=0.01)
+    p = mortar_pass(pts, sa, sb, capture=0.05)
+    h = np.diff(XB)
+    mass = sp.diags([h / 6, np.r_[h[0] / 3, (h[:-1] + h[1:]) / 3, h[-1] / 3], h / 6], [-1, 0, 1]).toarray()
+    np.testing.assert_allclose(p.E[5:, 5:].toarray(), mass, rtol=0, atol=1e-16)
