@@ -178,12 +178,12 @@ def test_fe_vs_sph_bodies_penetrator_reaches_tates_depth(tmp_path, run_immerse):
 @pytest.mark.timeout(600)
 def test_contact_methods_where_each_fails(tmp_path, run_immerse):
     """The contact methods at alpha 1e-6 and 1 (patch) and 40 and 80 arc segments (Hertz). Measured
-    (full campaign in its campaign.toml): patch stress error 8.4e-15 / 9.3e-13 for the dual pass (alpha
-    1 / 1e-6; 9.5e-15 / 1.6e-13 with the upper block as side a), single-pass mortar 5.5e-15,
-    node-to-surface 4.9e-2, the penalty 2.5e-3 / 2.5e-9 (its interpenetration, ~ alpha); Hertz
-    half-width -1.5 / -1.3 % dual pass, single-pass mortar 1.5 / 2.0 % with the cylinder as side a
-    and 4.3 / 0.43 % with the flat (the bias), the dual pass without stabilization off the peak
-    pressure by 322 / 196 % against the dual pass's 0.87 / 1.0 %."""
+    (full campaign in README): patch stress error 1.2e-14 / 9.3e-13 for the dual pass (alpha 1 / 1e-6;
+    7.8e-15 / 1.6e-13 with the upper block as side a), single-pass mortar 1.1e-14, node-to-surface
+    5.2e-2, the penalty 2.5e-3 / 2.5e-9 (its interpenetration, ~ alpha); Hertz half-width 1.45 / 1.21 %
+    dual pass, single-pass mortar 1.5 / 2.0 % with the cylinder as side a and 4.3 / 0.43 % with the
+    flat (the bias), the dual pass without stabilization off the peak pressure by 745 / 491 % against
+    the dual pass's 0.83 / 0.98 %."""
     out = tmp_path / "out"
     r = run_immerse("campaign", CAMPAIGNS / "contact_methods", "--out", out, "--only", "alpha=1e-06,1",
                     "arc_segments=40,80")
