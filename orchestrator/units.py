@@ -24,6 +24,7 @@ FIELD_UNITS: dict[str, str] = {
     "bulk_viscosity": "Pa",
     "contact_pressure": "Pa",
     "contact_gap": "m",
+    "contact_slip": "m",
     # ALE zones
     "specific_internal_energy": "J/kg",
     "sound_speed": "m/s",

@@ -53,6 +53,7 @@ class ExplicitContact:
         self.multiplier_nodes = np.zeros(0, np.int64)   # the surface node of each multiplier
         self.last_pressure = np.zeros(0)                # each multiplier's pressure of the last step
         self.last_gap = np.zeros(0)                     # each multiplier's gap at the last step's end (m)
+        self.slip = None                                # (ns,) accumulated slip, from set_surface on
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
         """facets (nf, 2 | 4) outward segments or quadrilaterals as indices into the surface nodes; body (nf,); mass (ns,);
@@ -61,6 +62,10 @@ class ExplicitContact:
             raise NotImplementedError("friction is 2-D only so far (the 3-D tangent operator is to come)")
         self.facets, self.body = np.asarray(facets), np.asarray(body)
         self.mass, self.free = np.asarray(mass, float), np.asarray(free, float)
+        # the tangential slip accumulated at every surface node (friction): |slip rate| dt summed over
+        # the steps, the rate of each multiplier row T v over its weight, averaged per node
+        if self.slip is None or len(self.slip) != len(self.mass):
+            self.slip = np.zeros(len(self.mass))
 
     def _operators(self, x: np.ndarray):
         if self.capture is None:  # a segment: far more than a step's approach, less than a body
@@ -136,6 +141,8 @@ class ExplicitContact:
             q, _ = box_qp_gauss_seidel(W, T @ v1, bound)
             self.last_sliding = int(np.sum((bound > 0) & (np.abs(q) >= bound * (1 - 1e-9))))
             impulse = impulse + T.T @ q
+            rate = np.abs(T @ (v1 + inv_m * (T.T @ q))) / constraint_weights(T, dim)
+            self.slip += dt * nodal_mean(self.multiplier_nodes, rate, ns, 0.0)
         return impulse.reshape(ns, dim)
 
     def nodal_gap(self, ns: int) -> np.ndarray:

@@ -352,13 +352,20 @@ class LagrangeSolver:
 
     def point_fields(self) -> dict[str, np.ndarray]:
         """Nodal output fields beyond the motion, when the case has contact (collective): the contact
-        pressure and the gap (m; 0 off the surface, the capture distance where nothing faces a node)."""
+        pressure and the gap (m; 0 off the surface, the capture distance where nothing faces a node);
+        with friction the tangential slip accumulated since t = 0 (m)."""
         if self.contact is None:
             return {}
         out = np.zeros(self.n_nodes_global)
         surf = self.surface()
         out[surf["node_ids"]] = self.contact.nodal_gap(len(surf["node_ids"]))
-        return {"contact_pressure": self.contact_pressure(), "contact_gap": out}
+        fields = {"contact_pressure": self.contact_pressure(), "contact_gap": out}
+        if self.contact.friction > 0.0:  # (the slip accumulated since t = 0, m)
+            slip = np.zeros(self.n_nodes_global)
+            if self.contact.slip is not None:
+                slip[surf["node_ids"]] = self.contact.slip
+            fields["contact_slip"] = slip
+        return fields
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
     def renew_surface(self) -> bool:
@@ -623,6 +630,8 @@ class LagrangeSolver:
                 h.attrs[k] = getattr(self, k)
             for k in self.STATE_VECTORS:
                 h.create_dataset(k, data=getattr(self, k))
+            if self.contact is not None and self.contact.slip is not None:  # friction's accumulated slip
+                h.create_dataset("contact_slip", data=self.contact.slip)
             h.attrs["ranks"] = self.comm.size
         tmp.replace(path)
 
@@ -643,5 +652,7 @@ class LagrangeSolver:
             for k in self.STATE_VECTORS:
                 if k in h:  # (impulse_gross: not in checkpoints before the coupling)
                     setattr(self, k, h[k][...])
+            if self.contact is not None and "contact_slip" in h:  # (kept by set_surface: same length)
+                self.contact.slip = h["contact_slip"][...]
         self.first_step = bool(self.first_step)
         self.step = int(self.step)
