@@ -16,14 +16,27 @@ with the contact operators B, J of the case's method (solvers.contact.methods) b
 reference configuration X: geometrically linear, the gap linearised about the initial geometry, which
 is the theory of the small-strain patch tests and of Hertz (whose gap is that of the undeformed
 profiles; evaluating the contact on the deformed one instead moves Hertz's peak pressure by 2 % at
-E = 1, P' = 0.01, where the strains reach 6 %). Large sliding needs the finite-strain mode (to come).
+E = 1, P' = 0.01, where the strains reach 6 %). Large sliding needs the finite-strain contact of the Newton mode below (a neo_hookean body).
 The complementarity is solved by the primal-dual active set (a semi-smooth Newton method,
 solvers.contact.kkt), warm-started from the previous load step's set; the material being linear,
 each set's solve is exact (one Newton step).
 
 Materials: ``linear_elastic`` as Hooke's law in small strain (the reference of the patch tests and
 of Hertz's theory), full-integration bilinear quads (plane strain) and trilinear hexahedra
-(solvers.lagrange.small_strain), whose stiffness is the consistent tangent of this linear problem.
+(solvers.lagrange.small_strain), whose stiffness is the consistent tangent of this linear problem: a
+linear_elastic body is always small strain, whatever its deformation. ``neo_hookean`` bodies are
+finite strain (total-Lagrangian, solvers.lagrange.finite_strain: the internal force f_int(u) and its
+consistent tangent K_T(u)). A case with any neo_hookean body solves each load step by Newton
+(QuasiStaticSolver._newton): at the iterate u_k the contact problem of the linearised equilibrium
+
+    K_T(u_k) u - B_k^T p = F - f_int(u_k) + K_T(u_k) u_k,   g~ = B_k (X + u) + J_k p >= 0, ...
+
+with B_k, J_k the contact operators rebuilt at x_k = X + u_k (finite strain: the gap of the current
+configuration, B(x_k) x, not the reference's), until the residual f_int - F - B^T p on the free dofs
+is below 1e-10 of the load and the active set repeats. B is frozen over each solve: the geometric
+contact stiffness d(B^T p)/dx is left out, so the convergence is only linear while the contact
+geometry changes (quadratic where it does not, e.g. flat-on-flat: rubber_block_compression). Cases
+with only linear_elastic bodies keep the single solve on the reference configuration above.
 
 Parallel: a gathered solve. Every rank assembles and solves the whole system (scipy's SuperLU) from
 the global mesh it already holds and keeps its own nodes' and elements' share of the answer: the
