@@ -360,10 +360,10 @@ def check_lagrange(case: dict, data: dict) -> None:
                 raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
                                 mesh["quarter_cylinder"],
                                 f"quarter_cylinder meshes are 3D only (run.dimension = {dim})")
-        if static and mat_model(case, body) != "linear_elastic":
+        if static and mat_model(case, body) not in ("linear_elastic", "neo_hookean"):
             raise CaseError(format_key(["materials", body["material"], "model"]), mat_model(case, body),
-                            f"lagrange.integrator = {integrator!r} solves small-strain elasticity; allowed: "
-                            "linear_elastic")
+                            f"lagrange.integrator = {integrator!r} solves elasticity (small strain or neo-Hookean finite strain); allowed: "
+                            "linear_elastic, neo_hookean")
         for key in ("initial_velocity", "erosion"):
             if static and key in raw:
                 raise CaseError(format_key(base + [key]), raw[key],

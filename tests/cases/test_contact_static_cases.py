@@ -132,3 +132,26 @@ def test_contact_patch_3d_aligned_meshes_are_exact(tmp_path):
                       np.where(upper, -0.05 + eps * (X[:, 2] - 2.0), 0.05 + eps * X[:, 2])], axis=1)
     err = np.abs(u - exact).max() / np.abs(exact).max()
     assert err < 1e-10, err
+
+
+def test_rubber_block_compression(tmp_path):
+    """Neo-Hookean blocks compressed 30 % by contact in 5 load steps (Newton, finite strain): the
+    homogeneous uniaxial state of the case's comment (its check: sigma_zz 2.7e-13 off, spread 6.8e-12,
+    other components 6.3e-12 of it, contact pressure 4.6e-12 off, spread 6.1e-11); the contact force is
+    the nominal stress P_zz = J sigma_zz / lambda_z times the 1 m^2 reference area (measured 2.1e-12).
+    Newton: 4 iterations a step, converging quadratically (the last relative residual ~ the square of
+    the one before: measured 3.0e-13 after 7.5e-7 in the first step, 3.9e-12 after 1.8e-6 in the last).
+    Evaluating the contact on the reference configuration instead fails the check (the pressure per
+    reference area); the iterates stay homogeneous, where the lateral S is ~0, so this case does not
+    see the tangent's geometric part (tests/solvers/lagrange/test_finite_strain.py does)."""
+    import h5py
+
+    out, s = run_case("rubber_block_compression", tmp_path)
+    assert s["final"]["lagrange.contact_force_z"] == pytest.approx(-405230.42431429937, rel=1e-11)
+    with h5py.File(out / "diagnostics.h5") as h:
+        it = h["lagrange.iterations"][1:]
+        last = h["lagrange.equilibrium_residual_rel"][1:]
+        prev = h["lagrange.newton_residual_previous"][1:]
+    assert np.all(it <= 5), it                              # measured 4 in each step
+    assert np.all(last < 1e-10) and np.all(prev > 1e-8), (last, prev)
+    assert np.all(last < 5.0 * prev ** 2), (last, prev)     # measured ratios 0.55 ... 1.2
