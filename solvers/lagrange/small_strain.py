@@ -59,11 +59,16 @@ def quad_stiffness(points: np.ndarray, cells: np.ndarray, d: np.ndarray) -> sp.c
     per unit thickness."""
     points = np.asarray(points, dtype=np.float64)
     b, det = _strain_displacement(points, cells)
+    return _assemble(b, det, d, _dofs(cells), 2 * len(points))
+
+
+def _assemble(b: np.ndarray, det: np.ndarray, d: np.ndarray, dof: np.ndarray, n: int) -> sp.csr_matrix:
+    """K (n, n) = sum over elements and Gauss points of B^T D B det(J) (unit weights), scattered by
+    each element's dofs (ne, k)."""
     ke = np.einsum("egip,ij,egjq,eg->epq", b, d, b, det)
-    dof = _dofs(cells)
-    rows = np.repeat(dof, 8, axis=1).ravel()
-    cols = np.tile(dof, (1, 8)).ravel()
-    n = 2 * len(points)
+    k = dof.shape[1]
+    rows = np.repeat(dof, k, axis=1).ravel()
+    cols = np.tile(dof, (1, k)).ravel()
     return sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n, n))
 
 
@@ -125,12 +130,7 @@ def hex_stiffness(points: np.ndarray, cells: np.ndarray, d: np.ndarray) -> sp.cs
     points = np.asarray(points, dtype=np.float64)
     cells = np.asarray(cells, dtype=np.int64)
     b, det = _hex_strain_displacement(points, cells)
-    ke = np.einsum("egip,ij,egjq,eg->epq", b, d, b, det)
-    dof = _hex_dofs(cells)
-    rows = np.repeat(dof, 24, axis=1).ravel()
-    cols = np.tile(dof, (1, 24)).ravel()
-    n = 3 * len(points)
-    return sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n, n))
+    return _assemble(b, det, d, _hex_dofs(cells), 3 * len(points))
 
 
 def hex_stresses(points: np.ndarray, cells: np.ndarray, d: np.ndarray, u: np.ndarray) -> np.ndarray:
