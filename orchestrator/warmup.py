@@ -167,6 +167,7 @@ def cases() -> dict[str, str]:
                 boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
     out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
     out["lagrange_2d_contact"] = _contact()
+    out["lagrange_3d_contact"] = _contact(3)
     for dim, model in ((2, "taitwater"), (3, "idealgas")):  # the SPH group (LAMMPS)
         out[f"sph_{dim}d_{model}"] = _sph(dim, model)
     for dim in (2, 3):  # the embedded-mesh coupling: a body moving through the grid
@@ -176,15 +177,18 @@ def cases() -> dict[str, str]:
     return out
 
 
-def _contact() -> str:
-    """Two touching 2-D blocks, one moving into the other across it ([contact] with friction: the
-    mortar and friction kernels)."""
-    text = _RUN2.replace("end_time = 1.0", "end_time = 1.0e-3") + f"[materials.linear_elastic]\n{_MAT['linear_elastic']}"
+def _contact(dim: int = 2) -> str:
+    """Two touching blocks, one moving into the other across it ([contact]; in 2-D with friction: the
+    segment mortar and friction kernels; in 3-D frictionless: the facet mortar kernels)."""
+    run = _RUN2 if dim == 2 else _RUN3
+    text = run.replace("end_time = 1.0", "end_time = 1.0e-3") + f"[materials.linear_elastic]\n{_MAT['linear_elastic']}"
+    extra = ", 0.0" * (dim - 2)
     for name, lo, hi, v in (("a", 0.0, 0.01, "50.0, 20.0"), ("b", 0.01, 0.02, "0.0, 0.0")):
         text += (f'[[lagrange.bodies]]\nname = "{name}"\nmaterial = "linear_elastic"\n'
-                 f"mesh = {{ box = {{ lower = [{lo}, 0.0], upper = [{hi}, 0.004], cells = [2, 2] }} }}\n"
-                 f"initial_velocity = [{v}]\n")
-    return text + '[contact]\npairs = [["a", "b"]]\nfriction = 0.2\n'
+                 f"mesh = {{ box = {{ lower = [{lo}, 0.0{extra}], upper = [{hi}, 0.004{', 0.004' * (dim - 2)}], "
+                 f"cells = [2, 2{', 2' * (dim - 2)}] }} }}\n"
+                 f"initial_velocity = [{v}{extra}]\n")
+    return text + '[contact]\npairs = [["a", "b"]]\n' + ("friction = 0.2\n" if dim == 2 else "")
 
 
 def _sph(dim: int, model: str) -> str:
