@@ -12,6 +12,17 @@ from tests.cases.test_coupled_cases import assert_same_steps
 from tests.conftest import immerse
 
 
+def continue_from_first_checkpoint(case, one, cont):
+    """A copy of the run ``one`` continued from its first checkpoint into ``cont``; asserts its last
+    output step equals ``one``'s bit for bit. Returns ``cont``."""
+    ckpt = sorted((one / "checkpoints").glob("checkpoint_*.h5"))[0]
+    shutil.copytree(one, cont, symlinks=True)
+    r = immerse("run", case, "--out", cont, "--restart", cont / "checkpoints" / ckpt.name)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert_same_steps(one, cont, slice(-1, None), roles=("lagrange",))
+    return cont
+
+
 def test_bars_impact(tmp_path):
     """Two elastic bars, 10 m/s against one at rest (cases/bars_impact): contact for 2 L / c =
     39.50 us at rho c v0 / 2 = 197.5 MPa, then the velocities swap; explicit dual-pass mortar contact
@@ -71,12 +82,7 @@ def test_bars_impact_on_two_ranks_and_from_a_checkpoint(tmp_path):
         assert fb[k] == pytest.approx(fa[k], rel=1e-12, abs=1e-14), k
     with h5py.File(one / "diagnostics.h5") as a, h5py.File(two / "diagnostics.h5") as b:
         assert np.array_equal(a["lagrange.contact_force_x"][...], b["lagrange.contact_force_x"][...])
-    ckpt = sorted((one / "checkpoints").glob("checkpoint_*.h5"))[0]
-    cont = tmp_path / "cont"
-    shutil.copytree(one, cont, symlinks=True)
-    r = immerse("run", case, "--out", cont, "--restart", cont / "checkpoints" / ckpt.name)
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert_same_steps(one, cont, slice(-1, None), roles=("lagrange",))
+    cont = continue_from_first_checkpoint(case, one, tmp_path / "cont")
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in (one, cont))
     assert sa["final"] == sb["final"]
 
@@ -167,12 +173,7 @@ def test_friction_slip_continues_from_a_checkpoint(tmp_path):
     one = tmp_path / "one"
     r = immerse("run", case, "--out", one)
     assert r.returncode == 0, r.stdout + r.stderr
-    ckpt = sorted((one / "checkpoints").glob("checkpoint_*.h5"))[0]
-    cont = tmp_path / "cont"
-    shutil.copytree(one, cont, symlinks=True)
-    r = immerse("run", case, "--out", cont, "--restart", cont / "checkpoints" / ckpt.name)
-    assert r.returncode == 0, r.stdout + r.stderr
-    assert_same_steps(one, cont, slice(-1, None), roles=("lagrange",))
+    cont = continue_from_first_checkpoint(case, one, tmp_path / "cont")
     from orchestrator import output
 
     _, _, index = output.read_steps(one, "lagrange")[-1]
