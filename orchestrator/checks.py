@@ -56,6 +56,15 @@ def run_check(case: dict, out: Path, history: dict[str, np.ndarray]) -> dict:
             "metrics": metrics, "reported": extra}
 
 
+def _body_meshes(case: dict):
+    """The Lagrangian bodies' meshes (case order) and each body's first node in the solver's
+    concatenated numbering (the output's), with the total last: (meshes, first (n_bodies + 1,))."""
+    from solvers.lagrange.mesh import body_mesh
+
+    meshes = [body_mesh(b, case["run"]["dimension"]) for b in case["lagrange"]["bodies"]]
+    return meshes, np.cumsum([0] + [m.num_points for m in meshes])
+
+
 def _cell_centroids(out: Path, role: str, index: int):
     from orchestrator import output
 
@@ -135,7 +144,6 @@ def impact(case, out, history, params):
     velocity along ``axis`` at the last output over the striker's initial one (``velocity_*_rel``),
     and the energy the contact took out (-contact_work over the initial kinetic energy)."""
     from orchestrator import output
-    from solvers.lagrange.mesh import body_mesh
 
     ax = "xyz".index(params["axis"])
     t = history["time"]
@@ -148,8 +156,7 @@ def impact(case, out, history, params):
     dim = case["run"]["dimension"]
     bodies = case["lagrange"]["bodies"]
     names = [b["name"] for b in bodies]
-    meshes = [body_mesh(b, dim) for b in bodies]
-    first = np.cumsum([0] + [m.num_points for m in meshes])
+    meshes, first = _body_meshes(case)
     _, _, index = output.read_steps(out, "lagrange")[-1]
     _, pd, _ = output.read_step(out, "lagrange", index)
     v = pd["velocity"][:, ax]
@@ -182,7 +189,6 @@ def sliding(case, out, history, params):
     held, so the momentum is the body's) and its largest speed there."""
     from solvers.lagrange.mesh import body_mesh, cell_volumes
 
-    ax = "xyz".index(params["axis"])
     dim = case["run"]["dimension"]
     body = next(b for b in case["lagrange"]["bodies"] if b["name"] == params["body"])
     mass = float(cell_volumes(body_mesh(body, dim)).sum() * case["materials"][body["material"]]["density"])
@@ -251,14 +257,12 @@ def no_penetration(case, out, history, params):
     the force first exceeds 1 % of its peak to the last record above it), ``contact_dissipation_rel``
     (-contact_work over the initial kinetic energy) and the balances' largest residuals."""
     from orchestrator import output
-    from solvers.lagrange.mesh import body_mesh
     from solvers.lagrange.surface import exterior_facets
 
     dim = case["run"]["dimension"]
     bodies = case["lagrange"]["bodies"]
     names = [b["name"] for b in bodies]
-    meshes = [body_mesh(b, dim) for b in bodies]
-    first = np.cumsum([0] + [m.num_points for m in meshes])
+    meshes, first = _body_meshes(case)
     surfaces = []
     for k, m in enumerate(meshes):
         f, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)
@@ -337,7 +341,6 @@ def hertz(case, out, history, params):
     over 0 <= s <= a), ``peak_pressure`` the mean of the two sides' p at their node nearest the
     symmetry plane."""
     from orchestrator import output
-    from solvers.lagrange.mesh import body_mesh
     from solvers.lagrange.surface import exterior_facets
 
     ax = "xyz".index(params["axis"])
@@ -347,8 +350,7 @@ def hertz(case, out, history, params):
     pair = case["contact"]["pairs"][0]
     if params["body"] not in pair:
         raise ValueError(f"check.params.body = {params['body']!r} is not in the first contact pair {pair}")
-    meshes = [body_mesh(b, dim) for b in bodies]
-    first = np.cumsum([0] + [m.num_points for m in meshes])
+    meshes, first = _body_meshes(case)
     _, _, index = _last_step(out, "lagrange")
     points, pd, _ = output.read_step(out, "lagrange", index)
     loads, moments, peaks, count = [], [], [], 0
@@ -431,7 +433,6 @@ def self_contact(case, out, history, params):
     ``self_contact_pressure`` their mean pressure. ``energy_balance_rel``: the largest |solver's
     energy balance| over the run (it books the boundaries' reactions and the contact's work)."""
     from orchestrator import output
-    from solvers.lagrange.mesh import body_mesh
     from solvers.lagrange.surface import exterior_facets
 
     dim = case["run"]["dimension"]
@@ -443,8 +444,7 @@ def self_contact(case, out, history, params):
     pairs = [tuple(p) for p in case.get("contact", {}).get("pairs", []) if name in p]
     if (name, name) not in pairs:
         raise ValueError(f"check.params.body = {name!r}: no self contact pair [{name!r}, {name!r}] in [contact] pairs")
-    meshes = [body_mesh(b, dim) for b in bodies]
-    first = np.cumsum([0] + [m.num_points for m in meshes])
+    meshes, first = _body_meshes(case)
     cells, facets = [], []
     for k, m in enumerate(meshes):
         f, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)

@@ -27,8 +27,9 @@ import scipy.sparse as sp
 
 from solvers.contact import methods
 from solvers.contact.kkt import solve_schur_complement
+from solvers.contact.nodal_values import constraint_weights, nodal_mean
 
-__all__ = ["ExplicitContact", "constraint_weights", "nodal_mean"]
+__all__ = ["ExplicitContact"]
 
 
 class ExplicitContact:
@@ -52,7 +53,9 @@ class ExplicitContact:
         self.last_sliding = 0
         self.multiplier_nodes = np.zeros(0, np.int64)   # the surface node of each multiplier
         self.last_pressure = np.zeros(0)                # each multiplier's pressure of the last step
-        self.last_gap = np.zeros(0)                     # each multiplier's gap at the last step's end (m)
+        # the last step's weighted end-of-step gaps B x and its B: turned into distances only when
+        # written (nodal_gap), not every step
+        self._gap_rows, self._gap_op, self._dim = np.zeros(0), None, 0
         self.slip = None                                # (ns,) accumulated slip, from set_surface on
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
@@ -102,7 +105,7 @@ class ExplicitContact:
         self.last_active = 0
         self.last_sliding = 0
         self.last_pressure = np.zeros(len(self.multiplier_nodes))
-        self.last_gap = np.zeros(len(self.multiplier_nodes))
+        self._gap_rows, self._gap_op, self._dim = np.zeros(len(self.multiplier_nodes)), None, dim
         if B is None:
             return out
         inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
@@ -128,7 +131,7 @@ class ExplicitContact:
         self.last_active = int(sol.active.sum())
         self.last_pressure = sol.p * (dt / (dt_force or dt))
         u = (dt * dt) * inv_m * (B.T @ sol.p)
-        self.last_gap = (g0 + B @ u) / constraint_weights(B, dim)
+        self._gap_rows, self._gap_op = g0 + B @ u, B
         impulse = np.repeat(self.mass, dim) * u / dt
         if T is not None and self.last_active:
             # Coulomb: the tangential impulses on the velocities after the normal ones, bounded by mu
@@ -149,38 +152,14 @@ class ExplicitContact:
         """(ns,) the gap (m) at the end of the last step at the surface nodes: the mean over the
         multipliers a node carries, the capture distance where it carries none (nothing facing it
         within reach)."""
-        return nodal_mean(self.multiplier_nodes, self.last_gap, ns, self.capture or 0.0)
+        gap = self._gap_rows
+        if self._gap_op is not None:
+            gap = gap / constraint_weights(self._gap_op, self._dim)
+        return nodal_mean(self.multiplier_nodes, gap, ns, self.capture or 0.0)
 
     def nodal_pressure(self, ns: int) -> np.ndarray:
         """(ns,) the last step's contact pressure at the surface nodes: the mean of the multipliers a
         node carries (both passes of the dual pass), 0 where it carries none (node-to-surface methods:
         their multipliers are forces per unit thickness, reported as they are)."""
-        total = np.zeros(ns)
-        count = np.zeros(ns)
-        np.add.at(total, self.multiplier_nodes, self.last_pressure)
-        np.add.at(count, self.multiplier_nodes, 1.0)
-        return np.divide(total, count, out=np.zeros(ns), where=count > 0)
+        return nodal_mean(self.multiplier_nodes, self.last_pressure, ns, 0.0)
 
-
-def constraint_weights(B: sp.spmatrix, dim: int) -> np.ndarray:
-    """(nm,) what turns a row's weighted gap B x into a distance: half the sum over the row's nodes of
-    |its coefficient| (each node's block is coefficient x normal). A mortar row A has -D on its own
-    side and +M on the other, each summing to its area (B = G/2 of the dual pass: area / 2, single
-    pass: the area); a node-to-surface row has +1 on the node and -1 shared by the segment: 1."""
-    B = sp.csr_matrix(B)
-    per_dof = B.multiply(B).tocsc()
-    n_nodes = B.shape[1] // dim
-    gather = sp.csr_matrix((np.ones(B.shape[1]), (np.arange(B.shape[1]), np.repeat(np.arange(n_nodes), dim))),
-                           shape=(B.shape[1], n_nodes))
-    node = (per_dof @ gather).tocsr()
-    node.data = np.sqrt(node.data)
-    w = 0.5 * np.asarray(node.sum(axis=1)).ravel()
-    return np.where(w > 0, w, 1.0)
-
-
-def nodal_mean(nodes: np.ndarray, values: np.ndarray, n: int, empty: float) -> np.ndarray:
-    """(n,) the mean of ``values`` over the entries of each node in ``nodes``, ``empty`` where none."""
-    total, count = np.zeros(n), np.zeros(n)
-    np.add.at(total, nodes, values)
-    np.add.at(count, nodes, 1.0)
-    return np.divide(total, count, out=np.full(n, float(empty)), where=count > 0)

@@ -103,7 +103,7 @@ class QuasiStaticSolver(LagrangeSolver):
         for nodes, c, val in bcs.prescribed:   # case order: a later condition wins
             self.fixed[nodes, c] = True
             self.rate[nodes, c] = val
-        facets, _ = exterior_facets(C, self.cell_type, n, P)
+        facets, facet_cell = exterior_facets(C, self.cell_type, n, P)
         self.load = traction_loads(P, facets, bcs.tractions)
         if self.has_gravity:
             mass = np.zeros(n)
@@ -114,8 +114,7 @@ class QuasiStaticSolver(LagrangeSolver):
         self.pairs = []
         self._cfg = case.get("contact") or None
         if self._cfg:
-            _, fcell = exterior_facets(C, self.cell_type, n, P)
-            fbody = self.body_of_cell[fcell]
+            fbody = self.body_of_cell[facet_cell]
             for a, b in self._cfg["pairs"]:
                 ia, ib = self.body_names.index(a), self.body_names.index(b)
                 # Puso & Solberg's gamma = alpha / E with the softer side's modulus: the
@@ -314,18 +313,17 @@ class QuasiStaticSolver(LagrangeSolver):
     def contact_pressure(self) -> np.ndarray:
         """(n_nodes_global,) contact pressure at every node: the mean of the multipliers it carries
         (both passes of the dual pass), 0 off the contact."""
+        from solvers.contact.nodal_values import nodal_mean
+
         n = self.n_nodes_global
-        total, count = np.zeros(n), np.zeros(n)
-        np.add.at(total, self.multiplier_nodes % n, self.p)
-        np.add.at(count, self.multiplier_nodes % n, 1.0)
-        return np.divide(total, count, out=np.zeros(n), where=count > 0)
+        return nodal_mean(self.multiplier_nodes % n, self.p, n, 0.0)
 
     def point_fields(self) -> dict[str, np.ndarray]:
         """The contact pressure and gap (m: of the linearised contact, B (X + u) over each row's
         weight; the capture distance where nothing faces a node), when the case has contact."""
         if not self.pairs:
             return {}
-        from solvers.contact.explicit import constraint_weights, nodal_mean
+        from solvers.contact.nodal_values import constraint_weights, nodal_mean
 
         n = self.n_nodes_global
         gap = (self._B @ (self.global_points + self.u).ravel()) / constraint_weights(self._B, self.dim)

@@ -345,9 +345,13 @@ class LagrangeSolver:
     def contact_pressure(self) -> np.ndarray:
         """(n_nodes_global,) the last step's contact pressure at every node (0 off the contact), the
         same on every rank (the contact is solved on the gathered surface)."""
+        ns = len(self.surface()["node_ids"])
+        return self._on_all_nodes(self.contact.nodal_pressure(ns))
+
+    def _on_all_nodes(self, surface_values: np.ndarray) -> np.ndarray:
+        """(n_nodes_global,) the values of the surface nodes (surface() order) at their nodes, 0 elsewhere."""
         out = np.zeros(self.n_nodes_global)
-        surf = self.surface()
-        out[surf["node_ids"]] = self.contact.nodal_pressure(len(surf["node_ids"]))
+        out[self.surface()["node_ids"]] = surface_values
         return out
 
     def point_fields(self) -> dict[str, np.ndarray]:
@@ -356,15 +360,12 @@ class LagrangeSolver:
         with friction the tangential slip accumulated since t = 0 (m)."""
         if self.contact is None:
             return {}
-        out = np.zeros(self.n_nodes_global)
-        surf = self.surface()
-        out[surf["node_ids"]] = self.contact.nodal_gap(len(surf["node_ids"]))
-        fields = {"contact_pressure": self.contact_pressure(), "contact_gap": out}
+        ns = len(self.surface()["node_ids"])
+        fields = {"contact_pressure": self.contact_pressure(),
+                  "contact_gap": self._on_all_nodes(self.contact.nodal_gap(ns))}
         if self.contact.friction > 0.0:  # (the slip accumulated since t = 0, m)
-            slip = np.zeros(self.n_nodes_global)
-            if self.contact.slip is not None:
-                slip[surf["node_ids"]] = self.contact.slip
-            fields["contact_slip"] = slip
+            slip = self.contact.slip
+            fields["contact_slip"] = self._on_all_nodes(np.zeros(ns) if slip is None else slip)
         return fields
 
     # ---- the surface seen by the embedded-mesh coupling -------------------------------------------
