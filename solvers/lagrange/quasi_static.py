@@ -181,9 +181,8 @@ class QuasiStaticSolver(LagrangeSolver):
             return self._newton(F, u_fixed, fixed, step, time)
         B, J = self._B, self._J
         # warm start: the last step's active set (the loads grow monotonically in most cases)
-        start = self._active if self._active is not None else None
         try:
-            sol = solve_frictionless(self.K, F, B, J, P.ravel(), fixed, u_fixed, active=start)
+            sol = solve_frictionless(self.K, F, B, J, P.ravel(), fixed, u_fixed, active=self._active)
         except RuntimeError as err:
             raise SolverError(f"quasi_static step {step} (t={time:.6g}): {err}") from None
         u = sol.u
@@ -196,15 +195,17 @@ class QuasiStaticSolver(LagrangeSolver):
         scale = max(float(np.abs(F).max()), float(np.abs(fc).max(initial=0.0)),
                     float(np.abs(r[fixed]).max(initial=0.0)), 1e-300)
         self.residual = float(np.abs(r[~fixed]).max(initial=0.0)) / scale
-        held = self.fixed.any(axis=1)
-        self.reaction = r.reshape(P.shape)[held].sum(axis=0)
+        self._finish(u, r, fc, step, time)
+
+    def _finish(self, u: np.ndarray, r: np.ndarray, fc: np.ndarray, step: int, time: float) -> None:
+        """Close a load step at displacements u with equilibrium residual r (the reactions on the
+        prescribed dofs) and contact forces fc (ndof,)."""
+        P = self.global_points
+        self.reaction = r.reshape(P.shape)[self.fixed.any(axis=1)].sum(axis=0)
         if self.pairs:
             self.contact_force = fc.reshape(P.shape)[self.body_of_node == self.pairs[0][2]].sum(axis=0)
         self.u = u.reshape(P.shape)
-        self.strain_energy = 0.5 * float(u @ (self.K @ u))
-        self._finish(step, time)
-
-    def _finish(self, step: int, time: float) -> None:
+        self.strain_energy = self._energy(u)
         self.x = self.X + self.u[self.part.nodes]
         self.sig[:] = self._stresses(self.u)[self.part.cells]
         self.step, self.time = step, time
@@ -271,13 +272,7 @@ class QuasiStaticSolver(LagrangeSolver):
         self.residual_history = history
         self.active = int(np.count_nonzero(active)) if active is not None else 0
         self.residual = res
-        held = self.fixed.any(axis=1)
-        self.reaction = r.reshape(P.shape)[held].sum(axis=0)
-        if self.pairs:
-            self.contact_force = fc.reshape(P.shape)[self.body_of_node == self.pairs[0][2]].sum(axis=0)
-        self.u = u.reshape(P.shape)
-        self.strain_energy = self._energy(u)
-        self._finish(step, time)
+        self._finish(u, r, fc, step, time)
 
     def _energy(self, u: np.ndarray) -> float:
         """The stored energy: 1/2 u K u of the small-strain bodies plus the integral of the
