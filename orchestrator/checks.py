@@ -186,7 +186,10 @@ def impact(case, out, history, params):
 def sliding(case, out, history, params):
     """A body sliding (or sticking) on a held one: its acceleration along ``axis`` (slope of the
     solver's momentum over the body's mass, a straight-line fit over ``window`` in s; every other body
-    held, so the momentum is the body's) and its largest speed there."""
+    held, so the momentum is the body's) and its largest speed there. With friction, ``slip_max``
+    (m): the most any of the body's nodes slid within the window (the output's contact_slip at the
+    window's last output step less its first): a sticking body's is round-off, where its momentum
+    still swings with its elastic ringing."""
     from solvers.lagrange.mesh import body_mesh, cell_volumes
 
     dim = case["run"]["dimension"]
@@ -198,9 +201,21 @@ def sliding(case, out, history, params):
     if w.sum() < 3:
         raise ValueError(f"check.params.window = {params['window']}: fewer than 3 records in it")
     v = history[f"lagrange.momentum_{params['axis']}"][w] / mass
-    return {"acceleration": float(np.polyfit(t[w], v, 1)[0]), "speed_max": float(np.abs(v).max()),
-            "energy_balance_rel": float(np.max(np.abs(history["lagrange.energy_balance_rel"]))),
-            "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
+    out_metrics = {"acceleration": float(np.polyfit(t[w], v, 1)[0]), "speed_max": float(np.abs(v).max()),
+                   "energy_balance_rel": float(np.max(np.abs(history["lagrange.energy_balance_rel"]))),
+                   "momentum_balance_rel": float(np.max(np.abs(history["lagrange.momentum_balance_rel"])))}
+    if float(case.get("contact", {}).get("friction", 0.0)) > 0.0:
+        from orchestrator import output
+
+        steps = [(ts, index) for ts, _, index in output.read_steps(out, "lagrange") if lo <= ts <= hi]
+        if len(steps) < 2:
+            raise ValueError(f"check.params.window = {params['window']}: fewer than 2 output steps in it")
+        _, first = _body_meshes(case)
+        k = [b["name"] for b in case["lagrange"]["bodies"]].index(params["body"])
+        a, b = (output.read_step(out, "lagrange", index)[1]["contact_slip"][first[k]:first[k + 1]]
+                for _, index in (steps[0], steps[-1]))
+        out_metrics["slip_max"] = float(np.max(b - a))
+    return out_metrics
 
 
 def surface_penetration(points: np.ndarray, facets: np.ndarray, nodes: np.ndarray, depth: float) -> np.ndarray:

@@ -14,11 +14,14 @@ S p = -B x* on the active set, S = dt^2 B M^-1 B^T + J (kkt.solve_schur_compleme
 nodes are stopped at the surface within the step (no penetration), and a multiplier that would pull
 is released (no sticking). The impulses of a pass balance (B^T p sums to
 zero), so momentum is exact. Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
-inertia, J_dyn = alpha * median(diag(dt^2 B M^-1 B^T)) / median(diag(J_1)) * J_1, with J_1 the
-operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for the inertia).
+inertia over the stable step dt_s, J_dyn = alpha * median(diag(dt_s^2 B M^-1 B^T)) / median(diag(J_1))
+* J_1, with J_1 the operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for
+the inertia). dt_s, not the step's own dt: a step shortened to land on an output time keeps J (see
+impulses).
 
-Prescribed velocity components (boundary conditions) are fixed dofs of the solve: the contact cannot
-move them. With friction (mu > 0) the tangential impulses follow the normal ones (friction.py).
+Prescribed velocity components (boundary conditions) are fixed dofs of the solve at their
+prescribed values (the solver passes them so): the contact cannot move them. With friction (mu > 0)
+the tangential impulses follow the normal ones (friction.py), unstabilized.
 """
 from __future__ import annotations
 
@@ -92,12 +95,16 @@ class ExplicitContact:
         T = sp.vstack(blocks_t, format="csr") if blocks_t else None
         return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr"), T
 
-    def impulses(self, x: np.ndarray, v: np.ndarray, dt: float, dt_force: float | None = None) -> np.ndarray:
+    def impulses(self, x: np.ndarray, v: np.ndarray, dt: float, dt_force: float | None = None,
+                 dt_scale: float | None = None) -> np.ndarray:
         """(ns, dim) contact impulses of the step: x = x^n and v = v* (predictor, after any other
         impulse) of the surface nodes.  dt_force: the time the step's forces act over in the central
         difference ((dt_prev + dt) / 2; default dt), by which the reported pressures are impulses
         (the impulses are dt B^T p: a step shortened to land on an output time would otherwise show
-        its pressure dt_force / dt too high)."""
+        its pressure dt_force / dt too high).  dt_scale: the step J's scale is weighed with (default
+        dt; the solver passes its stable step). J p is the offset of the stabilized gap the surfaces
+        rest at: a J that shrank with a step shortened to land on an output time pushed them apart in
+        that step (a kick of |J p| / dt, 5e-5 m/s on a block resting on an incline, that made it slip)."""
         x = np.asarray(x, float)
         ns, dim = x.shape
         out = np.zeros((ns, dim))
@@ -117,7 +124,7 @@ class ExplicitContact:
             w = np.asarray(op.multiply(op) @ inv_m).ravel() * factor
             return self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
 
-        scale = weight(B, dt * dt)
+        scale = weight(B, (dt_scale or dt) ** 2)
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
         # K = M/dt^2 is diagonal: the displacements u = dt^2 M^-1 B^T p eliminate, leaving the
         # multipliers' own system (the Schur complement of the KKT matrix, kkt.py's equations)
@@ -138,14 +145,23 @@ class ExplicitContact:
             # times each row's normal impulse dt p_A (friction.py)
             from solvers.contact.friction import box_qp_gauss_seidel
 
+            # W = T M^-1 T^T without the stabilization: stick is T v = 0 itself. With J_t the stuck
+            # rows held T v = -J_t q instead, a slip rate as large as the friction impulse's jump
+            # between the passes: a block at rest on a 10 degree incline (mu = 0.2) crept at 2.7 um/s;
+            # without, it stays to 1e-16 m/s. W is singular (the passes' rows are redundant); the
+            # Gauss-Seidel iteration takes any of the equivalent splittings of q.
             v1 = np.asarray(v, float).reshape(-1) + u / dt
-            W = (T @ sp.diags(inv_m) @ T.T + weight(T, 1.0) * J1).tocsr()
+            W = (T @ sp.diags(inv_m) @ T.T).tocsr()
             bound = self.friction * dt * sol.p
             q, _ = box_qp_gauss_seidel(W, T @ v1, bound)
             self.last_sliding = int(np.sum((bound > 0) & (np.abs(q) >= bound * (1 - 1e-9))))
             impulse = impulse + T.T @ q
-            rate = np.abs(T @ (v1 + inv_m * (T.T @ q))) / constraint_weights(T, dim)
-            self.slip += dt * nodal_mean(self.multiplier_nodes, rate, ns, 0.0)
+            # slip where the surfaces touch: pressed, or closed to within the stabilized gap's offset
+            # J p (a dual pass's redundant row may rest at p = 0; the gaps of pressed rows scatter by
+            # J p, +-1e-8 m on a sliding block). An open row's tangential rate is flight, not slip.
+            on = (sol.p > 0.0) | (self._gap_rows <= np.abs(scale * (J1 @ sol.p)).max())
+            rate = np.abs(T @ (v1 + inv_m * (T.T @ q)))[on] / constraint_weights(T, dim)[on]
+            self.slip += dt * nodal_mean(self.multiplier_nodes[on], rate, ns, 0.0)
         return impulse.reshape(ns, dim)
 
     def nodal_gap(self, ns: int) -> np.ndarray:

@@ -7,8 +7,9 @@ Coulomb bound where they cannot:
     W q + b = s,   |q_A| <= mu P_A,   s_A = 0 where |q_A| < mu P_A (stick),
     otherwise s_A q_A <= 0 (the impulse opposes the slip),
 
-with W = T M^-1 T^T + J_t (T the tangential operator, t_A in place of n_A in the gap operator G, the
-dual pass's 1/2 included; J_t the stabilization, scaled as the normal one) and b = T v the
+with W = T M^-1 T^T (T the tangential operator, t_A in place of n_A in the gap operator G, the
+dual pass's 1/2 included; no stabilization: stick is T v = 0 itself, and a J_t let stuck rows creep
+at T v = -J_t q; W is then singular, the passes' rows being redundant) and b = T v the
 tangential slip rates of the velocities after the normal impulses. That is the box-constrained
 quadratic program min 1/2 q.W q + b.q over |q_A| <= mu P_A, solved by projected Gauss-Seidel (numba:
 one pass over the rows of W in csr form per sweep) to a relative change below 1e-13. Friction

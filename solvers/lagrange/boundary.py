@@ -53,6 +53,16 @@ class BoundaryConditions:
             else:  # the schema admits nothing else
                 raise ValueError(f"boundaries.type = {kind!r}: unknown")
 
+    def prescribed_velocity(self, v: np.ndarray) -> np.ndarray:
+        """A copy of v with the prescribed components at their values (rigid walls not applied): the
+        velocities a constraint solved before apply() must see. The predictor moves a held node by its
+        force; apply() takes that back only after the contact impulses, and a contact that saw the
+        predicted velocity of a held incline dragged the block resting on it along at g dt per step."""
+        out = np.array(v, dtype=np.float64, copy=True)
+        for nodes, c, val in self.prescribed:
+            out[nodes, c] = val
+        return out
+
     def apply(self, x: np.ndarray, v: np.ndarray, dt: float) -> None:
         """Impose the conditions on the half-step velocity v (in place); x is the position at t^n."""
         for nodes, c, val in self.prescribed:

@@ -334,7 +334,10 @@ class LagrangeSolver:
             self._contact_first = np.zeros(len(surf["node_ids"]), bool)
             self._contact_first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
         xs, vs = self.surface_state("x"), self.surface_state("v")
-        imp = self.contact.impulses(xs, vs, self.dt, self.dt_avg)
+        # the solve sees held components at their prescribed values, not where the predictor put them
+        # (boundary.py prescribed_velocity); the work below is on the velocities the nodes have
+        v_solve = self._gather_surface(self.bcs.prescribed_velocity(self.v)) if self.bcs.prescribed else vs
+        imp = self.contact.impulses(xs, v_solve, self.dt, self.dt_avg, self._dt_stable)
         vo = self._gather_surface(self.v_old)
         m = np.where(surf["mass"] > 0, surf["mass"], np.inf)[:, None]
         self.w_contact += float(np.sum(imp * 0.5 * (vo + vs + imp / m)))

@@ -862,10 +862,29 @@ def test_impact(tmp_path):
     assert r["metrics"]["contact_duration"]["rel_error"] == pytest.approx(9.5 / 39.5, rel=1e-9)  # 30 us against 39.5
 
 
+def sliding_output(out, slips):
+    """cases/block_on_incline's meshes at the given (time, block slip, incline slip) records."""
+    from solvers.lagrange.mesh import body_mesh, concatenate
+
+    case = load_case(CASES / "block_on_incline")
+    meshes = [body_mesh(b, 2) for b in case["lagrange"]["bodies"]]
+    mesh, _ = concatenate(meshes)
+    n0 = meshes[0].num_points
+    steps = []
+    for t, a, b in slips:
+        slip = np.concatenate([np.full(n0, a), np.full(mesh.num_points - n0, b)])
+        steps.append((t, mesh.points, {"contact_slip": slip}, {}))
+    write(out, "lagrange", mesh.cells, steps)
+
+
 def test_sliding(tmp_path):
     """A body whose momentum grows as m a t: its acceleration to round-off and its largest speed in the
-    window; 10 % faster fails with that error; a window with fewer than 3 records is an error."""
+    window; 10 % faster fails with that error; a window with fewer than 3 records is an error. With
+    friction its slip within the window (the output's contact_slip at the window's last output step
+    less its first; the held body's slip not counted); fewer than 2 output steps in the window: an
+    error."""
     case = load_case(CASES / "block_on_incline")
+    sliding_output(tmp_path, [(0.0, 0.0, 0.0), (0.05, 1e-3, 5.0), (0.1, 1e-3 + 2.5e-6, 9.0)])
     m = 1000.0 * 0.1 * 0.05
     h = history("lagrange", n=101)
     h["time"] = np.linspace(0.0, 0.1, 101)
@@ -873,11 +892,14 @@ def test_sliding(tmp_path):
     r = checks.run_check(case, tmp_path, h)
     assert r["passed"], r
     assert r["metrics"]["acceleration"]["rel_error"] < 1e-9 and r["reported"]["speed_max"] == pytest.approx(0.1511541)
+    assert r["reported"]["slip_max"] == pytest.approx(2.5e-6, rel=1e-9)
     h["lagrange.momentum_x"] = 1.1 * m * 1.511541 * h["time"]
     r = checks.run_check(case, tmp_path, h)
     assert failed(r) == ["acceleration"] and r["metrics"]["acceleration"]["rel_error"] == pytest.approx(0.1, rel=1e-9)
     with pytest.raises(ValueError, match="fewer than 3 records"):
         checks.run_check(case_with("block_on_incline", window=[0.0405, 0.0415]), tmp_path, h)
+    with pytest.raises(ValueError, match="fewer than 2 output steps"):
+        checks.run_check(case_with("block_on_incline", window=[0.04, 0.09]), tmp_path, h)
 
 
 
