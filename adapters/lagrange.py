@@ -49,8 +49,9 @@ class LagrangeAdapter(SolverAdapter):
         return self.solver.renew_surface()
 
     def interface(self) -> dict[str, np.ndarray]:
-        """After predict: {"v": (ns, dim) predictor velocities v* of the surface nodes}."""
-        return {"v": self.solver.surface_state("v")}
+        """After predict: {"v": (ns, dim) predictor velocities v* of the surface nodes, held components
+        at their prescribed values (a clamped node does not move the fluid by its predicted force)}."""
+        return {"v": self.solver.constraint_velocity()}
 
     def positions(self) -> np.ndarray:
         """(ns, dim) current positions of the surface nodes: x^{n+1} after correct (x^0 before the

@@ -50,8 +50,6 @@ def normalise(raw: dict | None, case: dict) -> dict | None:
 def check(case: dict, data: dict) -> None:
     c = case["contact"]
     dim = case["run"]["dimension"]
-    if dim == 3 and c["friction"] > 0.0:
-        raise CaseError("contact.friction", c["friction"], "friction is 2-D only so far (run.dimension = 3); allowed: 0")
     if dim == 3 and not METHODS[c["method"]].three_d:
         ok = ", ".join(k for k, m in METHODS.items() if m.three_d)
         raise CaseError("contact.method", c["method"], f"not in 3-D (run.dimension = 3); allowed: {ok}")

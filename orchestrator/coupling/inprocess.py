@@ -36,7 +36,7 @@ class InProcess:
         dt_avg = 0.5 * dt if self.dt_prev == 0.0 else 0.5 * (self.dt_prev + dt)
         lag.predict(dt)
         ale.predict(dt)
-        imp = c.solve(dt, dt_avg, lag.surface_state("v"), ale.interface())
+        imp = c.solve(dt, dt_avg, lag.constraint_velocity(), ale.interface())
         lag.correct(surface_impulse=imp, step=self.step, time=t_new)
         corr = c.background_correction(lag.surface_state("x"), lag.surface_state("v"))
         nn, dim = ale._blk.nodes[0].size, ale.dim

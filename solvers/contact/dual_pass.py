@@ -88,15 +88,28 @@ def nodal_normals(points: np.ndarray, segments: np.ndarray) -> np.ndarray:
     return np.divide(n, norm[:, None], out=np.zeros_like(n), where=norm[:, None] > 0)
 
 
-def _require_2d(points: np.ndarray, what: str) -> None:
-    if points.shape[1] != 2:
-        raise NotImplementedError(f"{what} is 2-D only: a 3-D contact node has two tangent directions "
-                                  "(a 3-D friction law is not built yet)")
-
-
 def _tangent(n: np.ndarray) -> np.ndarray:
     """The tangent t = (n_y, -n_x) of unit normals n (n, 2)."""
     return np.stack([n[:, 1], -n[:, 0]], axis=1)
+
+
+def _tangents_3d(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Two unit tangents t1, t2 of unit normals n (n, 3), (t1, t2, n) right-handed: t1 = e x n / |e x n|
+    with e the coordinate axis least aligned with n (|e x n| >= sqrt(2/3): never near 0), t2 = n x t1.
+    Any orthonormal pair serves: the Coulomb cone is isotropic (friction.py)."""
+    e = np.zeros_like(n)
+    e[np.arange(len(n)), np.argmin(np.abs(n), axis=1)] = 1.0
+    t1 = np.cross(e, n)
+    t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
+    return t1, np.cross(n, t1)
+
+
+def _interleave(t1: sp.csr_matrix, t2: sp.csr_matrix) -> sp.csr_matrix:
+    """Rows t1_0, t2_0, t1_1, t2_1, ...: each multiplier's two tangential rows side by side."""
+    n = t1.shape[0]
+    order = np.empty(2 * n, dtype=np.int64)
+    order[0::2], order[1::2] = np.arange(n), n + np.arange(n)
+    return sp.vstack([t1, t2], format="csr")[order]
 
 
 @dataclass
@@ -225,11 +238,18 @@ class DualPassContact:
         """B = G / 2, the dual pass's b(mu, u) = mu . B u (both passes averaged)."""
         return 0.5 * self.gap_operator()
 
+    def _tangential(self) -> sp.csr_matrix:
+        """G with tangents in place of the normals: in 2-D one row per multiplier along t_A = (n_y,
+        -n_x); in 3-D two, along t1_A and t2_A, interleaved (friction.py's blocks)."""
+        if self.points.shape[1] == 2:
+            return self._directed_operator(_tangent)
+        return _interleave(self._directed_operator(lambda n: _tangents_3d(n)[0]),
+                           self._directed_operator(lambda n: _tangents_3d(n)[1]))
+
     def tangent_operator(self) -> sp.csr_matrix:
-        """T: the constraint operator with each multiplier's tangent t_A = (n_y, -n_x) in place of its
-        normal (the weighted tangential slip of the friction, friction.py). 2-D only."""
-        _require_2d(self.points, "the tangent operator (friction)")
-        return 0.5 * self._directed_operator(_tangent)
+        """T: the constraint operator with each multiplier's tangent(s) in place of its normal (the
+        weighted tangential slip of the friction, friction.py): (n_multipliers (dim - 1), dim n)."""
+        return 0.5 * self._tangential()
 
     def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
         """Weighted gaps g_A of every multiplier at positions x (default: the operators' own)."""
@@ -289,8 +309,7 @@ class SinglePassMortar(DualPassContact):
         return self.gap_operator()
 
     def tangent_operator(self) -> sp.csr_matrix:
-        _require_2d(self.points, "the tangent operator (friction)")
-        return self._directed_operator(_tangent)
+        return self._tangential()
 
     def stabilization(self, gamma: float, h: float) -> sp.csr_matrix:
         return sp.csr_matrix((self.n_multipliers, self.n_multipliers))

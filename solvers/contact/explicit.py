@@ -60,12 +60,12 @@ class ExplicitContact:
         # written (nodal_gap), not every step
         self._gap_rows, self._gap_op, self._dim = np.zeros(0), None, 0
         self.slip = None                                # (ns,) accumulated slip, from set_surface on
+        self._q_last, self._q_nodes = None, None        # the last friction impulses and their nodes
+        self.last_sweeps = 0                            # the friction solve's sweeps of the last step
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
         """facets (nf, 2 | 4) outward segments or quadrilaterals as indices into the surface nodes; body (nf,); mass (ns,);
         free (ns, dim) 1 where a velocity component is not prescribed."""
-        if facets.shape[1] != 2 and self.friction > 0.0:
-            raise NotImplementedError("friction is 2-D only so far (the 3-D tangent operator is to come)")
         self.facets, self.body = np.asarray(facets), np.asarray(body)
         self.mass, self.free = np.asarray(mass, float), np.asarray(free, float)
         # the tangential slip accumulated at every surface node (friction): |slip rate| dt summed over
@@ -124,7 +124,11 @@ class ExplicitContact:
             w = np.asarray(op.multiply(op) @ inv_m).ravel() * factor
             return self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
 
-        scale = weight(B, (dt_scale or dt) ** 2)
+        # J p is the offset of the stabilized gap: with p the physical pressure, the same in a step
+        # shortened to land on an output time. The step's p is its impulse over dt, which the central
+        # difference's forces give over dt_force: p dt / dt_force is the pressure, so J is scaled by
+        # dt / dt_force (with J fixed, a block resting in 3-D was kicked at every output time)
+        scale = weight(B, (dt_scale or dt) ** 2) * (dt / (dt_force or dt))
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
         # K = M/dt^2 is diagonal: the displacements u = dt^2 M^-1 B^T p eliminate, leaving the
         # multipliers' own system (the Schur complement of the KKT matrix, kkt.py's equations)
@@ -134,7 +138,7 @@ class ExplicitContact:
         # approaching surface's rows only, not the whole system's (mostly gaps that stay open). The
         # solution (p > 0 exactly where its set settles) is the same: the same last factorisation.
         sol = solve_schur_complement(((dt * dt) * (B @ sp.diags(inv_m) @ B.T) + scale * J1).tocsc(), g0,
-                                     active=g0 < 0.0)
+                                     active=g0 < 0.0, gap_tol=1e-12 * float((abs(B) @ np.abs(xstar)).max()))
         self.last_active = int(sol.active.sum())
         self.last_pressure = sol.p * (dt / (dt_force or dt))
         u = (dt * dt) * inv_m * (B.T @ sol.p)
@@ -143,7 +147,7 @@ class ExplicitContact:
         if T is not None and self.last_active:
             # Coulomb: the tangential impulses on the velocities after the normal ones, bounded by mu
             # times each row's normal impulse dt p_A (friction.py)
-            from solvers.contact.friction import box_qp_gauss_seidel
+            from solvers.contact.friction import disc_qp_gauss_seidel
 
             # W = T M^-1 T^T without the stabilization: stick is T v = 0 itself. With J_t the stuck
             # rows held T v = -J_t q instead, a slip rate as large as the friction impulse's jump
@@ -153,16 +157,37 @@ class ExplicitContact:
             v1 = np.asarray(v, float).reshape(-1) + u / dt
             W = (T @ sp.diags(inv_m) @ T.T).tocsr()
             bound = self.friction * dt * sol.p
-            q, _ = box_qp_gauss_seidel(W, T @ v1, bound)
-            self.last_sliding = int(np.sum((bound > 0) & (np.abs(q) >= bound * (1 - 1e-9))))
+            k = dim - 1                      # tangential components per multiplier (T's row blocks)
+            # warm start: the last step's q where the multipliers are the same nodes
+            same = self._q_last is not None and np.array_equal(self._q_nodes, self.multiplier_nodes)
+            q, self.last_sweeps = disc_qp_gauss_seidel(W, T @ v1, bound, start=self._q_last if same else None)
+            self._q_last, self._q_nodes = q, self.multiplier_nodes
+            q_size = np.linalg.norm(q.reshape(-1, k), axis=1)
+            self.last_sliding = int(np.sum((bound > 0) & (q_size >= bound * (1 - 1e-9))))
             impulse = impulse + T.T @ q
             # slip where the surfaces touch: pressed, or closed to within the stabilized gap's offset
             # J p (a dual pass's redundant row may rest at p = 0; the gaps of pressed rows scatter by
             # J p, +-1e-8 m on a sliding block). An open row's tangential rate is flight, not slip.
             on = (sol.p > 0.0) | (self._gap_rows <= np.abs(scale * (J1 @ sol.p)).max())
-            rate = np.abs(T @ (v1 + inv_m * (T.T @ q)))[on] / constraint_weights(T, dim)[on]
+            rate = (np.linalg.norm((T @ (v1 + inv_m * (T.T @ q))).reshape(-1, k), axis=1)[on]
+                    / constraint_weights(T, dim)[::k][on])
             self.slip += dt * nodal_mean(self.multiplier_nodes[on], rate, ns, 0.0)
         return impulse.reshape(ns, dim)
+
+    def state(self) -> dict[str, np.ndarray]:
+        """What a restart needs to continue bit for bit (friction): the accumulated slip, and the last
+        friction impulses with their multipliers' nodes (the next solve's warm start)."""
+        out = {} if self.slip is None else {"slip": self.slip}
+        if self._q_last is not None:
+            out.update(friction_q=self._q_last, friction_nodes=self._q_nodes)
+        return out
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        if "slip" in state:
+            self.slip = np.asarray(state["slip"], dtype=np.float64)
+        if "friction_q" in state:
+            self._q_last = np.asarray(state["friction_q"], dtype=np.float64)
+            self._q_nodes = np.asarray(state["friction_nodes"], dtype=np.int64)
 
     def nodal_gap(self, ns: int) -> np.ndarray:
         """(ns,) the gap (m) at the end of the last step at the surface nodes: the mean over the

@@ -112,11 +112,12 @@ def _active_set(nm: int, c: float, solve_on, max_iterations: int, active: np.nda
 
 
 def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int = 50,
-                           active: np.ndarray | None = None) -> ContactSolution:
+                           active: np.ndarray | None = None, gap_tol: float = 0.0) -> ContactSolution:
     """The same complementarity with the displacements eliminated (a diagonal K: the explicit step):
     gaps g~ = g0 + S p with S (nm, nm) sparse symmetric positive (semi)definite; p >= 0, g~ >= 0,
     p g~ = 0, by the same primal-dual active set (c = 1 / mean of diag S), from ``active`` (default
-    every multiplier). Returns u empty."""
+    every multiplier). gap_tol: the round-off of a gap (as solve_frictionless's: a row at p = 0 and
+    g~ = -1e-20 must not join and leave the set by turns). Returns u empty."""
     S = sp.csc_matrix(S)
     nm = S.shape[0]
     d = S.diagonal()
@@ -133,4 +134,4 @@ def solve_schur_complement(S: sp.spmatrix, g0: np.ndarray, max_iterations: int =
                              permc_spec="MMD_AT_PLUS_A")
         return np.zeros(0), p, g0 + S @ p
 
-    return _active_set(nm, c, solve_on, max_iterations, active)
+    return _active_set(nm, c, solve_on, max_iterations, active, c * gap_tol)

@@ -335,8 +335,8 @@ class LagrangeSolver:
             self._contact_first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
         xs, vs = self.surface_state("x"), self.surface_state("v")
         # the solve sees held components at their prescribed values, not where the predictor put them
-        # (boundary.py prescribed_velocity); the work below is on the velocities the nodes have
-        v_solve = self._gather_surface(self.bcs.prescribed_velocity(self.v)) if self.bcs.prescribed else vs
+        # (constraint_velocity); the work below is on the velocities the nodes have
+        v_solve = self.constraint_velocity() if self.bcs.prescribed else vs
         imp = self.contact.impulses(xs, v_solve, self.dt, self.dt_avg, self._dt_stable)
         vo = self._gather_surface(self.v_old)
         m = np.where(surf["mass"] > 0, surf["mass"], np.inf)[:, None]
@@ -489,6 +489,16 @@ class LagrangeSolver:
         self.surface()
         return self._gather_surface(self.x if which == "x" else self.v)
 
+    def constraint_velocity(self) -> np.ndarray:
+        """(ns, dim) after predict: the surface nodes' v* with their held components at the prescribed
+        values (boundary.py prescribed_velocity), the same array on every rank (collective): what a
+        constraint solved before correct must see (the contact, the coupling). The predictor moves a
+        held node by its force until correct's boundary conditions take that back."""
+        if not self.bcs.prescribed:
+            return self.surface_state("v")
+        self.surface()
+        return self._gather_surface(self.bcs.prescribed_velocity(self.v))
+
     def _surface_impulse_local(self, imp: np.ndarray) -> np.ndarray:
         """The (ns, dim) surface impulse as an (nn_local, dim) array on this rank's nodes: every copy
         of a surface node gets that node's full impulse (each copy is updated with the full nodal
@@ -634,8 +644,9 @@ class LagrangeSolver:
                 h.attrs[k] = getattr(self, k)
             for k in self.STATE_VECTORS:
                 h.create_dataset(k, data=getattr(self, k))
-            if self.contact is not None and self.contact.slip is not None:  # friction's accumulated slip
-                h.create_dataset("contact_slip", data=self.contact.slip)
+            if self.contact is not None:  # friction's accumulated slip and the last impulses (its warm start)
+                for name, value in self.contact.state().items():
+                    h.create_dataset(f"contact_{name}", data=value)
             h.attrs["ranks"] = self.comm.size
         tmp.replace(path)
 
@@ -656,7 +667,7 @@ class LagrangeSolver:
             for k in self.STATE_VECTORS:
                 if k in h:  # (impulse_gross: not in checkpoints before the coupling)
                     setattr(self, k, h[k][...])
-            if self.contact is not None and "contact_slip" in h:  # (kept by set_surface: same length)
-                self.contact.slip = h["contact_slip"][...]
+            if self.contact is not None:  # (kept by set_surface: the same surface)
+                self.contact.set_state({k[len("contact_"):]: h[k][...] for k in h if k.startswith("contact_")})
         self.first_step = bool(self.first_step)
         self.step = int(self.step)

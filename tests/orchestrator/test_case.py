@@ -232,7 +232,6 @@ BAD_CASES = [
     ("contact_self_node_to_surface", "contact.pairs[0]", "self contact needs a method that handles it"),
     ("contact_unknown_method", "contact.method", "must be one of: 'dual_pass_mortar'"),
     ("contact_3d_method", "contact.method", "not in 3-D (run.dimension = 3); allowed: dual_pass_mortar"),
-    ("contact_3d_friction", "contact.friction", "friction is 2-D only so far"),
     ("contact_friction_static", "contact.friction", "'quasi_static' is frictionless"),
     ("lagrange_traction_explicit", "boundaries[0].type", "traction boundaries are loads of the quasi-static mode"),
     ("lagrange_static_rigid_wall", "boundaries[0].type", "rigid_wall boundaries are velocity conditions"),

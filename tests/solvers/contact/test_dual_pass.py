@@ -113,11 +113,32 @@ def test_3d_weighted_gaps_forces_and_stabilization_of_parallel_faces():
     assert np.abs(J @ np.full(c.n_multipliers, 5.0)).max() <= 1e-19  # measured 1.5e-20 (gamma h p = 1.5e-3)
 
 
-def test_3d_friction_is_refused_and_nodal_normals_weigh_by_area():
-    pts, qa, qb = _grids_3d(0.0)
+def test_3d_tangent_operator_measures_the_slip_in_two_directions():
+    """T in 3-D: two rows per multiplier (interleaved), along tangents orthonormal to the nodal normal;
+    the upper (turned) face slid by s = (3, -2, 0) against the lower: each multiplier's pair of rows
+    is T x = area / 2 x (t1 . s, t2 . s) with the sign of its pass; a motion along the normal slips
+    nothing; both faces moved together slip nothing."""
+    pts, qa, qb = _grids_3d(0.01)
     c = DualPassContact(pts, qa, qb, capture=0.05)
-    with pytest.raises(NotImplementedError, match="2-D only"):
-        c.tangent_operator()
+    T = c.tangent_operator()
+    assert T.shape == (2 * c.n_multipliers, 3 * len(pts))
+    area = np.concatenate([p.area for p in c.passes])
+    normals = np.concatenate([p.normals for p in c.passes])
+    s = np.array([3.0, -2.0, 0.0])
+    up = np.zeros_like(pts)
+    up[len(pts) - 16:] = s                    # the 3 x 3 grid's 16 nodes last
+    slip = (T @ up.ravel()).reshape(-1, 2)
+    # the lower face (normal +z): t1 = x x n = -y, t2 = n x t1 = x; the mortar side (upper) moved by s:
+    # (2, 3) area / 2. The upper face (normal -z): t1 = x x n = y, t2 = x; its mortar side did not
+    # move, its own did: (t1, t2) . (-s) = (2, -3) area / 2
+    want = np.where(np.arange(c.n_multipliers)[:, None] < 25, [2.0, 3.0], [2.0, -3.0]) * area[:, None] / 2
+    np.testing.assert_allclose(slip, want, rtol=1e-14, atol=1e-16)  # measured 2.2e-16
+    up[len(pts) - 16:] = [0.0, 0.0, 0.7]
+    assert np.abs(T @ up.ravel()).max() <= 1e-15   # measured 0
+    assert np.abs(T @ np.tile(s, len(pts))).max() <= 1e-15  # measured 2.2e-16
+
+
+def test_3d_nodal_normals_weigh_by_area():
     # a roof: a 2 x 1 facet in the plane z = 0 and a 1 x 1 facet sloping up at 45 degrees along x
     roof = np.array([[-2, 0, 0], [0, 0, 0], [0, 1, 0], [-2, 1, 0], [1, 0, 1], [1, 1, 1]], float)
     n = nodal_normals(roof, np.array([[0, 1, 2, 3], [1, 4, 5, 2]]))
