@@ -73,13 +73,14 @@ class ExplicitContact:
         if self.slip is None or len(self.slip) != len(self.mass):
             self.slip = np.zeros(len(self.mass))
 
-    def _operators(self, x: np.ndarray):
+    def _operators(self, x: np.ndarray, zone: np.ndarray | None = None):
         if self.capture is None:  # a segment: far more than a step's approach, less than a body
             self.capture = float(np.median(np.linalg.norm(x[self.facets[:, 1]] - x[self.facets[:, 0]], axis=1)))
+        keep = np.ones(len(self.facets), bool) if zone is None else np.all(zone[self.facets], axis=1)
         blocks_b, blocks_j, blocks_t, nodes = [], [], [], []
         for a, b in self.pairs:
-            seg_a = self.facets[self.body == a]
-            seg_b = None if a == b else self.facets[self.body == b]
+            seg_a = self.facets[(self.body == a) & keep]
+            seg_b = None if a == b else self.facets[(self.body == b) & keep]
             c = methods.build(self.method, x, seg_a, seg_b, self.capture, self.capture)
             if c.n_multipliers:
                 nodes.append(np.concatenate([q.nodes for q in c.passes]) if hasattr(c, "passes") else c.nodes)
@@ -96,7 +97,7 @@ class ExplicitContact:
         return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr"), T
 
     def impulses(self, x: np.ndarray, v: np.ndarray, dt: float, dt_force: float | None = None,
-                 dt_scale: float | None = None) -> np.ndarray:
+                 dt_scale: float | None = None, zone: np.ndarray | None = None) -> np.ndarray:
         """(ns, dim) contact impulses of the step: x = x^n and v = v* (predictor, after any other
         impulse) of the surface nodes.  dt_force: the time the step's forces act over in the central
         difference ((dt_prev + dt) / 2; default dt), by which the reported pressures are impulses
@@ -104,11 +105,13 @@ class ExplicitContact:
         its pressure dt_force / dt too high).  dt_scale: the step J's scale is weighed with (default
         dt; the solver passes its stable step). J p is the offset of the stabilized gap the surfaces
         rest at: a J that shrank with a step shortened to land on an output time pushed them apart in
-        that step (a kick of |J p| / dt, 5e-5 m/s on a block resting on an incline, that made it slip)."""
+        that step (a kick of |J p| / dt, 5e-5 m/s on a block resting on an incline, that made it slip).
+        zone: (ns,) bool, the surface nodes whose states x and v hold (zone.py: the nodes near a
+        partner body); only the facets all of whose nodes are in it are searched (default: all)."""
         x = np.asarray(x, float)
         ns, dim = x.shape
         out = np.zeros((ns, dim))
-        B, J1, T = self._operators(x)
+        B, J1, T = self._operators(x, zone)
         self.last_active = 0
         self.last_sliding = 0
         self.last_pressure = np.zeros(len(self.multiplier_nodes))

@@ -324,8 +324,9 @@ class LagrangeSolver:
         self._dt_stable = dt if np.isfinite(dt) else self._dt_stable
 
     def _contact_impulse(self) -> np.ndarray:
-        """(nn_local, dim) contact impulses of this step on this rank's nodes (collective: the surface
-        is gathered and every rank solves the same contact problem, so the copies agree)."""
+        """(nn_local, dim) contact impulses of this step on this rank's nodes (collective: the nodes
+        near a partner body are gathered (solvers/contact/zone.py) and every rank solves the same
+        contact problem on them, so the copies agree)."""
         surf = self.surface()
         if self._contact_version != self.surface_version:
             self.contact.set_surface(surf["facets"], surf["body"], surf["mass"], surf["free"])
@@ -333,17 +334,71 @@ class LagrangeSolver:
             # the surface nodes of the first body of the first pair: the contact_force diagnostic's
             self._contact_first = np.zeros(len(surf["node_ids"]), bool)
             self._contact_first[np.unique(surf["facets"][surf["body"] == self.contact.pairs[0][0]])] = True
-        xs, vs = self.surface_state("x"), self.surface_state("v")
+            self._zone_maps = self._contact_zone_maps(surf)
         # the solve sees held components at their prescribed values, not where the predictor put them
-        # (constraint_velocity); the work below is on the velocities the nodes have
-        v_solve = self.constraint_velocity() if self.bcs.prescribed else vs
-        imp = self.contact.impulses(xs, v_solve, self.dt, self.dt_avg, self._dt_stable)
-        vo = self._gather_surface(self.v_old)
+        # (boundary.py prescribed_velocity); the work below is on the velocities the nodes have
+        v_solve = self.bcs.prescribed_velocity(self.v) if self.bcs.prescribed else self.v
+        zone, (xs, vs, v_solve, vo) = self._gather_near((self.x, self.v, v_solve, self.v_old))
+        imp = self.contact.impulses(xs, v_solve, self.dt, self.dt_avg, self._dt_stable, zone=zone)
         m = np.where(surf["mass"] > 0, surf["mass"], np.inf)[:, None]
         self.w_contact += float(np.sum(imp * 0.5 * (vo + vs + imp / m)))
         # the force the first body of the first pair takes from the contact over the step
         self.contact_force = imp[self._contact_first].sum(axis=0) / self.dt_avg  # (the central difference's force time)
         return self._surface_impulse_local(imp).copy()
+
+    def _contact_zone_maps(self, surf: dict) -> dict:
+        """What the near-node test needs, once per surface: the body of every surface node, the
+        canonical positions of the surface nodes this rank sends (owns), and the facets whole on this
+        rank (as local node indices: their extents bound the margin, zone.py)."""
+        m = self._surf
+        ns = len(surf["node_ids"])
+        node_body = np.zeros(ns, dtype=np.int64)
+        node_body[surf["facets"]] = surf["body"][:, None]
+        rank = self.comm.rank
+        sent_pos = m.recv_pos[m.displs[rank]:m.displs[rank] + m.counts[rank]] if self.comm.size > 1 else m.recv_pos
+        local = np.full(ns, -1, dtype=np.int64)
+        local[m.held_pos] = m.held_local
+        whole = np.all(local[surf["facets"]] >= 0, axis=1)
+        return {"node_body": node_body, "sent_pos": np.asarray(sent_pos, dtype=np.int64),
+                "local_facets": local[surf["facets"][whole]], "n_bodies": len(self.body_names)}
+
+    def _gather_near(self, arrays):
+        """The states (each (nn_local, dim)) of the surface nodes near a partner body, as (ns, dim)
+        arrays on every rank (zeros off the zone), and the zone (ns,) bool (collective: a gather of
+        every rank's body boxes, then one Allgatherv of the near nodes' rows; zone.py)."""
+        from solvers.contact.zone import body_boxes, facet_extent, near_nodes
+
+        z, m = self._zone_maps, self._surf
+        ns, dim = len(z["node_body"]), self.dim
+        xo = self.x[m.sent_local]
+        bodies = z["node_body"][z["sent_pos"]]
+        mine = np.concatenate([body_boxes(xo, bodies, z["n_bodies"]).ravel(),
+                               [facet_extent(self.x, z["local_facets"])]])
+        every = np.array(self.comm.allgather(mine)) if self.comm.size > 1 else mine[None]
+        boxes = every[:, :-1].reshape(len(every), z["n_bodies"], 2, dim)
+        margin = 2.0 * (float(self.contact.capture) + float(every[:, -1].max()))
+        near = near_nodes(xo, bodies, self.contact.pairs, boxes, margin)
+        rows = np.concatenate([z["sent_pos"][near, None].astype(np.float64)]
+                              + [np.asarray(a, dtype=np.float64)[m.sent_local[near]] for a in arrays], axis=1)
+        if self.comm.size > 1:
+            from mpi4py import MPI
+
+            counts = np.zeros(self.comm.size, dtype=np.int64)
+            self.comm.Allgather(np.array([len(rows)], dtype=np.int64), counts)
+            width = rows.shape[1]
+            recv = np.empty((int(counts.sum()), width))
+            displs = np.concatenate([[0], np.cumsum(counts)[:-1]])
+            self.comm.Allgatherv(np.ascontiguousarray(rows), [recv, counts * width, displs * width, MPI.DOUBLE])
+            rows = recv
+        pos = rows[:, 0].astype(np.int64)
+        zone = np.zeros(ns, dtype=bool)
+        zone[pos] = True
+        out = []
+        for k in range(len(arrays)):
+            a = np.zeros((ns, dim))
+            a[pos] = rows[:, 1 + k * dim:1 + (k + 1) * dim]
+            out.append(a)
+        return zone, out
 
     def contact_pressure(self) -> np.ndarray:
         """(n_nodes_global,) the last step's contact pressure at every node (0 off the contact), the
