@@ -133,7 +133,8 @@ def test_block_on_incline_3d_slides_along_gravity_at_newtons_rate(tmp_path):
     bounded by a disc): gravity tilted 20 degrees towards 30 degrees off x; the block accelerates
     along (cos 30, sin 30) at g (sin 20 - mu cos 20) = 1.511541 m/s^2: its own check on x (measured
     1.9e-5 off 1.309033), here y (1.8e-4 off 0.755771), the magnitude (3.2e-5) and the direction
-    (30.005 degrees: an anisotropic bound, a box on the two tangents, would turn it)."""
+    (30.005 degrees: an anisotropic bound, a box on the two tangents, would turn it). 2 ranks equal
+    1 rank bit for bit."""
     out, s = run_case("block_on_incline_3d", tmp_path)
     with h5py.File(out / "diagnostics.h5") as h:
         t = h["time"][...]
@@ -143,6 +144,10 @@ def test_block_on_incline_3d_slides_along_gravity_at_newtons_rate(tmp_path):
     assert ay == pytest.approx(0.755771, rel=1e-3)                      # measured 1.8e-4
     assert np.hypot(ax, ay) == pytest.approx(1.511541, rel=2e-4)        # measured 3.2e-5
     assert np.degrees(np.arctan2(ay, ax)) == pytest.approx(30.0, abs=0.02)  # measured 0.005
+    # on 2 ranks (each rank's boxes decide the nodes near: zone.py) equal to 1 rank bit for bit
+    r = immerse("run", CASES / "block_on_incline_3d", "--out", tmp_path / "two", "--ranks", "lagrange=2")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert_same_steps(out, tmp_path / "two", roles=("lagrange",))
 
 
 def test_block_on_incline_3d_sticks_below_the_friction_angle(tmp_path):
