@@ -104,7 +104,9 @@ def test_cancelled_job_reads_cancelled(tmp_path):
         wait_until("the cancelled job leaves squeue", lambda: not active(env, job))
         state, exit_code = array_task_states(env, job)[job]
         assert state == "CANCELLED", (state, exit_code)
-        assert exit_code == "0:15"  # killed by SIGTERM
+        # killed by SIGTERM: slurm records the signal (0:15), or, when the batch shell outlives its
+        # sleep by an instant (a loaded machine), the shell's exit status 128 + 15 (143:0)
+        assert exit_code in ("0:15", "143:0"), exit_code
         records = wait_until("a jobcomp record", lambda: read_jobcomp(tmp_path / "cluster"), timeout=10)
         assert [(r["JobId"], r["JobState"]) for r in records] == [(job, "CANCELLED")]
 
