@@ -1,0 +1,95 @@
+"""The energy-momentum midpoint internal force of St. Venant-Kirchhoff bodies (issue 12's implicit
+step; seed slide "Structure preserving time integration w/ contact"), for the elements of
+finite_strain.py (full-integration bilinear quads in plane strain, trilinear hexahedra).
+
+St. Venant-Kirchhoff: the stored energy per reference volume W(E) = lambda/2 (tr E)^2 + mu E:E of
+the Green strain E = (F^T F - I)/2, so S = lambda tr(E) I + 2 mu E (S = C E, C constant). Over a
+step n -> n+1 the midpoint scheme takes
+
+    f_int,ai^{n+1/2} = integral over the reference of (F_{n+1/2} S_{n+1/2})_iJ dN_a/dX_J,
+    F_{n+1/2} = (F_n + F_{n+1}) / 2,   S_{n+1/2} = C (E_n + E_{n+1}) / 2
+
+(Simo & Tarnow, ZAMP 43 (1992)). Because E_{n+1} - E_n = sym(F_{n+1/2}^T (F_{n+1} - F_n)) exactly,
+
+    (u_{n+1} - u_n) . f_int^{n+1/2} = integral (E_{n+1} - E_n) : C (E_n + E_{n+1}) / 2 = U_{n+1} - U_n
+
+to round-off, whatever the step: with M (v_{n+1} - v_n)/dt + f_int^{n+1/2} = f_ext and
+x_{n+1} - x_n = dt (v_n + v_{n+1}) / 2 the discrete energy is conserved. The force sums to zero
+(translation) and x_{n+1/2} x f sums to zero (F S F^T symmetric): the momenta are conserved too.
+
+Newton on u_{n+1} needs d f_int^{n+1/2} / d u_{n+1}: with dF_{n+1/2} = dF_{n+1} / 2 and
+dE_{n+1} = sym(F_{n+1}^T dF_{n+1}),
+
+    K_aibk = integral dN_a/dX_J A_iJkL dN_b/dX_L,
+    A_iJkL = 1/2 S_JL delta_ik + 1/2 F_{n+1/2},iI C_IJKL F_{n+1},kK
+           = 1/2 S_JL delta_ik + 1/2 [lambda F_{n+1/2},iJ F_{n+1},kL
+                                      + mu ((F_{n+1/2} F_{n+1}^T)_ik delta_JL + F_{n+1/2},iL F_{n+1},kJ)],
+
+not symmetric (F_{n+1/2} against F_{n+1}); at u_n = u_{n+1} it is half the static tangent.
+
+Vectorised numpy over elements and Gauss points; dofs interleaved as in finite_strain.py.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from solvers.lagrange.finite_strain import _assemble_vector, _dofs, kinematics
+
+__all__ = ["svk_energy", "midpoint_force", "midpoint_tangent"]
+
+
+def _green(f: np.ndarray) -> np.ndarray:
+    return 0.5 * (np.einsum("...kI,...kJ->...IJ", f, f) - np.eye(f.shape[-1]))
+
+
+def _svk_stress(e: np.ndarray, mu: float, lam: float) -> np.ndarray:
+    tr = np.trace(e, axis1=-2, axis2=-1)
+    return lam * tr[..., None, None] * np.eye(e.shape[-1]) + 2.0 * mu * e
+
+
+def svk_energy(points, cells, u, mu: float, lam: float) -> float:
+    """U = integral over the reference of lambda/2 (tr E)^2 + mu E:E (per unit thickness in 2-D)."""
+    f, _, w = kinematics(points, cells, u)
+    e = _green(f)
+    tr = np.trace(e, axis1=-2, axis2=-1)
+    return float(np.sum(w * (0.5 * lam * tr ** 2 + mu * np.einsum("...IJ,...IJ->...", e, e))))
+
+
+def _midpoint_state(points, cells, u0, u1, mu, lam):
+    f0, dndx, w = kinematics(points, cells, u0)
+    f1 = kinematics(points, cells, u1)[0]
+    s = _svk_stress(0.5 * (_green(f0) + _green(f1)), mu, lam)
+    return f1, 0.5 * (f0 + f1), s, dndx, w
+
+
+def midpoint_force(points, cells, u0, u1, mu: float, lam: float) -> np.ndarray:
+    """f_int^{n+1/2} (n d,) of the step from displacements u0 to u1 (each (n, d) or (n d,))."""
+    cells = np.asarray(cells, dtype=np.int64)
+    _, fm, s, dndx, w = _midpoint_state(points, cells, u0, u1, mu, lam)
+    p = np.einsum("egiI,egIJ->egiJ", fm, s)
+    fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
+    return _assemble_vector(cells, fm.shape[-1], fe, len(points))
+
+
+def midpoint_tangent(points, cells, u0, u1, mu: float, lam: float) -> tuple[sp.csr_matrix, np.ndarray]:
+    """(d f_int^{n+1/2} / d u1 (n d, n d), f_int^{n+1/2}) (module docstring's A)."""
+    cells = np.asarray(cells, dtype=np.int64)
+    f1, fm, s, dndx, w = _midpoint_state(points, cells, u0, u1, mu, lam)
+    d = fm.shape[-1]
+    eye = np.eye(d)
+    a = 0.5 * (np.einsum("ik,egJL->egiJkL", eye, s)
+               + lam * np.einsum("egiJ,egkL->egiJkL", fm, f1)
+               + mu * (np.einsum("egiK,egkK,JL->egiJkL", fm, f1, eye)
+                       + np.einsum("egiL,egkJ->egiJkL", fm, f1)))
+    ke = np.einsum("egaJ,egiJkL,egbL,eg->eaibk", dndx, a, dndx, w)
+    na = cells.shape[1]
+    nd = na * d
+    dof = _dofs(cells, d)
+    rows = np.repeat(dof, nd, axis=1).ravel()
+    cols = np.tile(dof, (1, nd)).ravel()
+    n = d * len(points)
+    p = np.einsum("egiI,egIJ->egiJ", fm, s)
+    fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
+    return (sp.csr_matrix((ke.reshape(len(cells), nd, nd).ravel(), (rows, cols)), shape=(n, n)),
+            _assemble_vector(cells, d, fe, len(points)))
