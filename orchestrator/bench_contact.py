@@ -7,9 +7,14 @@ line up), a gap of a tenth of a segment. Timed, medians of repeats:
 * search: the binned broad phase of both passes (search.candidate_pairs);
 * operators: both passes' integrals assembled, the gap operator G and the stabilization J (what a
   step needs before its multiplier solve);
+* solve: the multipliers' system of an explicit step, S p = -g0 with S = B M^-1 B^T + J (unit
+  masses, J weighed as explicit.py does) by the primal-dual active set (kkt.solve_schur_complement,
+  SuperLU), every row's gap closed (g0 < 0: the whole interface pressed, the largest system; the
+  set releases the faces' 4 end rows and settles in 2 iterations);
 * all pairs: the O(n^2) test the broad phase replaces, up to 10^3 facets (beyond, its n^2 memory).
 
-Reported per facet (µs) and the log-log slope of the total against the facet count (1: linear).
+Reported per facet (µs) and the log-log slopes against the facet count (1: linear) of the operators
+and of a step's whole contact work, search + operators + solve.
 
 And the contact's share of an explicit impact step (``contact_share``): two steel blocks of 5 x 10^4
 plane-strain quads each (5000 x 10), meeting along their long sides at 10 m/s (10^4 contact
@@ -51,12 +56,13 @@ def _median_time(fn, repeats: int) -> float:
 @bench("contact")
 def bench_contact(out: Path, quick: bool = False) -> Path:
     from solvers.contact.dual_pass import DualPassContact
+    from solvers.contact.kkt import solve_schur_complement
     from solvers.contact.search import candidate_pairs, facet_boxes
 
     sizes = [100, 1000] if quick else [100, 1000, 10000, 100000]
     repeats = 3 if quick else 7
     DualPassContact(*wavy_faces(10), capture=0.1)  # compile the kernel outside the timings
-    results, totals = [], []
+    results, totals, steps = [], [], []
     for n in sizes:
         pts, sa, sb = wavy_faces(n)
         capture = 0.5 / n
@@ -71,9 +77,17 @@ def bench_contact(out: Path, quick: bool = False) -> Path:
 
         t_ops = _median_time(operators, repeats)
         c = operators()
+        B = c.constraint_operator()
+        bbt = (B @ B.T).tocsc()
+        j1 = c.stabilization(1.0, 1.0)
+        S = (bbt + np.median(bbt.diagonal()) / np.median(j1.diagonal()) * j1).tocsc()
+        g0 = -np.abs(B @ pts.ravel()) - 1e-3 / n     # every row's gap closed
+        t_solve = _median_time(lambda: solve_schur_complement(S, g0, active=g0 < 0.0), repeats)
+        sol = solve_schur_complement(S, g0, active=g0 < 0.0)
         pairs = len(candidate_pairs(ba, bb))
         params = {"facets_a": n, "facets_b": len(sb), "candidate_pairs": pairs,
-                  "multipliers": c.n_multipliers, "repeats": repeats}
+                  "multipliers": c.n_multipliers, "repeats": repeats,
+                  "solve_active": int(sol.active.sum()), "solve_iterations": sol.iterations}
         if n <= 1000:
             def all_pairs():
                 return np.argwhere(np.all((ba[:, None, 0] <= bb[None, :, 1]) & (bb[None, :, 0] <= ba[:, None, 1]), axis=2))
@@ -83,11 +97,18 @@ def bench_contact(out: Path, quick: bool = False) -> Path:
              "unit": "us", "params": {**params, "seconds": t_search}},
             {"name": "contact_operators", "metric": "time_per_facet", "value": t_ops / (n + len(sb)) * 1e6,
              "unit": "us", "params": {**params, "seconds": t_ops}},
+            {"name": "contact_solve", "metric": "time_per_facet", "value": t_solve / (n + len(sb)) * 1e6,
+             "unit": "us", "params": {**params, "seconds": t_solve}},
+            {"name": "contact_search_operators_solve", "metric": "time_per_facet",
+             "value": (t_search + t_ops + t_solve) / (n + len(sb)) * 1e6, "unit": "us",
+             "params": {**params, "seconds": t_search + t_ops + t_solve}},
         ]
         totals.append(t_ops)
-    slope = float(np.polyfit(np.log(sizes[1:]), np.log(totals[1:]), 1)[0]) if len(sizes) > 2 else None
-    results.append({"name": "contact_operators", "metric": "loglog_slope_vs_facets", "value": slope, "unit": "",
-                    "params": {"sizes": sizes[1:], "target": "~1 (linear)"}})
+        steps.append(t_search + t_ops + t_solve)
+    for name, t in (("contact_operators", totals), ("contact_search_operators_solve", steps)):
+        slope = float(np.polyfit(np.log(sizes[1:]), np.log(t[1:]), 1)[0]) if len(sizes) > 2 else None
+        results.append({"name": name, "metric": "loglog_slope_vs_facets", "value": slope, "unit": "",
+                        "params": {"sizes": sizes[1:], "target": "~1 (linear)"}})
     results.append(contact_share(quick))
     doc = {"results": results, "machine": machine()}
     out.write_text(json.dumps(doc, indent=2))

@@ -85,8 +85,8 @@ def test_bench_sph_quick(tmp_path):
 
 
 def test_bench_contact_quick(tmp_path):
-    """The contact bench times the search and the dual-pass operators per facet at 10^2 and 10^3
-    facets and the all-pairs test they replace (speed itself is not asserted: `immerse bench contact`
+    """The contact bench times the search, the dual-pass operators and the multipliers' solve per
+    facet at 10^2 and 10^3 facets and the all-pairs test they replace (speed itself is not asserted: `immerse bench contact`
     measures it)."""
     out = tmp_path / "bench-contact.json"
     r = immerse("bench", "contact", "--quick", "--out", out, timeout=300)
@@ -101,6 +101,11 @@ def test_bench_contact_quick(tmp_path):
         assert p["multipliers"] == p["facets_a"] + p["facets_b"] + 2
         assert p["facets_a"] <= p["candidate_pairs"] <= 4 * p["facets_a"]
         assert x["value"] > 0 and p["all_pairs_s"] > 0
+        # the multipliers' solve with the interface pressed: all but the faces' end rows active
+        assert p["multipliers"] - 4 <= p["solve_active"] <= p["multipliers"] and p["solve_iterations"] <= 3
+    solves = [x for x in rows if x["name"] in ("contact_solve", "contact_search_operators_solve")
+              and x["metric"] == "time_per_facet"]
+    assert len(solves) == 4 and all(x["value"] > 0 for x in solves)
     (step,) = [x for x in rows if x["name"] == "contact_step"]
     # the quick size: 10^4 elements, 999 contact facets, all of the interface in contact
     assert step["params"]["elements"] == 9990 and step["params"]["active_multipliers"] == 1001
