@@ -1,0 +1,90 @@
+"""Steps 2 and 3 of the seed's contact update for the energy-momentum implicit step (issue 12, item 2;
+seed slides "Structure preserving time integration w/ contact", "3 Step Process" and the one after).
+
+Step 1 (the midpoint step with its multipliers) leaves velocities v^{n+1}. Step 2 removes the normal
+gap rate on the active contact rows G (the dual pass's constraint operator on them) with a velocity
+update at fixed positions:
+
+    M (vbar - v) + G^T lbar = 0,   G vbar = 0
+    =>  (G M^-1 G^T) lbar = G v,   vbar = v - M^-1 G^T lbar,
+
+which is strictly dissipative: with d = vbar - v, vbar.M vbar = v.M v - d.M d because
+vbar.M d = -(G vbar).lbar = 0, so the kinetic energy drops by
+
+    kappa = 1/2 d.M d = 1/2 lbar.(G M^-1 G^T) lbar = 1/2 lbar.(G v)   (>= 0),
+
+row A's share kappa_A = 1/2 lbar_A (G v)_A (the seed's kappa-bar, which sums to kappa). No chatter:
+the contact rows leave the step with zero normal gap rate.
+
+Step 3 returns stored dissipation K (the kappas of a contact episode) when its rows are released: a
+velocity change along the released rows' forces f = G_rel^T k (k_A: the energy each row stored),
+
+    vbarbar = vbar + s M^-1 f,   s >= 0 the root of  1/2 s^2 f.M^-1 f + s vbar.f = K,
+
+so that 1/2 vbarbar.M vbarbar - 1/2 vbar.M vbar = K exactly (the seed's alpha^2 is s, there with
+vbar.f = 0). f sums to zero and to zero torque like every contact force of the dual pass (its rows
+balance), so the momenta are unchanged.
+
+M is the lumped (diagonal) mass, given as its inverse per dof (0 on held dofs); G a scipy sparse
+matrix (rows x dofs). The normal system is solved by SuperLU; a singular one (dependent rows: the
+dual pass's two passes on one interface) falls back to the least-squares solution (LSQR), which
+still gives G vbar = 0 where the rows are consistent.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+__all__ = ["GapRateUpdate", "remove_gap_rate", "return_energy"]
+
+
+@dataclass
+class GapRateUpdate:
+    v: np.ndarray          # (ndof,) vbar: no normal gap rate on the rows
+    multipliers: np.ndarray  # (nrows,) lbar
+    dissipated: float      # kappa = 1/2 (vbar - v).M (vbar - v) >= 0
+    per_row: np.ndarray    # (nrows,) kappa_A = 1/2 lbar_A (G v)_A, summing to kappa
+
+
+def remove_gap_rate(G, inv_mass: np.ndarray, v: np.ndarray) -> GapRateUpdate:
+    """Step 2 (module docstring): vbar with G vbar = 0 at the least kinetic energy change."""
+    G = sp.csr_matrix(G)
+    v = np.asarray(v, dtype=np.float64)
+    inv_mass = np.asarray(inv_mass, dtype=np.float64)
+    if G.shape[0] == 0:
+        return GapRateUpdate(v=v.copy(), multipliers=np.zeros(0), dissipated=0.0, per_row=np.zeros(0))
+    rate = G @ v
+    S = (G @ sp.diags(inv_mass) @ G.T).tocsc()
+    try:
+        lam = spla.splu(S).solve(rate)
+        if not np.all(np.isfinite(lam)):
+            raise RuntimeError
+    except RuntimeError:   # dependent rows: the least-squares multipliers
+        lam = spla.lsqr(S, rate, atol=1e-15, btol=1e-15, iter_lim=10 * S.shape[0])[0]
+    vbar = v - inv_mass * (G.T @ lam)
+    per_row = 0.5 * lam * rate
+    return GapRateUpdate(v=vbar, multipliers=lam, dissipated=float(per_row.sum()), per_row=per_row)
+
+
+def return_energy(G_released, inv_mass: np.ndarray, v: np.ndarray, stored: np.ndarray) -> np.ndarray:
+    """Step 3 (module docstring): velocities with the energy ``stored`` (per released row, >= 0)
+    given back along the released rows' forces G_released^T stored."""
+    G = sp.csr_matrix(G_released)
+    v = np.asarray(v, dtype=np.float64)
+    k = np.asarray(stored, dtype=np.float64)
+    total = float(k.sum())
+    if G.shape[0] == 0 or total <= 0.0:
+        return v.copy()
+    f = G.T @ k
+    mf = np.asarray(inv_mass, dtype=np.float64) * f
+    a = float(f @ mf)               # f.M^-1 f
+    b = float(v @ f)                # vbar.f
+    if a <= 0.0:
+        return v.copy()             # (no free dof along the released rows: nothing to give back)
+    # 1/2 a s^2 + b s - K = 0, the root s >= 0 (written to avoid cancellation when b > 0)
+    disc = np.sqrt(b * b + 2.0 * a * total)
+    s = 2.0 * total / (b + disc) if b > 0.0 else (disc - b) / a
+    return v + s * mf
