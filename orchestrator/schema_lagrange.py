@@ -172,6 +172,10 @@ LAGRANGE = table(
         # quasi_static: equilibrium states, time a load parameter, load_steps of end_time / load_steps
         "integrator": {"enum": sorted(INTEGRATORS)},
         "load_steps": integer(None, minimum=1),
+        # midpoint, newmark: the implicit step (s) and the energy balance a step may be off by before
+        # the run stops as unstable (relative to the energy)
+        "time_step": number("s", exclusiveMinimum=0),
+        "energy_limit": number("dimensionless", exclusiveMinimum=0),
         "bodies": {"type": "array", "items": BODY},
     },
 )
@@ -290,6 +294,9 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
     lagrange["integrator"] = raw.get("integrator", "explicit")
     if "load_steps" in raw:
         lagrange["load_steps"] = int(raw["load_steps"])
+    for key in ("time_step", "energy_limit"):
+        if key in raw:
+            lagrange[key] = to_float(raw[key])
     lagrange["bodies"] = bodies
     return lagrange
 
@@ -321,6 +328,22 @@ def check_lagrange(case: dict, data: dict) -> None:
         raise CaseError("lagrange.load_steps", case["lagrange"]["load_steps"],
                         f"load steps are the quasi-static mode's (lagrange.integrator = {integrator!r}); allowed: "
                         "leave it out")
+    implicit = INTEGRATORS[integrator].implicit
+    implicit_names = ", ".join(k for k, v in INTEGRATORS.items() if v.implicit)
+    for key in ("time_step", "energy_limit"):
+        if key in case["lagrange"] and not implicit:
+            raise CaseError(f"lagrange.{key}", case["lagrange"][key],
+                            f"a key of the implicit integrators ({implicit_names}), not of lagrange.integrator = "
+                            f"{integrator!r}; allowed: leave it out")
+    if implicit:
+        if "time_step" not in case["lagrange"]:
+            raise CaseError("lagrange.time_step", MISSING, f"required with lagrange.integrator = {integrator!r}: "
+                            "the implicit step, s (e.g. 10 times the explicit limit)")
+        for key in ("coupling", "contact"):
+            if case.get(key):
+                raise CaseError("lagrange.integrator", integrator,
+                                f"[{key}] with an implicit integrator is not built yet (issue 12); allowed with "
+                                f"[{key}]: explicit" + (", quasi_static" if key == "contact" else ""))
     seen: dict[str, int] = {}
     for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
         base = ["lagrange", "bodies", i]
@@ -360,6 +383,13 @@ def check_lagrange(case: dict, data: dict) -> None:
                 raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
                                 mesh["quarter_cylinder"],
                                 f"quarter_cylinder meshes are 3D only (run.dimension = {dim})")
+        if implicit and mat_model(case, body) != "linear_elastic":
+            raise CaseError(format_key(["materials", body["material"], "model"]), mat_model(case, body),
+                            f"lagrange.integrator = {integrator!r} solves St. Venant-Kirchhoff bodies (a "
+                            "linear_elastic material's E, nu at finite strain); allowed: linear_elastic")
+        if implicit and "erosion" in raw:
+            raise CaseError(format_key(base + ["erosion"]), raw["erosion"],
+                            f"not with lagrange.integrator = {integrator!r}; allowed: leave it out")
         if static and mat_model(case, body) not in ("linear_elastic", "neo_hookean"):
             raise CaseError(format_key(["materials", body["material"], "model"]), mat_model(case, body),
                             f"lagrange.integrator = {integrator!r} solves elasticity (small strain or neo-Hookean finite strain); allowed: "
@@ -474,6 +504,10 @@ def check_boundaries(case: dict, data: dict) -> None:
             raise CaseError(format_key(base + ["type"]), raw["type"],
                             f"traction boundaries are loads of the quasi-static mode; allowed with "
                             f"lagrange.integrator = {integrator!r}: fixed, velocity, symmetry, rigid_wall")
+        if bc["type"] == "rigid_wall" and integrator in INTEGRATORS and INTEGRATORS[integrator].implicit:
+            raise CaseError(format_key(base + ["type"]), raw["type"],
+                            f"rigid walls are not built into lagrange.integrator = {integrator!r}; allowed: "
+                            "fixed, velocity, symmetry")
         if bc["type"] == "rigid_wall" and static:
             raise CaseError(format_key(base + ["type"]), raw["type"],
                             f"rigid_wall boundaries are velocity conditions; allowed with lagrange.integrator = "

@@ -22,6 +22,7 @@ with f_int(u) = f_int^{n+1/2}(u, u) and K(u) = 2 d f_int^{n+1/2}/du1 at u0 = u1 
 St. Venant-Kirchhoff force and tangent). It conserves energy for linear problems only: with large
 rotations its energy drifts and grows (the seed's "many implicit time integrators are unstable").
 
+Prescribed dofs move at their velocity (x1 - x0 = dt v_b); the residual there is the reaction.
 Newton with the consistent tangent and a sparse direct solve (scipy) on the free dofs; stops when the
 residual is below ``tol`` times the largest of |M v0 / dt|, |f_int|, |f_ext|; a step that does not
 converge in ``max_iterations`` raises StepFailed naming the scheme and its residuals (never NaN).
@@ -49,6 +50,17 @@ class StepResult:
     v: np.ndarray            # (n d,) velocities at t_{n+1}
     iterations: int
     residuals: list
+    reaction: np.ndarray     # (n d,) the force holding the prescribed dofs over the step (0 elsewhere)
+
+
+def _svk(points, blocks, u0, u1):
+    """(K, f) summed over the bodies: blocks [(cells, mu, lambda), ...] (each body its material)."""
+    n = np.asarray(points).size
+    k, f = sp.csr_matrix((n, n)), np.zeros(n)
+    for cells, mu, lam in blocks:
+        kb, fb = midpoint_tangent(points, cells, u0, u1, mu, lam)
+        k, f = k + kb, f + fb
+    return k, f
 
 
 def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations):
@@ -61,7 +73,7 @@ def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations):
         if not np.isfinite(res):
             raise StepFailed(f"{name}: the residual is not finite at iteration {it} (residuals {history})")
         if res <= tol:
-            return u, it, history
+            return u, it, history, r
         if it == max_iterations:
             break
         du = np.zeros_like(u)
@@ -71,54 +83,60 @@ def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations):
                      f"(relative residuals {['%.1e' % h for h in history]})")
 
 
-def _free(n_dof, fixed):
-    free = np.ones(n_dof, bool)
+def _prescribed(u0, dt, fixed, v_fixed):
+    """(free (n d,) bool, v_b (n d,)): the dofs ``fixed`` move at v_fixed (default 0) over the step."""
+    free = np.ones(len(u0), bool)
+    vb = np.zeros(len(u0))
     if fixed is not None:
-        free[np.asarray(fixed)] = False
-    return free
+        fixed = np.asarray(fixed)
+        free[fixed] = False
+        vb[fixed] = 0.0 if v_fixed is None else np.asarray(v_fixed, float)
+    return free, vb
 
 
-def midpoint_step(points, cells, mass, u0, v0, dt: float, mu: float, lam: float, f_ext=None,
-                  fixed=None, tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
-    """The midpoint step from (u0, v0) (each (n d,)); mass (n,) lumped; fixed: dofs held at u0 (their
-    velocity 0). Returns u1, v1 and Newton's history."""
+def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
+                  tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
+    """The midpoint step from (u0, v0) (each (n d,)); blocks [(cells, mu, lambda), ...] the bodies;
+    mass (n,) lumped; f_ext (n d,) constant over the step; fixed: dofs moving at v_fixed (default 0:
+    held). Returns u1, v1, Newton's history and the reactions on the fixed dofs."""
     u0, v0 = np.asarray(u0, float).ravel(), np.asarray(v0, float).ravel()
     d = np.asarray(points).shape[1]
     m = np.repeat(np.asarray(mass, float), d)
     fe = np.zeros_like(u0) if f_ext is None else np.asarray(f_ext, float).ravel()
-    free = _free(len(u0), fixed)
+    free, vb = _prescribed(u0, dt, fixed, v_fixed)
+    # a prescribed dof: x1 - x0 = dt (v0 + v1) / 2 with v0 = v1 = its velocity
+    v0 = np.where(free, v0, vb)
 
     def rt(u1):
-        k, f = midpoint_tangent(points, cells, u0, u1, mu, lam)
+        k, f = _svk(points, blocks, u0, u1)
         r = 2.0 * m * (u1 - u0 - dt * v0) / dt ** 2 + f - fe
         scale = max(float(np.linalg.norm(2.0 * m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(2.0 * m / dt ** 2) + k, scale
 
-    start = np.where(free, u0 + dt * v0, u0)
-    u1, it, hist = _newton("midpoint", rt, start, free, tol, max_iterations)
-    v1 = np.where(free, 2.0 * (u1 - u0) / dt - v0, 0.0)
-    return StepResult(u=u1, v=v1, iterations=it, residuals=hist)
+    u1, it, hist, r = _newton("midpoint", rt, u0 + dt * v0, free, tol, max_iterations)
+    v1 = np.where(free, 2.0 * (u1 - u0) / dt - v0, vb)
+    return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r))
 
 
-def newmark_step(points, cells, mass, u0, v0, dt: float, mu: float, lam: float, f_ext=None,
-                 fixed=None, tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
+def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
+                 tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
     """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step."""
     u0, v0 = np.asarray(u0, float).ravel(), np.asarray(v0, float).ravel()
     d = np.asarray(points).shape[1]
     m = np.repeat(np.asarray(mass, float), d)
     fe = np.zeros_like(u0) if f_ext is None else np.asarray(f_ext, float).ravel()
-    free = _free(len(u0), fixed)
-    f0 = midpoint_tangent(points, cells, u0, u0, mu, lam)[1]
+    free, vb = _prescribed(u0, dt, fixed, v_fixed)
+    v0 = np.where(free, v0, vb)
+    f0 = _svk(points, blocks, u0, u0)[1]
     a0 = np.where(free, (fe - f0) / m, 0.0)
 
     def rt(u1):
-        k, f = midpoint_tangent(points, cells, u1, u1, mu, lam)
+        k, f = _svk(points, blocks, u1, u1)
         r = 4.0 * m * (u1 - u0 - dt * v0) / dt ** 2 - m * a0 + f - fe
         scale = max(float(np.linalg.norm(m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(4.0 * m / dt ** 2) + 2.0 * k, scale
 
-    start = np.where(free, u0 + dt * v0, u0)
-    u1, it, hist = _newton("newmark", rt, start, free, tol, max_iterations)
+    u1, it, hist, r = _newton("newmark", rt, u0 + dt * v0, free, tol, max_iterations)
     a1 = np.where(free, 4.0 * (u1 - u0 - dt * v0) / dt ** 2 - a0, 0.0)
-    v1 = np.where(free, v0 + 0.5 * dt * (a0 + a1), 0.0)
-    return StepResult(u=u1, v=v1, iterations=it, residuals=hist)
+    v1 = np.where(free, v0 + 0.5 * dt * (a0 + a1), vb)
+    return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r))

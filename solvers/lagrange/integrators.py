@@ -4,7 +4,9 @@ diagnostics, output and checkpoint hooks), registered with the module that holds
 schema reads the names without importing the solvers:
 
 * ``explicit`` (default): central differences, lumped mass (solver.py);
-* ``quasi_static``: equilibrium under loads ramped with time, frictionless contact (quasi_static.py).
+* ``quasi_static``: equilibrium under loads ramped with time, frictionless contact (quasi_static.py);
+* ``midpoint``: the implicit energy-momentum midpoint scheme (implicit_dynamic.py, issue 12);
+* ``newmark``: Newmark's trapezoidal rule, the implicit comparison that fails (implicit_dynamic.py).
 """
 from __future__ import annotations
 
@@ -19,6 +21,7 @@ class Integrator:
     module: str
     attr: str
     dynamic: bool = True   # False: no inertia (no coupling with the fluid, no initial velocities)
+    implicit: bool = False  # True: steps of [lagrange] time_step, St. Venant-Kirchhoff bodies, no contact or coupling yet
 
 
 INTEGRATORS: dict[str, Integrator] = {}
@@ -32,6 +35,8 @@ def register(name: str, integrator: Integrator) -> None:
 
 register("explicit", Integrator("solvers.lagrange.solver", "LagrangeSolver"))
 register("quasi_static", Integrator("solvers.lagrange.quasi_static", "QuasiStaticSolver", dynamic=False))
+register("midpoint", Integrator("solvers.lagrange.implicit_dynamic", "MidpointSolver", implicit=True))
+register("newmark", Integrator("solvers.lagrange.implicit_dynamic", "NewmarkSolver", implicit=True))
 
 
 def solver_class(name: str):

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 
 from solvers.lagrange.finite_strain import _assemble_vector, _dofs, kinematics
 
-__all__ = ["svk_energy", "midpoint_force", "midpoint_tangent"]
+__all__ = ["svk_energy", "element_energies", "cauchy_stresses", "midpoint_force", "midpoint_tangent"]
 
 
 def _green(f: np.ndarray) -> np.ndarray:
@@ -48,12 +48,35 @@ def _svk_stress(e: np.ndarray, mu: float, lam: float) -> np.ndarray:
     return lam * tr[..., None, None] * np.eye(e.shape[-1]) + 2.0 * mu * e
 
 
-def svk_energy(points, cells, u, mu: float, lam: float) -> float:
-    """U = integral over the reference of lambda/2 (tr E)^2 + mu E:E (per unit thickness in 2-D)."""
+def element_energies(points, cells, u, mu: float, lam: float) -> np.ndarray:
+    """(ne,) each element's integral of lambda/2 (tr E)^2 + mu E:E (J; per unit thickness in 2-D)."""
     f, _, w = kinematics(points, cells, u)
     e = _green(f)
     tr = np.trace(e, axis1=-2, axis2=-1)
-    return float(np.sum(w * (0.5 * lam * tr ** 2 + mu * np.einsum("...IJ,...IJ->...", e, e))))
+    return np.sum(w * (0.5 * lam * tr ** 2 + mu * np.einsum("...IJ,...IJ->...", e, e)), axis=1)
+
+
+def svk_energy(points, cells, u, mu: float, lam: float) -> float:
+    """U = integral over the reference of lambda/2 (tr E)^2 + mu E:E (per unit thickness in 2-D)."""
+    return float(element_energies(points, cells, u, mu, lam).sum())
+
+
+def cauchy_stresses(points, cells, u, mu: float, lam: float) -> np.ndarray:
+    """(ne, 6) Voigt xx yy zz xy yz zx: sigma = F S F^T / J, the mean over each element's Gauss points
+    (plane strain: E_33 = 0, so sigma_zz = lambda tr E / J)."""
+    f, _, _ = kinematics(points, cells, u)
+    e = _green(f)
+    s = _svk_stress(e, mu, lam)
+    j = np.linalg.det(f)
+    sig = np.einsum("...iI,...IJ,...jJ->...ij", f, s, f) / j[..., None, None]
+    out = np.zeros(f.shape[:2] + (6,))
+    if f.shape[-1] == 2:
+        out[..., 0], out[..., 1], out[..., 3] = sig[..., 0, 0], sig[..., 1, 1], sig[..., 0, 1]
+        out[..., 2] = lam * np.trace(e, axis1=-2, axis2=-1) / j
+    else:
+        out[..., 0], out[..., 1], out[..., 2] = sig[..., 0, 0], sig[..., 1, 1], sig[..., 2, 2]
+        out[..., 3], out[..., 4], out[..., 5] = sig[..., 0, 1], sig[..., 1, 2], sig[..., 2, 0]
+    return out.mean(axis=1)
 
 
 def _midpoint_state(points, cells, u0, u1, mu, lam):

@@ -242,6 +242,10 @@ BAD_CASES = [
     ("lagrange_gravity_length", "lagrange.gravity", "dimension mismatch"),
     ("lagrange_ring_inner_beyond_outer", "lagrange.bodies[0].mesh.ring.outer_radius", "must be > inner_radius (0.1)"),
     ("lagrange_ring_3d", "lagrange.bodies[0].mesh.ring", "ring meshes are 2D only"),
+    ("lagrange_implicit_no_time_step", "lagrange.time_step", "required with lagrange.integrator = 'midpoint'"),
+    ("lagrange_time_step_explicit", "lagrange.time_step", "a key of the implicit integrators (midpoint, newmark)"),
+    ("lagrange_implicit_contact", "lagrange.integrator", "[contact] with an implicit integrator is not built yet"),
+    ("lagrange_implicit_neo_hookean", "materials.rubber.model", "St. Venant-Kirchhoff bodies"),
 ]
 
 

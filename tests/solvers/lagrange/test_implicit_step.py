@@ -44,7 +44,7 @@ def _run(step, kind, dt, n, **kw):
     gross = float(np.sum(mass * np.linalg.norm(v, axis=1)))
     its = []
     for _ in range(n):
-        res = step(p, cells, mass, u, vel, dt, mu, lam)
+        res = step(p, [(cells, mu, lam)], mass, u, vel, dt)
         u, vel = res.u, res.v
         its.append(res.iterations)
     e, lin, ang = invariants(u, vel)

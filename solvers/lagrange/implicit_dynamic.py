@@ -1,0 +1,166 @@
+"""Implicit dynamic modes of the Lagrangian solver (issue 12): ``[lagrange] integrator = "midpoint"``
+(the energy-momentum midpoint scheme) or ``"newmark"`` (the trapezoidal rule, kept as the comparison
+that fails), one step of ``[lagrange] time_step`` seconds at a time (implicit_step.py).
+
+Bodies: ``linear_elastic`` materials are taken as St. Venant-Kirchhoff (the same E, nu; Green strain
+and second Piola-Kirchhoff stress: identical at small strain, and frame-indifferent under large
+rotations, which Hooke's law on the small strain is not), on the elements of finite_strain.py; the
+masses are the explicit solver's lumped ones. Loads: gravity (m g, constant), boundary conditions
+(fixed, velocity, symmetry: prescribed velocities; the residual there is the reaction). Not yet:
+contact, coupling, other materials, erosion, rigid walls (refused by the case schema).
+
+Balances (the explicit solver's diagnostics, fed the implicit step's exact quantities): the strain
+energy U(u) is the internal work, gravity's work sum m g . (u1 - u0) and the reactions' work
+R . (u1 - u0) the external; over a midpoint step T + U changes by exactly that work (to the Newton
+tolerance), and the impulses (m g + R) dt and their moments about x_{n+1/2} close the momenta.
+A step whose Newton iteration fails, or after which the energy balance is off by more than
+``energy_limit`` (default 0.01 of the energy: Newmark on a large rotation), stops the run naming the
+scheme, the step and the numbers (SolverError), never NaN.
+
+Parallel: a gathered solve, as the quasi-static mode: every rank holds the global mesh and solves the
+whole step (scipy's SuperLU), keeping its own nodes' and elements' share; the ranks agree bit for bit,
+the problem size is bounded by one rank's memory, more ranks make it no faster.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from solvers.lagrange import finite_strain, midpoint_svk
+from solvers.lagrange.boundary import BoundaryConditions
+from solvers.lagrange.implicit_step import StepFailed, midpoint_step, newmark_step
+from solvers.lagrange.solver import LagrangeSolver, SolverError
+
+__all__ = ["MidpointSolver", "NewmarkSolver"]
+
+
+class _ImplicitDynamicSolver(LagrangeSolver):
+    scheme = ""
+    step_function = None
+    # the displacements are the state: checkpointed as they are (x - X would round them)
+    STATE_NODES = LagrangeSolver.STATE_NODES + ("u_local",)
+
+    def __init__(self, comm, case: dict):
+        super().__init__(comm, case)
+        self.contact = None
+        opts = case["lagrange"]
+        self.time_step = float(opts["time_step"])
+        self.energy_limit = float(opts.get("energy_limit", 0.01))
+        # the coupler takes run.dt_scale times the step asked for and clips it to land on output and
+        # end times: ask for a hair more than dt_scale's share so the steps are time_step
+        self._dt_stable = self.time_step / float(case["run"].get("dt_scale", 0.9)) * (1.0 + 1e-12)
+        P, C = self.global_points, self.global_cells
+        n, dim = len(P), self.dim
+        self._blocks = []
+        for k, b in enumerate(case["lagrange"]["bodies"]):
+            mat = case["materials"][b["material"]]
+            mu, lam = finite_strain.lame(mat["youngs_modulus"], mat["poisson_ratio"])
+            self._blocks.append((C[self.body_of_cell == k], mu, lam))
+        span = float(np.max(np.ptp(P, axis=0)))
+        bcs = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
+        fixed = np.zeros((n, dim), bool)
+        vb = np.zeros((n, dim))
+        for nodes, c, val in bcs.prescribed:   # case order: a later condition wins
+            fixed[nodes, c] = True
+            vb[nodes, c] = val
+        self._fixed = np.flatnonzero(fixed.ravel())
+        self._v_fixed = vb.ravel()[self._fixed]
+        self.gmass = self._global(self.mass[:, None])[:, 0]
+        self.f_ext = (self.gmass[:, None] * self.gravity).ravel() if self.has_gravity else np.zeros(n * dim)
+        self.u = np.zeros(n * dim)
+        self.vg = self._global(self.v).ravel()
+        self.vg[self._fixed] = self._v_fixed
+        self.iterations = 0
+        self._sync_local()
+        # the initial balances' references on the velocities the step starts from (prescribed ones set)
+        self.ke0, self.p0, self.l0 = self.kinetic_energy(), self.momentum(), self.angular_momentum()
+
+    def _global(self, a: np.ndarray) -> np.ndarray:
+        """(n_global, k) from this rank's (nn_local, k): the owned rows summed over the ranks."""
+        out = np.zeros((self.n_nodes_global, a.shape[1]))
+        out[self.part.nodes[self.part.owned]] = a[self.part.owned]
+        return self._allsum(out)
+
+    def _sync_local(self) -> None:
+        """This rank's nodes and elements from the global state u, v."""
+        P = self.global_points
+        u = self.u.reshape(P.shape)
+        self.u_local = u[self.part.nodes].copy()
+        self.x = self.X + self.u_local
+        self.v = self.vg.reshape(P.shape)[self.part.nodes].copy()
+        sig = np.zeros((len(self.global_cells), 6))
+        e = np.zeros(len(self.global_cells))
+        for k, (cells, mu, lam) in enumerate(self._blocks):
+            sel = self.body_of_cell == k
+            sig[sel] = midpoint_svk.cauchy_stresses(P, cells, u, mu, lam)
+            e[sel] = midpoint_svk.element_energies(P, cells, u, mu, lam)
+        self.sig[:] = sig[self.part.cells]
+        # each element's strain energy (J), on the rank that holds it (stress_power_energy)
+        self.e_int[:] = e[self.part.cells]
+
+    # ---- the step ----------------------------------------------------------------------------------
+    def stable_dt(self) -> float:
+        return self._dt_stable
+
+    def predict(self, dt: float) -> None:
+        self.dt = dt
+
+    def correct(self, impulse=None, step: int = 0, time: float = 0.0, surface_impulse=None) -> None:
+        if impulse is not None or surface_impulse is not None:
+            raise ValueError(f"{self.scheme}: no coupling impulses yet (issue 12)")
+        dt = self.dt
+        P = self.global_points
+        u0, v0 = self.u, self.vg
+        try:
+            res = type(self).step_function(P, [(c, mu, lam) for c, mu, lam in self._blocks], self.gmass, u0, v0,
+                                           dt, f_ext=self.f_ext, fixed=self._fixed, v_fixed=self._v_fixed)
+        except StepFailed as err:
+            raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s): {err}") from None
+        du = res.u - u0
+        force = self.f_ext + res.reaction
+        # the works: gravity's into w_gravity (and out of w_int, as the explicit kernel books it), the
+        # reactions' into w_ext; the impulses and their moments about x_{n+1/2}
+        w_g = float(self.f_ext @ du)
+        self.w_gravity += w_g
+        self.w_ext += float(res.reaction @ du)
+        xm = (P + (u0 + 0.5 * du).reshape(P.shape))
+        fn = force.reshape(P.shape) * dt
+        self.impulse += fn.sum(axis=0)
+        self.ang_impulse += self._cross(xm, fn).sum(axis=0)
+        self.impulse_gross += float(np.abs(fn).sum())
+        self.u, self.vg = res.u, res.v
+        self.iterations = res.iterations
+        self.step, self.time = step, time
+        self.first_step = False
+        self.dt_prev = dt
+        self._sync_local()
+        u_now = sum(midpoint_svk.svk_energy(P, c, self.u, mu, lam) for c, mu, lam in self._blocks)
+        self.w_int = u_now - self.w_gravity
+        d = super().diagnostics()
+        if abs(d["energy_balance_rel"]) > self.energy_limit:
+            raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s): the energy balance is off "
+                              f"by {d['energy_balance_rel']:.3g} of the energy (> lagrange.energy_limit = "
+                              f"{self.energy_limit:g}): {self.scheme} does not keep the energy at this step")
+
+    def diagnostics(self) -> dict[str, float]:
+        d = super().diagnostics()
+        d["newton_iterations"] = float(self.iterations)
+        d["time_step"] = float(getattr(self, "dt", self.time_step))
+        return d
+
+    # ---- checkpoint / restart: u and v are the state ------------------------------------------------
+    def restart(self, path) -> None:
+        super().restart(path)
+        self.u = self._global(self.u_local).ravel()
+        self.vg = self._global(self.v).ravel()
+
+
+class MidpointSolver(_ImplicitDynamicSolver):
+    """The energy-momentum midpoint scheme (module docstring)."""
+    scheme = "midpoint"
+    step_function = staticmethod(midpoint_step)
+
+
+class NewmarkSolver(_ImplicitDynamicSolver):
+    """Newmark's trapezoidal rule (gamma 1/2, beta 1/4): the comparison that fails (module docstring)."""
+    scheme = "newmark"
+    step_function = staticmethod(newmark_step)
