@@ -175,6 +175,7 @@ LAGRANGE = table(
         # midpoint, newmark: the implicit step (s) and the energy balance a step may be off by before
         # the run stops as unstable (relative to the energy)
         "time_step": number("s", exclusiveMinimum=0),
+        "time_step_min": number("s", exclusiveMinimum=0),
         "energy_limit": number("dimensionless", exclusiveMinimum=0),
         "bodies": {"type": "array", "items": BODY},
     },
@@ -294,7 +295,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
     lagrange["integrator"] = raw.get("integrator", "explicit")
     if "load_steps" in raw:
         lagrange["load_steps"] = int(raw["load_steps"])
-    for key in ("time_step", "energy_limit"):
+    for key in ("time_step", "time_step_min", "energy_limit"):
         if key in raw:
             lagrange[key] = to_float(raw[key])
     lagrange["bodies"] = bodies
@@ -330,7 +331,7 @@ def check_lagrange(case: dict, data: dict) -> None:
                         "leave it out")
     implicit = INTEGRATORS[integrator].implicit
     implicit_names = ", ".join(k for k, v in INTEGRATORS.items() if v.implicit)
-    for key in ("time_step", "energy_limit"):
+    for key in ("time_step", "time_step_min", "energy_limit"):
         if key in case["lagrange"] and not implicit:
             raise CaseError(f"lagrange.{key}", case["lagrange"][key],
                             f"a key of the implicit integrators ({implicit_names}), not of lagrange.integrator = "
@@ -339,6 +340,10 @@ def check_lagrange(case: dict, data: dict) -> None:
         if "time_step" not in case["lagrange"]:
             raise CaseError("lagrange.time_step", MISSING, f"required with lagrange.integrator = {integrator!r}: "
                             "the implicit step, s (e.g. 10 times the explicit limit)")
+        tmin = case["lagrange"].get("time_step_min")
+        if tmin is not None and not tmin <= case["lagrange"]["time_step"]:
+            raise CaseError("lagrange.time_step_min", tmin, f"must be <= lagrange.time_step "
+                            f"({fmt_num(case['lagrange']['time_step'])})")
         for key in ("coupling", "contact"):
             if case.get(key):
                 raise CaseError("lagrange.integrator", integrator,

@@ -44,7 +44,10 @@ class _ImplicitDynamicSolver(LagrangeSolver):
         self.contact = None
         opts = case["lagrange"]
         self.time_step = float(opts["time_step"])
+        self.time_step_min = float(opts.get("time_step_min", self.time_step / 1024.0))
         self.energy_limit = float(opts.get("energy_limit", 0.01))
+        self.case_dt_scale = float(case["run"].get("dt_scale", 0.9))
+        self.substeps = 0
         # the coupler takes run.dt_scale times the step asked for and clips it to land on output and
         # end times: ask for a hair more than dt_scale's share so the steps are time_step
         self._dt_stable = self.time_step / float(case["run"].get("dt_scale", 0.9)) * (1.0 + 1e-12)
@@ -108,31 +111,17 @@ class _ImplicitDynamicSolver(LagrangeSolver):
         if impulse is not None or surface_impulse is not None:
             raise ValueError(f"{self.scheme}: no coupling impulses yet (issue 12)")
         dt = self.dt
-        P = self.global_points
-        u0, v0 = self.u, self.vg
+        self.iterations, self.substeps, smallest = 0, 0, dt
         try:
-            res = type(self).step_function(P, [(c, mu, lam) for c, mu, lam in self._blocks], self.gmass, u0, v0,
-                                           dt, f_ext=self.f_ext, fixed=self._fixed, v_fixed=self._v_fixed)
+            smallest = self._advance(dt)
         except StepFailed as err:
-            raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s): {err}") from None
-        du = res.u - u0
-        force = self.f_ext + res.reaction
-        # the works: gravity's into w_gravity (and out of w_int, as the explicit kernel books it), the
-        # reactions' into w_ext; the impulses and their moments about x_{n+1/2}
-        w_g = float(self.f_ext @ du)
-        self.w_gravity += w_g
-        self.w_ext += float(res.reaction @ du)
-        xm = (P + (u0 + 0.5 * du).reshape(P.shape))
-        fn = force.reshape(P.shape) * dt
-        self.impulse += fn.sum(axis=0)
-        self.ang_impulse += self._cross(xm, fn).sum(axis=0)
-        self.impulse_gross += float(np.abs(fn).sum())
-        self.u, self.vg = res.u, res.v
-        self.iterations = res.iterations
+            raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s, halved down to "
+                              f"lagrange.time_step_min = {self.time_step_min:.6g} s): {err}") from None
         self.step, self.time = step, time
         self.first_step = False
         self.dt_prev = dt
         self._sync_local()
+        P = self.global_points
         u_now = sum(midpoint_svk.svk_energy(P, c, self.u, mu, lam) for c, mu, lam in self._blocks)
         self.w_int = u_now - self.w_gravity
         d = super().diagnostics()
@@ -140,11 +129,58 @@ class _ImplicitDynamicSolver(LagrangeSolver):
             raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s): the energy balance is off "
                               f"by {d['energy_balance_rel']:.3g} of the energy (> lagrange.energy_limit = "
                               f"{self.energy_limit:g}): {self.scheme} does not keep the energy at this step")
+        self._control(smallest)
+
+    def _advance(self, dt: float) -> float:
+        """One step of dt; a step whose Newton iteration fails is done as two of dt / 2 (down to
+        time_step_min, then StepFailed). Books the works and impulses; returns the smallest step done."""
+        P = self.global_points
+        u0, v0 = self.u, self.vg
+        try:
+            res = type(self).step_function(P, self._blocks, self.gmass, u0, v0, dt, f_ext=self.f_ext,
+                                           fixed=self._fixed, v_fixed=self._v_fixed)
+        except StepFailed:
+            if 0.5 * dt < self.time_step_min * (1.0 - 1e-12):
+                raise
+            a = self._advance(0.5 * dt)
+            return min(a, self._advance(0.5 * dt))
+        du = res.u - u0
+        force = self.f_ext + res.reaction
+        # the works: gravity's into w_gravity (and out of w_int, as the explicit kernel books it), the
+        # reactions' into w_ext; the impulses and their moments about x_{n+1/2}
+        self.w_gravity += float(self.f_ext @ du)
+        self.w_ext += float(res.reaction @ du)
+        xm = P + (u0 + 0.5 * du).reshape(P.shape)
+        fn = force.reshape(P.shape) * dt
+        self.impulse += fn.sum(axis=0)
+        self.ang_impulse += self._cross(xm, fn).sum(axis=0)
+        self.impulse_gross += float(np.abs(fn).sum())
+        self.u, self.vg = res.u, res.v
+        self.iterations = max(self.iterations, res.iterations)
+        self.substeps += 1
+        return dt
+
+    def _control(self, smallest: float) -> None:
+        """The next step from this one's Newton iterations (item 4 of issue 12): more than 8 halve it,
+        3 or fewer grow it by 1.25 up to time_step, a step that had to be split continues at the
+        smallest part that converged; never below time_step_min. (A step shortened to land on an output
+        time is judged against the controller's step, not its own.)"""
+        scale = float(self.case_dt_scale)
+        ctrl = self._dt_stable * scale / (1.0 + 1e-12)
+        if self.substeps > 1:
+            ctrl = min(ctrl, smallest)
+        elif self.iterations > 8:
+            ctrl = 0.5 * ctrl
+        elif self.iterations <= 3:
+            ctrl = min(1.25 * ctrl, self.time_step)
+        ctrl = max(ctrl, self.time_step_min)
+        self._dt_stable = ctrl / scale * (1.0 + 1e-12)
 
     def diagnostics(self) -> dict[str, float]:
         d = super().diagnostics()
         d["newton_iterations"] = float(self.iterations)
         d["time_step"] = float(getattr(self, "dt", self.time_step))
+        d["substeps"] = float(self.substeps)
         return d
 
     # ---- checkpoint / restart: u and v are the state ------------------------------------------------

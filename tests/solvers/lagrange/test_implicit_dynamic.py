@@ -1,0 +1,64 @@
+"""The implicit integrators' step control (solvers/lagrange/implicit_dynamic.py, issue 12 item 4): a
+step whose Newton iteration fails is done in halves (down to time_step_min, then the run stops by
+name); the next step follows the Newton iterations (more than 8: halved, 3 or fewer: grown by 1.25 up
+to time_step, split: the part that converged)."""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from orchestrator.case import load_case
+from solvers.lagrange import implicit_dynamic
+from solvers.lagrange.implicit_step import StepFailed, StepResult
+from solvers.lagrange.solver import SolverError
+from tests.cases.test_cases import CASES
+
+
+def _solver(monkeypatch, fail_above=None, iterations=None):
+    """The spinning block's midpoint solver, its step function wrapped: failing (StepFailed) for dt
+    above ``fail_above``, reporting ``iterations`` Newton iterations when given."""
+    real = implicit_dynamic.MidpointSolver.step_function
+
+    def step(*args, **kw):
+        dt = args[5]
+        if fail_above is not None and dt > fail_above * (1 + 1e-9):
+            raise StepFailed("midpoint: Newton did not converge in 25 iterations (test)")
+        res = real(*args, **kw)
+        if iterations is not None:
+            res = StepResult(u=res.u, v=res.v, iterations=iterations, residuals=res.residuals, reaction=res.reaction)
+        return res
+
+    monkeypatch.setattr(implicit_dynamic.MidpointSolver, "step_function", staticmethod(step))
+    return implicit_dynamic.MidpointSolver(MPI.COMM_SELF, load_case(CASES / "spinning_block_midpoint"))
+
+
+def _step(s, dt, k=1):
+    s.predict(dt)
+    s.correct(step=k, time=k * dt)
+    return s.stable_dt() * 0.9 / (1 + 1e-12)   # the controller's next step (dt_scale 0.9)
+
+
+def test_a_failed_step_is_done_in_halves_and_the_next_continues_at_the_half(monkeypatch):
+    s = _solver(monkeypatch, fail_above=0.003)
+    nxt = _step(s, 0.008)
+    assert s.substeps == 4 and nxt == pytest.approx(0.002, rel=1e-12)   # 0.008 -> 4 x 0.002
+    d = s.diagnostics()
+    assert d["substeps"] == 4.0 and abs(d["energy_balance_rel"]) < 1e-12 and d["time_step"] == 0.008
+
+
+def test_the_step_follows_the_newton_iterations(monkeypatch):
+    s = _solver(monkeypatch, iterations=10)
+    assert _step(s, 0.008) == pytest.approx(0.004, rel=1e-12)            # > 8: halved
+    s = _solver(monkeypatch, iterations=3)
+    s._dt_stable = 0.004 / 0.9 * (1 + 1e-12)
+    assert _step(s, 0.004) == pytest.approx(0.005, rel=1e-12)            # <= 3: x 1.25
+    s._dt_stable = 0.0075 / 0.9 * (1 + 1e-12)
+    assert _step(s, 0.0075, 2) == pytest.approx(0.008, rel=1e-12)        # capped at time_step
+    s = _solver(monkeypatch, iterations=5)
+    assert _step(s, 0.008) == pytest.approx(0.008, rel=1e-12)            # 4 .. 8: kept
+
+
+def test_below_time_step_min_the_run_stops_by_name(monkeypatch):
+    s = _solver(monkeypatch, fail_above=1e-6)        # time_step_min = 0.008 / 1024 = 7.8e-6
+    with pytest.raises(SolverError, match=r"midpoint step 1 .*halved down to lagrange.time_step_min = 7.8125e-06"):
+        _step(s, 0.008)
+    assert np.all(np.isfinite(s.vg))
