@@ -87,15 +87,20 @@ def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations):
                      f"(relative residuals {['%.1e' % h for h in history]})")
 
 
-def _prescribed(u0, dt, fixed, v_fixed):
-    """(free (n d,) bool, v_b (n d,)): the dofs ``fixed`` move at v_fixed (default 0) over the step."""
+def _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed):
+    """Flat u0, v0 (a prescribed dof's v0 its velocity: x1 - x0 = dt (v0 + v1) / 2 with v0 = v1),
+    the dofs' masses, f_ext, the free dofs (bool) and the prescribed velocities v_b (the dofs
+    ``fixed`` move at v_fixed, default 0)."""
+    u0, v0 = np.asarray(u0, float).ravel(), np.asarray(v0, float).ravel()
+    m = np.repeat(np.asarray(mass, float), np.asarray(points).shape[1])
+    fe = np.zeros_like(u0) if f_ext is None else np.asarray(f_ext, float).ravel()
     free = np.ones(len(u0), bool)
     vb = np.zeros(len(u0))
     if fixed is not None:
         fixed = np.asarray(fixed)
         free[fixed] = False
         vb[fixed] = 0.0 if v_fixed is None else np.asarray(v_fixed, float)
-    return free, vb
+    return u0, np.where(free, v0, vb), m, fe, free, vb
 
 
 def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
@@ -103,13 +108,7 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
     """The midpoint step from (u0, v0) (each (n d,)); blocks [(cells, mu, lambda), ...] the bodies;
     mass (n,) lumped; f_ext (n d,) constant over the step; fixed: dofs moving at v_fixed (default 0:
     held). Returns u1, v1, Newton's history and the reactions on the fixed dofs."""
-    u0, v0 = np.asarray(u0, float).ravel(), np.asarray(v0, float).ravel()
-    d = np.asarray(points).shape[1]
-    m = np.repeat(np.asarray(mass, float), d)
-    fe = np.zeros_like(u0) if f_ext is None else np.asarray(f_ext, float).ravel()
-    free, vb = _prescribed(u0, dt, fixed, v_fixed)
-    # a prescribed dof: x1 - x0 = dt (v0 + v1) / 2 with v0 = v1 = its velocity
-    v0 = np.where(free, v0, vb)
+    u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
 
     def rt(u1):
         k, f = _svk(points, blocks, u0, u1)
@@ -125,12 +124,7 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
 def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
                  tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
     """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step."""
-    u0, v0 = np.asarray(u0, float).ravel(), np.asarray(v0, float).ravel()
-    d = np.asarray(points).shape[1]
-    m = np.repeat(np.asarray(mass, float), d)
-    fe = np.zeros_like(u0) if f_ext is None else np.asarray(f_ext, float).ravel()
-    free, vb = _prescribed(u0, dt, fixed, v_fixed)
-    v0 = np.where(free, v0, vb)
+    u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
     f0 = _svk(points, blocks, u0, u0)[1]
     a0 = np.where(free, (fe - f0) / m, 0.0)
 
