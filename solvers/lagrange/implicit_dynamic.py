@@ -27,13 +27,14 @@ import numpy as np
 
 from solvers.lagrange import finite_strain, midpoint_svk
 from solvers.lagrange.boundary import BoundaryConditions
+from solvers.lagrange.gathered_step import GatheredStepSolver
 from solvers.lagrange.implicit_step import StepFailed, midpoint_step, newmark_step
 from solvers.lagrange.solver import LagrangeSolver, SolverError
 
 __all__ = ["MidpointSolver", "NewmarkSolver"]
 
 
-class _ImplicitDynamicSolver(LagrangeSolver):
+class _ImplicitDynamicSolver(GatheredStepSolver):
     scheme = ""
     step_function = None
     # the displacements are the state: checkpointed as they are (x - X would round them)
@@ -101,12 +102,6 @@ class _ImplicitDynamicSolver(LagrangeSolver):
         self.e_int[:] = e[self.part.cells]
 
     # ---- the step ----------------------------------------------------------------------------------
-    def stable_dt(self) -> float:
-        return self._dt_stable
-
-    def predict(self, dt: float) -> None:
-        self.dt = dt
-
     def correct(self, impulse=None, step: int = 0, time: float = 0.0, surface_impulse=None) -> None:
         if impulse is not None or surface_impulse is not None:
             raise ValueError(f"{self.scheme}: no coupling impulses yet (issue 12)")

@@ -50,8 +50,9 @@ import scipy.sparse as sp
 
 from solvers.lagrange import finite_strain, small_strain
 from solvers.lagrange.boundary import BoundaryConditions
+from solvers.lagrange.gathered_step import GatheredStepSolver
 from solvers.lagrange.loads import traction_loads
-from solvers.lagrange.solver import LagrangeSolver, SolverError
+from solvers.lagrange.solver import SolverError
 from solvers.lagrange.surface import exterior_facets
 
 __all__ = ["QuasiStaticSolver"]
@@ -61,7 +62,7 @@ def _elasticity(dim: int, mat: dict) -> np.ndarray:
     return small_strain.plane_strain_elasticity(e, nu) if dim == 2 else small_strain.elasticity_3d(e, nu)
 
 
-class QuasiStaticSolver(LagrangeSolver):
+class QuasiStaticSolver(GatheredStepSolver):
     """The explicit solver's bodies, mesh, partition, output and checkpoints; steps are load steps
     (module docstring)."""
 
@@ -161,12 +162,6 @@ class QuasiStaticSolver(LagrangeSolver):
         return out
 
     # ---- the step --------------------------------------------------------------------------------
-    def stable_dt(self) -> float:
-        return self._dt_stable
-
-    def predict(self, dt: float) -> None:
-        self.dt = dt
-
     def correct(self, impulse=None, step: int = 0, time: float = 0.0, surface_impulse=None) -> None:
         if impulse is not None or surface_impulse is not None:
             raise ValueError("quasi_static: no coupling impulses (a static solve has no inertia)")

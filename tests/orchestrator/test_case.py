@@ -246,6 +246,7 @@ BAD_CASES = [
     ("lagrange_time_step_explicit", "lagrange.time_step", "a key of the implicit integrators (midpoint, newmark)"),
     ("lagrange_implicit_contact", "lagrange.integrator", "[contact] with an implicit integrator is not built yet"),
     ("lagrange_implicit_neo_hookean", "materials.rubber.model", "St. Venant-Kirchhoff bodies"),
+    ("lagrange_time_step_min_above", "lagrange.time_step_min", "must be <= lagrange.time_step (0.001)"),
 ]
 
 
