@@ -53,6 +53,16 @@ class BoundaryConditions:
             else:  # the schema admits nothing else
                 raise ValueError(f"boundaries.type = {kind!r}: unknown")
 
+    def prescribed_arrays(self, n: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
+        """(held (n, dim) bool, values (n, dim)): which velocity components the conditions prescribe
+        and to what (case order: a later condition wins), for the n nodes they were built on."""
+        held = np.zeros((n, dim), bool)
+        values = np.zeros((n, dim))
+        for nodes, c, val in self.prescribed:
+            held[nodes, c] = True
+            values[nodes, c] = val
+        return held, values
+
     def prescribed_velocity(self, v: np.ndarray) -> np.ndarray:
         """A copy of v with the prescribed components at their values (rigid walls not applied): the
         velocities a constraint solved before apply() must see. The predictor moves a held node by its

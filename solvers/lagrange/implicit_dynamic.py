@@ -61,11 +61,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
             self._blocks.append((C[self.body_of_cell == k], mu, lam))
         span = float(np.max(np.ptp(P, axis=0)))
         bcs = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
-        fixed = np.zeros((n, dim), bool)
-        vb = np.zeros((n, dim))
-        for nodes, c, val in bcs.prescribed:   # case order: a later condition wins
-            fixed[nodes, c] = True
-            vb[nodes, c] = val
+        fixed, vb = bcs.prescribed_arrays(n, dim)
         self._fixed = np.flatnonzero(fixed.ravel())
         self._v_fixed = vb.ravel()[self._fixed]
         self.gmass = self._global(self.mass[:, None])[:, 0]
@@ -77,12 +73,6 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self._sync_local()
         # the initial balances' references on the velocities the step starts from (prescribed ones set)
         self.ke0, self.p0, self.l0 = self.kinetic_energy(), self.momentum(), self.angular_momentum()
-
-    def _global(self, a: np.ndarray) -> np.ndarray:
-        """(n_global, k) from this rank's (nn_local, k): the owned rows summed over the ranks."""
-        out = np.zeros((self.n_nodes_global, a.shape[1]))
-        out[self.part.nodes[self.part.owned]] = a[self.part.owned]
-        return self._allsum(out)
 
     def _sync_local(self) -> None:
         """This rank's nodes and elements from the global state u, v."""
@@ -98,8 +88,10 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
             sig[sel] = midpoint_svk.cauchy_stresses(P, cells, u, mu, lam)
             e[sel] = midpoint_svk.element_energies(P, cells, u, mu, lam)
         self.sig[:] = sig[self.part.cells]
-        # each element's strain energy (J), on the rank that holds it (stress_power_energy)
+        # each element's strain energy (J), on the rank that holds it (stress_power_energy), and the
+        # bodies' total U (the global elements: every rank has them)
         self.e_int[:] = e[self.part.cells]
+        self.strain_energy = float(e.sum())
 
     # ---- the step ----------------------------------------------------------------------------------
     def correct(self, impulse=None, step: int = 0, time: float = 0.0, surface_impulse=None) -> None:
@@ -116,9 +108,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.first_step = False
         self.dt_prev = dt
         self._sync_local()
-        P = self.global_points
-        u_now = sum(midpoint_svk.svk_energy(P, c, self.u, mu, lam) for c, mu, lam in self._blocks)
-        self.w_int = u_now - self.w_gravity
+        self.w_int = self.strain_energy - self.w_gravity
         d = super().diagnostics()
         if abs(d["energy_balance_rel"]) > self.energy_limit:
             raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s): the energy balance is off "

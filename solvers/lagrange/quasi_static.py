@@ -99,18 +99,11 @@ class QuasiStaticSolver(GatheredStepSolver):
         bcs = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
         if bcs.walls:
             raise ValueError("quasi_static: rigid_wall boundaries are not supported (model the wall as a held body in contact)")
-        self.fixed = np.zeros((n, dim), bool)
-        self.rate = np.zeros((n, dim))
-        for nodes, c, val in bcs.prescribed:   # case order: a later condition wins
-            self.fixed[nodes, c] = True
-            self.rate[nodes, c] = val
+        self.fixed, self.rate = bcs.prescribed_arrays(n, dim)
         facets, facet_cell = exterior_facets(C, self.cell_type, n, P)
         self.load = traction_loads(P, facets, bcs.tractions)
         if self.has_gravity:
-            mass = np.zeros(n)
-            mass[self.part.nodes[self.part.owned]] = self.mass[self.part.owned]
-            mass = self._allsum(mass)
-            self.load = self.load + mass[:, None] * self.gravity
+            self.load = self.load + self._global(self.mass[:, None]) * self.gravity
         # contact: each pair's facets on the global exterior surface
         self.pairs = []
         self._cfg = case.get("contact") or None
@@ -338,7 +331,4 @@ class QuasiStaticSolver(GatheredStepSolver):
     # ---- checkpoint / restart: the displacements are the state -----------------------------------
     def restart(self, path) -> None:
         super().restart(path)
-        u_local = self.x - self.X
-        u = np.zeros((self.n_nodes_global, self.dim))
-        u[self.part.nodes[self.part.owned]] = u_local[self.part.owned]
-        self.u = self._allsum(u)
+        self.u = self._global(self.x - self.X)

@@ -347,9 +347,9 @@ class LagrangeSolver:
         return self._surface_impulse_local(imp).copy()
 
     def _contact_zone_maps(self, surf: dict) -> dict:
-        """What the near-node test needs, once per surface: the body of every surface node, the
-        canonical positions of the surface nodes this rank sends (owns), and the facets whole on this
-        rank (as local node indices: their extents bound the margin, zone.py)."""
+        """What the near-node test needs, once per surface: the canonical positions of the surface nodes
+        this rank sends (owns) and their bodies, and the facets whole on this rank (as local node
+        indices: their extents bound the margin, zone.py)."""
         m = self._surf
         ns = len(surf["node_ids"])
         node_body = np.zeros(ns, dtype=np.int64)
@@ -359,7 +359,8 @@ class LagrangeSolver:
         local = np.full(ns, -1, dtype=np.int64)
         local[m.held_pos] = m.held_local
         whole = np.all(local[surf["facets"]] >= 0, axis=1)
-        return {"node_body": node_body, "sent_pos": np.asarray(sent_pos, dtype=np.int64),
+        sent_pos = np.asarray(sent_pos, dtype=np.int64)
+        return {"ns": ns, "sent_pos": sent_pos, "sent_body": node_body[sent_pos],
                 "local_facets": local[surf["facets"][whole]], "n_bodies": len(self.body_names)}
 
     def _gather_near(self, arrays):
@@ -369,9 +370,9 @@ class LagrangeSolver:
         from solvers.contact.zone import body_boxes, facet_extent, near_nodes
 
         z, m = self._zone_maps, self._surf
-        ns, dim = len(z["node_body"]), self.dim
+        ns, dim = z["ns"], self.dim
         xo = self.x[m.sent_local]
-        bodies = z["node_body"][z["sent_pos"]]
+        bodies = z["sent_body"]
         mine = np.concatenate([body_boxes(xo, bodies, z["n_bodies"]).ravel(),
                                [facet_extent(self.x, z["local_facets"])]])
         every = np.array(self.comm.allgather(mine)) if self.comm.size > 1 else mine[None]
@@ -513,10 +514,7 @@ class LagrangeSolver:
             arr.flags.writeable = False
 
     def _free_components(self) -> np.ndarray:
-        free = np.ones((len(self.X), self.dim))
-        for nodes, c, _ in self.bcs.prescribed:
-            free[nodes, c] = 0.0
-        return free
+        return 1.0 - self.bcs.prescribed_arrays(len(self.X), self.dim)[0]
 
     def _gather_surface(self, a: np.ndarray) -> np.ndarray:
         """(ns, ...) values of the surface nodes on every rank, from the copies their owners hold:
