@@ -21,6 +21,20 @@ def run_case(name, tmp_path, *extra, timeout=900):
     return out, s
 
 
+def case_variant(tmp_path, name, *edits):
+    """A copy of cases/<name> in tmp_path/<name> with its case.toml's texts replaced (``edits``:
+    (old, new) pairs, each old text asserted present)."""
+    case = tmp_path / name
+    shutil.copytree(CASES / name, case, ignore=shutil.ignore_patterns("out"))
+    p = case / "case.toml"
+    text = p.read_text()
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new)
+    p.write_text(text)
+    return case
+
+
 def assert_check_passed(s):
     m = s["check"]["metrics"]
     bad = {k: (v["value"], v["reference"], v["tolerance"]) for k, v in m.items() if not v["passed"]}

@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.cases.test_cases import CASES, run_case
+from tests.cases.test_cases import CASES, case_variant, run_case
 from tests.cases.test_coupled_cases import assert_same_steps
 from tests.conftest import immerse
 
@@ -65,10 +65,8 @@ def test_bars_impact(tmp_path):
 def test_bars_impact_on_two_ranks_and_from_a_checkpoint(tmp_path):
     """2 ranks (the bars' nodes on both; every rank solves the gathered contact) equal 1 rank bit for
     bit; a checkpoint at 30 us (in contact) continues bit for bit."""
-    case = tmp_path / "case"
-    shutil.copytree(CASES / "bars_impact", case)
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace("output_interval = 5.0e-6", "output_interval = 5.0e-6\ncheckpoint_interval = 30.0e-6"))
+    case = case_variant(tmp_path, "bars_impact",
+                        ("output_interval = 5.0e-6", "output_interval = 5.0e-6\ncheckpoint_interval = 30.0e-6"))
     one, two = tmp_path / "one", tmp_path / "two"
     for out, ranks in ((one, "lagrange=1"), (two, "lagrange=2")):
         r = immerse("run", case, "--out", out, "--ranks", ranks)
@@ -117,13 +115,10 @@ def test_block_sticks_below_the_friction_angle(tmp_path):
     out, s = run_case("block_on_incline_stick", tmp_path)
     assert set(s["check"]["metrics"]) == {"slip_max", "energy_balance_rel", "momentum_balance_rel"}
     assert s["check"]["reported"]["speed_max"] > 1e-7   # (it rings: measured 7.8e-6 m/s)
-    case = tmp_path / "free"
-    shutil.copytree(CASES / "block_on_incline_stick", case)
-    p = case / "case.toml"
-    text = p.read_text().replace("friction = 0.2", "friction = 0.0").replace("end_time = 0.3", "end_time = 0.1")
-    p.write_text(text.replace("window = [0.1, 0.3]", "window = [0.02, 0.1]").replace(
-        "metrics.slip_max = { reference = 0.0, tolerance = 1e-13 }",
-        "metrics.acceleration = { reference = 1.703479, tolerance = 3e-5 }"))  # measured 7.8e-6
+    case = case_variant(tmp_path, "block_on_incline_stick", ("friction = 0.2", "friction = 0.0"),
+                        ("end_time = 0.3", "end_time = 0.1"), ("window = [0.1, 0.3]", "window = [0.02, 0.1]"),
+                        ("metrics.slip_max = { reference = 0.0, tolerance = 1e-13 }",
+                         "metrics.acceleration = { reference = 1.703479, tolerance = 3e-5 }"))  # measured 7.8e-6
     r = immerse("run", case, "--out", tmp_path / "free_out")
     assert r.returncode == 0, r.stdout + r.stderr
 
@@ -155,17 +150,11 @@ def test_block_on_incline_3d_sticks_below_the_friction_angle(tmp_path):
     landing no node slides more than 1e-14 m over 0.1-0.3 s (measured 3.8e-16 m; 2.2e-10 m while J
     ignored that a step shortened to land on an output time has its pressure p dt / dt_force, 4.1e-13
     m with the friction solve stopped at 1e-10 of the largest slip rate without a warm start)."""
-    case = tmp_path / "stick"
-    case.mkdir()
-    text = (CASES / "block_on_incline_3d" / "case.toml").read_text()
-    reps = [("gravity = [2.905726, 1.677621, -9.218442]", "gravity = [1.475256, 0.851740, -9.660964]"),
-            ("end_time = 0.1", "end_time = 0.3"), ("window = [0.02, 0.1]", "window = [0.1, 0.3]"),
-            ("metrics.acceleration = { reference = 1.309033, tolerance = 1e-4 }",
-             "metrics.slip_max = { reference = 0.0, tolerance = 1e-14 }")]
-    for a, b in reps:
-        assert a in text
-        text = text.replace(a, b)
-    (case / "case.toml").write_text(text)
+    case = case_variant(tmp_path, "block_on_incline_3d",
+                        ("gravity = [2.905726, 1.677621, -9.218442]", "gravity = [1.475256, 0.851740, -9.660964]"),
+                        ("end_time = 0.1", "end_time = 0.3"), ("window = [0.02, 0.1]", "window = [0.1, 0.3]"),
+                        ("metrics.acceleration = { reference = 1.309033, tolerance = 1e-4 }",
+                         "metrics.slip_max = { reference = 0.0, tolerance = 1e-14 }"))
     r = immerse("run", case, "--out", tmp_path / "out")
     assert r.returncode == 0, r.stdout + r.stderr
     m = json.loads((tmp_path / "out" / "summary.json").read_text())["check"]["metrics"]
@@ -216,10 +205,8 @@ def test_impacting_plates(tmp_path):
 def test_friction_slip_continues_from_a_checkpoint(tmp_path):
     """block_on_incline checkpointed at 0.05 s (sliding) and continued: the last step, the slip
     accumulated by friction included, equals the uninterrupted run's bit for bit."""
-    case = tmp_path / "case"
-    shutil.copytree(CASES / "block_on_incline", case)
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace("output_interval = 0.025", "output_interval = 0.025\ncheckpoint_interval = 0.05"))
+    case = case_variant(tmp_path, "block_on_incline",
+                        ("output_interval = 0.025", "output_interval = 0.025\ncheckpoint_interval = 0.05"))
     one = tmp_path / "one"
     r = immerse("run", case, "--out", one)
     assert r.returncode == 0, r.stdout + r.stderr

@@ -2,25 +2,12 @@
 checked against its analytic reference by its own [check]: Crisfield's patch test with either block
 on top and with single-pass node-to-surface failing it; Hertz at three meshes; 2 ranks equal to 1."""
 import json
-import shutil
 
 import numpy as np
 import pytest
 
-from tests.cases.test_cases import CASES, assert_check_passed, run_case
+from tests.cases.test_cases import CASES, assert_check_passed, case_variant, run_case
 from tests.conftest import immerse
-
-
-def _variant(tmp_path, name, *replacements):
-    case = tmp_path / "case"
-    shutil.copytree(CASES / name, case)
-    p = case / "case.toml"
-    text = p.read_text()
-    for old, new in replacements:
-        assert old in text, old
-        text = text.replace(old, new)
-    p.write_text(text)
-    return case
 
 
 def _run(case, out, *extra):
@@ -47,7 +34,7 @@ def test_contact_patch_2d(tmp_path):
 def test_contact_patch_2d_either_block_on_top(tmp_path):
     """The dual pass is unbiased: the coarser mesh below instead of above passes as well (measured
     sigma_y 1e-15, spread 1e-14)."""
-    case = _variant(tmp_path, "contact_patch_2d", ("cells = [4, 2]", "cells = [@, 2]"),
+    case = case_variant(tmp_path, "contact_patch_2d", ("cells = [4, 2]", "cells = [@, 2]"),
                     ("cells = [3, 2]", "cells = [4, 2]"), ("cells = [@, 2]", "cells = [3, 2]"))
     assert_check_passed(_run(case, tmp_path / "out"))
 
@@ -56,7 +43,7 @@ def test_single_pass_node_to_surface_fails_the_patch_test(tmp_path):
     """Single-pass node-to-surface (the lower block's nodes on the upper's segments) cannot carry a
     uniform pressure on non-matching meshes: its stress is off by more than 1e-3 (measured: see the
     assertion's message)."""
-    case = _variant(tmp_path, "contact_patch_2d", ("pairs = [[\"lower\", \"upper\"]]",
+    case = case_variant(tmp_path, "contact_patch_2d", ("pairs = [[\"lower\", \"upper\"]]",
                                                    "pairs = [[\"lower\", \"upper\"]]\nmethod = \"node_to_surface\""))
     r = immerse("run", case, "--out", tmp_path / "out")
     s = json.loads((tmp_path / "out" / "summary.json").read_text())
@@ -73,7 +60,7 @@ def test_hertz_cylinder_at_three_meshes(tmp_path):
     -0.83 / +0.98 / +0.49 %); the contact force equals the load (2e-12, measured 3.3e-13)."""
     errors = []
     for n in (40, 80, 160):
-        case = _variant(tmp_path / str(n), "hertz_cylinder", ("radial_cells = 80", f"radial_cells = {n}"))
+        case = case_variant(tmp_path / str(n), "hertz_cylinder", ("radial_cells = 80", f"radial_cells = {n}"))
         s = _run(case, tmp_path / str(n) / "out")
         assert_check_passed(s)
         errors.append(abs(s["check"]["metrics"]["half_width"]["rel_error"]))
@@ -117,7 +104,7 @@ def test_contact_patch_3d_aligned_meshes_are_exact(tmp_path):
     value (the issue's bound; measured 1.7e-13), sigma_zz uniform to round-off."""
     from orchestrator import output
 
-    case = _variant(tmp_path, "contact_patch_3d", ("cells = [5, 5, 2]", "cells = [3, 3, 2]"),
+    case = case_variant(tmp_path, "contact_patch_3d", ("cells = [5, 5, 2]", "cells = [3, 3, 2]"),
                     ('mesh = { file = "upper_turned.msh" }',
                      "mesh = { box = { lower = [0.0, 0.0, 0.95], upper = [1.0, 1.0, 2.0], cells = [3, 3, 2] } }"))
     out = tmp_path / "out"
@@ -167,7 +154,7 @@ def test_newton_while_the_contact_zone_grows(tmp_path):
     contact force equals the load to Newton's tolerance (measured 3.4e-11)."""
     import h5py
 
-    case = _variant(tmp_path, "hertz_cylinder", ('model = "linear_elastic"\ndensity = 1.0\nyoungs_modulus = 1.0\n',
+    case = case_variant(tmp_path, "hertz_cylinder", ('model = "linear_elastic"\ndensity = 1.0\nyoungs_modulus = 1.0\n',
                                                  'model = "neo_hookean"\ndensity = 1.0\nyoungs_modulus = 1.0\n'),
                     ("load_steps = 1", "load_steps = 4"), ("radial_cells = 80", "radial_cells = 40"),
                     ("traction = { y = 0.005 }", "traction = { y = 0.05 }"))

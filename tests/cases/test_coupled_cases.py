@@ -8,7 +8,7 @@ import shutil
 
 import pytest
 
-from tests.cases.test_cases import assert_check_passed
+from tests.cases.test_cases import assert_check_passed, case_variant
 from tests.conftest import CASES, immerse
 
 
@@ -529,19 +529,6 @@ def test_oblique_slip_wall_mesh_is_the_periodic_strip():
     assert load_case(CASES / "oblique_slip_wall")["ale"]["grid"]["upper"][1] == ly
 
 
-def _variant(tmp_path, name, edits):
-    """A copy of cases/<name> with its case.toml's texts replaced (``edits``: (old, new) pairs)."""
-    case = tmp_path / name
-    shutil.copytree(CASES / name, case, ignore=shutil.ignore_patterns("out"))
-    p = case / "case.toml"
-    text = p.read_text()
-    for old, new in edits:
-        assert old in text, old
-        text = text.replace(old, new)
-    p.write_text(text)
-    return case
-
-
 def test_a_coupled_body_that_erodes_away_leaves_its_room_to_the_air(tmp_path):
     """The clamped plate in a shock (cases/plate_in_shock_2d) eroding at an effective strain of 1e-3:
     the ambient 1e5 Pa alone strains it that far, so its elements erode within the first steps,
@@ -551,7 +538,7 @@ def test_a_coupled_body_that_erodes_away_leaves_its_room_to_the_air(tmp_path):
     internal energy at step 5 (and so it does with the merge of those zones switched off).  Balances
     at round-off (measured, 21 steps: energy 1.5e-14 and mass 4.8e-14 of the whole, the coupling's
     momentum 7.9e-16)."""
-    case = _variant(tmp_path, "plate_in_shock_2d", [
+    case = case_variant(tmp_path, "plate_in_shock_2d", *[
         ("end_time = 4.0e-3", "end_time = 3.0e-4"), ("output_interval = 0.5e-3", "output_interval = 1.0e-4"),
         ('material = "rubber"\n', 'material = "rubber"\nerosion = { strain = 1e-3 }\n')])
     s = run(case, tmp_path / "out")
@@ -569,7 +556,7 @@ def test_an_eroding_fe_rod_penetrates_aluminium(tmp_path):
     574 m/s (measured over 2..6 us: 521.8 m/s, -9.1 %: the impact's phase), and the mass and coupling
     balances stay at round-off through the erosions, the vacuum cut-off and the merges of the zones
     the eroded elements uncover, the energy's within 1.4e-12 (measured: mass 1.2e-14, energy 1.4e-12, the coupling's momentum 4.7e-16)."""
-    case = _variant(tmp_path, "penetrator_tate_fe", [
+    case = case_variant(tmp_path, "penetrator_tate_fe", *[
         ("end_time = 3.2e-5", "end_time = 6.0e-6"),
         ("window = [8.0e-6, 1.6e-5], depth_time = 2.970e-5", "window = [2.0e-6, 6.0e-6]"),
         ("metrics.depth_at_time = { reference = 0.01705, tolerance = 0.15 }", "")])

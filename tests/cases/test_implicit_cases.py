@@ -2,13 +2,12 @@
 the midpoint scheme keeps a free spinning block's energy and momenta far above the explicit limit, on
 1 and 2 ranks alike and across a restart; Newmark's trapezoid on the same run is stopped by name."""
 import json
-import shutil
 
 import h5py
 import numpy as np
 import pytest
 
-from tests.cases.test_cases import CASES, run_case
+from tests.cases.test_cases import CASES, case_variant, run_case
 from tests.cases.test_contact_cases import continue_from_first_checkpoint
 from tests.cases.test_coupled_cases import assert_same_steps
 from tests.conftest import immerse
@@ -18,10 +17,8 @@ def test_spinning_block_midpoint_on_two_ranks_and_from_a_checkpoint(tmp_path):
     """Its check (energy 1.4e-12, momentum 1.7e-14, angular momentum 7.8e-13 measured) at 8 ms steps
     (16.6x the explicit limit), at most 6 Newton iterations a step (measured 5); 2 ranks (a gathered
     solve on each) equal 1 rank bit for bit; a checkpoint continues bit for bit."""
-    case = tmp_path / "case"
-    shutil.copytree(CASES / "spinning_block_midpoint", case)
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace("output_interval = 0.05", "output_interval = 0.05\ncheckpoint_interval = 0.25"))
+    case = case_variant(tmp_path, "spinning_block_midpoint",
+                        ("output_interval = 0.05", "output_interval = 0.05\ncheckpoint_interval = 0.25"))
     out, s = run_case("spinning_block_midpoint", tmp_path)
     with h5py.File(out / "diagnostics.h5") as h:
         assert h["lagrange.newton_iterations"][1:].max() <= 6
@@ -44,10 +41,7 @@ def test_newmark_is_stopped_by_name(tmp_path):
     number; the output written before (t = 0) stays readable and finite."""
     from orchestrator import output
 
-    case = tmp_path / "case"
-    shutil.copytree(CASES / "spinning_block_midpoint", case)
-    p = case / "case.toml"
-    p.write_text(p.read_text().replace('integrator = "midpoint"', 'integrator = "newmark"'))
+    case = case_variant(tmp_path, "spinning_block_midpoint", ('integrator = "midpoint"', 'integrator = "newmark"'))
     out = tmp_path / "out"
     r = immerse("run", case, "--out", out)
     assert r.returncode != 0
