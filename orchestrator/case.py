@@ -536,6 +536,11 @@ def _check(case: dict, data: dict, schema: bool = True) -> None:
         err = _best_schema_error(PARAMS[kind], data["check"].get("params", {})) if schema else None
         if err is not None:
             raise _schema_error_to_case_error(err, ("check", "params"))
+        from orchestrator.checks import RULES
+
+        bad = RULES[kind](case, case["check"].get("params", {})) if kind in RULES else None
+        if bad is not None:
+            raise CaseError(f"check.params.{bad[0]}", data["check"]["params"][bad[0]], bad[1])
 
     # data files last: reading them may be slow
     for t in schema_registry.tables():

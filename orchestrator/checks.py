@@ -25,12 +25,19 @@ WINDOW = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems
           "x-allowed": "must be [lower, upper] (2 numbers, m)"}
 
 
-def register_check(name: str, params: dict | None = None):
+RULES: dict[str, Callable] = {}
+"""Each kind's cross-field rule on its params (optional): rule(case, params) returns None or
+(param name, what is allowed), checked when the case is loaded."""
+
+
+def register_check(name: str, params: dict | None = None, rule: Callable | None = None):
     """Register check ``name``; ``params``: the properties of its ``[check] params`` table (with
-    ``required``: a ``schema_parts.table``), None for a kind that takes none."""
+    ``required``: a ``schema_parts.table``), None for a kind that takes none; ``rule``: RULES'."""
     def deco(fn):
         CHECKS[name] = fn
         PARAMS[name] = params if params is not None else table({})
+        if rule is not None:
+            RULES[name] = rule
         return fn
 
     return deco
@@ -518,6 +525,47 @@ def momentum(case, out, history, params):
         if k.endswith("_balance_rel"):
             vals[k.split(".", 1)[1]] = float(np.max(np.abs(a)))
     vals["steps"] = float(history["step"][-1])
+    return vals
+
+
+def _after_in_run(case, params):
+    end = case["run"]["end_time"]
+    return None if params["after"] <= end else ("after", f"must be <= run.end_time ({end:g} s)")
+
+
+@register_check("free_flight", params=table({"after": number("s", minimum=0.0)}, required=("after",)),
+                rule=_after_in_run)
+def free_flight(case, out, history, params):
+    """A body left to itself after its loads end (issue 12's l_block_free_flight): from the first
+    step at or after ``after`` on, the largest drift of the total energy E = T + U (relative to E
+    there), of the linear momentum (relative to sqrt(2 M T), the momentum the kinetic energy would
+    give the mass moving as one) and of the angular momentum (relative to its size there); with the
+    whole run's balances, the steps and the most Newton iterations of a step."""
+    role = "lagrange"
+    t = history["time"]
+    sel = t >= params["after"] * (1.0 - 1e-12)
+    if not sel.any():
+        raise ValueError(f"check.params.after = {params['after']}: no step at or after it (end {t[-1]:g} s)")
+    e = history[f"{role}.kinetic_energy"] + history[f"{role}.stress_power_energy"]
+    dim = case["run"]["dimension"]
+    p = np.stack([history[f"{role}.momentum_{c}"] for c in "xyz"[:dim]], axis=1)
+    comps = "xyz" if dim == 3 else "z"
+    ang = np.stack([history[f"{role}.angular_momentum_{c}"] for c in comps], axis=1)
+    e, p, ang = e[sel], p[sel], ang[sel]
+    mass = float(history[f"{role}.mass"][-1])
+    p_scale = max(np.sqrt(2.0 * mass * float(history[f"{role}.kinetic_energy"][sel][0])), 1e-300)
+    vals = {
+        "energy_drift_rel": float(np.max(np.abs(e - e[0])) / max(abs(e[0]), 1e-300)),
+        "momentum_drift_rel": float(np.max(np.linalg.norm(p - p[0], axis=1)) / p_scale),
+        "angular_momentum_drift_rel": float(np.max(np.linalg.norm(ang - ang[0], axis=1))
+                                            / max(float(np.linalg.norm(ang[0])), 1e-300)),
+        "energy_after": float(e[0]),
+        "steps": float(history["step"][-1]),
+    }
+    for k in ("energy_balance_rel", "momentum_balance_rel", "angular_momentum_balance_rel"):
+        vals[k] = float(np.max(np.abs(history[f"{role}.{k}"])))
+    if f"{role}.newton_iterations" in history:
+        vals["newton_iterations_max"] = float(np.max(history[f"{role}.newton_iterations"]))
     return vals
 
 

@@ -9,6 +9,8 @@ multiplier solve every step (solvers/contact/explicit.py).
                                                        # compliance factor, k = 100 E / (alpha h)
     capture = 1e-3                                     # search distance, m (default: median element edge)
     friction = 0.2                                     # Coulomb's mu (default 0: frictionless)
+    return_energy = true                               # midpoint only: step 3 of the three-step update
+                                                       # (give back on release what the contact took)
 
 Normalised layout (``case["contact"]``): the same keys with the defaults filled in (capture only when
 given). Cross-field rules: the bodies are [[lagrange.bodies]] names, a pair names two bodies (or one
@@ -32,6 +34,7 @@ CONTACT = table(
         "alpha": number(exclusiveMinimum=0.0),
         "capture": number("m", exclusiveMinimum=0.0),
         "friction": number("dimensionless", minimum=0.0),
+        "return_energy": {"type": "boolean"},
     },
     required=("pairs",),
 )
@@ -44,6 +47,8 @@ def normalise(raw: dict | None, case: dict) -> dict | None:
            "alpha": float(raw.get("alpha", 1.0)), "friction": float(raw.get("friction", 0.0))}
     if "capture" in raw:
         out["capture"] = float(raw["capture"])
+    if "return_energy" in raw:
+        out["return_energy"] = bool(raw["return_energy"])
     return out
 
 
@@ -56,6 +61,11 @@ def check(case: dict, data: dict) -> None:
     names = [b["name"] for b in case.get("lagrange", {}).get("bodies", [])]
     if not names:
         raise CaseError("contact", data.get("contact"), "contact is between Lagrangian bodies: [[lagrange.bodies]] has none")
+    integrator = (case.get("lagrange") or {}).get("integrator", "explicit")
+    if "return_energy" in c and integrator != "midpoint":
+        raise CaseError("contact.return_energy", data["contact"]["return_energy"],
+                        f"a step of the midpoint scheme's contact update; lagrange.integrator = {integrator!r}: "
+                        "allowed: leave it out")
     seen = {}
     for i, pair in enumerate(c["pairs"]):
         for j, n in enumerate(pair):
@@ -66,7 +76,6 @@ def check(case: dict, data: dict) -> None:
         if key in seen:
             raise CaseError(format_key(["contact", "pairs", i]), pair, f"the same pair as contact.pairs[{seen[key]}]")
         seen[key] = i
-        integrator = (case.get("lagrange") or {}).get("integrator", "explicit")
         if c["friction"] > 0.0 and integrator != "explicit":
             raise CaseError("contact.friction", c["friction"], f"friction is enforced by the explicit step's "
                             f"impulses; lagrange.integrator = {integrator!r} is frictionless: allowed 0")

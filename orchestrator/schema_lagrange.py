@@ -185,8 +185,8 @@ BOUNDARY_KEYS = {
     "fixed": ("type", "region"),
     "velocity": ("type", "region", "velocity"),
     # a uniform traction (Pa) on the exterior facets whose nodes all lie in the region (quasi-static
-    # mode: ramped with the load factor t / end_time)
-    "traction": ("type", "region", "traction"),
+    # mode: ramped with the load factor t / end_time; the dynamic modes: times its curve, default 1)
+    "traction": ("type", "region", "traction", "curve"),
     "symmetry": ("type", "axis", "at"),
     "rigid_wall": ("type", "point", "normal"),
 }
@@ -203,6 +203,11 @@ BOUNDARY = {
             {c: number("Pa") for c in ("x", "y", "z")},
             minProperties=1,
         ),
+        # the traction's history: [[t (s), factor], ...], t increasing, linear between the points and
+        # the end values held outside (LS-DYNA's *DEFINE_CURVE; a hat pulse: [[0, 0], [2.5, 2.5], [5, 0]])
+        "curve": {"type": "array", "minItems": 2,
+                  "items": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
+                  "x-allowed": "must be a list of at least 2 [time (s), factor] pairs"},
         "axis": {"type": "string", "enum": ["x", "y", "z"]},
         "at": number("m"),
         "point": vector("m"),
@@ -210,7 +215,7 @@ BOUNDARY = {
     },
     "additionalProperties": False,
     "required": ["type"],
-    "allOf": variants("type", BOUNDARY_KEYS),
+    "allOf": variants("type", BOUNDARY_KEYS, {**BOUNDARY_KEYS, "traction": ("type", "region", "traction")}),
 }
 BOUNDARIES = {"type": "array", "items": BOUNDARY}
 
@@ -344,11 +349,14 @@ def check_lagrange(case: dict, data: dict) -> None:
         if tmin is not None and not tmin <= case["lagrange"]["time_step"]:
             raise CaseError("lagrange.time_step_min", tmin, f"must be <= lagrange.time_step "
                             f"({fmt_num(case['lagrange']['time_step'])})")
-        for key in ("coupling", "contact"):
-            if case.get(key):
-                raise CaseError("lagrange.integrator", integrator,
-                                f"[{key}] with an implicit integrator is not built yet (issue 12); allowed with "
-                                f"[{key}]: explicit" + (", quasi_static" if key == "contact" else ""))
+        if case.get("coupling"):
+            raise CaseError("lagrange.integrator", integrator,
+                            "[coupling] with an implicit integrator is not built yet (issue 12); allowed with "
+                            "[coupling]: explicit")
+        if case.get("contact") and integrator != "midpoint":
+            raise CaseError("lagrange.integrator", integrator,
+                            "[contact] is built into the energy-momentum scheme only (its three-step update); "
+                            "allowed with [contact]: explicit, quasi_static, midpoint")
     seen: dict[str, int] = {}
     for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
         base = ["lagrange", "bodies", i]
@@ -483,10 +491,24 @@ def normalise_boundaries(raw: list | None, case: dict) -> list:
                 out[k] = {c: to_float(x) for c, x in v.items()}
             elif k == "at":
                 out[k] = to_float(v)
+            elif k == "curve":
+                out[k] = [[to_float(t), to_float(f)] for t, f in v]
             elif k in ("point", "normal"):
                 out[k] = [to_float(x) for x in v]
         boundaries.append(out)
     return boundaries
+
+
+def _check_curve(key: str, raw, curve: list, static: bool, integrator: str) -> None:
+    """A traction's [[t, factor], ...]: times strictly increasing, every value a finite float; not in
+    the quasi-static mode (its loads follow the load factor t / end_time)."""
+    if static:
+        raise CaseError(key, raw, f"lagrange.integrator = {integrator!r} ramps every load with t / end_time; "
+                                  "allowed: no curve (curves are for the dynamic integrators)")
+    if not all(math.isfinite(v) for pair in curve for v in pair):
+        raise CaseError(key, raw, "must hold finite numbers (time in s, factor)")
+    if any(b[0] <= a[0] for a, b in zip(curve, curve[1:])):
+        raise CaseError(key, raw, "times must increase strictly from one point to the next")
 
 
 def check_boundaries(case: dict, data: dict) -> None:
@@ -505,10 +527,8 @@ def check_boundaries(case: dict, data: dict) -> None:
                                     f"allowed: {', '.join(comps)}")
         integrator = (case.get("lagrange") or {}).get("integrator", "explicit")
         static = integrator in INTEGRATORS and not INTEGRATORS[integrator].dynamic
-        if bc["type"] == "traction" and not static:
-            raise CaseError(format_key(base + ["type"]), raw["type"],
-                            f"traction boundaries are loads of the quasi-static mode; allowed with "
-                            f"lagrange.integrator = {integrator!r}: fixed, velocity, symmetry, rigid_wall")
+        if "curve" in raw:
+            _check_curve(format_key(base + ["curve"]), raw["curve"], bc["curve"], static, integrator)
         if bc["type"] == "rigid_wall" and integrator in INTEGRATORS and INTEGRATORS[integrator].implicit:
             raise CaseError(format_key(base + ["type"]), raw["type"],
                             f"rigid walls are not built into lagrange.integrator = {integrator!r}; allowed: "

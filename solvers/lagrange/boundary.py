@@ -4,8 +4,8 @@ Each condition overwrites some velocity components of some nodes; the solver tur
 reaction impulse m (v_after - v_before), which enters the momentum and energy balances. Conditions
 apply in case order, so a later one wins where two overlap.
 
-``traction`` conditions are loads, not velocities: kept as (node mask, traction) for the quasi-static
-mode (quasi_static.py, loads.py); the explicit solver's case check refuses them.
+``traction`` conditions are loads, not velocities: kept as (node mask, traction) with their curves
+(``curve``: [[t, factor], ...], None for none) for the solvers' load vectors (loads.py).
 """
 from __future__ import annotations
 
@@ -30,7 +30,8 @@ class BoundaryConditions:
         dim = X.shape[1]
         self.prescribed = []  # (node indices, component, value)
         self.walls = []       # (point, unit normal)
-        self.tractions = []   # (node mask, traction (dim,)): loads of the quasi-static mode (loads.py)
+        self.tractions = []   # (node mask, traction (dim,)): surface loads (loads.py)
+        self.traction_curves = []  # each traction's [[t, factor], ...] or None
         for spec in specs:
             kind = spec["type"]
             if kind == "fixed":
@@ -50,6 +51,7 @@ class BoundaryConditions:
             elif kind == "traction":
                 t = np.array([float(spec["traction"].get(c, 0.0)) for c in NAMES[:dim]])
                 self.tractions.append((_region(spec["region"], X), t))
+                self.traction_curves.append(spec.get("curve"))
             else:  # the schema admits nothing else
                 raise ValueError(f"boundaries.type = {kind!r}: unknown")
 

@@ -5,14 +5,17 @@ that fails), one step of ``[lagrange] time_step`` seconds at a time (implicit_st
 Bodies: ``linear_elastic`` materials are taken as St. Venant-Kirchhoff (the same E, nu; Green strain
 and second Piola-Kirchhoff stress: identical at small strain, and frame-indifferent under large
 rotations, which Hooke's law on the small strain is not), on the elements of finite_strain.py; the
-masses are the explicit solver's lumped ones. Loads: gravity (m g, constant), boundary conditions
-(fixed, velocity, symmetry: prescribed velocities; the residual there is the reaction). Not yet:
-contact, coupling, other materials, erosion, rigid walls (refused by the case schema).
+masses are the explicit solver's lumped ones. Loads: gravity (m g, constant), tractions times their
+curves (loads.py: the midpoint scheme takes them at t_{n+1/2}, Newmark at t_n and t_{n+1}), boundary
+conditions (fixed, velocity, symmetry: prescribed velocities; the residual there is the reaction).
+Contact (midpoint only): the seed's three steps (implicit_step.py step 1, _contact_update steps 2
+and 3). Not yet: coupling, friction, other materials, erosion, rigid walls (refused by the schema).
 
 Balances (the explicit solver's diagnostics, fed the implicit step's exact quantities): the strain
-energy U(u) is the internal work, gravity's work sum m g . (u1 - u0) and the reactions' work
-R . (u1 - u0) the external; over a midpoint step T + U changes by exactly that work (to the Newton
-tolerance), and the impulses (m g + R) dt and their moments about x_{n+1/2} close the momenta.
+energy U(u) is the internal work, gravity's work sum m g . (u1 - u0), the tractions' F . (u1 - u0)
+and the reactions' R . (u1 - u0) the external; over a midpoint step T + U changes by exactly that work
+(to the Newton tolerance), and the impulses (m g + F + R) dt and their moments about x_{n+1/2} close
+the momenta (Newmark: F the mean of the step's two ends; its balances are not exact).
 A step whose Newton iteration fails, or after which the energy balance is off by more than
 ``energy_limit`` (default 0.01 of the energy: Newmark on a large rotation), stops the run naming the
 scheme, the step and the numbers (SolverError), never NaN.
@@ -27,6 +30,8 @@ import numpy as np
 
 from solvers.lagrange import finite_strain, midpoint_svk
 from solvers.lagrange.boundary import BoundaryConditions
+from solvers.contact.implicit_update import remove_gap_rate, return_energy
+from solvers.lagrange.gathered_contact import GatheredContact
 from solvers.lagrange.gathered_step import GatheredStepSolver
 from solvers.lagrange.implicit_step import StepFailed, midpoint_step, newmark_step
 from solvers.lagrange.solver import LagrangeSolver, SolverError
@@ -70,6 +75,22 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.vg = self._global(self.v).ravel()
         self.vg[self._fixed] = self._v_fixed
         self.iterations = 0
+        # contact (midpoint only): the seed's three steps (_contact_update); per multiplier key the
+        # energy stored since its episode began, to be given back when it releases
+        self._gcontact = None
+        self.w_contact, self.contact_active, self.contact_stored = 0.0, 0, 0.0
+        self.contact_force = np.zeros(dim)
+        self._active_keys: dict = {}
+        self._stored: dict = {}
+        if case.get("contact"):
+            self._gcontact = GatheredContact(case["contact"], case, P, C, self.cell_type, self.body_of_cell,
+                                             self.body_names)
+            self._contact_body = self._gcontact.pairs[0][2]
+        self._return_energy = bool((case.get("contact") or {}).get("return_energy", True))
+        self.contact_lost = 0.0
+        inv = np.zeros(n * dim)
+        inv[np.setdiff1d(np.arange(n * dim), self._fixed)] = 1.0
+        self._inv_mass = inv / np.repeat(self.gmass, dim)
         self._sync_local()
         # the initial balances' references on the velocities the step starts from (prescribed ones set)
         self.ke0, self.p0, self.l0 = self.kinetic_energy(), self.momentum(), self.angular_momentum()
@@ -100,7 +121,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         dt = self.dt
         self.iterations, self.substeps, smallest = 0, 0, dt
         try:
-            smallest = self._advance(dt)
+            smallest = self._advance(self.time, dt)
         except StepFailed as err:
             raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s, halved down to "
                               f"lagrange.time_step_min = {self.time_step_min:.6g} s): {err}") from None
@@ -108,7 +129,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.first_step = False
         self.dt_prev = dt
         self._sync_local()
-        self.w_int = self.strain_energy - self.w_gravity
+        self.w_int = self.strain_energy - self.w_gravity - self.w_load
         d = super().diagnostics()
         if abs(d["energy_balance_rel"]) > self.energy_limit:
             raise SolverError(f"{self.scheme} step {step} (t={time:.6g} s, dt={dt:.6g} s): the energy balance is off "
@@ -116,24 +137,40 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
                               f"{self.energy_limit:g}): {self.scheme} does not keep the energy at this step")
         self._control(smallest)
 
-    def _advance(self, dt: float) -> float:
-        """One step of dt; a step whose Newton iteration fails is done as two of dt / 2 (down to
-        time_step_min, then StepFailed). Books the works and impulses; returns the smallest step done."""
+    def _load_at(self, t: float) -> np.ndarray:
+        """(n d,) the tractions' nodal forces at t (zeros without tractions; self.loads: the base
+        solver's, on the global mesh)."""
+        return self.loads.at(t).ravel() if self.loads is not None else np.zeros_like(self.u)
+
+    def _step_loads(self, t0: float, dt: float) -> tuple[dict, np.ndarray]:
+        """(the step function's load arguments, the step's mean traction force): the midpoint scheme's
+        load at t_{n+1/2} (its work F . (u1 - u0) is then what the discrete energy takes up)."""
+        fm = self._load_at(t0 + 0.5 * dt)
+        return {"f_ext": self.f_ext + fm}, fm
+
+    def _advance(self, t0: float, dt: float) -> float:
+        """One step of dt from t0; a step whose Newton iteration fails is done as two of dt / 2 (down
+        to time_step_min, then StepFailed). Books the works and impulses; returns the smallest step done."""
         P = self.global_points
         u0, v0 = self.u, self.vg
+        loads, f_load = self._step_loads(t0, dt)
+        if self._gcontact is not None:
+            loads.update(contact=self._gcontact.dynamic_operators, active=self._active_keys)
         try:
-            res = type(self).step_function(P, self._blocks, self.gmass, u0, v0, dt, f_ext=self.f_ext,
-                                           fixed=self._fixed, v_fixed=self._v_fixed)
+            res = type(self).step_function(P, self._blocks, self.gmass, u0, v0, dt, fixed=self._fixed,
+                                           v_fixed=self._v_fixed, **loads)
         except StepFailed:
             if 0.5 * dt < self.time_step_min * (1.0 - 1e-12):
                 raise
-            a = self._advance(0.5 * dt)
-            return min(a, self._advance(0.5 * dt))
+            a = self._advance(t0, 0.5 * dt)
+            return min(a, self._advance(t0 + 0.5 * dt, 0.5 * dt))
         du = res.u - u0
-        force = self.f_ext + res.reaction
-        # the works: gravity's into w_gravity (and out of w_int, as the explicit kernel books it), the
-        # reactions' into w_ext; the impulses and their moments about x_{n+1/2}
+        force = self.f_ext + f_load + res.reaction
+        # the works: gravity's into w_gravity and the tractions' into w_load (both out of w_int, as the
+        # explicit kernel books them), the reactions' into w_ext; the impulses and their moments about
+        # x_{n+1/2}
         self.w_gravity += float(self.f_ext @ du)
+        self.w_load += float(f_load @ du)
         self.w_ext += float(res.reaction @ du)
         xm = P + (u0 + 0.5 * du).reshape(P.shape)
         fn = force.reshape(P.shape) * dt
@@ -141,9 +178,60 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.ang_impulse += self._cross(xm, fn).sum(axis=0)
         self.impulse_gross += float(np.abs(fn).sum())
         self.u, self.vg = res.u, res.v
+        if res.contact is not None:
+            self._contact_update(res.contact, du)
         self.iterations = max(self.iterations, res.iterations)
         self.substeps += 1
         return dt
+
+    def _contact_update(self, c, du: np.ndarray) -> None:
+        """Steps 2 and 3 of the seed's contact update (solvers/contact/implicit_update.py) after the
+        midpoint step (step 1) left v^{n+1} in self.vg and the contact c at t_{n+1/2}:
+
+        2. the active rows' normal gap rate is removed, G vbar = 0 (no chatter; strictly dissipative:
+           kappa-bar_A per row);
+        3. rows active at the last step and released now (p = 0) give back the energy stored over
+           their episode, kappa_A (step 1's work on the row: -p_A (B du)_A) plus the kappa-bar_A of
+           steps 2, along their current rows (a row out of capture keeps its energy until it is back).
+
+        Every velocity change here is a contact impulse: its work goes to w_contact with step 1's
+        B^T p . du, its impulse and moment about x_{n+1} to the balances (zero between free bodies)."""
+        w0 = self.w_contact
+        self.w_contact += float(c.force @ du)
+        keys, act = c.keys, np.asarray(c.active, bool) if c.active is not None else np.zeros(len(c.keys), bool)
+        step1 = -c.p * (c.B @ du)                      # kappa_A (>= 0 when the step dissipates)
+        v = self.vg
+        update = remove_gap_rate(c.B[np.flatnonzero(act)], self._inv_mass, v)
+        stored = dict(self._stored)
+        for k, a, b in zip(keys[act].tolist(), step1[act].tolist(), update.per_row.tolist()):
+            stored[k] = stored.get(k, 0.0) + a + b
+        v_new = update.v
+        row = {k: i for i, k in enumerate(keys.tolist())}
+        now = set(keys[act].tolist())
+        released = sorted(k for k in stored if k not in now and k in row)   # (sorted: a restart's order)
+        if released and not self._return_energy:   # ([contact] return_energy = false: kept as lost)
+            self.contact_lost += float(sum(stored.pop(k) for k in released))
+        elif released:
+            rows = np.array([row[k] for k in released])
+            v_new = return_energy(c.B[rows], self._inv_mass, v_new, np.array([stored[k] for k in released]))
+            for k in released:
+                del stored[k]
+        self._stored = stored
+        self._active_keys = {k: True for k in now}
+        dv = v_new - v
+        m = np.repeat(self.gmass, self.dim)
+        self.w_contact += float(0.5 * (v_new @ (m * v_new) - v @ (m * v)))
+        self.w_ext += self.w_contact - w0     # (the contact's work is external work in the balance)
+        P = self.global_points
+        imp = (m * dv).reshape(P.shape)
+        self.impulse += imp.sum(axis=0)
+        self.ang_impulse += self._cross(P + self.u.reshape(P.shape), imp).sum(axis=0)
+        self.impulse_gross += float(np.abs(imp).sum()) + float(np.abs(c.force).sum()) * self.dt
+        self.vg = v_new
+        self.contact_active = int(np.count_nonzero(act))
+        self.contact_stored = float(sum(stored[k] for k in sorted(stored)))
+        f = c.force.reshape(P.shape)
+        self.contact_force = f[self.body_of_node == self._contact_body].sum(axis=0)
 
     def _control(self, smallest: float) -> None:
         """The next step from this one's Newton iterations (item 4 of issue 12): more than 8 halve it,
@@ -166,9 +254,35 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         d["newton_iterations"] = float(self.iterations)
         d["time_step"] = float(getattr(self, "dt", self.time_step))
         d["substeps"] = float(self.substeps)
+        if self._gcontact is not None:
+            d["contact_work"] = self.w_contact
+            d["contact_active"] = float(self.contact_active)
+            d["contact_stored_energy"] = self.contact_stored
+            if not self._return_energy:
+                d["contact_lost_energy"] = self.contact_lost
+            for c, name in enumerate("xyz"[: self.dim]):
+                d[f"contact_force_{name}"] = float(self.contact_force[c])
         return d
 
     # ---- checkpoint / restart: u and v are the state ------------------------------------------------
+    def _extra_state(self) -> dict:
+        """The contact's accumulated works and, per multiplier key, the energy stored and the rows
+        active at the last step (the next step's warm start and its releases)."""
+        if self._gcontact is None:
+            return {}
+        keys = np.array(sorted(self._stored), dtype=np.int64)
+        return {"contact_works": np.array([self.w_contact, self.contact_lost]),
+                "stored_keys": keys, "stored": np.array([self._stored[k] for k in keys.tolist()], dtype=np.float64),
+                "active_keys": np.array(sorted(self._active_keys), dtype=np.int64)}
+
+    def _set_extra_state(self, state: dict) -> None:
+        if self._gcontact is None:
+            return
+        self.w_contact, self.contact_lost = (float(v) for v in state["contact_works"])
+        self._stored = dict(zip(state["stored_keys"].tolist(), state["stored"].tolist()))
+        self._active_keys = {k: True for k in state["active_keys"].tolist()}
+        self.contact_stored = float(sum(self._stored[k] for k in sorted(self._stored)))
+
     def restart(self, path) -> None:
         super().restart(path)
         self.u = self._global(self.u_local).ravel()
@@ -185,3 +299,8 @@ class NewmarkSolver(_ImplicitDynamicSolver):
     """Newmark's trapezoidal rule (gamma 1/2, beta 1/4): the comparison that fails (module docstring)."""
     scheme = "newmark"
     step_function = staticmethod(newmark_step)
+
+    def _step_loads(self, t0: float, dt: float) -> tuple[dict, np.ndarray]:
+        """The trapezoid's loads at both ends of the step; its work booked with their mean."""
+        f0, f1 = self._load_at(t0), self._load_at(t0 + dt)
+        return {"f_ext": self.f_ext + f1, "f_ext0": self.f_ext + f0}, 0.5 * (f0 + f1)

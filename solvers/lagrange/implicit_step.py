@@ -38,7 +38,7 @@ import scipy.sparse.linalg as spla
 
 from solvers.lagrange.midpoint_svk import midpoint_tangent
 
-__all__ = ["StepResult", "StepFailed", "midpoint_step", "newmark_step"]
+__all__ = ["StepResult", "ContactState", "StepFailed", "midpoint_step", "newmark_step"]
 
 
 class StepFailed(RuntimeError):
@@ -52,6 +52,18 @@ class StepResult:
     iterations: int
     residuals: list
     reaction: np.ndarray     # (n d,) the force holding the prescribed dofs over the step (0 elsewhere)
+    contact: "ContactState | None" = None
+
+
+@dataclass
+class ContactState:
+    """Step 1's contact at t_{n+1/2}: the operator B and keys of its rows (at x_{n+1/2}), the
+    pressures p >= 0 (0 off the active set) and the contact force B^T p (n d,)."""
+    B: sp.csr_matrix
+    keys: np.ndarray
+    p: np.ndarray
+    active: np.ndarray
+    force: np.ndarray
 
 
 def _svk(points, blocks, u0, u1):
@@ -104,10 +116,16 @@ def _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed):
 
 
 def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
-                  tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
+                  tol: float = 1e-12, max_iterations: int = 25, contact=None, active=None) -> StepResult:
     """The midpoint step from (u0, v0) (each (n d,)); blocks [(cells, mu, lambda), ...] the bodies;
-    mass (n,) lumped; f_ext (n d,) constant over the step; fixed: dofs moving at v_fixed (default 0:
-    held). Returns u1, v1, Newton's history and the reactions on the fixed dofs."""
+    mass (n,) lumped; f_ext (n d,) the load at t_{n+1/2}; fixed: dofs moving at v_fixed (default 0:
+    held). Returns u1, v1, Newton's history and the reactions on the fixed dofs.
+
+    contact: None, or a function of the positions x (n, d) and the dofs' inverse stiffness giving
+    (B, J, keys) (gathered_contact.py's dynamic_operators):
+    then step 1 of the seed's contact update, the midpoint equations with f_c = B^T p, p >= 0 and the
+    stabilized gap B x_{n+1/2} + J p >= 0 at the midpoint (_newton_contact); ``active``: a warm start
+    {key: True} of the rows active at the last step."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
 
     def rt(u1):
@@ -116,17 +134,101 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
         scale = max(float(np.linalg.norm(2.0 * m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(2.0 * m / dt ** 2) + k, scale
 
-    u1, it, hist, r = _newton("midpoint", rt, u0 + dt * v0, free, tol, max_iterations)
+    state = None
+    if contact is None:
+        u1, it, hist, r = _newton("midpoint", rt, u0 + dt * v0, free, tol, max_iterations)
+    else:
+        u1, it, hist, r, state = _newton_contact(rt, np.asarray(points, float), u0, u0 + dt * v0, free, contact,
+                                                 active, tol, max_iterations)
+        r = r - state.force
     v1 = np.where(free, 2.0 * (u1 - u0) / dt - v0, vb)
-    return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r))
+    return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r), contact=state)
+
+
+def _largest(m) -> float:
+    """The largest |entry| of a sparse matrix (0 when it has none)."""
+    m = sp.csr_matrix(m)
+    return float(abs(m.data).max()) if m.nnz else 0.0
+
+
+def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, max_iterations,
+                    max_rebuilds: int = 10):
+    """Newton on the midpoint equations with frictionless contact at t_{n+1/2} (seed slide "Structure
+    preserving time integration w/ contact", step 1). With the operators B, J built at
+    x_{n+1/2} = X + (u0 + u) / 2 of an iterate u and frozen, each Newton iteration is a contact KKT
+    solve of the linearised step,
+
+        A (u' - u) + r(u) - B^T p = 0,   B (X + (u0 + u') / 2) + J p >= 0,  p >= 0, complementary,
+
+    kkt.solve_frictionless's problem with K = A, F = A u - r and the gap doubled (B (2 X + u0 + u') +
+    2 J p); converged when the residual r - B^T p on the free dofs is below tol (relative to the
+    inertia, internal, external or contact force) with the active set repeated (or stalled at the
+    round-off floor within 1000 tol). Then B is rebuilt at the converged midpoint and the step is
+    solved again from there until B no longer changes (to 1e-9 of its largest entry, the same rows):
+    rebuilding it at every Newton iterate instead made the pressures of the dual pass's redundant
+    rows jump with the operator's tiny changes and Newton stagnate (bars_impact_implicit: 3e-8).
+    The geometric contact stiffness is left out."""
+    from solvers.contact.kkt import solve_frictionless
+
+    shape = points.shape
+    X = points.ravel()
+    fixed = ~free
+    u = u_start.copy()
+    history = []
+    p = active = None
+    keys_prev = None
+    iterations = 0
+    inv_a = None
+    for rebuild in range(max_rebuilds + 1):
+        if inv_a is None:   # J's weight: the step matrix's inverse diagonal on the free dofs
+            a0 = rt(u)[1].diagonal()
+            inv_a = np.where(free & (a0 > 0), 1.0 / np.where(a0 > 0, a0, 1.0), 0.0)
+        B, J, keys = contact((X + 0.5 * (u0 + u)).reshape(shape), inv_a)
+        if rebuild > 0 and np.array_equal(keys, keys_prev) and B.shape == B_prev.shape \
+                and _largest(B - B_prev) <= 1e-9 * _largest(B):
+            return u, iterations, history, r, ContactState(B=B_prev, keys=keys_prev, p=p, active=active,
+                                                           force=B_prev.T @ p)
+        if p is None or not np.array_equal(keys, keys_prev):
+            p = np.zeros(B.shape[0])
+            active = None if not active_keys else np.array([bool(active_keys.get(int(k), False)) for k in keys])
+        same = False
+        for it in range(max_iterations + 1):
+            r, a, scale = rt(u)
+            fc = B.T @ p
+            res = float(np.linalg.norm((r - fc)[free])) / max(scale, float(np.linalg.norm(fc)), 1e-300)
+            history.append(res)
+            if not np.isfinite(res):
+                raise StepFailed(f"midpoint: the residual is not finite at iteration {iterations} (residuals {history})")
+            if it > 0 and same and (res <= tol or (it >= 2 and res <= 1e3 * tol and res >= 0.5 * history[-2])):
+                break
+            if it == max_iterations:
+                raise StepFailed(f"midpoint: Newton with contact did not converge in {max_iterations} iterations "
+                                 f"(relative residuals {['%.1e' % h for h in history]})")
+            # the saddle point system scaled (rows beta B, pressures p / beta, J beta^2) so that beta B
+            # is of the size of sqrt(A): unscaled (steel: A ~ 1e11, B ~ 1e-3, J ~ 1e-17) its LU gave
+            # the pressures to 1e-7 only and Newton stalled there
+            beta = np.sqrt(float(np.median(a0[free]))) / max(_largest(B), 1e-300)
+            try:
+                sol = solve_frictionless(a, a @ u - r, beta * B, (2.0 * beta * beta) * J, 2.0 * X + u0, fixed, u,
+                                         active=active)
+            except RuntimeError as err:
+                raise StepFailed(f"midpoint: the contact solve failed at iteration {iterations}: {err}") from None
+            same = active is not None and np.array_equal(sol.active, active)
+            u, p, active = sol.u, beta * sol.p, sol.active
+            iterations += 1
+        B_prev, keys_prev = B, keys
+    raise StepFailed(f"midpoint: the contact operators still changed after {max_rebuilds} rebuilds at the "
+                     f"converged midpoint (relative residuals {['%.1e' % h for h in history]})")
 
 
 def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
-                 tol: float = 1e-12, max_iterations: int = 25) -> StepResult:
-    """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step."""
+                 tol: float = 1e-12, max_iterations: int = 25, f_ext0=None) -> StepResult:
+    """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step,
+    but f_ext is the load at t_{n+1} and f_ext0 the one at t_n (default f_ext: constant)."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
+    fe0 = fe if f_ext0 is None else np.asarray(f_ext0, float).ravel()
     f0 = _svk(points, blocks, u0, u0)[1]
-    a0 = np.where(free, (fe - f0) / m, 0.0)
+    a0 = np.where(free, (fe0 - f0) / m, 0.0)
 
     def rt(u1):
         k, f = _svk(points, blocks, u1, u1)

@@ -51,6 +51,7 @@ import scipy.sparse as sp
 from solvers.lagrange import finite_strain, small_strain
 from solvers.lagrange.boundary import BoundaryConditions
 from solvers.lagrange.gathered_step import GatheredStepSolver
+from solvers.lagrange.gathered_contact import GatheredContact
 from solvers.lagrange.loads import traction_loads
 from solvers.lagrange.solver import SolverError
 from solvers.lagrange.surface import exterior_facets
@@ -100,25 +101,17 @@ class QuasiStaticSolver(GatheredStepSolver):
         if bcs.walls:
             raise ValueError("quasi_static: rigid_wall boundaries are not supported (model the wall as a held body in contact)")
         self.fixed, self.rate = bcs.prescribed_arrays(n, dim)
-        facets, facet_cell = exterior_facets(C, self.cell_type, n, P)
+        facets = exterior_facets(C, self.cell_type, n, P)[0]
         self.load = traction_loads(P, facets, bcs.tractions)
         if self.has_gravity:
             self.load = self.load + self._global(self.mass[:, None]) * self.gravity
-        # contact: each pair's facets on the global exterior surface
-        self.pairs = []
+        # contact: each pair's facets on the global exterior surface (gathered_contact.py)
         self._cfg = case.get("contact") or None
-        if self._cfg:
-            fbody = self.body_of_cell[facet_cell]
-            for a, b in self._cfg["pairs"]:
-                ia, ib = self.body_names.index(a), self.body_names.index(b)
-                # Puso & Solberg's gamma = alpha / E with the softer side's modulus: the
-                # stabilization is weighed against the compliance that sets the pressures
-                e = min(case["materials"][bodies[k]["material"]]["youngs_modulus"] for k in (ia, ib))
-                self.pairs.append((facets[fbody == ia], None if ia == ib else facets[fbody == ib], ia, e))
-            edge = np.linalg.norm(P[C[:, 1]] - P[C[:, 0]], axis=1)
-            self.h = float(np.median(edge))
-            self.capture = float(self._cfg.get("capture", self.h))
-            self.alpha = float(self._cfg.get("alpha", 1.0))
+        self._contact = (GatheredContact(self._cfg, case, P, C, self.cell_type, self.body_of_cell, self.body_names)
+                         if self._cfg else None)
+        self.pairs = self._contact.pairs if self._contact else []
+        if self._contact:
+            self.h, self.capture = self._contact.h, self._contact.capture
         self._B, self._J, self.multiplier_nodes = self._contact_operators(P)
         self._active = None
         self.u = np.zeros((n, dim))
@@ -276,22 +269,10 @@ class QuasiStaticSolver(GatheredStepSolver):
 
     def _contact_operators(self, x: np.ndarray):
         """B, J (every pair's, stacked) at positions x (n, dim), and each multiplier's key: its node
-        + pair index * n."""
-        from solvers.contact import methods
-
-        n_dof = x.size
+        + pair index * n (gathered_contact.py)."""
         if not self.pairs:
-            return sp.csr_matrix((0, n_dof)), sp.csr_matrix((0, 0)), np.zeros(0, np.int64)
-        bs, js, nodes = [], [], []
-        for seg_a, seg_b, _, e in self.pairs:
-            c = methods.build(self._cfg.get("method", "dual_pass_mortar"), x, seg_a, seg_b, self.capture, self.capture)
-            bs.append(c.constraint_operator())
-            js.append(c.stabilization(self.alpha / e, self.h))
-            # (a multiplier's key: its node, offset by its pair: a body may be in two pairs)
-            ids = np.concatenate([q.nodes for q in c.passes]) if hasattr(c, "passes") else c.nodes
-            nodes.append(ids + len(nodes) * len(x))
-        return (sp.vstack(bs, format="csr"), sp.block_diag(js, format="csr"),
-                np.concatenate(nodes).astype(np.int64))
+            return sp.csr_matrix((0, x.size)), sp.csr_matrix((0, 0)), np.zeros(0, np.int64)
+        return self._contact.operators(x)
 
     def contact_pressure(self) -> np.ndarray:
         """(n_nodes_global,) contact pressure at every node: the mean of the multipliers it carries

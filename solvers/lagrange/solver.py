@@ -27,6 +27,7 @@ import numpy as np
 from solvers.expressions import compile_expression
 from solvers.lagrange import kernels, materials, nodal
 from solvers.lagrange.boundary import BoundaryConditions
+from solvers.lagrange.loads import SurfaceLoads
 from solvers.lagrange.mesh import body_mesh, cell_volumes, concatenate
 from solvers.lagrange.partition import partition
 from solvers.lagrange.shared_sums import OrderedSharedSums
@@ -187,6 +188,15 @@ class LagrangeSolver:
         self.gravity = np.array(opts.get("gravity", [0.0] * dim), dtype=np.float64)
         self.has_gravity = bool(np.any(self.gravity != 0.0))
         self.w_gravity = 0.0
+        # surface loads ([[boundaries]] type = "traction", times their curves: loads.py) on the initial
+        # exterior facets, added to the forces at t^n like gravity and booked the same way (w_load)
+        self.loads = None
+        self.w_load = 0.0
+        if self.bcs.tractions:
+            P, E = self.global_points, self.global_cells
+            g = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
+            self.loads = SurfaceLoads(P, exterior_facets(E, self.cell_type, len(P), P)[0], g.tractions,
+                                      g.traction_curves)
         # contact between bodies ([contact] pairs: impulses from a multiplier solve every step,
         # solvers/contact/explicit.py); w_contact: their work on the step's mean velocity (<= 0: the
         # energy the contact takes out, booked in the energy balance with the other external work)
@@ -252,7 +262,13 @@ class LagrangeSolver:
             self._cut.sum_into(self._fe_cut, self.f)
         if self.has_gravity:  # (every copy of a node has its full mass: the copies agree)
             self.f += self.mass[:, None] * self.gravity
+        if self.loads is not None:  # (global: every copy of a node gets its full load)
+            self.f += self._load_local(self.time)
         return self._min(dt_min)
+
+    def _load_local(self, t: float) -> np.ndarray:
+        """(nn_local, dim) the surface loads at t on this rank's nodes."""
+        return self.loads.at(t)[self.part.nodes]
 
     def _min(self, value: float) -> float:
         if self.comm.size == 1:
@@ -303,6 +319,15 @@ class LagrangeSolver:
             xn = self.x[w] - self.dt * self.v[w]
             tot = self._allsum(np.concatenate([[np.sum(mg * vbar)], mg.sum(axis=0), self._cross(xn, mg).sum(axis=0)]))
             self.w_gravity += float(tot[0])
+            self.impulse += tot[1:1 + self.dim]
+            self.ang_impulse += tot[1 + self.dim:]
+        if self.loads is not None:  # the same for the surface loads at t^n (those in this step's forces)
+            w = self.part.owned
+            fl = self._load_local(self.time)[w] * self.dt_avg
+            vbar = 0.5 * (self.v_old[w] + self.v[w])
+            xn = self.x[w] - self.dt * self.v[w]
+            tot = self._allsum(np.concatenate([[np.sum(fl * vbar)], fl.sum(axis=0), self._cross(xn, fl).sum(axis=0)]))
+            self.w_load += float(tot[0])
             self.impulse += tot[1:1 + self.dim]
             self.ang_impulse += tot[1 + self.dim:]
         # exact discrete work, impulse and torque of this step (shared nodes counted once)
@@ -605,8 +630,8 @@ class LagrangeSolver:
             "mass": mass,
             "kinetic_energy": ke,
             # (gravity's work, in the kernel's W_int, moved to the external work: the sum is unchanged)
-            "internal_work": self.w_int + self.w_gravity,
-            "external_work": self.w_ext + self.w_gravity,
+            "internal_work": self.w_int + self.w_gravity + self.w_load,
+            "external_work": self.w_ext + self.w_gravity + self.w_load,
             "stress_power_energy": e_int,
             "energy_balance_rel": float(e_err),
             "momentum_balance_rel": float(p_err),
@@ -614,6 +639,8 @@ class LagrangeSolver:
         }
         if self.has_gravity:
             d["gravity_work"] = self.w_gravity
+        if self.loads is not None:
+            d["load_work"] = self.w_load
         if self.contact is not None:
             d["contact_work"] = self.w_contact
             d["contact_active"] = float(self.contact.last_active)
@@ -678,10 +705,18 @@ class LagrangeSolver:
 
     def _work_scalars(self) -> tuple:
         """The accumulated works a checkpoint holds when the case has them (contact, gravity)."""
-        return (("w_contact",) if self.contact is not None else ()) + (("w_gravity",) if self.has_gravity else ())
+        return ((("w_contact",) if self.contact is not None else ()) + (("w_gravity",) if self.has_gravity else ())
+                + (("w_load",) if self.loads is not None else ()))
 
     def _state_cells(self) -> tuple:
         return self.STATE_CELLS + (self.STATE_EROSION if self.erosion else ())
+
+    def _extra_state(self) -> dict:
+        """A subclass's further state for the checkpoint, {name: array} (replicated on every rank)."""
+        return {}
+
+    def _set_extra_state(self, state: dict) -> None:
+        """Take back what _extra_state gave (restart)."""
 
     def checkpoint(self, path: Path) -> None:
         nodes = {k: self.gather_nodes(getattr(self, k)) for k in self.STATE_NODES}
@@ -700,6 +735,8 @@ class LagrangeSolver:
             if self.contact is not None:  # friction's accumulated slip and the last impulses (its warm start)
                 for name, value in self.contact.state().items():
                     h.create_dataset(f"contact_{name}", data=value)
+            for name, value in self._extra_state().items():
+                h.create_dataset(f"extra_{name}", data=value)
             h.attrs["ranks"] = self.comm.size
         tmp.replace(path)
 
@@ -722,5 +759,6 @@ class LagrangeSolver:
                     setattr(self, k, h[k][...])
             if self.contact is not None:  # (kept by set_surface: the same surface)
                 self.contact.set_state({k[len("contact_"):]: h[k][...] for k in h if k.startswith("contact_")})
+            self._set_extra_state({k[len("extra_"):]: h[k][...] for k in h if k.startswith("extra_")})
         self.first_step = bool(self.first_step)
         self.step = int(self.step)

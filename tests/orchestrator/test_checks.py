@@ -480,6 +480,44 @@ def test_momentum(tmp_path, residual, fails):
     assert failed(r) == fails and r["passed"] == (not fails)
 
 
+# ---- free_flight ---------------------------------------------------------------------------------
+def tumbling_history(energy_kick=0.0, momentum_kick=0.0, spin_kick=0.0):
+    """A 3-D body loaded to t = 5 (energy, spin growing), then free to t = 30: the energy E = T + U
+    (T 1000 J + U 500 J, exchanging), the momentum 0 and the angular momentum (3, 2, -1) from t = 5,
+    with a kick of the given relative size at t = 20."""
+    t = np.linspace(0.0, 30.0, 301)
+    after = t >= 5.0
+    late = t >= 20.0
+    ramp = np.minimum(t / 5.0, 1.0)
+    u = 500.0 * ramp * (1.0 + 0.3 * np.sin(t)) / 1.3
+    ke = 1500.0 * ramp - u + 1500.0 * energy_kick * late
+    h = {"time": t, "step": np.arange(len(t), dtype=float),
+         "lagrange.kinetic_energy": ke, "lagrange.stress_power_energy": u,
+         "lagrange.mass": np.full(len(t), 1170.0), "lagrange.newton_iterations": np.full(len(t), 4.0)}
+    scale = np.sqrt(2.0 * 1170.0 * ke[after][0])
+    for c, w in zip("xyz", (1.0, 0.0, 0.0)):
+        h[f"lagrange.momentum_{c}"] = momentum_kick * scale * w * late
+    for c, w in zip("xyz", (3.0, 2.0, -1.0)):
+        h[f"lagrange.angular_momentum_{c}"] = w * ramp * (1.0 + spin_kick * late)
+    for k in ("energy", "momentum", "angular_momentum"):
+        h[f"lagrange.{k}_balance_rel"] = np.full(len(t), 1e-14)
+    return h
+
+
+@pytest.mark.parametrize("kick, fails", [({}, []), ({"energy_kick": 1e-11}, ["energy_drift_rel"]),
+                                         ({"momentum_kick": 1e-12}, ["momentum_drift_rel"]),
+                                         ({"spin_kick": 1e-12}, ["angular_momentum_drift_rel"])])
+def test_free_flight(tmp_path, kick, fails):
+    """The L-block's check: drifts from t = 5 on, each caught at 10 times its tolerance; the load phase
+    before (energy and spin growing) is not counted."""
+    case = load_case(CASES / "l_block_free_flight")
+    r = checks.run_check(case, tmp_path, tumbling_history(**kick))
+    assert failed(r) == fails and r["passed"] == (not fails), r
+    if not fails:
+        assert r["metrics"]["energy_drift_rel"]["value"] < 1e-15
+        assert r["reported"]["newton_iterations_max"] == 4.0
+
+
 # ---- embedded_piston -----------------------------------------------------------------------------
 def embedded_piston_output(out, case, centre_shift=0.0, p_factor=1.0):
     """Sod's exact solution at t on the case's grid with the piston (the body's box moved with the
@@ -796,7 +834,7 @@ def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
               "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact", "sliding",
-              "uniform_stress", "hertz", "self_contact", "no_penetration"}
+              "uniform_stress", "hertz", "self_contact", "no_penetration", "free_flight"}
     assert set(checks.CHECKS) == tested
 
 
