@@ -719,6 +719,7 @@ from orchestrator import bench_coupling  # noqa: E402,F401  (registers "coupling
 from orchestrator import bench_coupling_studies  # noqa: E402,F401  (plate_convergence, penalty_sweep)
 from orchestrator import bench_sph  # noqa: E402,F401  (registers "sph")
 from orchestrator import bench_contact  # noqa: E402,F401  (registers "contact")
+from orchestrator import bench_implicit  # noqa: E402,F401  (registers "implicit")
 
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
     _worker(int(sys.argv[2]), sys.argv[3])

@@ -316,6 +316,36 @@ def no_penetration(case, out, history, params):
     return vals
 
 
+@register_check("bounce", params=table({"depth": number(exclusiveMinimum=0.0)}))
+def bounce(case, out, history, params):
+    """Contact episodes of an implicit run (issue 12's ring_bounce, rotating_rod_wall): the runs of
+    steps with active contact rows. For each, the mechanical energy E = T + U - W_gravity (gravity's
+    work booked so far: E is T + U + the potential energy) at the step before it against the step after
+    it: ``energy_rebound_rel`` the largest |E_after / E_before - 1| (the three-step update gives back
+    what the contact took); ``state_changes_max`` the most changes of the number of active rows within
+    one episode (chatter: rows leaving and rejoining), ``episodes``, and no_penetration's measures."""
+    vals = no_penetration(case, out, history, params)
+    active = history["lagrange.contact_active"] > 0
+    e = history["lagrange.kinetic_energy"] + history["lagrange.stress_power_energy"]
+    if "lagrange.gravity_work" in history:
+        e = e - history["lagrange.gravity_work"]
+    edges = np.flatnonzero(np.diff(active.astype(int)))
+    starts = [k + 1 for k in edges if not active[k]]
+    ends = [k + 1 for k in edges if active[k]]          # the first step without contact
+    rebound, changes = [], []
+    for a in starts:
+        b = next((k for k in ends if k > a), None)
+        if b is None:
+            continue                                     # (still in contact at the end)
+        rebound.append(abs(e[b] / e[a - 1] - 1.0))
+        n = history["lagrange.contact_active"][a:b]
+        changes.append(int(np.count_nonzero(np.diff(n))))
+    vals.update({"episodes": float(len(rebound)),
+                 "energy_rebound_rel": float(max(rebound)) if rebound else float("nan"),
+                 "state_changes_max": float(max(changes)) if changes else 0.0})
+    return vals
+
+
 VOIGT = {"xx": 0, "yy": 1, "zz": 2, "xy": 3, "yz": 4, "zx": 5}
 
 

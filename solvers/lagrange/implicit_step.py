@@ -123,9 +123,9 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
 
     contact: None, or a function of the positions x (n, d) and the dofs' inverse stiffness giving
     (B, J, keys) (gathered_contact.py's dynamic_operators):
-    then step 1 of the seed's contact update, the midpoint equations with f_c = B^T p, p >= 0 and the
-    stabilized gap B x_{n+1/2} + J p >= 0 at the midpoint (_newton_contact); ``active``: a warm start
-    {key: True} of the rows active at the last step."""
+    then step 1 of the seed's contact update, the midpoint equations with f_c = B^T p (B at the
+    midpoint), p >= 0 and the stabilized gap B x_{n+1} + J p >= 0 (_newton_contact); ``active``: a warm start
+    {key: pressure} of the rows active at the last step."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
 
     def rt(u1):
@@ -153,21 +153,25 @@ def _largest(m) -> float:
 
 def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, max_iterations,
                     max_rebuilds: int = 10):
-    """Newton on the midpoint equations with frictionless contact at t_{n+1/2} (seed slide "Structure
-    preserving time integration w/ contact", step 1). With the operators B, J built at
-    x_{n+1/2} = X + (u0 + u) / 2 of an iterate u and frozen, each Newton iteration is a contact KKT
-    solve of the linearised step,
+    """Newton on the midpoint equations with frictionless contact (seed slide "Structure preserving
+    time integration w/ contact", step 1): the force f_c = B^T p with B built at x_{n+1/2} (balanced
+    and torque-free there: the momenta stay exact), p >= 0, and the stabilized gap at the step's END,
 
-        A (u' - u) + r(u) - B^T p = 0,   B (X + (u0 + u') / 2) + J p >= 0,  p >= 0, complementary,
+        A (u' - u) + r(u) - B^T p = 0,   B (X + u') + J p >= 0,  p >= 0, complementary,
 
-    kkt.solve_frictionless's problem with K = A, F = A u - r and the gap doubled (B (2 X + u0 + u') +
-    2 J p); converged when the residual r - B^T p on the free dofs is below tol (relative to the
-    inertia, internal, external or contact force) with the active set repeated (or stalled at the
-    round-off floor within 1000 tol). Then B is rebuilt at the converged midpoint and the step is
-    solved again from there until B no longer changes (to 1e-9 of its largest entry, the same rows):
-    rebuilding it at every Newton iterate instead made the pressures of the dual pass's redundant
-    rows jump with the operator's tiny changes and Newton stagnate (bars_impact_implicit: 3e-8).
-    The geometric contact stiffness is left out."""
+    kkt.solve_frictionless's problem with K = A and F = A u - r, each Newton iteration one such
+    solve with B frozen. The seed holds the gap at the midpoint instead: then B x_{n+1} = -B x_n, the
+    step ends as deep in as it began apart, the next step's contact pushes that out again with
+    positive work, and a ring on a floor gained 0.8 J in a bounce; at the end its work
+    B^T p . (x1 - x0) = -p . (J p + B x0) <= 0 is dissipative whenever the step starts apart.
+    Converged when the residual r - B^T p on the free dofs is below tol (relative to the inertia,
+    internal, external or contact force) with the active set repeated (or stalled at the round-off
+    floor within 1000 tol). Then B is rebuilt at the converged midpoint and the step solved again
+    from there until B no longer changes (to 1e-9 of its largest entry, the same rows): rebuilding
+    it at every Newton iterate instead made the pressures of the dual pass's redundant rows jump with
+    the operator's tiny changes and Newton stagnate (bars_impact_implicit: 3e-8). The geometric
+    contact stiffness is left out. Returns the most iterations of one solve with B frozen (what the
+    step control weighs: each rebuild starts again near the solution)."""
     from solvers.contact.kkt import solve_frictionless
 
     shape = points.shape
@@ -177,7 +181,7 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
     history = []
     p = active = None
     keys_prev = None
-    iterations = 0
+    iterations = most = 0   # all Newton iterations; the most of one solve with B frozen (returned)
     inv_a = None
     for rebuild in range(max_rebuilds + 1):
         if inv_a is None:   # J's weight: the step matrix's inverse diagonal on the free dofs
@@ -186,11 +190,11 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
         B, J, keys = contact((X + 0.5 * (u0 + u)).reshape(shape), inv_a)
         if rebuild > 0 and np.array_equal(keys, keys_prev) and B.shape == B_prev.shape \
                 and _largest(B - B_prev) <= 1e-9 * _largest(B):
-            return u, iterations, history, r, ContactState(B=B_prev, keys=keys_prev, p=p, active=active,
-                                                           force=B_prev.T @ p)
+            return u, most, history, r, ContactState(B=B_prev, keys=keys_prev, p=p, active=active,
+                                                     force=B_prev.T @ p)
         if p is None or not np.array_equal(keys, keys_prev):
             p = np.zeros(B.shape[0])
-            active = None if not active_keys else np.array([bool(active_keys.get(int(k), False)) for k in keys])
+            active = None if not active_keys else np.array([int(k) in active_keys for k in keys])
         same = False
         for it in range(max_iterations + 1):
             r, a, scale = rt(u)
@@ -209,13 +213,13 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
             # the pressures to 1e-7 only and Newton stalled there
             beta = np.sqrt(float(np.median(a0[free]))) / max(_largest(B), 1e-300)
             try:
-                sol = solve_frictionless(a, a @ u - r, beta * B, (2.0 * beta * beta) * J, 2.0 * X + u0, fixed, u,
-                                         active=active)
+                sol = solve_frictionless(a, a @ u - r, beta * B, (beta * beta) * J, X, fixed, u, active=active)
             except RuntimeError as err:
                 raise StepFailed(f"midpoint: the contact solve failed at iteration {iterations}: {err}") from None
             same = active is not None and np.array_equal(sol.active, active)
             u, p, active = sol.u, beta * sol.p, sol.active
             iterations += 1
+            most = max(most, it + 1)
         B_prev, keys_prev = B, keys
     raise StepFailed(f"midpoint: the contact operators still changed after {max_rebuilds} rebuilds at the "
                      f"converged midpoint (relative residuals {['%.1e' % h for h in history]})")

@@ -50,7 +50,7 @@ def _svk_stress(e: np.ndarray, mu: float, lam: float) -> np.ndarray:
 
 def element_energies(points, cells, u, mu: float, lam: float) -> np.ndarray:
     """(ne,) each element's integral of lambda/2 (tr E)^2 + mu E:E (J; per unit thickness in 2-D)."""
-    f, _, w = kinematics(points, cells, u)
+    f, _, w = kinematics(points, cells, u, cache=True)
     e = _green(f)
     tr = np.trace(e, axis1=-2, axis2=-1)
     return np.sum(w * (0.5 * lam * tr ** 2 + mu * np.einsum("...IJ,...IJ->...", e, e)), axis=1)
@@ -64,7 +64,7 @@ def svk_energy(points, cells, u, mu: float, lam: float) -> float:
 def cauchy_stresses(points, cells, u, mu: float, lam: float) -> np.ndarray:
     """(ne, 6) Voigt xx yy zz xy yz zx: sigma = F S F^T / J, the mean over each element's Gauss points
     (plane strain: E_33 = 0, so sigma_zz = lambda tr E / J)."""
-    f, _, _ = kinematics(points, cells, u)
+    f, _, _ = kinematics(points, cells, u, cache=True)
     e = _green(f)
     s = _svk_stress(e, mu, lam)
     j = np.linalg.det(f)
@@ -80,8 +80,8 @@ def cauchy_stresses(points, cells, u, mu: float, lam: float) -> np.ndarray:
 
 
 def _midpoint_state(points, cells, u0, u1, mu, lam):
-    f0, dndx, w = kinematics(points, cells, u0)
-    f1 = kinematics(points, cells, u1)[0]
+    f0, dndx, w = kinematics(points, cells, u0, cache=True)
+    f1 = kinematics(points, cells, u1, cache=True)[0]
     s = _svk_stress(0.5 * (_green(f0) + _green(f1)), mu, lam)
     return f1, 0.5 * (f0 + f1), s, dndx, w
 

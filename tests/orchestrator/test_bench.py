@@ -110,3 +110,23 @@ def test_bench_contact_quick(tmp_path):
     # the quick size: 10^4 elements, 999 contact facets, all of the interface in contact
     assert step["params"]["elements"] == 9990 and step["params"]["active_multipliers"] == 1001
     assert 0.0 < step["value"] < 1.0 and step["params"]["step_with_s"] > step["params"]["step_without_s"]
+
+
+def test_bench_implicit_quick(tmp_path):
+    """The implicit bench times a midpoint step of the spinning block at 10^2 and 10^3 elements (its
+    Newton iterations, the tangent's and the solve's share) and the L-block's explicit and midpoint
+    steps, whose ratio is the break-even step ratio (speed itself is not asserted: `immerse bench
+    implicit` measures it)."""
+    out = tmp_path / "bench-implicit.json"
+    r = immerse("bench", "implicit", "--quick", "--out", out, timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(out.read_text())["results"]
+    steps = [x for x in rows if x["name"] == "midpoint_step" and x["metric"] == "time_per_element_step"]
+    assert [x["params"]["elements"] for x in steps] == [100, 1024]
+    for x in steps:
+        p = x["params"]
+        assert 2 <= p["newton_iterations"] <= 6 and 0 < p["tangent_s"] + p["solve_s"] < p["step_s"]
+    (be,) = [x for x in rows if x["metric"] == "break_even_dt_ratio"]
+    p = be["params"]
+    assert be["value"] == pytest.approx(p["midpoint_step_s"] / p["explicit_step_s"])
+    assert p["elements"] == 117 and 10 < p["dt_ratio"] < 40

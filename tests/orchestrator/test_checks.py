@@ -518,6 +518,35 @@ def test_free_flight(tmp_path, kick, fails):
         assert r["reported"]["newton_iterations_max"] == 4.0
 
 
+# ---- bounce --------------------------------------------------------------------------------------
+def bouncing_history(lost=0.0, flicker=False):
+    """A body falling (T + U - W_gravity = 10 J throughout), in contact over steps 5-14 and 20-24:
+    the second episode loses ``lost`` of the energy; ``flicker``: its active rows go 2, 4, 2, 4, ..."""
+    n = 30
+    active = np.zeros(n)
+    active[5:15] = 4.0
+    active[20:25] = np.where(np.arange(5) % 2, 4.0, 2.0) if flicker else 3.0
+    e = np.full(n, 10.0)
+    e[25:] -= 10.0 * lost
+    wg = np.linspace(0.0, 3.0, n)
+    ke = 0.6 * (e + wg)
+    return {"time": np.linspace(0.0, 0.029, n), "step": np.arange(n, dtype=float),
+            "lagrange.contact_active": active, "lagrange.kinetic_energy": ke,
+            "lagrange.stress_power_energy": e + wg - ke, "lagrange.gravity_work": wg}
+
+
+@pytest.mark.parametrize("kw, expect", [({}, (2, 0.0, 0)), ({"lost": 1e-6}, (2, 1e-6, 0)),
+                                        ({"flicker": True}, (2, 0.0, 4))])
+def test_bounce_episodes(monkeypatch, tmp_path, kw, expect):
+    """The episodes (runs of steps with active rows), the energy after each against before (gravity's
+    potential counted), and the changes of the active count within one; the penetration measures are
+    no_penetration's (tested there; replaced here)."""
+    monkeypatch.setattr(checks, "no_penetration", lambda *a: {})
+    vals = checks.CHECKS["bounce"](None, tmp_path, bouncing_history(**kw), {})
+    assert (vals["episodes"], vals["state_changes_max"]) == (expect[0], expect[2])
+    assert vals["energy_rebound_rel"] == pytest.approx(expect[1], abs=1e-15)
+
+
 # ---- embedded_piston -----------------------------------------------------------------------------
 def embedded_piston_output(out, case, centre_shift=0.0, p_factor=1.0):
     """Sod's exact solution at t on the case's grid with the piston (the body's box moved with the
@@ -834,7 +863,7 @@ def test_every_registered_kind_is_tested_here():
     tested = {"bar_wave", "taylor_bar", "momentum", "riemann", "sedov", "positivity", "reflected_shock", "piston",
               "advected_shape", "embedded_piston", "coupled_balances", "acoustic_transmission",
               "uniform_flow", "riemann_wall", "surge_front", "free_end", "tip_history", "penetration", "impact", "sliding",
-              "uniform_stress", "hertz", "self_contact", "no_penetration", "free_flight"}
+              "uniform_stress", "hertz", "self_contact", "no_penetration", "free_flight", "bounce"}
     assert set(checks.CHECKS) == tested
 
 
