@@ -68,6 +68,10 @@ SCHEMA = {
                     "vary": {"type": "array", "items": {"type": "string"}, "uniqueItems": True,
                              "x-allowed": "must be an array of axis names (the axes this series runs over)"},
                     "set": _KEYS,
+                    # keys of the base case this series leaves out (e.g. an implicit case's
+                    # lagrange.time_step when the series runs it explicitly)
+                    "unset": {"type": "array", "items": {"type": "string", "minLength": 1}, "uniqueItems": True,
+                              "x-allowed": "must be an array of dotted case keys"},
                     "axes": {"type": "object", "additionalProperties": _SERIES_AXIS},
                 },
             },
@@ -173,6 +177,20 @@ def set_key(data: dict, key: str, value: Any) -> None:
         if not isinstance(node, dict):
             raise KeyError(f"{format_key(path[:-1])} is not a table")
         node[last] = copy.deepcopy(value)
+
+
+def unset_key(data: dict, key: str) -> None:
+    """Remove a dotted case key from raw case data. Raises KeyError(reason) if it is not there."""
+    path = parse_key(key)
+    node: Any = data
+    for i, part in enumerate(path[:-1]):
+        try:
+            node = node[part]
+        except (KeyError, IndexError, TypeError):
+            raise KeyError(f"the base case has no {format_key(path[:i + 1])}") from None
+    if not isinstance(node, dict) or path[-1] not in node:
+        raise KeyError(f"the base case has no {format_key(path)}")
+    del node[path[-1]]
 
 
 def slug(text: str) -> str:
@@ -295,6 +313,12 @@ def load_campaign(path: str | Path, *, check_cases: bool = True,
                     settings[key] = vals[k]
             name = "-".join([slug(s["name"])] + [f"{slug(a)}{slug(_level_text(v))}" for a, v in levels.items()])
             run_data = copy.deepcopy(raw)
+            for key in s.get("unset", []):
+                try:
+                    unset_key(run_data, key)
+                except KeyError as e:
+                    raise CaseError(format_key(["series", si, "unset"]), key,
+                                    f"cannot unset in {s['case']}: {e.args[0]}") from None
             for key, value in settings.items():
                 try:
                     set_key(run_data, key, value)

@@ -201,3 +201,23 @@ def test_contact_methods_where_each_fails(tmp_path, run_immerse):
     bias = abs(e["Hertz_single-pass_mortar_flat_as_side_a-arc_segments40"]
                - e["Hertz_single-pass_mortar_cylinder_as_side_a-arc_segments40"])
     assert bias > 0.02, e   # measured 0.028
+
+
+@pytest.mark.timeout(600)
+def test_time_integrators_where_each_fails(tmp_path, run_immerse):
+    """The L-block to t = 10 s at steps of 0.1 and 0.2 s (the full campaign adds 0.025 and 0.05):
+    the midpoint scheme keeps the free flight's energy to 2.7e-15 / 8.6e-15 (measured); Newmark is
+    stopped by name at both steps (t = 3.4 s and 1.4 s, its energy off by 1.14 % / 1.22 %: the full
+    campaign's 0.025 s step runs through, drifting 2.1e-4); the explicit run at its own step loses
+    63 % of the energy over the free flight (measured: its viscous hourglass control and bulk
+    viscosity at this Poisson ratio, 0.495)."""
+    out = tmp_path / "out"
+    r = run_immerse("campaign", CAMPAIGNS / "time_integrators", "--out", out, "--only", "dt=0.1,0.2")
+    assert r.returncode == 0, r.stdout + r.stderr   # (a run that fails is a result, not an error)
+    rows = {x["run"]: x for x in _rows(out)}
+    assert set(rows) == {"midpoint-dt0.1", "midpoint-dt0.2", "newmark-dt0.1", "newmark-dt0.2", "explicit"}
+    for dt in ("0.1", "0.2"):
+        assert rows[f"midpoint-dt{dt}"]["status"] == "passed" and float(rows[f"midpoint-dt{dt}"]["error"]) < 1e-13
+        m = rows[f"newmark-dt{dt}"]
+        assert m["status"] == "failed" and "newmark does not keep the energy" in m["message"], m
+    assert float(rows["explicit"]["error"]) > 0.3, rows["explicit"]

@@ -61,6 +61,19 @@ def test_a_series_runs_over_the_axes_it_varies_only(tmp_path):
         load_campaign(_write(tmp_path, BASE.replace('name = "mid"', 'name = "mid"\nvary = []')))
 
 
+def test_a_series_can_leave_out_keys_of_its_base_case(tmp_path):
+    """``unset``: the explicit series of a campaign over an implicit case drops lagrange.time_step
+    (cases/campaigns/time_integrators); a key the base case does not have is one line naming it."""
+    text = BASE.replace('set = { "coupling.condition" = "tied" }',
+                        'set = { "coupling.condition" = "tied" }\nunset = ["coupling.condition", "ale.grid.lower"]')
+    mid = load_campaign(_write(tmp_path, text), check_cases=False).runs[3]   # (a grid needs its lower)
+    assert mid.data["coupling"]["condition"] == "tied"        # (set after unset)
+    assert "lower" not in mid.data["ale"]["grid"] and mid.data["ale"]["grid"]["cells"] == [200, 1]
+    with pytest.raises(CaseError, match=r"^series\[1\]\.unset = 'ale\.grid\.nothing': cannot unset in .*: the base "
+                                        r"case has no ale\.grid\.nothing"):
+        load_campaign(_write(tmp_path, text.replace('"ale.grid.lower"', '"ale.grid.nothing"')), check_cases=False)
+
+
 @pytest.mark.parametrize("edit, key, allowed", [
     (lambda t: t.replace('name = "t"', 'name = "t"\nspeed = 3'), "speed", "unknown key"),
     (lambda t: t.replace('values = [100, 200]', 'values = [100, 200, 400]'), 'axes.zones."ale.grid.cells"',
