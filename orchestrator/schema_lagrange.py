@@ -396,10 +396,11 @@ def check_lagrange(case: dict, data: dict) -> None:
                 raise CaseError(format_key(base + ["mesh", "quarter_cylinder"]),
                                 mesh["quarter_cylinder"],
                                 f"quarter_cylinder meshes are 3D only (run.dimension = {dim})")
-        if implicit and mat_model(case, body) != "linear_elastic":
+        if implicit and mat_model(case, body) not in ("linear_elastic", "neo_hookean"):
             raise CaseError(format_key(["materials", body["material"], "model"]), mat_model(case, body),
-                            f"lagrange.integrator = {integrator!r} solves St. Venant-Kirchhoff bodies (a "
-                            "linear_elastic material's E, nu at finite strain); allowed: linear_elastic")
+                            f"lagrange.integrator = {integrator!r} solves hyperelastic bodies (St. Venant-"
+                            "Kirchhoff from a linear_elastic material's E, nu; neo_hookean); allowed: "
+                            "linear_elastic, neo_hookean")
         if implicit and "erosion" in raw:
             raise CaseError(format_key(base + ["erosion"]), raw["erosion"],
                             f"not with lagrange.integrator = {integrator!r}; allowed: leave it out")

@@ -37,12 +37,13 @@ class ContactSolution:
 
 def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spmatrix, X: np.ndarray,
                        fixed: np.ndarray, u_fixed: np.ndarray, max_iterations: int = 50,
-                       active: np.ndarray | None = None) -> ContactSolution:
+                       active: np.ndarray | None = None, offset: np.ndarray | None = None) -> ContactSolution:
     """The contact solution (module docstring). K (ndof, ndof); F (ndof,); B (nm, ndof); J (nm, nm);
     X (ndof,) reference positions (B X: the initial gaps); fixed (ndof,) bool Dirichlet dofs with
     values u_fixed (ndof,) (read where fixed). Starts from ``active`` (nm,) bool (default: every
-    multiplier active); raises RuntimeError if the system is singular on an active set, or the set
-    cycles or does not settle within max_iterations.
+    multiplier active); ``offset`` (nm,): the rows' floors, g~ >= offset (default 0); raises
+    RuntimeError if the system is singular on an active set, or the set cycles or does not settle
+    within max_iterations.
 
     A gap counts as closed down to round-off: a multiplier joins the set when its gap is below
     -1e-12 of the scale |B| |X + u| (a gap of -1e-17 on a released node is zero, and taking it in
@@ -53,6 +54,8 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     free = np.flatnonzero(~fixed)
     ud = np.where(fixed, u_fixed, 0.0)
     g0 = B @ (X + ud)                              # the gaps with only the prescribed motion
+    if offset is not None:                         # (g~ >= offset: each row's floor)
+        g0 = g0 - offset
     rhs_u = (F - K @ ud)[free]
     Kff, Bf = K[free][:, free], B[:, free]
     # scale of the comparison p - c g~: pressures against gaps, by the stiffness over the constraint

@@ -4,12 +4,13 @@ that fails), one step of ``[lagrange] time_step`` seconds at a time (implicit_st
 
 Bodies: ``linear_elastic`` materials are taken as St. Venant-Kirchhoff (the same E, nu; Green strain
 and second Piola-Kirchhoff stress: identical at small strain, and frame-indifferent under large
-rotations, which Hooke's law on the small strain is not), on the elements of finite_strain.py; the
-masses are the explicit solver's lumped ones. Loads: gravity (m g, constant), tractions times their
+rotations, which Hooke's law on the small strain is not), ``neo_hookean`` ones by Gonzalez's discrete
+gradient (discrete_gradient_nh.py), on the elements of finite_strain.py; the masses are the explicit
+solver's lumped ones. Loads: gravity (m g, constant), tractions times their
 curves (loads.py: the midpoint scheme takes them at t_{n+1/2}, Newmark at t_n and t_{n+1}), boundary
 conditions (fixed, velocity, symmetry: prescribed velocities; the residual there is the reaction).
 Contact (midpoint only): the seed's three steps (implicit_step.py step 1, _contact_update steps 2
-and 3). Not yet: coupling, friction, other materials, erosion, rigid walls (refused by the schema).
+and 3). Not yet: coupling, friction, plastic materials, erosion, rigid walls (refused by the schema).
 
 Balances (the explicit solver's diagnostics, fed the implicit step's exact quantities): the strain
 energy U(u) is the internal work, gravity's work sum m g . (u1 - u0), the tractions' F . (u1 - u0)
@@ -28,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solvers.lagrange import finite_strain, midpoint_svk
+from solvers.lagrange import discrete_gradient_nh, finite_strain, midpoint_svk
 from solvers.lagrange.boundary import BoundaryConditions
 from solvers.contact.implicit_update import remove_gap_rate, return_energy
 from solvers.lagrange.gathered_contact import GatheredContact
@@ -63,7 +64,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         for k, b in enumerate(case["lagrange"]["bodies"]):
             mat = case["materials"][b["material"]]
             mu, lam = finite_strain.lame(mat["youngs_modulus"], mat["poisson_ratio"])
-            self._blocks.append((C[self.body_of_cell == k], mu, lam))
+            self._blocks.append((C[self.body_of_cell == k], mu, lam, mat.get("model", "linear_elastic")))
         span = float(np.max(np.ptp(P, axis=0)))
         bcs = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
         fixed, vb = bcs.prescribed_arrays(n, dim)
@@ -104,10 +105,11 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.v = self.vg.reshape(P.shape)[self.part.nodes].copy()
         sig = np.zeros((len(self.global_cells), 6))
         e = np.zeros(len(self.global_cells))
-        for k, (cells, mu, lam) in enumerate(self._blocks):
+        for k, (cells, mu, lam, model) in enumerate(self._blocks):
             sel = self.body_of_cell == k
-            sig[sel] = midpoint_svk.cauchy_stresses(P, cells, u, mu, lam)
-            e[sel] = midpoint_svk.element_energies(P, cells, u, mu, lam)
+            mod = discrete_gradient_nh if model == "neo_hookean" else midpoint_svk
+            sig[sel] = mod.cauchy_stresses(P, cells, u, mu, lam)
+            e[sel] = mod.element_energies(P, cells, u, mu, lam)
         self.sig[:] = sig[self.part.cells]
         # each element's strain energy (J), on the rank that holds it (stress_power_energy), and the
         # bodies' total U (the global elements: every rank has them)
@@ -179,12 +181,12 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.impulse_gross += float(np.abs(fn).sum())
         self.u, self.vg = res.u, res.v
         if res.contact is not None:
-            self._contact_update(res.contact, du)
+            self._contact_update(res.contact, du, dt)
         self.iterations = max(self.iterations, res.iterations)
         self.substeps += 1
         return dt
 
-    def _contact_update(self, c, du: np.ndarray) -> None:
+    def _contact_update(self, c, du: np.ndarray, dt: float) -> None:
         """Steps 2 and 3 of the seed's contact update (solvers/contact/implicit_update.py) after the
         midpoint step (step 1) left v^{n+1} in self.vg and the contact c at t_{n+1/2}:
 
@@ -240,7 +242,12 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         imp = (m * dv).reshape(P.shape)
         self.impulse += imp.sum(axis=0)
         self.ang_impulse += self._cross(P + self.u.reshape(P.shape), imp).sum(axis=0)
-        self.impulse_gross += float(np.abs(imp).sum()) + float(np.abs(c.force).sum()) * self.dt
+        # step 1's contact force: it sums to zero (the rows balance), but its moment about x_{n+1/2}
+        # is the dual pass's discretisation (nodal normals, not each row's gap direction): booked
+        fc = c.force.reshape(P.shape) * dt
+        self.impulse += fc.sum(axis=0)
+        self.ang_impulse += self._cross(P + (self.u - 0.5 * du).reshape(P.shape), fc).sum(axis=0)
+        self.impulse_gross += float(np.abs(imp).sum()) + float(np.abs(c.force).sum()) * dt
         self.vg = v_new
         self.contact_active = int(len(rows))
         self.contact_stored = float(sum(stored[k] for k in sorted(stored)))
