@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from solvers.lagrange.finite_strain import _assemble_vector, _dofs, kinematics
+from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector, kinematics
 
 __all__ = ["nh_energy", "element_energies", "cauchy_stresses", "dg_force", "dg_tangent"]
 
@@ -110,13 +110,8 @@ def dg_tangent(points, cells, u0, u1, mu: float, lam: float) -> tuple[sp.csr_mat
     # A_iJkL = 1/2 S_JL delta_ik + 1/2 F_m,iI CC_IJKL F1,kK
     a = 0.5 * (np.einsum("ik,egJL->egiJkL", eye, s) + np.einsum("egiI,egIJKL,egkK->egiJkL", fm, cc, f1))
     ke = np.einsum("egaJ,egiJkL,egbL,eg->eaibk", dndx, a, dndx, w, optimize=True)
-    na = cells.shape[1]
-    nd = na * d
-    dof = _dofs(cells, d)
-    rows = np.repeat(dof, nd, axis=1).ravel()
-    cols = np.tile(dof, (1, nd)).ravel()
-    n = d * len(points)
+    nd = cells.shape[1] * d
     p = np.einsum("egiI,egIJ->egiJ", fm, s)
     fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
-    return (sp.csr_matrix((ke.reshape(len(cells), nd, nd).ravel(), (rows, cols)), shape=(n, n)),
+    return (_assemble_matrix(cells, d, ke.reshape(len(cells), nd, nd), len(points)),
             _assemble_vector(cells, d, fe, len(points)))

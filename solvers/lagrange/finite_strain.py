@@ -116,6 +116,15 @@ def _stress_state(f: np.ndarray, mu: float, lam: float):
     return j, lnj, cinv, np.swapaxes(finv, -1, -2), s
 
 
+def _assemble_matrix(cells, d, ke, n):
+    """The global (n d, n d) CSR matrix of element blocks ke (ne, a d, a d) (duplicates summed)."""
+    nd = ke.shape[1]
+    dof = _dofs(cells, d)
+    rows = np.repeat(dof, nd, axis=1).ravel()
+    cols = np.tile(dof, (1, nd)).ravel()
+    return sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n * d, n * d))
+
+
 def _assemble_vector(cells, d, fe, n):
     out = np.zeros(n * d)
     np.add.at(out, _dofs(cells, d).ravel(), fe.ravel())
@@ -149,14 +158,9 @@ def tangent(points, cells, u, mu: float, lam: float) -> tuple[sp.csr_matrix, np.
     ke = np.einsum("egaJ,egiJkL,egbL,eg->eaibk", dndx, a, dndx, w)
     na = cells.shape[1]
     ke = ke.reshape(len(cells), na * d, na * d)
-    dof = _dofs(cells, d)
-    nd = na * d
-    rows = np.repeat(dof, nd, axis=1).ravel()
-    cols = np.tile(dof, (1, nd)).ravel()
-    n = d * len(points)
     p = np.einsum("egiI,egIJ->egiJ", f, s)
     fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
-    return sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n, n)), _assemble_vector(cells, d, fe, len(points))
+    return _assemble_matrix(cells, d, ke, len(points)), _assemble_vector(cells, d, fe, len(points))
 
 
 def cauchy_stresses(points, cells, u, mu: float, lam: float) -> np.ndarray:

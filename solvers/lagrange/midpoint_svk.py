@@ -34,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from solvers.lagrange.finite_strain import _assemble_vector, _dofs, kinematics
+from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector, kinematics
 
 __all__ = ["svk_energy", "element_energies", "cauchy_stresses", "midpoint_force", "midpoint_tangent"]
 
@@ -126,13 +126,6 @@ def midpoint_tangent(points, cells, u0, u1, mu: float, lam: float) -> tuple[sp.c
     f1, fm, s, dndx, w = _midpoint_state(points, cells, u0, u1, mu, lam)
     d = fm.shape[-1]
     ke = _element_tangents(f1, fm, s, dndx, w, mu, lam)
-    na = cells.shape[1]
-    nd = na * d
-    dof = _dofs(cells, d)
-    rows = np.repeat(dof, nd, axis=1).ravel()
-    cols = np.tile(dof, (1, nd)).ravel()
-    n = d * len(points)
     p = np.einsum("egiI,egIJ->egiJ", fm, s)
     fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
-    return (sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n, n)),
-            _assemble_vector(cells, d, fe, len(points)))
+    return _assemble_matrix(cells, d, ke, len(points)), _assemble_vector(cells, d, fe, len(points))

@@ -312,24 +312,11 @@ class LagrangeSolver:
             b = int(self.body_of_node[node])
             raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s "
                               f"(body {self.body_names[b]!r}, its node {node - int(self._body_first_node[b])})")
-        if self.has_gravity:  # its work on the mean velocity, as the node kernel books it; its impulse
-            w = self.part.owned   # m g dt_avg and torque x^n x m g dt_avg (x^n = x^{n+1} - dt v)
-            mg = self.mass[w, None] * self.gravity * self.dt_avg
-            vbar = 0.5 * (self.v_old[w] + self.v[w])
-            xn = self.x[w] - self.dt * self.v[w]
-            tot = self._allsum(np.concatenate([[np.sum(mg * vbar)], mg.sum(axis=0), self._cross(xn, mg).sum(axis=0)]))
-            self.w_gravity += float(tot[0])
-            self.impulse += tot[1:1 + self.dim]
-            self.ang_impulse += tot[1 + self.dim:]
-        if self.loads is not None:  # the same for the surface loads at t^n (those in this step's forces)
-            w = self.part.owned
-            fl = self._load_local(self.time)[w] * self.dt_avg
-            vbar = 0.5 * (self.v_old[w] + self.v[w])
-            xn = self.x[w] - self.dt * self.v[w]
-            tot = self._allsum(np.concatenate([[np.sum(fl * vbar)], fl.sum(axis=0), self._cross(xn, fl).sum(axis=0)]))
-            self.w_load += float(tot[0])
-            self.impulse += tot[1:1 + self.dim]
-            self.ang_impulse += tot[1 + self.dim:]
+        w = self.part.owned
+        if self.has_gravity:
+            self.w_gravity += self._book_force(self.mass[w, None] * self.gravity)
+        if self.loads is not None:  # (the surface loads at t^n: those in this step's forces)
+            self.w_load += self._book_force(self._load_local(self.time)[w])
         # exact discrete work, impulse and torque of this step (shared nodes counted once)
         # the gross size of the impulses (scale of the momentum balance: a clamped body's coupling
         # impulses and reactions cancel, its momentum stays 0)
@@ -347,6 +334,19 @@ class LagrangeSolver:
         dt = self._forces(self.dt)
         # (no live element left, every one eroded: the free nodes fly at any step; the last one kept)
         self._dt_stable = dt if np.isfinite(dt) else self._dt_stable
+
+    def _book_force(self, f: np.ndarray) -> float:
+        """Book a force f (on the owned nodes, in the step's forces) as the node kernel books the
+        element forces: its impulse f dt_avg and torque x^n x f dt_avg (x^n = x^{n+1} - dt v) into
+        the balances; returns its work on the mean velocity (all ranks)."""
+        w = self.part.owned
+        fi = f * self.dt_avg
+        vbar = 0.5 * (self.v_old[w] + self.v[w])
+        xn = self.x[w] - self.dt * self.v[w]
+        tot = self._allsum(np.concatenate([[np.sum(fi * vbar)], fi.sum(axis=0), self._cross(xn, fi).sum(axis=0)]))
+        self.impulse += tot[1:1 + self.dim]
+        self.ang_impulse += tot[1 + self.dim:]
+        return float(tot[0])
 
     def _contact_impulse(self) -> np.ndarray:
         """(nn_local, dim) contact impulses of this step on this rank's nodes (collective: the nodes

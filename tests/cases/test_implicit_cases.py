@@ -13,6 +13,17 @@ from tests.cases.test_coupled_cases import assert_same_steps
 from tests.conftest import immerse
 
 
+def assert_restart_bitwise(case, tmp_path):
+    """Run ``case`` (which writes checkpoints) and continue it from its first checkpoint: the last
+    output step and the summary's final values equal the uninterrupted run's bit for bit."""
+    one = tmp_path / "one"
+    r = immerse("run", case, "--out", one)
+    assert r.returncode == 0, r.stdout + r.stderr
+    cont = continue_from_first_checkpoint(case, one, tmp_path / "cont")
+    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (one, cont))
+    assert sa["final"] == sb["final"]
+
+
 def test_spinning_block_midpoint_on_two_ranks_and_from_a_checkpoint(tmp_path):
     """Its check (energy 1.4e-12, momentum 1.7e-14, angular momentum 7.8e-13 measured) at 8 ms steps
     (16.6x the explicit limit), at most 6 Newton iterations a step (measured 5); 2 ranks (a gathered
@@ -27,12 +38,7 @@ def test_spinning_block_midpoint_on_two_ranks_and_from_a_checkpoint(tmp_path):
     r = immerse("run", CASES / "spinning_block_midpoint", "--out", two, "--ranks", "lagrange=2")
     assert r.returncode == 0, r.stdout + r.stderr
     assert_same_steps(out, two, roles=("lagrange",))
-    one = tmp_path / "one"
-    r = immerse("run", case, "--out", one)
-    assert r.returncode == 0, r.stdout + r.stderr
-    cont = continue_from_first_checkpoint(case, one, tmp_path / "cont")
-    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (one, cont))
-    assert sa["final"] == sb["final"]
+    assert_restart_bitwise(case, tmp_path)
 
 
 def test_newmark_is_stopped_by_name(tmp_path):
@@ -152,12 +158,7 @@ def test_bars_impact_implicit_continues_bit_for_bit_from_a_checkpoint_inside_the
     stored energies, the active rows and the contact's works are in it."""
     case = case_variant(tmp_path, "bars_impact_implicit",
                         ("output_interval = 5.0e-6", "output_interval = 5.0e-6\ncheckpoint_interval = 15.0e-6"))
-    one = tmp_path / "one"
-    r = immerse("run", case, "--out", one)
-    assert r.returncode == 0, r.stdout + r.stderr
-    cont = continue_from_first_checkpoint(case, one, tmp_path / "cont")
-    sa, sb = (json.loads((d / "summary.json").read_text()) for d in (one, cont))
-    assert sa["final"] == sb["final"]
+    assert_restart_bitwise(case, tmp_path)
 
 
 def test_ring_bounce_gives_back_every_episodes_energy(tmp_path):
