@@ -44,34 +44,31 @@ class GatheredContact:
 
     def operators(self, x: np.ndarray):
         """(B (nm, n d), J (nm, nm), keys (nm,)) of every pair at positions x (n, d)."""
-        from solvers.contact import methods
-
-        bs, js, keys = [], [], []
-        for k, (seg_a, seg_b, _, e) in enumerate(self.pairs):
-            c = methods.build(self.method, x, seg_a, seg_b, self.capture, self.capture)
-            bs.append(c.constraint_operator())
-            js.append(c.stabilization(self.alpha / e, self.h))
-            ids = np.concatenate([q.nodes for q in c.passes]) if hasattr(c, "passes") else c.nodes
-            keys.append(ids + k * len(x))
-        return (sp.vstack(bs, format="csr"), sp.block_diag(js, format="csr"),
-                np.concatenate(keys).astype(np.int64))
+        return self._stacked(x, lambda c, b, e: c.stabilization(self.alpha / e, self.h))
 
     def dynamic_operators(self, x: np.ndarray, inv_stiffness: np.ndarray):
         """(B, J, keys) at positions x with J weighed against the dofs' inverse stiffness (n d,)
         (module docstring), each pair on its own rows."""
-        from solvers.contact import methods
-
-        bs, js, keys = [], [], []
-        for k, (seg_a, seg_b, _, _) in enumerate(self.pairs):
-            c = methods.build(self.method, x, seg_a, seg_b, self.capture, self.capture)
-            b = c.constraint_operator()
+        def weighed(c, b, e):
             j1 = c.stabilization(1.0, 1.0)
             w = np.asarray(b.multiply(b) @ inv_stiffness).ravel()
             d = j1.diagonal()
             scale = (self.alpha * float(np.median(w[w > 0])) / float(np.median(d[d > 0]))
                      if np.any(w > 0) and np.any(d > 0) else 0.0)
+            return scale * j1
+
+        return self._stacked(x, weighed)
+
+    def _stacked(self, x: np.ndarray, stabilization):
+        """Every pair's (B, stabilization(contact, B, E), keys) at positions x, stacked."""
+        from solvers.contact import methods
+
+        bs, js, keys = [], [], []
+        for k, (seg_a, seg_b, _, e) in enumerate(self.pairs):
+            c = methods.build(self.method, x, seg_a, seg_b, self.capture, self.capture)
+            b = c.constraint_operator()
             bs.append(b)
-            js.append(scale * j1)
+            js.append(stabilization(c, b, e))
             ids = np.concatenate([q.nodes for q in c.passes]) if hasattr(c, "passes") else c.nodes
             keys.append(ids + k * len(x))
         return (sp.vstack(bs, format="csr"), sp.block_diag(js, format="csr"),

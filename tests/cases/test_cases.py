@@ -11,8 +11,9 @@ from tests.conftest import CASES, immerse
 
 
 def run_case(name, tmp_path, *extra, timeout=900):
-    """`immerse run` of a shipped case; asserts exit 0 and that every metric of its [check] passed
-    (tolerances: cases/<name>/case.toml, a few times the error measured)."""
+    """`immerse run` of a shipped case (or of a case directory's path: a case_variant); asserts exit 0
+    and that every metric of its [check] passed (tolerances: cases/<name>/case.toml, a few times the
+    error measured)."""
     out = tmp_path / "out"
     r = immerse("run", CASES / name, "--out", out, *extra, timeout=timeout)
     assert r.returncode == 0, r.stdout + r.stderr

@@ -7,7 +7,7 @@ import h5py
 import numpy as np
 import pytest
 
-from tests.cases.test_cases import CASES, assert_check_passed, case_variant, run_case
+from tests.cases.test_cases import CASES, case_variant, run_case
 from tests.cases.test_contact_cases import continue_from_first_checkpoint
 from tests.cases.test_coupled_cases import assert_same_steps
 from tests.conftest import immerse
@@ -182,11 +182,7 @@ def test_rotating_rod_wall_strikes_without_losing_energy(tmp_path):
     contact's moment) to 2.9e-12 / 6.5e-13 / 1.4e-12 (measured); 2 ranks equal 1 bit for bit."""
     case = case_variant(tmp_path, "rotating_rod_wall", ("end_time = 5.0", "end_time = 0.15"),
                         ("output_interval = 0.05", "output_interval = 0.025"))
-    out = tmp_path / "one"
-    r = immerse("run", case, "--out", out)
-    assert r.returncode == 0, r.stdout + r.stderr
-    s = json.loads((out / "summary.json").read_text())
-    assert_check_passed(s)
+    out, s = run_case(case, tmp_path)
     rep = s["check"]["reported"]
     assert rep["episodes"] == 4 and rep["angular_momentum_balance_rel"] < 1e-11
     two = tmp_path / "two"
@@ -202,11 +198,7 @@ def test_spinning_neo_hookean_block_keeps_its_energy_with_the_discrete_gradient(
     (measured; 3-5 for St. Venant-Kirchhoff)."""
     case = case_variant(tmp_path, "spinning_block_midpoint", ('model = "linear_elastic"', 'model = "neo_hookean"'),
                         ("tolerance = 5e-12", "tolerance = 5e-13"))
-    out = tmp_path / "out"
-    r = immerse("run", case, "--out", out)
-    assert r.returncode == 0, r.stdout + r.stderr
-    s = json.loads((out / "summary.json").read_text())
-    assert_check_passed(s)
+    out, s = run_case(case, tmp_path)
     with h5py.File(out / "diagnostics.h5") as h:
         assert h["lagrange.newton_iterations"][1:].max() <= 8
         assert h["lagrange.stress_power_energy"][...].max() > 0.1    # (it does stretch: 0.19 J of 24.9)
