@@ -129,34 +129,53 @@ def test_l_block_loads_moment_is_the_rigid_bodys(tmp_path):
     assert max(abs(final[f"lagrange.momentum_{c}"]) for c in "xyz") < 1e-12 * np.linalg.norm(rigid)
 
 
-def test_bars_impact_implicit_gives_back_the_contacts_energy(tmp_path):
+# the bars at 200 (160) elements along and 1 us steps, again 10 times their explicit limit: the
+# mechanisms' tests (the swap there: 2.34 %, not the case's 1 %)
+COARSE_BARS = (("cells = [800, 1]", "cells = [200, 1]"), ("cells = [640, 1]", "cells = [160, 1]"),
+               ("time_step = 2.4685e-7", "time_step = 1.0e-6"),
+               ("velocity_striker_rel = { reference = 0.0, tolerance = 0.01 }",
+                "velocity_striker_rel = { reference = 0.0, tolerance = 0.03 }"),
+               ("velocity_target_rel = { reference = 1.0, tolerance = 0.01 }",
+                "velocity_target_rel = { reference = 1.0, tolerance = 0.03 }"))
+
+
+def test_bars_impact_implicit_swaps_the_velocities_within_one_percent(tmp_path):
     """The two-bar impact at 10 times the explicit limit with the three-step contact update (its
-    check: stress 197.39 MPa, contact 40 us, the contact's work over the episode -1.5e-16 of the
-    energy, momentum 4.2e-14 measured); without step 3 ([contact] return_energy = false) the 0.27 J
-    the first step and the gap-rate updates took stays lost: 1.39e-3 of the kinetic energy (measured),
-    booked as contact_lost_energy = -contact_work."""
+    check: the striker keeps 0.92 % of its speed, stress 197.37 MPa, contact 39.94 us, the contact's
+    work over the episode -1.2e-15 of the energy, momentum 2.2e-13 measured); the 0.068 J the first
+    step and the gap-rate updates took is held over the episode and given back."""
     out, s = run_case("bars_impact_implicit", tmp_path)
     with h5py.File(out / "diagnostics.h5") as h:
-        assert h["lagrange.newton_iterations"][1:].max() <= 4
+        assert h["lagrange.newton_iterations"][1:].max() <= 3
         stored = h["lagrange.contact_stored_energy"][...]
-        assert stored.max() > 0.25 and stored[-1] == 0.0     # held over the episode, given back
-    case = case_variant(tmp_path, "bars_impact_implicit",
+        assert stored.max() > 0.06 and stored[-1] == 0.0     # held over the episode, given back
+
+
+def test_bars_impact_implicit_without_step_3_loses_the_contacts_energy(tmp_path):
+    """Without step 3 ([contact] return_energy = false) the 0.27 J the first step and the gap-rate
+    updates took stays lost: 1.39e-3 of the kinetic energy (measured on the coarse bars), booked as
+    contact_lost_energy = -contact_work, and the striker keeps 2.47 % of its speed against 2.34 %
+    with step 3."""
+    case = case_variant(tmp_path, "bars_impact_implicit", *COARSE_BARS,
                         ('pairs = [["striker", "target"]]', 'pairs = [["striker", "target"]]\nreturn_energy = false'))
-    out2 = tmp_path / "lost"
-    r = immerse("run", case, "--out", out2)
+    out = tmp_path / "lost"
+    r = immerse("run", case, "--out", out)
     assert r.returncode != 0 and "contact_dissipation_rel: 0.00138889 vs 0" in r.stdout + r.stderr, r.stdout + r.stderr
-    s2 = json.loads((out2 / "summary.json").read_text())
-    m = s2["check"]["metrics"]
+    s = json.loads((out / "summary.json").read_text())
+    m = s["check"]["metrics"]
     assert m["contact_dissipation_rel"]["value"] == pytest.approx(1.389e-3, rel=1e-3)
     assert [k for k, v in m.items() if not v["passed"]] == ["contact_dissipation_rel"]
-    f = s2["final"]
+    assert m["velocity_striker_rel"]["value"] == pytest.approx(0.02466, rel=1e-3)
+    f = s["final"]
     assert f["lagrange.contact_lost_energy"] == pytest.approx(-f["lagrange.contact_work"], rel=1e-9)
+    _, s3 = run_case(case_variant(tmp_path / "with", "bars_impact_implicit", *COARSE_BARS), tmp_path / "with")
+    assert s3["check"]["metrics"]["velocity_striker_rel"]["value"] == pytest.approx(0.02338, rel=1e-3)
 
 
 def test_bars_impact_implicit_continues_bit_for_bit_from_a_checkpoint_inside_the_contact(tmp_path):
     """A checkpoint at 15 us (in the contact: energy stored, rows active) continues bit for bit: the
-    stored energies, the active rows and the contact's works are in it."""
-    case = case_variant(tmp_path, "bars_impact_implicit",
+    stored energies, the active rows and the contact's works are in it (the coarse bars)."""
+    case = case_variant(tmp_path, "bars_impact_implicit", *COARSE_BARS,
                         ("output_interval = 5.0e-6", "output_interval = 5.0e-6\ncheckpoint_interval = 15.0e-6"))
     assert_restart_bitwise(case, tmp_path)
 
