@@ -353,10 +353,6 @@ def check_lagrange(case: dict, data: dict) -> None:
             raise CaseError("lagrange.integrator", integrator,
                             "[coupling] with an implicit integrator is not built yet (issue 12); allowed with "
                             "[coupling]: explicit")
-        if case.get("contact") and integrator != "midpoint":
-            raise CaseError("lagrange.integrator", integrator,
-                            "[contact] is built into the energy-momentum scheme only (its three-step update); "
-                            "allowed with [contact]: explicit, quasi_static, midpoint")
     seen: dict[str, int] = {}
     for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
         base = ["lagrange", "bodies", i]

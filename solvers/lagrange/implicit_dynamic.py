@@ -9,8 +9,10 @@ gradient (discrete_gradient_nh.py), on the elements of finite_strain.py; the mas
 solver's lumped ones. Loads: gravity (m g, constant), tractions times their
 curves (loads.py: the midpoint scheme takes them at t_{n+1/2}, Newmark at t_n and t_{n+1}), boundary
 conditions (fixed, velocity, symmetry: prescribed velocities; the residual there is the reaction).
-Contact (midpoint only): the seed's three steps (implicit_step.py step 1, _contact_update steps 2
-and 3). Not yet: coupling, friction, plastic materials, erosion, rigid walls (refused by the schema).
+Contact: the midpoint scheme's the seed's three steps (implicit_step.py step 1, _contact_update steps
+2 and 3); Newmark's the trapezoid's own, the multipliers at the step's end and nothing after (the
+comparison). Not yet: coupling, friction, plastic materials, erosion, rigid walls (refused by the
+schema).
 
 Balances (the explicit solver's diagnostics, fed the implicit step's exact quantities): the strain
 energy U(u) is the internal work, gravity's work sum m g . (u1 - u0), the tractions' F . (u1 - u0)
@@ -81,6 +83,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self._gcontact = None
         self.w_contact, self.contact_active, self.contact_stored = 0.0, 0, 0.0
         self.contact_force = np.zeros(dim)
+        self._fc_end = np.zeros(n * dim)   # Newmark: the last step's end contact force (its next a0)
         self._active_keys: dict = {}
         self._stored: dict = {}
         if case.get("contact"):
@@ -323,6 +326,43 @@ class NewmarkSolver(_ImplicitDynamicSolver):
     step_function = staticmethod(newmark_step)
 
     def _step_loads(self, t0: float, dt: float) -> tuple[dict, np.ndarray]:
-        """The trapezoid's loads at both ends of the step; its work booked with their mean."""
+        """The trapezoid's loads at both ends of the step; its work booked with their mean (and with
+        contact, the last step's end contact force, in the step's start acceleration)."""
         f0, f1 = self._load_at(t0), self._load_at(t0 + dt)
-        return {"f_ext": self.f_ext + f1, "f_ext0": self.f_ext + f0}, 0.5 * (f0 + f1)
+        loads = {"f_ext": self.f_ext + f1, "f_ext0": self.f_ext + f0}
+        if self._gcontact is not None:
+            loads["f_contact0"] = self._fc_end
+        return loads, 0.5 * (f0 + f1)
+
+    def _contact_update(self, c, du: np.ndarray, dt: float) -> None:
+        """Newmark's contact: the multipliers at the step's end and no update after them (no steps 2
+        and 3: what the seed's update is measured against). Its force over the step is the mean of
+        the two ends' (the trapezoid's: the kinetic energy changes by exactly its work on du), booked
+        to w_contact, the impulse and its moment about x_{n+1/2}."""
+        f = 0.5 * (self._fc_end + c.force)
+        w = float(f @ du)
+        self.w_contact += w
+        self.w_ext += w
+        P = self.global_points
+        fc = f.reshape(P.shape) * dt
+        self.impulse += fc.sum(axis=0)
+        self.ang_impulse += self._cross(P + (self.u - 0.5 * du).reshape(P.shape), fc).sum(axis=0)
+        self.impulse_gross += float(np.abs(fc).sum())
+        act = np.asarray(c.active, bool) if c.active is not None else np.zeros(len(c.keys), bool)
+        rows = np.flatnonzero(act)
+        self._active_keys = {int(k): float(p) for k, p in zip(c.keys[rows].tolist(), c.p[rows].tolist())}
+        self._fc_end = c.force.copy()
+        self.contact_active = int(len(rows))
+        self.contact_force = c.force.reshape(P.shape)[self.body_of_node == self._contact_body].sum(axis=0)
+
+    def _extra_state(self) -> dict:
+        """The midpoint scheme's, and the last step's end contact force (the next step's a0)."""
+        state = super()._extra_state()
+        if self._gcontact is not None:
+            state["contact_force_end"] = self._fc_end.copy()
+        return state
+
+    def _set_extra_state(self, state: dict) -> None:
+        super()._set_extra_state(state)
+        if self._gcontact is not None:
+            self._fc_end = np.array(state["contact_force_end"], dtype=np.float64)

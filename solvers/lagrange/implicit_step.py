@@ -58,7 +58,7 @@ class StepResult:
 
 @dataclass
 class ContactState:
-    """Step 1's contact at t_{n+1/2}: the operator B and keys of its rows (at x_{n+1/2}), the
+    """Step 1's contact: the operator B and keys of its rows (at x_{n+1/2}; Newmark's at x_{n+1}), the
     pressures p >= 0 (0 off the active set) and the contact force B^T p (n d,)."""
     B: sp.csr_matrix
     keys: np.ndarray
@@ -145,8 +145,8 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
     if contact is None:
         u1, it, hist, r = _newton("midpoint", rt, u0 + dt * v0, free, tol, max_iterations)
     else:
-        u1, it, hist, r, state = _newton_contact(rt, np.asarray(points, float), u0, u0 + dt * v0, free, contact,
-                                                 active, tol, max_iterations)
+        u1, it, hist, r, state = _newton_contact("midpoint", rt, np.asarray(points, float), u0, u0 + dt * v0, free,
+                                                 contact, active, tol, max_iterations, at=0.5)
         r = r - state.force
     v1 = np.where(free, 2.0 * (u1 - u0) / dt - v0, vb)
     return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r), contact=state)
@@ -158,7 +158,7 @@ def _largest(m) -> float:
     return float(abs(m.data).max()) if m.nnz else 0.0
 
 
-def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, max_iterations,
+def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, tol, max_iterations, at: float,
                     max_rebuilds: int = 30):
     """Newton on the midpoint equations with frictionless contact (seed slide "Structure preserving
     time integration w/ contact", step 1): the force f_c = B^T p with B built at x_{n+1/2} (balanced
@@ -183,7 +183,9 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
     it at every Newton iterate instead made the pressures of the dual pass's redundant rows jump with
     the operator's tiny changes and Newton stagnate (bars_impact_implicit: 3e-8). The geometric
     contact stiffness is left out. Returns the most iterations of one solve with B frozen (what the
-    step control weighs: each rebuild starts again near the solution)."""
+    step control weighs: each rebuild starts again near the solution).
+    ``at``: where in the step B is built, x_n + at (x_{n+1} - x_n) (the midpoint scheme 1/2, Newmark's
+    trapezoid 1: its contact force is the step end's); ``name`` the scheme's, in its failures."""
     from solvers.contact.kkt import solve_frictionless
 
     shape = points.shape
@@ -199,7 +201,7 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
         if inv_a is None:   # J's weight: the step matrix's inverse diagonal on the free dofs
             a0 = rt(u)[1].diagonal()
             inv_a = np.where(free & (a0 > 0), 1.0 / np.where(a0 > 0, a0, 1.0), 0.0)
-        B, J, keys = contact((X + 0.5 * (u0 + u)).reshape(shape), inv_a)
+        B, J, keys = contact((X + u0 + at * (u - u0)).reshape(shape), inv_a)
         if rebuild > 0 and np.array_equal(keys, keys_prev) and B.shape == B_prev.shape:
             if _largest(B - B_prev) <= 1e-9 * _largest(B):
                 return u, most, history, r, ContactState(B=B_prev, keys=keys_prev, p=p, active=active,
@@ -224,21 +226,21 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
             res = float(np.linalg.norm((r - fc)[free])) / max(scale, float(np.linalg.norm(fc)), 1e-300)
             history.append(res)
             if not np.isfinite(res):
-                raise StepFailed(f"midpoint: the residual is not finite at iteration {iterations} (residuals {history})")
+                raise StepFailed(f"{name}: the residual is not finite at iteration {iterations} (residuals {history})")
             if it > 0 and same and (res <= tol or (it >= 2 and res <= 1e3 * tol and res >= 0.5 * history[-2])):
                 break
             if it == max_iterations:
-                raise StepFailed(f"midpoint: Newton with contact did not converge in {max_iterations} iterations "
+                raise StepFailed(f"{name}: Newton with contact did not converge in {max_iterations} iterations "
                                  f"(relative residuals {['%.1e' % h for h in history]})")
             # the saddle point system scaled (rows beta B, pressures p / beta, J beta^2) so that beta B
             # is of the size of sqrt(A): unscaled (steel: A ~ 1e11, B ~ 1e-3, J ~ 1e-17) its LU gave
             # the pressures to 1e-7 only and Newton stalled there
-            beta = np.sqrt(float(np.median(a0[free]))) / max(_largest(B), 1e-300)
+            beta = np.sqrt(float(np.median(a0[free]))) / _largest(B) if B.nnz else 1.0
             try:
                 sol = solve_frictionless(a, a @ u - r, beta * B, (beta * beta) * J, X, fixed, u, active=active,
                                          offset=beta * np.minimum(B @ (X + u0), 0.0))
             except RuntimeError as err:
-                raise StepFailed(f"midpoint: the contact solve failed at iteration {iterations}: {err}") from None
+                raise StepFailed(f"{name}: the contact solve failed at iteration {iterations}: {err}") from None
             same = active is not None and np.array_equal(sol.active, active)
             u, p, active = sol.u, beta * sol.p, sol.active
             iterations += 1
@@ -246,18 +248,25 @@ def _newton_contact(rt, points, u0, u_start, free, contact, active_keys, tol, ma
         if final:   # (converged again with the rebuilt operator: it is the step's)
             return u, most, history, r, ContactState(B=B, keys=keys, p=p, active=active, force=B.T @ p)
         B_prev, keys_prev = B, keys
-    raise StepFailed(f"midpoint: the contact operators still changed after {max_rebuilds} rebuilds at the "
+    raise StepFailed(f"{name}: the contact operators still changed after {max_rebuilds} rebuilds at the "
                      f"converged midpoint (relative residuals {['%.1e' % h for h in history]})")
 
 
 def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
-                 tol: float = 1e-12, max_iterations: int = 25, f_ext0=None) -> StepResult:
+                 tol: float = 1e-12, max_iterations: int = 25, f_ext0=None, contact=None, active=None,
+                 f_contact0=None) -> StepResult:
     """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step,
-    but f_ext is the load at t_{n+1} and f_ext0 the one at t_n (default f_ext: constant)."""
+    but f_ext is the load at t_{n+1} and f_ext0 the one at t_n (default f_ext: constant).
+
+    contact: as midpoint_step's, but the trapezoid's: f_c = B^T p at the step's end (B at x_{n+1}),
+    the gap held there as the midpoint scheme holds it, and in a0 the last step's contact force
+    f_contact0 (n d,). No gap-rate update, no energy given back: the comparison the seed's three steps
+    are measured against."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
     fe0 = fe if f_ext0 is None else np.asarray(f_ext0, float).ravel()
     f0 = _svk(points, blocks, u0, u0)[1]
-    a0 = np.where(free, (fe0 - f0) / m, 0.0)
+    fc0 = 0.0 if f_contact0 is None else np.asarray(f_contact0, float).ravel()
+    a0 = np.where(free, (fe0 - f0 + fc0) / m, 0.0)
 
     def rt(u1):
         k, f = _svk(points, blocks, u1, u1)
@@ -265,7 +274,17 @@ def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None
         scale = max(float(np.linalg.norm(m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(4.0 * m / dt ** 2) + 2.0 * k, scale
 
-    u1, it, hist, r = _newton("newmark", rt, u0 + dt * v0, free, tol, max_iterations)
+    state = None
+    if contact is None:
+        u1, it, hist, r = _newton("newmark", rt, u0 + dt * v0, free, tol, max_iterations)
+    else:
+        u1, it, hist, r, state = _newton_contact("newmark", rt, np.asarray(points, float), u0, u0 + dt * v0, free,
+                                                 contact, active, tol, max_iterations, at=1.0)
+        r = r - state.force
     a1 = np.where(free, 4.0 * (u1 - u0 - dt * v0) / dt ** 2 - a0, 0.0)
     v1 = np.where(free, v0 + 0.5 * dt * (a0 + a1), vb)
-    return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r))
+    # the prescribed dofs' reaction over the step: the trapezoid's mean of its two ends (at t_n the
+    # force that holds them, f_int - f_ext - f_c), with which the momenta's change is exact
+    r0 = f0 - fe0 - fc0
+    return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, 0.5 * (r0 + r)),
+                      contact=state)

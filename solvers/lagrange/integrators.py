@@ -21,7 +21,7 @@ class Integrator:
     module: str
     attr: str
     dynamic: bool = True   # False: no inertia (no coupling with the fluid, no initial velocities)
-    implicit: bool = False  # True: steps of [lagrange] time_step, St. Venant-Kirchhoff bodies, no contact or coupling yet
+    implicit: bool = False  # True: steps of [lagrange] time_step, elastic bodies (no plasticity), no coupling yet
 
 
 INTEGRATORS: dict[str, Integrator] = {}

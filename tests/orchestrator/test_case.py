@@ -247,7 +247,6 @@ BAD_CASES = [
     ("lagrange_ring_3d", "lagrange.bodies[0].mesh.ring", "ring meshes are 2D only"),
     ("lagrange_implicit_no_time_step", "lagrange.time_step", "required with lagrange.integrator = 'midpoint'"),
     ("lagrange_time_step_explicit", "lagrange.time_step", "a key of the implicit integrators (midpoint, newmark)"),
-    ("lagrange_implicit_contact", "lagrange.integrator", "[contact] is built into the energy-momentum scheme only"),
     ("lagrange_implicit_johnson_cook", "materials.steel.model", "allowed: linear_elastic, neo_hookean"),
     ("lagrange_time_step_min_above", "lagrange.time_step_min", "must be <= lagrange.time_step (0.001)"),
 ]
