@@ -30,6 +30,7 @@ the problem size is bounded by one rank's memory, more ranks make it no faster.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from solvers.lagrange import discrete_gradient_nh, finite_strain, midpoint_svk
 from solvers.lagrange.boundary import BoundaryConditions
@@ -85,6 +86,9 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.contact_force = np.zeros(dim)
         self._fc_end = np.zeros(n * dim)   # Newmark: the last step's end contact force (its next a0)
         self._active_keys: dict = {}
+        # the rows of B active at the last step, in the order of sorted(self._active_keys): a release
+        # gives the episode's energy back along them (the current B may no longer have those rows)
+        self._last_rows = sp.csr_matrix((0, n * dim))
         self._stored: dict = {}
         if case.get("contact"):
             self._gcontact = GatheredContact(case["contact"], case, P, C, self.cell_type, self.body_of_cell,
@@ -196,8 +200,9 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         2. the active rows' normal gap rate is removed, G vbar = 0 (no chatter; strictly dissipative);
         3. the energy a pair's contact episode took (step 1's work B^T p . du and step 2's losses)
            is given back when the episode ends, i.e. when none of the pair's rows is active any
-           more, along the force its rows carried at the episode's last step (their current rows
-           weighted with the last pressures). Kept per pair, not per row: the dual pass's two passes
+           more, along the force its rows carried at the episode's last step (that step's rows of B
+           weighted with its pressures: the releasing step's B need not have them, a rod's corner
+           leaving a wall had dropped its row from it, and 8 J of a strike stayed lost). Kept per pair, not per row: the dual pass's two passes
            are redundant, so how step 2 splits its loss over the rows is arbitrary (on a ring
            bouncing on a floor single rows held +-1 J of a 0.08 J total) and a row released while
            its neighbours stay active would give back the wrong share.
@@ -223,21 +228,23 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         m = np.repeat(self.gmass, self.dim)
         ke = lambda w: 0.5 * float(w @ (m * w))   # noqa: E731
         last = self._active_keys                    # {key: pressure} of the rows active at the last step
-        row_of = {k: i for i, k in enumerate(keys.tolist())}
+        last_keys = np.array(sorted(last), dtype=np.int64)   # (the order of self._last_rows)
         for q in sorted(stored):                    # (sorted: a restart's order)
             if np.any(pair[rows] == q):
                 continue
-            mine = sorted(k for k in last if k // n == q and k in row_of)
+            mine = np.flatnonzero(last_keys // n == q)
             k_total = stored.pop(q)
-            if not self._return_energy or not mine:
+            if not self._return_energy or not len(mine):
                 self.contact_lost += k_total
                 continue
-            w = np.array([last[k] for k in mine])
+            w = np.array([last[k] for k in last_keys[mine].tolist()])
             before = ke(v_new)
-            v_new = return_energy(c.B[[row_of[k] for k in mine]], self._inv_mass, v_new, w * (k_total / w.sum()))
+            v_new = return_energy(self._last_rows[mine], self._inv_mass, v_new, w * (k_total / w.sum()))
             self.contact_lost += k_total - (ke(v_new) - before)
         self._stored = stored
-        self._active_keys = {int(k): float(p) for k, p in zip(keys[rows].tolist(), c.p[rows].tolist())}
+        order = rows[np.argsort(keys[rows], kind="stable")]
+        self._active_keys = {int(k): float(p) for k, p in zip(keys[order].tolist(), c.p[order].tolist())}
+        self._last_rows = sp.csr_matrix(c.B[order])
         dv = v_new - v
         self.w_contact += ke(v_new) - ke(v)
         self.w_ext += self.w_contact - w0     # (the contact's work is external work in the balance)
@@ -298,7 +305,9 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         return {"contact_works": np.array([self.w_contact, self.contact_lost]),
                 "stored_keys": keys, "stored": np.array([self._stored[k] for k in keys.tolist()], dtype=np.float64),
                 "active_keys": active,
-                "active_pressures": np.array([self._active_keys[k] for k in active.tolist()], dtype=np.float64)}
+                "active_pressures": np.array([self._active_keys[k] for k in active.tolist()], dtype=np.float64),
+                "last_rows_data": self._last_rows.data.copy(), "last_rows_indices": self._last_rows.indices.astype(np.int64),
+                "last_rows_indptr": self._last_rows.indptr.astype(np.int64)}
 
     def _set_extra_state(self, state: dict) -> None:
         if self._gcontact is None:
@@ -306,6 +315,9 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.w_contact, self.contact_lost = (float(v) for v in state["contact_works"])
         self._stored = dict(zip(state["stored_keys"].tolist(), state["stored"].tolist()))
         self._active_keys = dict(zip(state["active_keys"].tolist(), state["active_pressures"].tolist()))
+        self._last_rows = sp.csr_matrix((np.asarray(state["last_rows_data"], np.float64),
+                                         np.asarray(state["last_rows_indices"]), np.asarray(state["last_rows_indptr"])),
+                                        shape=(len(state["last_rows_indptr"]) - 1, self.u.size))
         self.contact_stored = float(sum(self._stored[k] for k in sorted(self._stored)))
 
     def restart(self, path) -> None:
