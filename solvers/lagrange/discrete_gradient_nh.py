@@ -29,7 +29,7 @@ import scipy.sparse as sp
 
 from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector, kinematics
 
-__all__ = ["nh_energy", "element_energies", "cauchy_stresses", "dg_force", "dg_tangent"]
+__all__ = ["nh_energy", "element_energies", "cauchy_stresses", "dg_force", "dg_elements", "dg_tangent"]
 
 
 def _cauchy_green(f: np.ndarray) -> np.ndarray:
@@ -99,6 +99,14 @@ def dg_force(points, cells, u0, u1, mu: float, lam: float) -> np.ndarray:
 def dg_tangent(points, cells, u0, u1, mu: float, lam: float) -> tuple[sp.csr_matrix, np.ndarray]:
     """(Newton's matrix (n d, n d), f_int (n d,)) (module docstring)."""
     cells = np.asarray(cells, dtype=np.int64)
+    ke, fe = dg_elements(points, cells, u0, u1, mu, lam)
+    d = fe.shape[-1]
+    return _assemble_matrix(cells, d, ke, len(points)), _assemble_vector(cells, d, fe, len(points))
+
+
+def dg_elements(points, cells, u0, u1, mu: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each element's (Newton's matrix (ne, a d, a d), f_int (ne, a, d)) (module docstring)."""
+    cells = np.asarray(cells, dtype=np.int64)
     f1, fm, s, s_m, cinv, lnj, dndx, w = _algorithmic_state(points, cells, u0, u1, mu, lam)
     d = fm.shape[-1]
     eye = np.eye(d)
@@ -112,6 +120,4 @@ def dg_tangent(points, cells, u0, u1, mu: float, lam: float) -> tuple[sp.csr_mat
     ke = np.einsum("egaJ,egiJkL,egbL,eg->eaibk", dndx, a, dndx, w, optimize=True)
     nd = cells.shape[1] * d
     p = np.einsum("egiI,egIJ->egiJ", fm, s)
-    fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
-    return (_assemble_matrix(cells, d, ke.reshape(len(cells), nd, nd), len(points)),
-            _assemble_vector(cells, d, fe, len(points)))
+    return ke.reshape(len(cells), nd, nd), np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)

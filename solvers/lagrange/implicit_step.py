@@ -36,8 +36,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from solvers.lagrange.discrete_gradient_nh import dg_tangent
-from solvers.lagrange.midpoint_svk import midpoint_tangent
+from solvers.lagrange.discrete_gradient_nh import dg_elements
+from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector
+from solvers.lagrange.midpoint_svk import midpoint_elements
 
 __all__ = ["StepResult", "ContactState", "StepFailed", "midpoint_step", "newmark_step"]
 
@@ -67,19 +68,26 @@ class ContactState:
     force: np.ndarray
 
 
-# each material model's midpoint force and Newton matrix: St. Venant-Kirchhoff's (midpoint_svk.py, the
-# linear_elastic bodies') and the neo-Hookean discrete gradient (discrete_gradient_nh.py)
-TANGENTS = {"linear_elastic": midpoint_tangent, "neo_hookean": dg_tangent}
+# each material model's elements' midpoint force and Newton matrix: St. Venant-Kirchhoff's
+# (midpoint_svk.py, the linear_elastic bodies') and the neo-Hookean discrete gradient
+# (discrete_gradient_nh.py)
+ELEMENTS = {"linear_elastic": midpoint_elements, "neo_hookean": dg_elements}
 
 
-def _svk(points, blocks, u0, u1):
+def _svk(points, blocks, u0, u1, elements=None):
     """(K, f) summed over the bodies: blocks [(cells, mu, lambda[, model]), ...] (each body its
-    material; model a key of TANGENTS, default linear_elastic)."""
-    n = np.asarray(points).size
+    material; model a key of ELEMENTS, default linear_elastic). elements: None (every element here),
+    or elements(k, function, u0, u1, mu, lam) giving block k's (ke, fe) of all its elements in order
+    (the solver's: each rank evaluates its share of the elements and gathers the rest; an element's
+    values are its own, so the matrix is the same bit for bit)."""
+    points = np.asarray(points)
+    n, d = points.size, points.shape[1]
     k, f = sp.csr_matrix((n, n)), np.zeros(n)
-    for cells, mu, lam, *model in blocks:
-        kb, fb = TANGENTS[model[0] if model else "linear_elastic"](points, cells, u0, u1, mu, lam)
-        k, f = k + kb, f + fb
+    for b, (cells, mu, lam, *model) in enumerate(blocks):
+        fn = ELEMENTS[model[0] if model else "linear_elastic"]
+        ke, fe = fn(points, cells, u0, u1, mu, lam) if elements is None else elements(b, fn, u0, u1, mu, lam)
+        k = k + _assemble_matrix(cells, d, ke, len(points))
+        f = f + _assemble_vector(cells, d, fe, len(points))
     return k, f
 
 
@@ -123,7 +131,8 @@ def _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed):
 
 
 def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
-                  tol: float = 1e-12, max_iterations: int = 25, contact=None, active=None) -> StepResult:
+                  tol: float = 1e-12, max_iterations: int = 25, contact=None, active=None,
+                  elements=None) -> StepResult:
     """The midpoint step from (u0, v0) (each (n d,)); blocks [(cells, mu, lambda), ...] the bodies;
     mass (n,) lumped; f_ext (n d,) the load at t_{n+1/2}; fixed: dofs moving at v_fixed (default 0:
     held). Returns u1, v1, Newton's history and the reactions on the fixed dofs.
@@ -132,11 +141,12 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
     (B, J, keys) (gathered_contact.py's dynamic_operators):
     then step 1 of the seed's contact update, the midpoint equations with f_c = B^T p (B at the
     midpoint), p >= 0 and the stabilized gap B x_{n+1} + J p >= 0 (_newton_contact); ``active``: a warm start
-    {key: pressure} of the rows active at the last step."""
+    {key: pressure} of the rows active at the last step. elements: how the elements are evaluated
+    (_svk's; default all of them here)."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
 
     def rt(u1):
-        k, f = _svk(points, blocks, u0, u1)
+        k, f = _svk(points, blocks, u0, u1, elements)
         r = 2.0 * m * (u1 - u0 - dt * v0) / dt ** 2 + f - fe
         scale = max(float(np.linalg.norm(2.0 * m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(2.0 * m / dt ** 2) + k, scale
@@ -254,7 +264,7 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
 
 def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
                  tol: float = 1e-12, max_iterations: int = 25, f_ext0=None, contact=None, active=None,
-                 f_contact0=None) -> StepResult:
+                 f_contact0=None, elements=None) -> StepResult:
     """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step,
     but f_ext is the load at t_{n+1} and f_ext0 the one at t_n (default f_ext: constant).
 
@@ -264,12 +274,12 @@ def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None
     are measured against."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
     fe0 = fe if f_ext0 is None else np.asarray(f_ext0, float).ravel()
-    f0 = _svk(points, blocks, u0, u0)[1]
+    f0 = _svk(points, blocks, u0, u0, elements)[1]
     fc0 = 0.0 if f_contact0 is None else np.asarray(f_contact0, float).ravel()
     a0 = np.where(free, (fe0 - f0 + fc0) / m, 0.0)
 
     def rt(u1):
-        k, f = _svk(points, blocks, u1, u1)
+        k, f = _svk(points, blocks, u1, u1, elements)
         r = 4.0 * m * (u1 - u0 - dt * v0) / dt ** 2 - m * a0 + f - fe
         scale = max(float(np.linalg.norm(m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(4.0 * m / dt ** 2) + 2.0 * k, scale
