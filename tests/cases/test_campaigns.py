@@ -205,19 +205,28 @@ def test_contact_methods_where_each_fails(tmp_path, run_immerse):
 
 @pytest.mark.timeout(600)
 def test_time_integrators_where_each_fails(tmp_path, run_immerse):
-    """The L-block to t = 10 s at steps of 0.1 and 0.2 s (the full campaign adds 0.025 and 0.05):
-    the midpoint scheme keeps the free flight's energy to 2.7e-15 / 8.6e-15 (measured); Newmark is
-    stopped by name at both steps (t = 3.4 s and 1.4 s, its energy off by 1.14 % / 1.22 %: the full
-    campaign's 0.025 s step runs through, drifting 2.1e-4); the explicit run at its own step loses
-    63 % of the energy over the free flight (measured: its viscous hourglass control and bulk
-    viscosity at this Poisson ratio, 0.495)."""
+    """The L-block to t = 10 s at steps of 0.1 and 0.2 s and the rotating rod to 0.3 s at 1 ms (the
+    full campaign adds 0.025 and 0.05 s, 0.25 and 0.5 ms): the midpoint scheme keeps the free
+    flight's energy to 2.7e-15 / 8.6e-15 and gives each of the rod's strikes back to 3.1e-13
+    (measured); Newmark is stopped by name at both L-block steps (t = 3.4 s and 1.4 s, its energy off
+    by 1.14 % / 1.22 %: the full campaign's 0.025 s step runs through, drifting 2.1e-4) and at the
+    rod's first strike (t = 0.034 s, 1.46 %); the explicit run at its own step loses 63 % of the
+    L-block's energy over the free flight (its viscous hourglass control and bulk viscosity at this
+    Poisson ratio, 0.495) and up to 22 % of the rod's in a strike (its contact stops the striking
+    nodes), measured."""
     out = tmp_path / "out"
-    r = run_immerse("campaign", CAMPAIGNS / "time_integrators", "--out", out, "--only", "dt=0.1,0.2")
+    r = run_immerse("campaign", CAMPAIGNS / "time_integrators", "--out", out, "--only", "dt=0.1,0.2", "dt_rod=0.001")
     assert r.returncode == 0, r.stdout + r.stderr   # (a run that fails is a result, not an error)
     rows = {x["run"]: x for x in _rows(out)}
-    assert set(rows) == {"midpoint-dt0.1", "midpoint-dt0.2", "newmark-dt0.1", "newmark-dt0.2", "explicit"}
+    assert set(rows) == {"midpoint-dt0.1", "midpoint-dt0.2", "newmark-dt0.1", "newmark-dt0.2", "explicit",
+                         "rod_midpoint-dt_rod0.001", "rod_newmark-dt_rod0.001", "rod_explicit"}
     for dt in ("0.1", "0.2"):
         assert rows[f"midpoint-dt{dt}"]["status"] == "passed" and float(rows[f"midpoint-dt{dt}"]["error"]) < 1e-13
         m = rows[f"newmark-dt{dt}"]
         assert m["status"] == "failed" and "newmark does not keep the energy" in m["message"], m
     assert float(rows["explicit"]["error"]) > 0.3, rows["explicit"]
+    rod = rows["rod_midpoint-dt_rod0.001"]
+    assert rod["status"] == "passed" and float(rod["error"]) < 1e-12, rod
+    m = rows["rod_newmark-dt_rod0.001"]
+    assert m["status"] == "failed" and "newmark step 34 (t=0.034 s" in m["message"], m
+    assert float(rows["rod_explicit"]["error"]) > 0.1, rows["rod_explicit"]
