@@ -7,6 +7,9 @@ elements, and where it beats the explicit one.
   per step and per element-step, and the split between the element tangent (assembly) and the
   sparse direct solve (SuperLU, one per Newton iteration). 2-D: a 3-D block of 10^5 hexahedra is a
   3 x 10^5 dof system whose fill-in exceeds what a gathered direct solve on one rank should carry.
+* Ranks: the largest block's step on 1 and 2 ranks (mpiexec, this module's worker): the elements'
+  matrices and forces are evaluated in parallel and gathered, the assembly and the direct solve are
+  every rank's (implicit_dynamic.py): the tangent's share shrinks, the solve's does not.
 * Break-even on the L-block (cases/l_block_free_flight): the median seconds of an explicit step (at
   run.dt_scale 0.5, the stable fraction at its Poisson ratio 0.495) and of a midpoint step (0.1 s,
   during the free flight), both in this process; the implicit run wins when its step is more than
@@ -16,6 +19,7 @@ elements, and where it beats the explicit one.
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -41,15 +45,17 @@ def spinning_block(n: int, dt_ratio: float = 16.6) -> tuple[dict, float]:
     return case, dt
 
 
-def time_midpoint_step(n: int) -> dict:
-    """One midpoint step of the n x n spinning block, the tangent and the solve timed apart."""
+def time_midpoint_step(n: int, comm=None) -> dict:
+    """One midpoint step of the n x n spinning block (on comm, default this process alone), the
+    tangent (the elements' evaluation, gathering and assembly) and the solve timed apart."""
     from mpi4py import MPI
 
     from solvers.lagrange import implicit_step
     from solvers.lagrange.implicit_dynamic import MidpointSolver
 
+    comm = comm or MPI.COMM_SELF
     case, dt = spinning_block(n)
-    s = MidpointSolver(MPI.COMM_SELF, case)
+    s = MidpointSolver(comm, case)
     spent = {"tangent": 0.0, "solve": 0.0}
     real_svk, real_spsolve = implicit_step._svk, implicit_step.spla.spsolve
 
@@ -67,15 +73,16 @@ def time_midpoint_step(n: int) -> dict:
 
     implicit_step._svk, implicit_step.spla.spsolve = svk, spsolve
     try:
+        comm.Barrier()
         t0 = time.perf_counter()
         s.predict(dt)
         s.correct(step=1, time=dt)
-        wall = time.perf_counter() - t0
+        wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
     finally:
         implicit_step._svk, implicit_step.spla.spsolve = real_svk, real_spsolve
     ne = n * n
     return {"name": "midpoint_step", "metric": "time_per_element_step", "value": wall / ne * 1e6, "unit": "us",
-            "params": {"elements": ne, "dofs": 2 * (n + 1) ** 2, "dt_s": dt, "dt_over_explicit": 16.6,
+            "params": {"elements": ne, "ranks": comm.size, "dofs": 2 * (n + 1) ** 2, "dt_s": dt, "dt_over_explicit": 16.6,
                        "step_s": wall, "newton_iterations": s.iterations, "tangent_s": spent["tangent"],
                        "solve_s": spent["solve"]}}
 
@@ -130,7 +137,39 @@ def bench_implicit(out: Path, quick: bool = False) -> Path:
     results.append({"name": "midpoint_step", "metric": "loglog_slope_vs_elements",
                     "value": float(np.polyfit(np.log(ne), np.log(steps), 1)[0]), "unit": "",
                     "params": {"elements": ne.astype(int).tolist(), "target": "1 (linear); the direct solve's fill-in above"}})
+    results += on_ranks(sizes[-1])
     results.append(break_even(quick))
     doc = {"results": results, "machine": machine()}
     out.write_text(json.dumps(doc, indent=2))
     return out
+
+
+def on_ranks(n: int) -> list[dict]:
+    """The n x n block's step on 1 and 2 ranks, each in one mpiexec job (the same start-up), and the
+    2-rank speed-up of the step and of its tangent."""
+    import os
+    import subprocess
+    import sys
+
+    mpiexec = Path(sys.executable).parent / "mpiexec"
+    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
+    runs = {}
+    for ranks in (1, 2):
+        r = subprocess.run([str(mpiexec), "-n", str(ranks), sys.executable, "-m", "orchestrator.bench_implicit",
+                            "worker", str(n)], capture_output=True, text=True, env=env, check=True)
+        runs[ranks] = json.loads(r.stdout.strip().splitlines()[-1])
+    one, two = runs[1]["params"], runs[2]["params"]
+    return [runs[2], {"name": "midpoint_step", "metric": "speedup_2_ranks", "value": one["step_s"] / two["step_s"],
+                      "unit": "x", "params": {"elements": one["elements"], "step_s": [one["step_s"], two["step_s"]],
+                                              "tangent_s": [one["tangent_s"], two["tangent_s"]],
+                                              "tangent_speedup": one["tangent_s"] / two["tangent_s"],
+                                              "solve_s": [one["solve_s"], two["solve_s"]],
+                                              "note": "1 and 2 ranks, each one mpiexec job; the solve is every rank's"}}]
+
+
+if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
+    from mpi4py import MPI
+
+    row = time_midpoint_step(int(sys.argv[2]), MPI.COMM_WORLD)
+    if MPI.COMM_WORLD.rank == 0:
+        print(json.dumps(row))

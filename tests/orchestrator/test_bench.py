@@ -122,10 +122,12 @@ def test_bench_implicit_quick(tmp_path):
     assert r.returncode == 0, r.stderr
     rows = json.loads(out.read_text())["results"]
     steps = [x for x in rows if x["name"] == "midpoint_step" and x["metric"] == "time_per_element_step"]
-    assert [x["params"]["elements"] for x in steps] == [100, 1024]
+    assert [(x["params"]["elements"], x["params"]["ranks"]) for x in steps] == [(100, 1), (1024, 1), (1024, 2)]
     for x in steps:
         p = x["params"]
         assert 2 <= p["newton_iterations"] <= 6 and 0 < p["tangent_s"] + p["solve_s"] < p["step_s"]
+    (sp,) = [x for x in rows if x["metric"] == "speedup_2_ranks"]     # (the tangent's share in parallel)
+    assert sp["value"] == pytest.approx(sp["params"]["step_s"][0] / sp["params"]["step_s"][1])
     (be,) = [x for x in rows if x["metric"] == "break_even_dt_ratio"]
     p = be["params"]
     assert be["value"] == pytest.approx(p["midpoint_step_s"] / p["explicit_step_s"])
