@@ -320,6 +320,35 @@ class Coupler:
             if self.reply[r][0] != 0.0:
                 raise RuntimeError(f"{r} reported failure status {self.reply[r][0]}")
 
+    def _implicit_note(self) -> str:
+        """The progress line's note: each implicit solver's last recorded step size and Newton
+        iterations (the groups whose diagnostics have newton_iterations and time_step)."""
+        notes = []
+        for r in self.roles:
+            names = list(self.names[r])
+            if "newton_iterations" in names and "time_step" in names and self.history[r]:
+                row = self.history[r][-1]
+                note = (f"{r}: dt {row[names.index('time_step')]:.4g} s, "
+                        f"{row[names.index('newton_iterations')]:.0f} Newton iterations")
+                if "substeps" in names and row[names.index("substeps")] > 1:
+                    note += f" ({row[names.index('substeps')]:.0f} substeps)"
+                notes.append(note)
+        return "; ".join(notes)
+
+    def _implicit_summary(self, hist: dict) -> dict:
+        """summary.json's "implicit": per implicit solver (diagnostics with newton_iterations), the
+        step sizes (min, median, max, s), the Newton iterations (median, max) and the most substeps of
+        a step, over the recorded steps after the first record."""
+        out = {}
+        for r in self.roles:
+            if f"{r}.newton_iterations" not in hist or len(hist[f"{r}.newton_iterations"]) < 2:
+                continue
+            it, dt = hist[f"{r}.newton_iterations"][1:], hist[f"{r}.time_step"][1:]
+            out[r] = {"time_step": {"min": float(dt.min()), "median": float(np.median(dt)), "max": float(dt.max())},
+                      "newton_iterations": {"median": float(np.median(it)), "max": float(it.max())},
+                      "substeps_max": float(hist[f"{r}.substeps"][1:].max()) if f"{r}.substeps" in hist else 1.0}
+        return out
+
     def _record(self) -> None:
         self.history_t.append(self.t)
         self.history_step.append(self.step)
@@ -486,7 +515,7 @@ class Coupler:
             if self.t >= self.next_checkpoint_t * (1 - 1e-12) and not done:
                 self.checkpoint()
                 self.next_checkpoint_t = self._next_multiple(self.checkpoint_interval)
-            prog.update(self.t, self.step)
+            prog.update(self.t, self.step, self._implicit_note())
         prog.close()
         self._broadcast(P.command(P.CMD_STOP))
         self._receive_all()
@@ -528,6 +557,7 @@ class Coupler:
             "steps": self.step,
             "end_time": self.t,
             "dt": {"min": self.dt_min if np.isfinite(self.dt_min) else None, "max": self.dt_max},
+            "implicit": self._implicit_summary(hist),
             "ranks": {r: self.inter[r].Get_remote_size() for r in self.roles},
             "conservation": conservation,
             **({"contact": contact} if (contact := contact_balances(hist, list(self.history))) else {}),

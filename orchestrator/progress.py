@@ -48,17 +48,18 @@ class Progress:
         eta = self.eta(now, t)
         return f"step {step}, {rate:.0f} steps/s, " + (f"ETA {eta:.0f} s" if eta is not None else "ETA --")
 
-    def update(self, t: float, step: int) -> None:
+    def update(self, t: float, step: int, note: str = "") -> None:
+        """note: what the solvers add to the line (an implicit solver's step and Newton iterations)."""
         now = self.clock()
         if self.first is None:
             self.first = (now, t, step)
         if self.bar is not None:
             self.bar.update(t - self.t_last)
-            self.bar.set_postfix_str(self.status(now, t, step), refresh=False)
+            self.bar.set_postfix_str(self.status(now, t, step) + (f"; {note}" if note else ""), refresh=False)
             self.t_last = t
         elif now - self.last_line >= self.every:
             frac = t / self.end if self.end > 0 else 1.0
-            self.log(f"t = {t:.4e} s ({100 * frac:.1f}%), {self.status(now, t, step)}")
+            self.log(f"t = {t:.4e} s ({100 * frac:.1f}%), {self.status(now, t, step)}" + (f"; {note}" if note else ""))
             self.last_line = now
 
     def close(self) -> None:

@@ -34,6 +34,10 @@ def test_spinning_block_midpoint_on_two_ranks_and_from_a_checkpoint(tmp_path):
     with h5py.File(out / "diagnostics.h5") as h:
         assert h["lagrange.newton_iterations"][1:].max() <= 6
         assert np.median(h["lagrange.time_step"][1:]) == pytest.approx(8.0e-3, rel=1e-11)
+    # the summary's step sizes and Newton iterations (issue 12 item 4; the log's lines name the last)
+    imp = s["implicit"]["lagrange"]
+    assert imp["newton_iterations"]["max"] <= 6 and imp["substeps_max"] == 1.0
+    assert imp["time_step"]["median"] == pytest.approx(8.0e-3, rel=1e-11)
     two = tmp_path / "two"
     r = immerse("run", CASES / "spinning_block_midpoint", "--out", two, "--ranks", "lagrange=2")
     assert r.returncode == 0, r.stdout + r.stderr

@@ -127,3 +127,23 @@ def test_a_collapsed_time_step_stops_the_run_naming_the_solver():
     assert collapsed_step({"ale": 1.01 * DT_COLLAPSE * 2.68e-8, "lagrange": 2.0e-9}, 2.68e-8) is None
     assert collapsed_step({"ale": 0.99 * DT_COLLAPSE * 2.68e-8}, 2.68e-8) is not None
     assert collapsed_step({"ale": 1e-30}, 0.0) is None
+
+
+def test_the_progress_note_and_summary_name_an_implicit_solvers_steps_and_iterations():
+    """The coupler's log line carries each implicit group's last recorded step and Newton iterations
+    (substeps when a step was split); summary.json's "implicit" their min / median / max and median /
+    max over the records after the first."""
+    from types import SimpleNamespace
+
+    from orchestrator.coupler import Coupler
+
+    names = ["kinetic_energy", "newton_iterations", "time_step", "substeps"]
+    rows = [np.array([1.0, 0.0, 1e-3, 1.0]), np.array([1.0, 3.0, 1e-3, 1.0]), np.array([1.0, 9.0, 5e-4, 2.0])]
+    c = SimpleNamespace(roles=["lagrange", "ale"], names={"lagrange": names, "ale": ["mass"]},
+                        history={"lagrange": rows, "ale": [np.array([1.0])] * 3})
+    assert Coupler._implicit_note(c) == "lagrange: dt 0.0005 s, 9 Newton iterations (2 substeps)"
+    hist = {f"lagrange.{n}": np.array([r[i] for r in rows]) for i, n in enumerate(names)}
+    hist["ale.mass"] = np.ones(3)
+    assert Coupler._implicit_summary(c, hist) == {"lagrange": {
+        "time_step": {"min": 5e-4, "median": 7.5e-4, "max": 1e-3},
+        "newton_iterations": {"median": 6.0, "max": 9.0}, "substeps_max": 2.0}}

@@ -31,6 +31,15 @@ def test_log_lines_when_not_a_terminal():
     assert lines[1] == "t = 5.0000e-01 s (50.0%), step 200, 25 steps/s, ETA 8 s"
 
 
+def test_an_implicit_solvers_step_and_iterations_join_the_line():
+    lines = []
+    clock = FakeClock()
+    p = Progress(end_time=1.0, start_time=0.0, tty=False, log=lines.append, every_s=0.0, clock=clock)
+    clock.t += 1.0
+    p.update(0.25, 100, "lagrange: dt 0.00025 s, 4 Newton iterations")
+    assert lines == ["t = 2.5000e-01 s (25.0%), step 100, 0 steps/s, ETA --; lagrange: dt 0.00025 s, 4 Newton iterations"]
+
+
 def test_no_eta_from_a_slow_start():
     """The case of issue 7: 18 s of start-up (kernels compiled before step 1), then the run ends a
     second later. The old rate, (steps done) / (wall since start), predicted an ETA of ~1787 s; no
