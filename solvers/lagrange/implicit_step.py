@@ -66,6 +66,7 @@ class ContactState:
     p: np.ndarray
     active: np.ndarray
     force: np.ndarray
+    set_changes: int = 0     # of the step's longest solve with B frozen, its iterations that changed the active set
 
 
 # each material model's elements' midpoint force and Newton matrix: St. Venant-Kirchhoff's
@@ -193,7 +194,9 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
     it at every Newton iterate instead made the pressures of the dual pass's redundant rows jump with
     the operator's tiny changes and Newton stagnate (bars_impact_implicit: 3e-8). The geometric
     contact stiffness is left out. Returns the most iterations of one solve with B frozen (what the
-    step control weighs: each rebuild starts again near the solution).
+    step control weighs: each rebuild starts again near the solution), and in the state how many of
+    them changed the active set (the control does not count those: Abaqus's "severe discontinuity
+    iterations"; the first always does, from the last step's set).
     ``at``: where in the step B is built, x_n + at (x_{n+1} - x_n) (the midpoint scheme 1/2, Newmark's
     trapezoid 1: its contact force is the step end's); ``name`` the scheme's, in its failures."""
     from solvers.contact.kkt import solve_frictionless
@@ -205,7 +208,7 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
     history = []
     p = active = None
     keys_prev = None
-    iterations = most = 0   # all Newton iterations; the most of one solve with B frozen (returned)
+    iterations = most = most_changes = 0   # all Newton iterations; the most of one solve with B frozen
     inv_a = None
     for rebuild in range(max_rebuilds + 1):
         if inv_a is None:   # J's weight: the step matrix's inverse diagonal on the free dofs
@@ -215,7 +218,7 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
         if rebuild > 0 and np.array_equal(keys, keys_prev) and B.shape == B_prev.shape:
             if _largest(B - B_prev) <= 1e-9 * _largest(B):
                 return u, most, history, r, ContactState(B=B_prev, keys=keys_prev, p=p, active=active,
-                                                         force=B_prev.T @ p)
+                                                         force=B_prev.T @ p, set_changes=most_changes)
             # or the step already holds with the rebuilt operator: its residual at the Newton
             # tolerance's floor (the fixed point on B converges linearly, 0.2 a rebuild on the
             # rotating rod: 10 rebuilds were not enough to bring B's change to 1e-9)
@@ -230,6 +233,7 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
             p = np.zeros(B.shape[0])
             active = None if not active_keys else np.array([int(k) in active_keys for k in keys])
         same = False
+        changes = 0
         for it in range(max_iterations + 1):
             r, a, scale = rt(u)
             fc = B.T @ p
@@ -254,9 +258,12 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
             same = active is not None and np.array_equal(sol.active, active)
             u, p, active = sol.u, beta * sol.p, sol.active
             iterations += 1
-            most = max(most, it + 1)
+            changes += 0 if same else 1
+            if it + 1 >= most:
+                most, most_changes = it + 1, changes
         if final:   # (converged again with the rebuilt operator: it is the step's)
-            return u, most, history, r, ContactState(B=B, keys=keys, p=p, active=active, force=B.T @ p)
+            return u, most, history, r, ContactState(B=B, keys=keys, p=p, active=active, force=B.T @ p,
+                                                     set_changes=most_changes)
         B_prev, keys_prev = B, keys
     raise StepFailed(f"{name}: the contact operators still changed after {max_rebuilds} rebuilds at the "
                      f"converged midpoint (relative residuals {['%.1e' % h for h in history]})")

@@ -57,6 +57,17 @@ def test_the_step_follows_the_newton_iterations(monkeypatch):
     assert _step(s, 0.008) == pytest.approx(0.008, rel=1e-12)            # 4 .. 8: kept
 
 
+def test_the_contacts_active_set_changes_do_not_count_against_growing_the_step(monkeypatch):
+    """4 Newton iterations of which 1 changed the contact's active set: 3 equilibrium iterations, the
+    step grows by 1.25; 4 of which none did: kept."""
+    s = _solver(monkeypatch)
+    for changes, grown in ((1, 0.005), (0, 0.004)):
+        s._dt_stable = 0.004 / 0.9 * (1 + 1e-12)
+        s.iterations, s.equilibrium_iterations, s.substeps = 4, 4 - changes, 1
+        s._control(0.004)
+        assert s.stable_dt() * 0.9 / (1 + 1e-12) == pytest.approx(grown, rel=1e-12)
+
+
 def test_below_time_step_min_the_run_stops_by_name(monkeypatch):
     s = _solver(monkeypatch, fail_above=1e-6)        # time_step_min = 0.008 / 1024 = 7.8e-6
     with pytest.raises(SolverError, match=r"midpoint step 1 .*halved down to lagrange.time_step_min = 7.8125e-06"):
