@@ -112,7 +112,9 @@ def _finish(fig, ax, xlabel: str, ylabel: str, title: str, path: Path) -> None:
 def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: str, path: Path,
                          fit: bool) -> dict[str, float] | None:
     """Per series, ``values(row)`` of its finished runs against the resolution axis (log-log); with
-    ``fit`` the observed order of each series in its legend (returned). None without a resolution."""
+    ``fit`` the observed order of each series in its legend (returned). None without a resolution,
+    or when no run has a positive finite value to chart (a value this chart's runs do not report: an
+    empty figure says nothing)."""
     import matplotlib.pyplot as plt
 
     axis = spec["report"].get("resolution")
@@ -120,6 +122,7 @@ def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: s
         return None
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     orders = {}
+    points = 0
     for k, name in enumerate(names):
         rs = [r for r in rows if r["series"] == name and r["status"] in ("passed", "check_failed", "warned")]
         n = np.array([_float(r.get(f"level.{axis}")) for r in rs])
@@ -127,8 +130,12 @@ def _chart_vs_resolution(spec, chart, names, rows, values, ylabel: str, title: s
         p = fit_order(n, v) if fit else math.nan
         orders[name] = p
         ok = np.isfinite(n) & np.isfinite(v) & (v > 0) & (n > 0)
+        points += int(ok.sum())
         ax.loglog(n[ok], v[ok], marker=_MARKERS[k % len(_MARKERS)], linestyle="-",
                   label=f"{name} (order {p:.2f})" if p == p else name)
+    if not points:
+        plt.close(fig)
+        return None
     _finish(fig, ax, spec["report"].get("resolution_label") or f"{axis} (resolution)", ylabel,
             f"{chart}: {title}", path)
     return orders

@@ -58,3 +58,19 @@ resolution = "zones"
     (out / "figures" / "page_order.png").unlink()
     page = check_page(out / "report.html", tmp_path / "broken.png")
     assert page.broken_images and any("page_order.png" in e for e in page.console_errors), page
+
+
+def test_a_plot_no_run_has_values_for_draws_no_figure(tmp_path):
+    """A report plot of a value a chart's runs do not report (the rod's chart asked for the L-block's
+    free-flight drift) gives no figure, not an empty one; with values it is drawn."""
+    from orchestrator.campaign.report import _chart_vs_resolution
+
+    spec = {"report": {"resolution": "dt"}}
+    rows = [{"series": "a", "status": "passed", "level.dt": 0.1, "v": None},
+            {"series": "a", "status": "passed", "level.dt": 0.2, "v": None}]
+    f = tmp_path / "empty.png"
+    assert _chart_vs_resolution(spec, "c", ["a"], rows, lambda r: r["v"], "v", "v", f, fit=False) is None
+    assert not f.exists()
+    rows[0]["v"], rows[1]["v"] = 1e-3, 4e-3
+    assert _chart_vs_resolution(spec, "c", ["a"], rows, lambda r: r["v"], "v", "v", f, fit=False) is not None
+    assert f.exists()
