@@ -152,15 +152,21 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
         scale = max(float(np.linalg.norm(2.0 * m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(2.0 * m / dt ** 2) + k, scale
 
-    state = None
-    if contact is None:
-        u1, it, hist, r = _newton("midpoint", rt, u0 + dt * v0, free, tol, max_iterations)
-    else:
-        u1, it, hist, r, state = _newton_contact("midpoint", rt, np.asarray(points, float), u0, u0 + dt * v0, free,
-                                                 contact, active, tol, max_iterations, at=0.5)
-        r = r - state.force
+    u1, it, hist, r, state = _solve("midpoint", rt, points, u0, u0 + dt * v0, free, tol, max_iterations,
+                                    contact, active, at=0.5)
     v1 = np.where(free, 2.0 * (u1 - u0) / dt - v0, vb)
     return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r), contact=state)
+
+
+def _solve(name, rt, points, u0, u_start, free, tol, max_iterations, contact, active, at: float):
+    """The step's Newton iteration: plain (_newton), or with contact (_newton_contact, B built at
+    x_n + at (x_{n+1} - x_n)). Returns (u1, iterations, residuals, the residual less the contact force
+    (the reactions on the prescribed dofs), the contact state or None)."""
+    if contact is None:
+        return (*_newton(name, rt, u_start, free, tol, max_iterations), None)
+    u1, it, hist, r, state = _newton_contact(name, rt, np.asarray(points, float), u0, u_start, free, contact, active,
+                                             tol, max_iterations, at=at)
+    return u1, it, hist, r - state.force, state
 
 
 def _largest(m) -> float:
@@ -291,13 +297,8 @@ def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None
         scale = max(float(np.linalg.norm(m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(4.0 * m / dt ** 2) + 2.0 * k, scale
 
-    state = None
-    if contact is None:
-        u1, it, hist, r = _newton("newmark", rt, u0 + dt * v0, free, tol, max_iterations)
-    else:
-        u1, it, hist, r, state = _newton_contact("newmark", rt, np.asarray(points, float), u0, u0 + dt * v0, free,
-                                                 contact, active, tol, max_iterations, at=1.0)
-        r = r - state.force
+    u1, it, hist, r, state = _solve("newmark", rt, points, u0, u0 + dt * v0, free, tol, max_iterations,
+                                    contact, active, at=1.0)
     a1 = np.where(free, 4.0 * (u1 - u0 - dt * v0) / dt ** 2 - a0, 0.0)
     v1 = np.where(free, v0 + 0.5 * dt * (a0 + a1), vb)
     # the prescribed dofs' reaction over the step: the trapezoid's mean of its two ends (at t_n the
