@@ -7,9 +7,9 @@ elements, and where it beats the explicit one.
   per step and per element-step, and the split between the element tangent (assembly) and the
   sparse direct solve (SuperLU, one per Newton iteration). 2-D: a 3-D block of 10^5 hexahedra is a
   3 x 10^5 dof system whose fill-in exceeds what a gathered direct solve on one rank should carry.
-* Ranks: the largest block's step on 1 and 2 ranks (mpiexec, this module's worker): the elements'
-  matrices and forces are evaluated in parallel and gathered, the assembly and the direct solve are
-  every rank's (implicit_dynamic.py): the tangent's share shrinks, the solve's does not.
+* Ranks: the largest block's step on 1 and 2 ranks (mpiexec, this module's worker): the solves run
+  on rank 0 (the others wait), the elements are split among the ranks where that was measured to
+  pay (gathered_step.RankShare; ``elements_split``), every rank assembles.
 * Break-even on the L-block (cases/l_block_free_flight): the median seconds of an explicit step (at
   run.dt_scale 0.5, the stable fraction at its Poisson ratio 0.495) and of a midpoint step (0.1 s,
   during the free flight), both in this process; the implicit run wins when its step is more than
@@ -83,6 +83,7 @@ def time_midpoint_step(n: int, comm=None) -> dict:
     ne = n * n
     return {"name": "midpoint_step", "metric": "time_per_element_step", "value": wall / ne * 1e6, "unit": "us",
             "params": {"elements": ne, "ranks": comm.size, "dofs": 2 * (n + 1) ** 2, "dt_s": dt, "dt_over_explicit": 16.6,
+                       "elements_split": bool(s._ranks and any(v is True for v in s._ranks.split.values())),
                        "step_s": wall, "newton_iterations": s.iterations, "tangent_s": spent["tangent"],
                        "solve_s": spent["solve"]}}
 

@@ -166,6 +166,8 @@ def cases() -> dict[str, str]:
                 dim, ("ideal_gas", "ideal_gas"), q,
                 boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
     out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
+    for dim in (2, 3):   # the implicit step's element kernel (midpoint_svk_kernel.py)
+        out[f"lagrange_{dim}d_midpoint"] = _midpoint(dim)
     out["lagrange_2d_contact"] = _contact()
     out["lagrange_3d_contact"] = _contact(3)
     for dim, model in ((2, "taitwater"), (3, "idealgas")):  # the SPH group (LAMMPS)
@@ -175,6 +177,17 @@ def cases() -> dict[str, str]:
         out[f"coupled_{dim}d_mixed"] = _coupled(dim, mixed=True)
         out[f"coupled_{dim}d_still"] = _coupled(dim, still=True)  # (a body at rest: blocked.py's held path)
     return out
+
+
+def _midpoint(dim: int) -> str:
+    """A spinning elastic block by the implicit midpoint scheme."""
+    run = _RUN2 if dim == 2 else _RUN3
+    vel = '["-50.0 * y", "50.0 * x"' + (', "0.0"]' if dim == 3 else "]")
+    box = f"{{ lower = {[-0.05] * dim}, upper = {[0.05] * dim}, cells = {[2] * dim} }}"
+    return (run + '[materials.m]\nmodel = "linear_elastic"\ndensity = 1000.0\nyoungs_modulus = 1.0e6\n'
+            'poisson_ratio = 0.3\n[lagrange]\nintegrator = "midpoint"\ntime_step = 1.0e-3\n'
+            f'[[lagrange.bodies]]\nname = "block"\nmaterial = "m"\nmesh = {{ box = {box} }}\n'
+            f"initial_velocity = {vel}\n")
 
 
 def _contact(dim: int = 2) -> str:
@@ -259,9 +272,9 @@ def _step_ale(case: dict, comm, steps: int, blocked: bool) -> None:
 
 
 def _step_lagrange(case: dict, comm, steps: int) -> None:
-    from solvers.lagrange.solver import LagrangeSolver
+    from solvers.lagrange.integrators import solver_class
 
-    s = LagrangeSolver(comm, case)
+    s = solver_class(case["lagrange"].get("integrator", "explicit"))(comm, case)
     for n in range(steps):
         s.predict(0.5 * s.stable_dt())
         s.correct(None, step=n + 1, time=0.0)

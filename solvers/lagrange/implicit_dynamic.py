@@ -23,12 +23,12 @@ A step whose Newton iteration fails, or after which the energy balance is off by
 ``energy_limit`` (default 0.01 of the energy: Newmark on a large rotation), stops the run naming the
 scheme, the step and the numbers (SolverError), never NaN.
 
-Parallel: the elements' matrices and forces are evaluated in parallel (each rank a contiguous share
-of every body's elements, gathered with Allgatherv: the most expensive part of a step, 3.8 of 10.5 s
-at 10^5 quads on one rank), then a gathered solve, as the quasi-static mode: every rank holds the
-global mesh, assembles and solves the whole step (scipy's SuperLU), keeping its own nodes' and
-elements' share. The ranks agree bit for bit (an element's values are its own); the problem size is
-bounded by one rank's memory, and the solve (and the contact's) does not get faster with ranks.
+Parallel: every rank holds the global mesh; the elements' matrices and forces are evaluated in
+parallel (each rank a contiguous share of every body's elements, gathered with Allgatherv), every
+rank assembles the whole system, and the solves (SuperLU, the contact's KKT) run on rank 0 and are
+broadcast (gathered_step.RankShare); each rank keeps its own nodes' and elements' share. The ranks
+agree bit for bit; the problem size is bounded by one rank's memory, and the solves do not get
+faster with ranks.
 """
 from __future__ import annotations
 
@@ -39,7 +39,7 @@ from solvers.lagrange import discrete_gradient_nh, finite_strain, midpoint_svk
 from solvers.lagrange.boundary import BoundaryConditions
 from solvers.contact.implicit_update import remove_gap_rate, return_energy
 from solvers.lagrange.gathered_contact import GatheredContact
-from solvers.lagrange.gathered_step import GatheredStepSolver
+from solvers.lagrange.gathered_step import GatheredStepSolver, RankShare
 from solvers.lagrange.implicit_step import StepFailed, midpoint_step, newmark_step
 from solvers.lagrange.solver import LagrangeSolver, SolverError
 
@@ -71,16 +71,9 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
             mat = case["materials"][b["material"]]
             mu, lam = finite_strain.lame(mat["youngs_modulus"], mat["poisson_ratio"])
             self._blocks.append((C[self.body_of_cell == k], mu, lam, mat.get("model", "linear_elastic")))
-        # each rank's share of each body's elements: Newton's matrix and force are evaluated in
-        # parallel (a contiguous share per rank), gathered, and every rank assembles and solves the
-        # whole system (_elements)
-        self._element_shares = None
-        if self.comm.size > 1:
-            self._element_shares = []
-            for cells, *_ in self._blocks:
-                counts = np.array([len(c) for c in np.array_split(np.arange(len(cells)), self.comm.size)])
-                lo = int(counts[: self.comm.rank].sum())
-                self._element_shares.append((np.ascontiguousarray(cells[lo:lo + counts[self.comm.rank]]), counts))
+        # the ranks' share of a step (gathered_step.RankShare): the elements evaluated in parallel,
+        # the solves on rank 0
+        self._ranks = RankShare(self.comm, self._blocks, P) if self.comm.size > 1 else None
         span = float(np.max(np.ptp(P, axis=0)))
         bcs = BoundaryConditions(case.get("boundaries", []), P, tol=1e-9 * span)
         fixed, vb = bcs.prescribed_arrays(n, dim)
@@ -180,7 +173,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
             loads.update(contact=self._gcontact.dynamic_operators, active=self._active_keys)
         try:
             res = type(self).step_function(P, self._blocks, self.gmass, u0, v0, dt, fixed=self._fixed,
-                                           v_fixed=self._v_fixed, elements=self._elements_on_ranks(), **loads)
+                                           v_fixed=self._v_fixed, ranks=self._ranks, **loads)
         except StepFailed:
             if 0.5 * dt < self.time_step_min * (1.0 - 1e-12):
                 raise
@@ -207,28 +200,6 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.equilibrium_iterations = max(self.equilibrium_iterations, res.iterations - changes)
         self.substeps += 1
         return dt
-
-    def _elements_on_ranks(self):
-        """The step's element evaluation (implicit_step._svk's ``elements``): None on one rank; on N,
-        each rank evaluates its share of a body's elements and gathers the others' (Allgatherv, in
-        element order: the same arrays, bit for bit, as one rank's)."""
-        if self._element_shares is None:
-            return None
-        P = self.global_points
-        d = P.shape[1]
-
-        def elements(b, fn, u0, u1, mu, lam):
-            mine, counts = self._element_shares[b]
-            a = mine.shape[1]
-            if len(mine):
-                ke, fe = fn(P, mine, u0, u1, mu, lam)
-            else:
-                ke, fe = np.zeros((0, a * d, a * d)), np.zeros((0, a, d))
-            ke_all, fe_all = np.empty((int(counts.sum()), a * d, a * d)), np.empty((int(counts.sum()), a, d))
-            self.comm.Allgatherv(np.ascontiguousarray(ke, dtype=np.float64), [ke_all, counts * (a * d) ** 2])
-            self.comm.Allgatherv(np.ascontiguousarray(fe, dtype=np.float64), [fe_all, counts * (a * d)])
-            return ke_all, fe_all
-        return elements
 
     def _contact_update(self, c, du: np.ndarray, dt: float) -> None:
         """Steps 2 and 3 of the seed's contact update (solvers/contact/implicit_update.py) after the

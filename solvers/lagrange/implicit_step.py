@@ -75,24 +75,30 @@ class ContactState:
 ELEMENTS = {"linear_elastic": midpoint_elements, "neo_hookean": dg_elements}
 
 
-def _svk(points, blocks, u0, u1, elements=None):
+def _svk(points, blocks, u0, u1, ranks=None):
     """(K, f) summed over the bodies: blocks [(cells, mu, lambda[, model]), ...] (each body its
-    material; model a key of ELEMENTS, default linear_elastic). elements: None (every element here),
-    or elements(k, function, u0, u1, mu, lam) giving block k's (ke, fe) of all its elements in order
-    (the solver's: each rank evaluates its share of the elements and gathers the rest; an element's
-    values are its own, so the matrix is the same bit for bit)."""
+    material; model a key of ELEMENTS, default linear_elastic). ranks: None (one rank: every element
+    here), or the solver's share of the work among its ranks (gathered_step.RankShare): its
+    elements(k, function, u0, u1, mu, lam) gives block k's (ke, fe) of all its elements in order,
+    each rank evaluating its share (an element's values are its own: the matrix is the same bit for
+    bit), and its on_root(function, ...) runs a solve on one rank and hands every rank the result."""
     points = np.asarray(points)
     n, d = points.size, points.shape[1]
     k, f = sp.csr_matrix((n, n)), np.zeros(n)
     for b, (cells, mu, lam, *model) in enumerate(blocks):
         fn = ELEMENTS[model[0] if model else "linear_elastic"]
-        ke, fe = fn(points, cells, u0, u1, mu, lam) if elements is None else elements(b, fn, u0, u1, mu, lam)
+        ke, fe = fn(points, cells, u0, u1, mu, lam) if ranks is None else ranks.elements(b, fn, u0, u1, mu, lam)
         k = k + _assemble_matrix(cells, d, ke, len(points))
         f = f + _assemble_vector(cells, d, fe, len(points))
     return k, f
 
 
-def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations):
+def _on_root(ranks, fn, *args, **kw):
+    """fn(*args, **kw), on one rank of ``ranks`` and broadcast (every rank the same result) or here."""
+    return fn(*args, **kw) if ranks is None else ranks.on_root(fn, *args, **kw)
+
+
+def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations, ranks=None):
     u = u_start.copy()
     history = []
     for it in range(max_iterations + 1):
@@ -109,7 +115,7 @@ def _newton(name, residual_and_tangent, u_start, free, tol, max_iterations):
         if it == max_iterations:
             break
         du = np.zeros_like(u)
-        du[free] = spla.spsolve(sp.csc_matrix(a[free][:, free]), -r[free])
+        du[free] = _on_root(ranks, spla.spsolve, sp.csc_matrix(a[free][:, free]), -r[free])
         u = u + du
     raise StepFailed(f"{name}: Newton did not converge in {max_iterations} iterations "
                      f"(relative residuals {['%.1e' % h for h in history]})")
@@ -133,7 +139,7 @@ def _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed):
 
 def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
                   tol: float = 1e-12, max_iterations: int = 25, contact=None, active=None,
-                  elements=None) -> StepResult:
+                  ranks=None) -> StepResult:
     """The midpoint step from (u0, v0) (each (n d,)); blocks [(cells, mu, lambda), ...] the bodies;
     mass (n,) lumped; f_ext (n d,) the load at t_{n+1/2}; fixed: dofs moving at v_fixed (default 0:
     held). Returns u1, v1, Newton's history and the reactions on the fixed dofs.
@@ -142,30 +148,30 @@ def midpoint_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=Non
     (B, J, keys) (gathered_contact.py's dynamic_operators):
     then step 1 of the seed's contact update, the midpoint equations with f_c = B^T p (B at the
     midpoint), p >= 0 and the stabilized gap B x_{n+1} + J p >= 0 (_newton_contact); ``active``: a warm start
-    {key: pressure} of the rows active at the last step. elements: how the elements are evaluated
-    (_svk's; default all of them here)."""
+    {key: pressure} of the rows active at the last step. ranks: the work's share among the solver's
+    ranks (_svk's; default all of it here)."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
 
     def rt(u1):
-        k, f = _svk(points, blocks, u0, u1, elements)
+        k, f = _svk(points, blocks, u0, u1, ranks)
         r = 2.0 * m * (u1 - u0 - dt * v0) / dt ** 2 + f - fe
         scale = max(float(np.linalg.norm(2.0 * m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(2.0 * m / dt ** 2) + k, scale
 
     u1, it, hist, r, state = _solve("midpoint", rt, points, u0, u0 + dt * v0, free, tol, max_iterations,
-                                    contact, active, at=0.5)
+                                    contact, active, at=0.5, ranks=ranks)
     v1 = np.where(free, 2.0 * (u1 - u0) / dt - v0, vb)
     return StepResult(u=u1, v=v1, iterations=it, residuals=hist, reaction=np.where(free, 0.0, r), contact=state)
 
 
-def _solve(name, rt, points, u0, u_start, free, tol, max_iterations, contact, active, at: float):
+def _solve(name, rt, points, u0, u_start, free, tol, max_iterations, contact, active, at: float, ranks=None):
     """The step's Newton iteration: plain (_newton), or with contact (_newton_contact, B built at
     x_n + at (x_{n+1} - x_n)). Returns (u1, iterations, residuals, the residual less the contact force
     (the reactions on the prescribed dofs), the contact state or None)."""
     if contact is None:
-        return (*_newton(name, rt, u_start, free, tol, max_iterations), None)
+        return (*_newton(name, rt, u_start, free, tol, max_iterations, ranks), None)
     u1, it, hist, r, state = _newton_contact(name, rt, np.asarray(points, float), u0, u_start, free, contact, active,
-                                             tol, max_iterations, at=at)
+                                             tol, max_iterations, at=at, ranks=ranks)
     return u1, it, hist, r - state.force, state
 
 
@@ -176,7 +182,7 @@ def _largest(m) -> float:
 
 
 def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, tol, max_iterations, at: float,
-                    max_rebuilds: int = 30):
+                    max_rebuilds: int = 30, ranks=None):
     """Newton on the midpoint equations with frictionless contact (seed slide "Structure preserving
     time integration w/ contact", step 1): the force f_c = B^T p with B built at x_{n+1/2} (balanced
     and torque-free there: the momenta stay exact), p >= 0, and the stabilized gap at the step's END,
@@ -257,8 +263,8 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
             # the pressures to 1e-7 only and Newton stalled there
             beta = np.sqrt(float(np.median(a0[free]))) / _largest(B) if B.nnz else 1.0
             try:
-                sol = solve_frictionless(a, a @ u - r, beta * B, (beta * beta) * J, X, fixed, u, active=active,
-                                         offset=beta * np.minimum(B @ (X + u0), 0.0))
+                sol = _on_root(ranks, solve_frictionless, a, a @ u - r, beta * B, (beta * beta) * J, X, fixed, u,
+                               active=active, offset=beta * np.minimum(B @ (X + u0), 0.0))
             except RuntimeError as err:
                 raise StepFailed(f"{name}: the contact solve failed at iteration {iterations}: {err}") from None
             same = active is not None and np.array_equal(sol.active, active)
@@ -277,7 +283,7 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
 
 def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None, v_fixed=None,
                  tol: float = 1e-12, max_iterations: int = 25, f_ext0=None, contact=None, active=None,
-                 f_contact0=None, elements=None) -> StepResult:
+                 f_contact0=None, ranks=None) -> StepResult:
     """The trapezoidal (Newmark gamma 1/2, beta 1/4) step from (u0, v0); arguments as midpoint_step,
     but f_ext is the load at t_{n+1} and f_ext0 the one at t_n (default f_ext: constant).
 
@@ -287,18 +293,18 @@ def newmark_step(points, blocks, mass, u0, v0, dt: float, f_ext=None, fixed=None
     are measured against."""
     u0, v0, m, fe, free, vb = _step_arrays(points, mass, u0, v0, f_ext, fixed, v_fixed)
     fe0 = fe if f_ext0 is None else np.asarray(f_ext0, float).ravel()
-    f0 = _svk(points, blocks, u0, u0, elements)[1]
+    f0 = _svk(points, blocks, u0, u0, ranks)[1]
     fc0 = 0.0 if f_contact0 is None else np.asarray(f_contact0, float).ravel()
     a0 = np.where(free, (fe0 - f0 + fc0) / m, 0.0)
 
     def rt(u1):
-        k, f = _svk(points, blocks, u1, u1, elements)
+        k, f = _svk(points, blocks, u1, u1, ranks)
         r = 4.0 * m * (u1 - u0 - dt * v0) / dt ** 2 - m * a0 + f - fe
         scale = max(float(np.linalg.norm(m * v0 / dt)), float(np.linalg.norm(f)), float(np.linalg.norm(fe)))
         return r, sp.diags(4.0 * m / dt ** 2) + 2.0 * k, scale
 
     u1, it, hist, r, state = _solve("newmark", rt, points, u0, u0 + dt * v0, free, tol, max_iterations,
-                                    contact, active, at=1.0)
+                                    contact, active, at=1.0, ranks=ranks)
     a1 = np.where(free, 4.0 * (u1 - u0 - dt * v0) / dt ** 2 - a0, 0.0)
     v1 = np.where(free, v0 + 0.5 * dt * (a0 + a1), vb)
     # the prescribed dofs' reaction over the step: the trapezoid's mean of its two ends (at t_n the

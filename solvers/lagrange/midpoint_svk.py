@@ -27,14 +27,16 @@ dE_{n+1} = sym(F_{n+1}^T dF_{n+1}),
 
 not symmetric (F_{n+1/2} against F_{n+1}); at u_n = u_{n+1} it is half the static tangent.
 
-Vectorised numpy over elements and Gauss points; dofs interleaved as in finite_strain.py.
+Vectorised numpy over elements and Gauss points (the step's element matrices and forces: the numba
+kernel of midpoint_svk_kernel.py); dofs interleaved as in finite_strain.py.
 """
 from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
 
-from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector, kinematics
+from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector, _reference_gradients_cached, kinematics
+from solvers.lagrange.midpoint_svk_kernel import svk_midpoint_elements
 
 __all__ = ["svk_energy", "element_energies", "cauchy_stresses", "midpoint_force", "midpoint_elements", "midpoint_tangent"]
 
@@ -87,12 +89,20 @@ def _midpoint_state(points, cells, u0, u1, mu, lam):
 
 
 def midpoint_force(points, cells, u0, u1, mu: float, lam: float) -> np.ndarray:
-    """f_int^{n+1/2} (n d,) of the step from displacements u0 to u1 (each (n, d) or (n d,))."""
+    """f_int^{n+1/2} (n d,) of the step from displacements u0 to u1 (each (n, d) or (n d,)): the
+    step's own (midpoint_elements')."""
     cells = np.asarray(cells, dtype=np.int64)
-    _, fm, s, dndx, w = _midpoint_state(points, cells, u0, u1, mu, lam)
+    fe = midpoint_elements(points, cells, u0, u1, mu, lam)[1]
+    return _assemble_vector(cells, fe.shape[-1], fe, len(points))
+
+
+def numpy_elements(points, cells, u0, u1, mu: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
+    """midpoint_elements in vectorised numpy (the module docstring's formulas as they read): the
+    reference the numba kernel is tested against."""
+    cells = np.asarray(cells, dtype=np.int64)
+    f1, fm, s, dndx, w = _midpoint_state(points, cells, u0, u1, mu, lam)
     p = np.einsum("egiI,egIJ->egiJ", fm, s)
-    fe = np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
-    return _assemble_vector(cells, fm.shape[-1], fe, len(points))
+    return _element_tangents(f1, fm, s, dndx, w, mu, lam), np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
 
 
 def _element_tangents(f1, fm, s, dndx, w, mu: float, lam: float) -> np.ndarray:
@@ -121,13 +131,17 @@ def _element_tangents(f1, fm, s, dndx, w, mu: float, lam: float) -> np.ndarray:
 
 
 def midpoint_elements(points, cells, u0, u1, mu: float, lam: float) -> tuple[np.ndarray, np.ndarray]:
-    """Each element's (d f_int^{n+1/2} / d u1 (ne, a d, a d), f_int^{n+1/2} (ne, a, d)): an element's
-    values depend on its own nodes only, so any split of the cells gives them bit for bit."""
+    """Each element's (d f_int^{n+1/2} / d u1 (ne, a d, a d), f_int^{n+1/2} (ne, a, d)), by the numba
+    kernel of midpoint_svk_kernel.py (the same as numpy_elements to 8e-16):
+    an element's values depend on its own nodes only, so any split of the cells gives them bit for
+    bit."""
+    points = np.asarray(points, dtype=np.float64)
     cells = np.asarray(cells, dtype=np.int64)
-    f1, fm, s, dndx, w = _midpoint_state(points, cells, u0, u1, mu, lam)
-    ke = _element_tangents(f1, fm, s, dndx, w, mu, lam)
-    p = np.einsum("egiI,egIJ->egiJ", fm, s)
-    return ke, np.einsum("egiJ,egaJ,eg->eai", p, dndx, w)
+    dndx, w = _reference_gradients_cached(points, cells)
+    n = len(points)
+    ue0 = np.asarray(u0, dtype=np.float64).reshape(n, -1)[cells]
+    ue1 = np.asarray(u1, dtype=np.float64).reshape(n, -1)[cells]
+    return svk_midpoint_elements(ue0, ue1, np.ascontiguousarray(dndx), np.ascontiguousarray(w), float(mu), float(lam))
 
 
 def midpoint_tangent(points, cells, u0, u1, mu: float, lam: float) -> tuple[sp.csr_matrix, np.ndarray]:
