@@ -10,7 +10,25 @@ from mpi4py import MPI
 
 from solvers.lagrange.solver import LagrangeSolver
 
-__all__ = ["GatheredStepSolver", "RankShare"]
+__all__ = ["GatheredStepSolver", "RankShare", "on_root"]
+
+
+def on_root(comm, fn, *args, **kw):
+    """fn(*args, **kw) run on rank 0 of comm, its result broadcast to every rank (the others wait
+    instead of doing the same solve side by side); an exception raised there is raised on every rank
+    (none left waiting). One rank: fn here."""
+    if comm.size == 1:
+        return fn(*args, **kw)
+    out = None
+    if comm.rank == 0:
+        try:
+            out = (True, fn(*args, **kw))
+        except Exception as err:
+            out = (False, err)
+    ok, value = comm.bcast(out, root=0)
+    if not ok:
+        raise value
+    return value
 
 
 class GatheredStepSolver(LagrangeSolver):
@@ -105,13 +123,4 @@ class RankShare:
         return out
 
     def on_root(self, fn, *args, **kw):
-        out = None
-        if self.comm.rank == 0:
-            try:
-                out = (True, fn(*args, **kw))
-            except Exception as err:   # (handed to every rank, raised there: no rank left waiting)
-                out = (False, err)
-        ok, value = self.comm.bcast(out, root=0)
-        if not ok:
-            raise value
-        return value
+        return on_root(self.comm, fn, *args, **kw)

@@ -38,10 +38,12 @@ contact stiffness d(B^T p)/dx is left out, so the convergence is only linear whi
 geometry changes (quadratic where it does not, e.g. flat-on-flat: rubber_block_compression). Cases
 with only linear_elastic bodies keep the single solve on the reference configuration above.
 
-Parallel: a gathered solve. Every rank assembles and solves the whole system (scipy's SuperLU) from
-the global mesh it already holds and keeps its own nodes' and elements' share of the answer: the
-ranks agree bit for bit, nothing is communicated, and the problem size is bounded by one rank's memory
-(about 1e5 - 1e6 dofs in 2-D); more ranks make it no faster.
+Parallel: a gathered solve. Every rank assembles the whole system from the global mesh it already
+holds; the solve (scipy's SuperLU in the contact's active-set iteration) runs on rank 0 and its
+answer is broadcast (gathered_step.on_root: the ranks do not factorise side by side; a failure is
+raised on every rank); each keeps its own nodes' and elements' share: the ranks agree bit for bit,
+the problem size is bounded by one rank's memory (about 1e5 - 1e6 dofs in 2-D); more ranks make it
+no faster.
 """
 from __future__ import annotations
 
@@ -50,7 +52,7 @@ import scipy.sparse as sp
 
 from solvers.lagrange import finite_strain, small_strain
 from solvers.lagrange.boundary import BoundaryConditions
-from solvers.lagrange.gathered_step import GatheredStepSolver
+from solvers.lagrange.gathered_step import GatheredStepSolver, on_root
 from solvers.lagrange.gathered_contact import GatheredContact
 from solvers.lagrange.loads import traction_loads
 from solvers.lagrange.solver import SolverError
@@ -163,7 +165,8 @@ class QuasiStaticSolver(GatheredStepSolver):
         B, J = self._B, self._J
         # warm start: the last step's active set (the loads grow monotonically in most cases)
         try:
-            sol = solve_frictionless(self.K, F, B, J, P.ravel(), fixed, u_fixed, active=self._active)
+            sol = on_root(self.comm, solve_frictionless, self.K, F, B, J, P.ravel(), fixed, u_fixed,
+                          active=self._active)
         except RuntimeError as err:
             raise SolverError(f"quasi_static step {step} (t={time:.6g}): {err}") from None
         u = sol.u
@@ -242,7 +245,8 @@ class QuasiStaticSolver(GatheredStepSolver):
                 raise SolverError(f"quasi_static step {step} (t={time:.6g}): Newton did not converge in "
                                   f"{max_iterations} iterations; relative residuals {history}")
             try:
-                sol = solve_frictionless(kt, F - fint + kt @ u, B, J, X, fixed, u_fixed, active=active)
+                sol = on_root(self.comm, solve_frictionless, kt, F - fint + kt @ u, B, J, X, fixed, u_fixed,
+                              active=active)
             except RuntimeError as err:
                 raise SolverError(f"quasi_static step {step} (t={time:.6g}), Newton iteration {it}: {err}") from None
             same = active is not None and np.array_equal(sol.active, active)
