@@ -5,6 +5,8 @@ predictor: correct solves the step), and _global turns this rank's nodal arrays 
 every rank solves with."""
 from __future__ import annotations
 
+import time
+
 import numpy as np
 from mpi4py import MPI
 
@@ -70,7 +72,7 @@ class RankShare:
         self.comm = comm
         self.points = points
         self.cells = [cells for cells, *_ in blocks]
-        self.split: dict = {}            # (block, function) -> bool, measured at its first evaluation
+        self.split: dict = {}            # (block, function) -> "measure", then bool (class docstring)
         self.shares = []
         for cells in self.cells:
             counts = np.array([len(c) for c in np.array_split(np.arange(len(cells)), comm.size)])
@@ -86,8 +88,6 @@ class RankShare:
         return ke_all, fe_all
 
     def elements(self, b, fn, u0, u1, mu, lam):
-        import time
-
         lo, mine, counts = self.shares[b]
         split = self.split.get((b, fn))
         if split is None:                # (the first evaluation: all, building the gradients' cache)

@@ -221,12 +221,11 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         w0 = self.w_contact
         self.w_contact += float(c.force @ du)
         keys = c.keys
-        act = np.asarray(c.active, bool) if c.active is not None else np.zeros(len(keys), bool)
         n = self.n_nodes_global
         pair = keys // n
         step1 = c.p * (c.B @ du)                       # each row's work (<= 0 summed: dissipated)
         v = self.vg
-        rows = np.flatnonzero(act)
+        rows = _active_rows(c)
         update = remove_gap_rate(c.B[rows], self._inv_mass, v)
         stored = dict(self._stored)
         for q in np.unique(pair[rows]).tolist():
@@ -260,17 +259,23 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         imp = (m * dv).reshape(P.shape)
         self.impulse += imp.sum(axis=0)
         self.ang_impulse += self._cross(P + self.u.reshape(P.shape), imp).sum(axis=0)
-        # step 1's contact force: it sums to zero (the rows balance), but its moment about x_{n+1/2}
-        # is the dual pass's discretisation (nodal normals, not each row's gap direction): booked
-        fc = c.force.reshape(P.shape) * dt
+        self._book_contact_force(c, c.force, du, dt, len(rows), gross=float(np.abs(imp).sum()))
+        self.vg = v_new
+        self.contact_stored = float(sum(stored[k] for k in sorted(stored)))
+
+    def _book_contact_force(self, c, f: np.ndarray, du: np.ndarray, dt: float, active: int, gross: float = 0.0) -> None:
+        """The contact force f (n d,) acting over the step: its impulse f dt and moment about x_{n+1/2}
+        into the balances (it sums to zero, the rows balance, but its moment is the dual pass's
+        discretisation: nodal normals, not each row's gap direction); the diagnostics' active rows and
+        the force the first pair's first body takes at the step's end (c.force). gross: the step's
+        other contact impulses' size, booked with it."""
+        P = self.global_points
+        fc = f.reshape(P.shape) * dt
         self.impulse += fc.sum(axis=0)
         self.ang_impulse += self._cross(P + (self.u - 0.5 * du).reshape(P.shape), fc).sum(axis=0)
-        self.impulse_gross += float(np.abs(imp).sum()) + float(np.abs(c.force).sum()) * dt
-        self.vg = v_new
-        self.contact_active = int(len(rows))
-        self.contact_stored = float(sum(stored[k] for k in sorted(stored)))
-        f = c.force.reshape(P.shape)
-        self.contact_force = f[self.body_of_node == self._contact_body].sum(axis=0)
+        self.impulse_gross += gross + float(np.abs(f).sum()) * dt
+        self.contact_active = int(active)
+        self.contact_force = c.force.reshape(P.shape)[self.body_of_node == self._contact_body].sum(axis=0)
 
     def _control(self, smallest: float) -> None:
         """The next step from this one's Newton iterations (item 4 of issue 12): more than 8 halve it,
@@ -336,6 +341,11 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.vg = self._global(self.v).ravel()
 
 
+def _active_rows(c) -> np.ndarray:
+    """The indices of the contact state's active rows (none without an active set)."""
+    return np.flatnonzero(c.active) if c.active is not None else np.zeros(0, np.int64)
+
+
 class MidpointSolver(_ImplicitDynamicSolver):
     """The energy-momentum midpoint scheme (module docstring)."""
     scheme = "midpoint"
@@ -365,17 +375,10 @@ class NewmarkSolver(_ImplicitDynamicSolver):
         w = float(f @ du)
         self.w_contact += w
         self.w_ext += w
-        P = self.global_points
-        fc = f.reshape(P.shape) * dt
-        self.impulse += fc.sum(axis=0)
-        self.ang_impulse += self._cross(P + (self.u - 0.5 * du).reshape(P.shape), fc).sum(axis=0)
-        self.impulse_gross += float(np.abs(fc).sum())
-        act = np.asarray(c.active, bool) if c.active is not None else np.zeros(len(c.keys), bool)
-        rows = np.flatnonzero(act)
+        rows = _active_rows(c)
         self._active_keys = {int(k): float(p) for k, p in zip(c.keys[rows].tolist(), c.p[rows].tolist())}
         self._fc_end = c.force.copy()
-        self.contact_active = int(len(rows))
-        self.contact_force = c.force.reshape(P.shape)[self.body_of_node == self._contact_body].sum(axis=0)
+        self._book_contact_force(c, f, du, dt, len(rows))
 
     def _extra_state(self) -> dict:
         """The midpoint scheme's, and the last step's end contact force (the next step's a0)."""
