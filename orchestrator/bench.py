@@ -118,12 +118,18 @@ def bench_lagrange(out: Path, quick: bool = False) -> Path:
     return out
 
 
-def _two_ranks(n: int, label: str) -> float:
+def run_worker(module: str, ranks: int, *args) -> str:
+    """The last line `mpiexec -n ranks python -m module worker args...` prints (rank 0's result; one
+    thread a rank): a bench's timing on several ranks, in a job of its own."""
     mpiexec = Path(sys.executable).parent / "mpiexec"
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    r = subprocess.run([str(mpiexec), "-n", "2", sys.executable, "-m", "orchestrator.bench", "worker",
-                        str(n), label], capture_output=True, text=True, env=env, check=True)
-    return float(r.stdout.strip().splitlines()[-1])
+    r = subprocess.run([str(mpiexec), "-n", str(ranks), sys.executable, "-m", module, "worker",
+                        *(str(a) for a in args)], capture_output=True, text=True, env=env, check=True)
+    return r.stdout.strip().splitlines()[-1]
+
+
+def _two_ranks(n: int, label: str) -> float:
+    return float(run_worker("orchestrator.bench", 2, n, label))
 
 
 def _worker(n: int, label: str) -> None:

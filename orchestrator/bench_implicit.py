@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench import bench, machine
+from orchestrator.bench import bench, machine, run_worker
 
 RUBBER = {"model": "linear_elastic", "density": 1000.0, "youngs_modulus": 1.0e6, "poisson_ratio": 0.3}
 
@@ -148,24 +148,14 @@ def bench_implicit(out: Path, quick: bool = False) -> Path:
 def on_ranks(n: int) -> list[dict]:
     """The n x n block's step on 1 and 2 ranks, each in one mpiexec job (the same start-up), and the
     2-rank speed-up of the step and of its tangent."""
-    import os
-    import subprocess
-    import sys
-
-    mpiexec = Path(sys.executable).parent / "mpiexec"
-    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    runs = {}
-    for ranks in (1, 2):
-        r = subprocess.run([str(mpiexec), "-n", str(ranks), sys.executable, "-m", "orchestrator.bench_implicit",
-                            "worker", str(n)], capture_output=True, text=True, env=env, check=True)
-        runs[ranks] = json.loads(r.stdout.strip().splitlines()[-1])
+    runs = {ranks: json.loads(run_worker("orchestrator.bench_implicit", ranks, n)) for ranks in (1, 2)}
     one, two = runs[1]["params"], runs[2]["params"]
     return [runs[2], {"name": "midpoint_step", "metric": "speedup_2_ranks", "value": one["step_s"] / two["step_s"],
                       "unit": "x", "params": {"elements": one["elements"], "step_s": [one["step_s"], two["step_s"]],
                                               "tangent_s": [one["tangent_s"], two["tangent_s"]],
                                               "tangent_speedup": one["tangent_s"] / two["tangent_s"],
                                               "solve_s": [one["solve_s"], two["solve_s"]],
-                                              "note": "1 and 2 ranks, each one mpiexec job; the solve is every rank's"}}]
+                                              "note": "1 and 2 ranks, each one mpiexec job; the solves are rank 0's"}}]
 
 
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:

@@ -515,7 +515,7 @@ class Coupler:
             if self.t >= self.next_checkpoint_t * (1 - 1e-12) and not done:
                 self.checkpoint()
                 self.next_checkpoint_t = self._next_multiple(self.checkpoint_interval)
-            prog.update(self.t, self.step, self._implicit_note())
+            prog.update(self.t, self.step, self._implicit_note)
         prog.close()
         self._broadcast(P.command(P.CMD_STOP))
         self._receive_all()

@@ -14,6 +14,12 @@ import time as _time
 ETA_AFTER_S = 3.0  # seconds of stepping before the rate is trusted for an ETA
 
 
+def _suffix(note) -> str:
+    """"; note" (note a string or a function giving one), or nothing."""
+    text = note() if callable(note) else note
+    return f"; {text}" if text else ""
+
+
 class Progress:
     def __init__(self, end_time: float, start_time: float, tty: bool, log, every_s: float = 10.0,
                  eta_after_s: float = ETA_AFTER_S, clock=_time.perf_counter):
@@ -48,18 +54,19 @@ class Progress:
         eta = self.eta(now, t)
         return f"step {step}, {rate:.0f} steps/s, " + (f"ETA {eta:.0f} s" if eta is not None else "ETA --")
 
-    def update(self, t: float, step: int, note: str = "") -> None:
-        """note: what the solvers add to the line (an implicit solver's step and Newton iterations)."""
+    def update(self, t: float, step: int, note=None) -> None:
+        """note: what the solvers add to the line (an implicit solver's step and Newton iterations): a
+        string, or a function giving it, called only when a line is written (not every step)."""
         now = self.clock()
         if self.first is None:
             self.first = (now, t, step)
         if self.bar is not None:
             self.bar.update(t - self.t_last)
-            self.bar.set_postfix_str(self.status(now, t, step) + (f"; {note}" if note else ""), refresh=False)
+            self.bar.set_postfix_str(self.status(now, t, step) + _suffix(note), refresh=False)
             self.t_last = t
         elif now - self.last_line >= self.every:
             frac = t / self.end if self.end > 0 else 1.0
-            self.log(f"t = {t:.4e} s ({100 * frac:.1f}%), {self.status(now, t, step)}" + (f"; {note}" if note else ""))
+            self.log(f"t = {t:.4e} s ({100 * frac:.1f}%), {self.status(now, t, step)}" + _suffix(note))
             self.last_line = now
 
     def close(self) -> None:

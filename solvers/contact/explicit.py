@@ -24,7 +24,9 @@ within one step, such a row's impulse did positive work: the spinning rod of
 cases/rotating_rod_wall striking its walls, explicit with the dual pass, gained 10.7 J of its 52.7
 over 0.4 s (one strike 17 J); held, the contact takes 11.2 J (each strike stops its nodes) and no
 node is behind a wall (LS-DYNA's "initial penetrations ignored" holds them likewise). For a
-row resting in contact the floor is 0 (its offset made up), so nothing sinks step by step. Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
+row resting in contact the floor is 0 (its offset made up), so nothing sinks step by step.
+
+Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
 inertia over the stable step dt_s, J_dyn = alpha * median(diag(dt_s^2 B M^-1 B^T)) / median(diag(J_1))
 * J_1, with J_1 the operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for
 the inertia). dt_s, not the step's own dt: a step shortened to land on an output time keeps J (see

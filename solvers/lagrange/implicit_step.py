@@ -227,6 +227,11 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
             a0 = rt(u)[1].diagonal()
             inv_a = np.where(free & (a0 > 0), 1.0 / np.where(a0 > 0, a0, 1.0), 0.0)
         B, J, keys = contact((X + u0 + at * (u - u0)).reshape(shape), inv_a)
+        floor = np.minimum(B @ (X + u0), 0.0)   # the gap's floor with this B (held where a row starts in)
+        # the saddle point system scaled (rows beta B, pressures p / beta, J beta^2) so that beta B is
+        # of the size of sqrt(A): unscaled (steel: A ~ 1e11, B ~ 1e-3, J ~ 1e-17) its LU gave the
+        # pressures to 1e-7 only and Newton stalled there
+        beta = np.sqrt(float(np.median(a0[free]))) / _largest(B) if B.nnz else 1.0
         if rebuild > 0 and np.array_equal(keys, keys_prev) and B.shape == B_prev.shape:
             if _largest(B - B_prev) <= 1e-9 * _largest(B):
                 return u, most, history, r, ContactState(B=B_prev, keys=keys_prev, p=p, active=active,
@@ -236,7 +241,6 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
             # rotating rod: 10 rebuilds were not enough to bring B's change to 1e-9)
             fc = B.T @ p
             res = float(np.linalg.norm((r - fc)[free])) / max(scale, float(np.linalg.norm(fc)), 1e-300)
-            floor = np.minimum(B @ (X + u0), 0.0)
             final = res <= 1e3 * tol and np.all(B @ (X + u) + J @ p - floor
                                                 >= -1e-9 * _largest(B) * float(np.abs(X + u).max()))
         else:
@@ -258,13 +262,9 @@ def _newton_contact(name, rt, points, u0, u_start, free, contact, active_keys, t
             if it == max_iterations:
                 raise StepFailed(f"{name}: Newton with contact did not converge in {max_iterations} iterations "
                                  f"(relative residuals {['%.1e' % h for h in history]})")
-            # the saddle point system scaled (rows beta B, pressures p / beta, J beta^2) so that beta B
-            # is of the size of sqrt(A): unscaled (steel: A ~ 1e11, B ~ 1e-3, J ~ 1e-17) its LU gave
-            # the pressures to 1e-7 only and Newton stalled there
-            beta = np.sqrt(float(np.median(a0[free]))) / _largest(B) if B.nnz else 1.0
             try:
                 sol = _on_root(ranks, solve_frictionless, a, a @ u - r, beta * B, (beta * beta) * J, X, fixed, u,
-                               active=active, offset=beta * np.minimum(B @ (X + u0), 0.0))
+                               active=active, offset=beta * floor)
             except RuntimeError as err:
                 raise StepFailed(f"{name}: the contact solve failed at iteration {iterations}: {err}") from None
             same = active is not None and np.array_equal(sol.active, active)

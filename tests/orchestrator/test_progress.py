@@ -38,6 +38,13 @@ def test_an_implicit_solvers_step_and_iterations_join_the_line():
     clock.t += 1.0
     p.update(0.25, 100, "lagrange: dt 0.00025 s, 4 Newton iterations")
     assert lines == ["t = 2.5000e-01 s (25.0%), step 100, 0 steps/s, ETA --; lagrange: dt 0.00025 s, 4 Newton iterations"]
+    # a function is asked only when a line is written
+    asked = []
+    p.every = 10.0
+    p.update(0.3, 120, lambda: asked.append(1) or "x")
+    clock.t += 11.0
+    p.update(0.35, 140, lambda: asked.append(1) or "lagrange: dt 0.0005 s, 3 Newton iterations")
+    assert len(asked) == 1 and lines[-1].endswith("; lagrange: dt 0.0005 s, 3 Newton iterations")
 
 
 def test_no_eta_from_a_slow_start():
