@@ -45,6 +45,12 @@ class SolverAdapter(ABC):
     def remap(self, fractions: np.ndarray | None = None) -> None:
         return None
 
+    def central_difference(self) -> bool:
+        """Whether the solver steps by explicit central differences (leapfrog, velocity Verlet): the
+        coupler's step control then keeps the step from following a jittering stable step
+        (orchestrator/step_control.py). An implicit or quasi-static solver says False."""
+        return True
+
     def close(self) -> None:
         """Release what the solver holds (e.g. a LAMMPS instance) while MPI is still up."""
         return None

@@ -32,6 +32,12 @@ class LagrangeAdapter(SolverAdapter):
     def stable_dt(self) -> float:
         return self.solver.stable_dt()
 
+    def central_difference(self) -> bool:
+        from solvers.lagrange.integrators import INTEGRATORS
+
+        it = INTEGRATORS[self.case["lagrange"].get("integrator", "explicit")]
+        return it.dynamic and not it.implicit
+
     def predict(self, dt: float, step: int, time: float) -> None:
         self._step, self._time = step, time
         self.solver.predict(dt)

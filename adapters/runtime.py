@@ -102,8 +102,9 @@ def serve(adapter_cls, argv=None) -> None:
                 reply[P.REPLY_HEAD:] = [diag[n] for n in names]
             ic.Send(reply, dest=0, tag=7)
 
-    if rank == 0:  # once, at start-up: the names of the diagnostics (pickled; not a hot path)
-        ic.send(names, dest=0, tag=6)
+    if rank == 0:  # once, at start-up: the names of the diagnostics and whether the solver steps by
+        # central differences (pickled; not a hot path)
+        ic.send((names, adapter.central_difference()), dest=0, tag=6)
     answer(True)
     cmd = np.empty(P.CMD_LEN)
     work_s = 0.0  # this rank's time in the steps' own work (the waits for the coupler excluded)

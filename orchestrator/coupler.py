@@ -1,10 +1,12 @@
 """The coupler: rank 0 of the job, owner of the time loop.
 
-Per step it takes the smallest stable step of the solver groups (times dt_scale, clipped to land
-exactly on every output time k * output_interval, every checkpoint time and end_time), commands
-every group to advance, and collects their next stable step and diagnostics.
-It decides when to write output (then appends to the XDMF/HDF5 index) and checkpoints, keeps the
-diagnostics history and, at the end, writes summary.json with the case's own check.
+Per step it takes the smallest stable step of the solver groups times dt_scale, through the step
+control (orchestrator/step_control.py: a fall followed at once, a rise only once it held, the end time
+landed on exactly; output and checkpoint times never change a step), commands every group to advance,
+and collects their next stable step and diagnostics.
+It writes an output (then appends to the XDMF/HDF5 index) at the first step that reaches each output
+time, stamped with that step's time, and checkpoints likewise; keeps the diagnostics history and, at
+the end, writes summary.json with the case's own check.
 Constraint coupling between groups (Lagrange multipliers) slots in between predict and correct.
 """
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 from adapters import protocol as P
 from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
 from orchestrator.restart import check_restart
+from orchestrator.step_control import StepControl, next_time, reached
 
 COUPLING = "coupling"  # the coupler's own diagnostics in the history (coupled runs)
 
@@ -123,7 +126,8 @@ class Coupler:
         self.coupling = None
         if case.get("coupling"):
             self._start_coupling()
-        self.names = {r: P.recv_object(self.inter[r], 0, 6) for r in self.roles}
+        started = {r: P.recv_object(self.inter[r], 0, 6) for r in self.roles}
+        self.names = {r: names for r, (names, _) in started.items()}
         self.reply = {r: np.zeros(P.REPLY_HEAD + len(self.names[r])) for r in self.roles}
         self.history_t: list[float] = []
         self.history_step: list[int] = []
@@ -134,9 +138,13 @@ class Coupler:
         self.t = 0.0
         self.step = 0
         self.output_s = 0.0  # the time loop's share spent writing outputs and checkpoints (summary)
-        self.out_index = 0  # number of the next output step's files (not a time: see _next_multiple)
+        self.out_index = 0  # number of the next output step's files (not a time: see step_control.next_time)
         self.dt_min = np.inf
         self.dt_max = 0.0
+        # a jittering stable step destabilises central differences, not an implicit step: the step
+        # control filters the rises only when a group steps by central differences
+        self.clock = (StepControl(self.end_time) if any(cd for _, cd in started.values())
+                      else StepControl(self.end_time, window=1, growth=np.inf))
         self._receive_all()
         self._record()
         if restart:
@@ -404,6 +412,7 @@ class Coupler:
                 h.create_dataset(f"history/{COUPLING}", data=np.array(self.history[COUPLING]))
                 for k, a in self.coupling.state_arrays().items():
                     h.create_dataset(f"coupling/{k}", data=a)
+            h.create_dataset("step_control", data=self.clock.state())
             h.create_dataset("history/t", data=np.array(self.history_t))
             h.create_dataset("history/step", data=np.array(self.history_step))
         os.replace(tmp, path)
@@ -428,6 +437,7 @@ class Coupler:
             self.out_index = int(h.attrs["out_index"])
             self.dt_min = float(h.attrs["dt_min"])
             self.dt_max = float(h.attrs["dt_max"])
+            self.clock.load(h["step_control"][...])
             self.history_t = list(h["history/t"][...])
             self.history_step = [int(s) for s in h["history/step"][...]]
             for r in self.roles:
@@ -439,27 +449,6 @@ class Coupler:
         self.log(f"restarted from {path.name}: step {self.step}, t = {self.t:.6e} s")
 
     # ---- the time loop ---------------------------------------------------------------------------
-    def _next_multiple(self, interval: float | None) -> float:
-        """The first multiple k * interval after the current time (inf without an interval). Derived
-        from t, not counted: a restart with another output or checkpoint interval continues on the
-        new interval's times instead of catching up on every step. A time within round-off (1e-12
-        relative) of t counts as reached: the step that landed on it was clipped there exactly."""
-        if not interval:
-            return np.inf
-        k = np.floor(self.t / interval * (1 + 1e-12)) + 1.0
-        return float(k * interval)
-
-    def _next_target(self) -> float:
-        """The next time the run must land on exactly: the end, the next output time or the next
-        checkpoint time. Times within round-off of the end are not targets of their own: 20 * 4e-6
-        is one ulp below 8e-5, and a step to it would leave a 1e-20 s sliver."""
-        end = self.end_time
-        target = end
-        for tk in (self.next_output_t, self.next_checkpoint_t):
-            if tk < end * (1 - 1e-12):
-                target = min(target, tk)
-        return target
-
     def run(self) -> dict:
         from orchestrator.progress import Progress
 
@@ -471,27 +460,19 @@ class Coupler:
                      "stable (Courant) limit (a stability study); a failure is reported as that")
         if self.out_index == 0:
             self.write_output()
-        self.next_output_t = self._next_multiple(self.output_interval)
-        self.next_checkpoint_t = self._next_multiple(self.checkpoint_interval)
+        self.next_output_t = next_time(self.t, self.output_interval)
+        self.next_checkpoint_t = next_time(self.t, self.checkpoint_interval)
         prog = Progress(self.end_time, self.t, bool(os.environ.get("IMMERSE_TTY")), self.log)
         done = self.t >= self.end_time
         while not done and self.step < self.max_steps:
             stable = min(self.reply[r][1] for r in self.roles)
-            dt = self.dt_scale * stable
-            if not np.isfinite(dt) or dt <= 0.0:
-                raise RuntimeError(f"stable time step is {dt} at step {self.step}, t={self.t:.6g} s")
+            if not np.isfinite(stable) or stable <= 0.0:
+                raise RuntimeError(f"stable time step is {stable} at step {self.step}, t={self.t:.6g} s")
             why = collapsed_step({r: self.reply[r][1] for r in self.roles}, self.dt_max)
             if why:
                 raise RuntimeError(f"time step collapsed at step {self.step}, t = {self.t:.6g} s: {why}")
-            # clip the step to land exactly on the end, output and checkpoint times (never stretch
-            # it: the stable step is a limit), so that profiles are written at the stated times
-            target = self._next_target()
-            clipped = self.t + dt >= target * (1 - 1e-12)
-            if clipped:
-                dt, t_new = target - self.t, target
-            else:
-                t_new = self.t + dt
-            done = t_new >= self.end_time
+            # the step control (step_control.py): outputs and checkpoints never change a step
+            dt, t_new, done = self.clock.next(self.t, self.dt_scale * stable)
             self.step += 1
             diag = done or self.step % self.diag_every == 0
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
@@ -499,7 +480,7 @@ class Coupler:
                 self._coupled_step(dt)
             self._receive_all()
             self.t = t_new
-            if not clipped:  # dt statistics of the steps the stability limit set
+            if not done:  # dt statistics of the steps the control chose (not the landing on the end)
                 self.dt_min = min(self.dt_min, dt)
                 self.dt_max = max(self.dt_max, dt)
             if self.first_step_s is None:
@@ -509,12 +490,12 @@ class Coupler:
                              f"(imports, set-up, kernels loaded or compiled)")
             if diag:
                 self._record()
-            if self.t >= self.next_output_t * (1 - 1e-12) or done:
+            if reached(self.t, self.next_output_t) or done:
                 self.write_output()
-                self.next_output_t = self._next_multiple(self.output_interval)
-            if self.t >= self.next_checkpoint_t * (1 - 1e-12) and not done:
+                self.next_output_t = next_time(self.t, self.output_interval)
+            if reached(self.t, self.next_checkpoint_t) and not done:
                 self.checkpoint()
-                self.next_checkpoint_t = self._next_multiple(self.checkpoint_interval)
+                self.next_checkpoint_t = next_time(self.t, self.checkpoint_interval)
             prog.update(self.t, self.step, self._implicit_note)
         prog.close()
         self._broadcast(P.command(P.CMD_STOP))
