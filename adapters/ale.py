@@ -21,6 +21,9 @@ class AleAdapter(SolverAdapter):
         self.solver = AleSolver(self.comm, self.case["ale"], bodies=self.bodies)
         self._mesh_written = False
 
+    def local_limiter(self) -> dict | None:
+        return self.solver.local_limiter()
+
     # ---- the embedded-mesh coupling (background side; the runtime moves the buffers) --------------
     def unpack_geometry(self, buf):
         from solvers.ale.coupled import BodyGeometry

@@ -8,7 +8,8 @@ Hook order, per coupled step n -> n+1 (driven by the coupler, see orchestrator.c
     remap(fractions)   background only: advection restricted by the bodies' volume fractions
     stable_dt()        the solver's own explicit limit for the next step (collective, same on all ranks)
     diagnostics()      mass, momentum, energies (collective; meaningful on the group root)
-and when the coupler asks: write(index, step, time), checkpoint(path); close() after the last command.
+and when the coupler asks: write(index, step, time), checkpoint(path), step_limiter() (what sets the
+stable step: local_limiter() of every rank); close() after the last command.
 Every hook is collective over the solver group's communicator `self.comm`.
 """
 from __future__ import annotations
@@ -44,6 +45,25 @@ class SolverAdapter(ABC):
 
     def remap(self, fractions: np.ndarray | None = None) -> None:
         return None
+
+    def local_limiter(self) -> dict | None:
+        """What sets this rank's part of the stable step (collective over the group: called on every
+        rank), or None: {"dt": its step (s), "kind": "sound speed" | "cut zone" | "particle" | ...,
+        "what": "element 12 of body 'block'" | "zone (38, 30)" | "particle 512", "at": [x, y(, z)],
+        "detail": optional text}."""
+        return None
+
+    def step_limiter(self) -> dict | None:
+        """What sets the group's stable step, on the group root (collective; rare: the coupler asks
+        for it for a progress line or a message): the rank candidate with the smallest step."""
+        local = self.local_limiter()
+        if self.comm.size == 1:
+            return local
+        every = self.comm.gather(local, root=0)
+        if self.comm.rank != 0:
+            return None
+        found = [c for c in every if c]
+        return min(found, key=lambda c: c["dt"]) if found else None
 
     def central_difference(self) -> bool:
         """Whether the solver steps by explicit central differences (leapfrog, velocity Verlet): the

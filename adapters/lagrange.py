@@ -32,6 +32,10 @@ class LagrangeAdapter(SolverAdapter):
     def stable_dt(self) -> float:
         return self.solver.stable_dt()
 
+    def local_limiter(self) -> dict | None:
+        f = getattr(self.solver, "local_limiter", None)
+        return f() if f is not None else None
+
     def central_difference(self) -> bool:
         from solvers.lagrange.integrators import INTEGRATORS
 

@@ -20,6 +20,7 @@ COUPLER = "coupler"
 
 # Commands the coupler broadcasts to a solver group: float64[CMD_LEN]
 CMD_STEP, CMD_WRITE, CMD_CHECKPOINT, CMD_STOP = 1.0, 2.0, 3.0, 4.0
+CMD_LIMITER = 5.0  # no step: the group root sends what sets its stable step (TAG_LIMITER), then replies
 CMD_LEN = 6  # [command, dt, step (after the step), time (after the step), output index, spare]
 
 # Reply of a group root to the coupler after every command: float64[REPLY_HEAD + n_diagnostics]
@@ -217,6 +218,7 @@ TAG_IMPULSE = 22    # coupler -> foreground: surface impulses
 TAG_STATE = 23      # foreground -> coupler, after correct: x^{n+1}, v^{n+1/2} of the surface nodes, then a flag (1: a new surface follows, TAG_SURFACE)
 TAG_CORRECT = 24    # coupler -> background: node impulses, the surface's v^{n+1/2} and mean velocity
 TAG_TIMING = 30     # solver -> coupler, after its stop reply: [seconds in its own step work, seconds in its engine (LAMMPS runs) or nan]
+TAG_LIMITER = 31    # solver -> coupler, on CMD_LIMITER: its step_limiter() (pickled dict or None; rare, not a hot path)
 
 
 SPIN_ENV = "IMMERSE_WAIT_SPIN_S"

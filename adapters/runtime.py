@@ -162,6 +162,11 @@ def serve(adapter_cls, argv=None) -> None:
         elif c == P.CMD_WRITE:
             adapter.write(index, step, time)
             answer(False)
+        elif c == P.CMD_LIMITER:   # what sets the stable step (a progress line, a message)
+            lim = adapter.step_limiter()
+            if rank == 0:
+                ic.send(lim, dest=0, tag=P.TAG_LIMITER)
+            answer(False)
         elif c == P.CMD_CHECKPOINT:
             adapter.checkpoint(out / "checkpoints" / f"step_{step:08d}" / f"{args.role}.h5")
             answer(False)

@@ -232,9 +232,12 @@ class SphAdapter(SolverAdapter):
                 # of cases/embedded_sph_piston, a body pushed from rest, 0.43 (0.20 shifted; what
                 # is left: vest carries half the step's impulse, see correct()).
                 esph = esph - (0.5 * (self._dt or 0.0)) * a["desph"]
-            speed, acc, sums = particle_sums(a["x"], a["v"], a["f"], a["rho"], esph, a["type"].astype(np.int64),
-                                             self._mass[i], ~self._fixed[i], self._c0, self._rho0,
-                                             MODEL_CODES[self.model], self.gravity, self.dim)
+            speed, acc, sums, i_speed, i_acc = particle_sums(
+                a["x"], a["v"], a["f"], a["rho"], esph, a["type"].astype(np.int64), self._mass[i], ~self._fixed[i],
+                self._c0, self._rho0, MODEL_CODES[self.model], self.gravity, self.dim)
+            # this rank's fastest and most accelerated particles (id, position): local_limiter()
+            self._extremes = {k: (float(val), int(a["id"][j]), a["x"][j, : self.dim].tolist())
+                              for k, val, j in (("speed", speed, i_speed), ("acceleration", acc, i_acc)) if j >= 0}
             both = np.array([speed, acc])
             self.comm.Allreduce(MPI.IN_PLACE, both, op=MPI.MAX)
             self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
@@ -255,6 +258,28 @@ class SphAdapter(SolverAdapter):
         if not np.isfinite(dt):
             raise RuntimeError("sph: no particle moves and no sound speed: no stable step (every body fixed?)")
         return float(dt)
+
+    def local_limiter(self) -> dict | None:
+        """This rank's candidate for what sets the group's stable step (_limits): its fastest particle
+        (cfl h / (c + |v|)) or its most accelerated one (cfl sqrt(h / |a|)); LAMMPS's own tlsph limit,
+        when it is the smallest, without a particle."""
+        speed, acc, _ = self._sums()
+        h, cfl = self.sph["smoothing_length"], self.sph["cfl"]
+        best = None
+        for k, (val, pid, x) in getattr(self, "_extremes", {}).items():
+            if not val > 0.0:
+                continue
+            dt = self.substeps * cfl * (h / val if k == "speed" else np.sqrt(h / val))
+            if best is None or dt < best["dt"]:
+                best = {"dt": float(dt), "kind": "signal speed" if k == "speed" else "acceleration",
+                        "what": f"particle {pid}", "at": x,
+                        "detail": (f"c + |v| = {val:.4g} m/s" if k == "speed" else f"|a| = {val:.4g} m/s^2")}
+        if self.model == "tlsph":
+            dt = self.substeps * cfl * self._tlsph_dt()
+            if best is None or dt < best["dt"]:
+                best = {"dt": float(dt), "kind": "tlsph", "what": "a particle of the solid",
+                        "detail": "LAMMPS's limit 2 radius / P-wave speed"}
+        return best
 
     def _tlsph_dt(self) -> float:
         """LAMMPS's own tlsph limit: min over the particles of 2 radius / c_eff with c_eff the

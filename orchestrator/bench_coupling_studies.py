@@ -131,7 +131,7 @@ def _replace(text: str, old: str, new: str, case: str) -> str:
 
 def _run(text: str, where: Path) -> dict:
     """Write ``text`` as a case in ``where``, run it through the launcher (as `immerse run`); the
-    exit code, the launcher's wall time, the summary (None if the run stopped) and the failure
+    exit code, the launcher's wall time, the summary (a stopped run's record: status, where it stopped) and the failure
     line run_job wrote to the log (None if it succeeded)."""
     from orchestrator.case import load_case, ranks_for
     from orchestrator.launch import run_job

@@ -41,7 +41,7 @@ Normalised layout (all keys always present)::
 
     {"name": str, "case_dir": Path,
      "run": {dimension, end_time, dt_scale, output_interval, checkpoint_interval (None if
-             unset), max_steps, diagnostics_every},
+             unset), max_steps, diagnostics_every, dt_min (None if unset)},
      "ranks": {role: int}  (1 for every used solver unless given),
      "check": None | {kind, params, metrics: {name: {reference, tolerance}}},
      ... and the registered tables: "materials", "boundaries" (always), "lagrange", "ale" (when
@@ -463,6 +463,7 @@ def _normalise(data: dict, case_dir: Path) -> dict:
         "max_steps": int(run_in.get("max_steps", RUN_DEFAULTS["max_steps"])),
         "diagnostics_every": int(run_in.get("diagnostics_every",
                                             RUN_DEFAULTS["diagnostics_every"])),
+        "dt_min": None if run_in.get("dt_min") is None else _f(run_in["dt_min"]),
     }
 
     check = None
@@ -501,6 +502,9 @@ def _check(case: dict, data: dict, schema: bool = True) -> None:
     run = case["run"]
 
     # [run]
+    if run["dt_min"] is not None and run["dt_min"] >= run["end_time"]:
+        raise CaseError("run.dt_min", data["run"]["dt_min"],
+                        f"must be < run.end_time = {_fmt_num(data['run']['end_time'])} (s)")
     if run["output_interval"] > run["end_time"]:
         raise CaseError("run.output_interval", data["run"]["output_interval"],
                         f"must be <= run.end_time = {_fmt_num(data['run']['end_time'])} (s)")

@@ -50,6 +50,8 @@ RUN = table(
         "checkpoint_interval": number("s", exclusiveMinimum=0),
         "max_steps": integer("steps", minimum=1),
         "diagnostics_every": integer("steps", minimum=1),
+        # a step below this stops the run by name (its limiter named; LS-DYNA's DTMIN); unset: none
+        "dt_min": number("s", exclusiveMinimum=0),
     },
     required=("dimension", "end_time"),
 )

@@ -52,10 +52,11 @@ def _add_machine_flags(p) -> None:
 
 def _admit(args, case: dict, ranks: dict, overridden) -> int:
     """What check and run verify after the case file: rank counts and memory against the machine of
-    the flags, then every expression evaluated on the case's own points; the memory estimate.
-    Raises CaseError."""
+    the flags, then every expression evaluated on the case's own points, then the coupled bodies'
+    thickness in zones; the memory estimate. Raises CaseError."""
     from adapters.protocol import SPIN_ENV, spin_s_from
     from orchestrator.case import CaseError
+    from orchestrator.coupling.thickness import check_thin_bodies
     from orchestrator.expressions import check_expressions
     from orchestrator.resources import check_resources, this_machine
 
@@ -64,6 +65,7 @@ def _admit(args, case: dict, ranks: dict, overridden) -> int:
     machine = this_machine(args.nodes, args.memory_per_node, args.oversubscribe)
     estimate = check_resources(case, ranks, machine, overridden)
     check_expressions(case)
+    check_thin_bodies(case)
     return estimate
 
 

@@ -12,7 +12,6 @@ Constraint coupling between groups (Lagrange multipliers) slots in between predi
 from __future__ import annotations
 
 import functools
-import json
 import os
 import signal
 import socket
@@ -26,6 +25,7 @@ import numpy as np
 from adapters import protocol as P
 from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
 from orchestrator.restart import check_restart
+from orchestrator.run_record import conservation_residuals, contact_balances, write_diagnostics, write_summary
 from orchestrator.step_control import StepControl, next_time, reached
 
 COUPLING = "coupling"  # the coupler's own diagnostics in the history (coupled runs)
@@ -44,54 +44,6 @@ def process_age_s() -> float | None:
         return None
 
 
-def conservation_residuals(hist: dict[str, np.ndarray], roles) -> dict[str, float]:
-    """summary.json's `conservation`: for each balanced quantity Q (mass, energy, momentum, ...)
-    `Q_rel` = the largest |Q_balance_rel| over the run and over the solver roles, where every solver
-    defines Q_balance_rel = (Q(t) - Q(0) - what crossed the boundary up to t) / scale (the solver's
-    own diagnostic of that name, the same figure the case checks report as `Q_balance_rel`).
-    A solver whose mass cannot cross its boundary (Lagrangian bodies) reports no mass balance:
-    its residual is then (M(t) - M(0)) / M(0) from its mass history: the same definition with
-    nothing crossing."""
-    rel: dict[str, float] = {}
-
-    def put(name: str, a) -> None:
-        rel[name] = max(rel.get(name, 0.0), float(np.max(np.abs(a))))
-
-    for r in roles:
-        prefix = f"{r}."
-        for k, a in hist.items():
-            if k.startswith(prefix) and k.endswith("_balance_rel") and len(a):
-                put(k[len(prefix):].replace("_balance_rel", "_rel"), a)
-        m = hist.get(f"{r}.mass")
-        if f"{r}.mass_balance_rel" not in hist and m is not None and len(m) and m[0] != 0:
-            put("mass_rel", m / m[0] - 1.0)
-    return rel
-
-
-def contact_balances(hist: dict[str, np.ndarray], roles) -> dict[str, dict[str, float]]:
-    """summary.json's `contact`, per solver role that has contact: the work the contact did on the
-    bodies over the run (`work`, J; <= 0: the energy it took, booked in the energy balance), that work
-    over the role's initial kinetic energy (`dissipated_rel`, when it had any), the largest contact
-    force (`force_max`, the norm of the contact_force components: N, per unit thickness in 2-D) and
-    the most multipliers active at once (`active_max`)."""
-    out: dict[str, dict[str, float]] = {}
-    for r in roles:
-        comps = [hist[f"{r}.contact_force_{c}"] for c in "xyz" if f"{r}.contact_force_{c}" in hist]
-        if not comps or not len(comps[0]):
-            continue
-        d = {"force_max": float(np.sqrt(sum(a**2 for a in comps)).max())}
-        if f"{r}.contact_active" in hist:
-            d["active_max"] = float(hist[f"{r}.contact_active"].max())
-        w = hist.get(f"{r}.contact_work")
-        if w is not None and len(w):
-            d["work"] = float(w[-1])
-            ke0 = hist.get(f"{r}.kinetic_energy")
-            if ke0 is not None and len(ke0) and ke0[0] > 0:
-                d["dissipated_rel"] = float(-w[-1] / ke0[0])
-        out[r] = d
-    return out
-
-
 DT_COLLAPSE = 1e-6
 """A stable step below this share of the largest step so far stops the run (LS-DYNA's DTMIN): a
 penetrator's background went on at t = 21.4 us with steps of 3e-18 s (a node driven to ~1e14 m/s),
@@ -106,6 +58,31 @@ def collapsed_step(stable: dict, dt_max: float) -> str | None:
         return None
     return (f"the {role} solver's stable step is {stable[role]:.6g} s, below {DT_COLLAPSE:g} of the largest so "
             f"far {dt_max:.6g} s (the run would not reach its end time)")
+
+
+def describe_limiter(role: str, lim: dict | None) -> str:
+    """One phrase for what sets the step: the group, the kind of limit, the element, zone or particle,
+    where, and its state (a group's step_limiter(), adapters/base.py)."""
+    if not lim:
+        return f"the {role} solver"
+    text = f"{role}: {lim['kind']} limit in {lim['what']}"
+    if lim.get("at") is not None:
+        text += " at (" + ", ".join(f"{v:.4g}" for v in lim["at"]) + ") m"
+    if lim.get("detail"):
+        text += f" ({lim['detail']})"
+    return text
+
+
+EARLY_STEPS = 50
+"""The steps whose median step is the run's reference for a falling step (the stable steps of a
+scene once started: the first steps of a blast or an impact may still be growing)."""
+
+FALL_WARN = 100.0
+"""A step this many times below the early median is said once in the log, with what sets it (a scene
+that crawls without a word looks like a stall)."""
+
+LIMITER_NOTE_S = 10.0
+"""How often the progress line asks the groups what sets the step (a collective query of its own)."""
 
 
 class Coupler:
@@ -141,14 +118,25 @@ class Coupler:
         self.out_index = 0  # number of the next output step's files (not a time: see step_control.next_time)
         self.dt_min = np.inf
         self.dt_max = 0.0
+        self.dt_floor = run.get("dt_min")   # run.dt_min: a step below it stops the run by name
+        self.early: list[float] = []        # the first EARLY_STEPS steps (the falling step's reference)
+        self._fall_said = False
+        self._note, self._note_at = "", None
         # a jittering stable step destabilises central differences, not an implicit step: the step
         # control filters the rises only when a group steps by central differences
         self.clock = (StepControl(self.end_time) if any(cd for _, cd in started.values())
                       else StepControl(self.end_time, window=1, growth=np.inf))
         self._receive_all()
-        self._record()
+        self._record(spool=False)
         if restart:
             self._load(Path(restart))
+        # every recorded row also on disk at once (history_spool.py): a run that fails or is
+        # interrupted still leaves its history; a restart's loaded rows first
+        from orchestrator.history_spool import HistorySpool
+
+        self.spool = HistorySpool(out, {r: self.names[r] for r in self.history})
+        for k in range(len(self.history_t)):
+            self.spool.append(self.history_t[k], self.history_step[k], [self.history[r][k] for r in self.history])
 
     # ---- the embedded-mesh coupling ----------------------------------------------------------------
     def _start_coupling(self) -> None:
@@ -328,6 +316,43 @@ class Coupler:
             if self.reply[r][0] != 0.0:
                 raise RuntimeError(f"{r} reported failure status {self.reply[r][0]}")
 
+    def limiters(self) -> dict[str, dict | None]:
+        """What sets each group's stable step now (a collective query: CMD_LIMITER, no step)."""
+        self._broadcast(P.command(P.CMD_LIMITER))
+        got = {r: P.recv_object(self.inter[r], 0, P.TAG_LIMITER) for r in self.roles}
+        self._receive_all()
+        return got
+
+    def step_limit_text(self) -> str:
+        """The group whose stable step is the smallest and what in it sets the step."""
+        role = min(self.roles, key=lambda r: self.reply[r][1])
+        return describe_limiter(role, self.limiters()[role])
+
+    def _progress_note(self) -> str:
+        """The progress line's note: the step and what sets it (asked at most every LIMITER_NOTE_S),
+        and each implicit solver's steps and Newton iterations."""
+        now = _time.perf_counter()
+        if self._note_at is None or now - self._note_at >= LIMITER_NOTE_S:
+            self._note = f"dt {self.clock.dt:.4g} s set by {self.step_limit_text()}"
+            self._note_at = now
+        return "; ".join(n for n in (self._note, self._implicit_note()) if n)
+
+    def _watch_step(self, dt: float) -> None:
+        """The step chosen for the next step (before the landing on the end): below run.dt_min it
+        stops the run by name; more than FALL_WARN below the early median it is said once."""
+        if len(self.early) < EARLY_STEPS:
+            self.early.append(dt)
+        if self.dt_floor is not None and dt < self.dt_floor:
+            raise RuntimeError(f"time step {dt:.6g} s below run.dt_min = {self.dt_floor:g} s at step {self.step + 1}, "
+                               f"t = {self.t:.6g} s; set by {self.step_limit_text()}")
+        if not self._fall_said and len(self.early) >= min(EARLY_STEPS, 10):
+            ref = float(np.median(self.early))
+            if dt < ref / FALL_WARN:
+                self._fall_said = True
+                self.log(f"warning: the step fell to {dt:.4g} s at step {self.step + 1}, t = {self.t:.6g} s, "
+                         f"{ref / dt:.3g} times below its early median {ref:.4g} s (steps 1-{len(self.early)}): "
+                         f"set by {self.step_limit_text()}")
+
     def _implicit_note(self) -> str:
         """The progress line's note: each implicit solver's last recorded step size and Newton
         iterations (the groups whose diagnostics have newton_iterations and time_step)."""
@@ -357,13 +382,15 @@ class Coupler:
                       "substeps_max": float(hist[f"{r}.substeps"][1:].max()) if f"{r}.substeps" in hist else 1.0}
         return out
 
-    def _record(self) -> None:
+    def _record(self, spool: bool = True) -> None:
         self.history_t.append(self.t)
         self.history_step.append(self.step)
         for r in self.roles:
             self.history[r].append(self.reply[r][P.REPLY_HEAD:].copy())
         if self.coupling is not None:
             self.history[COUPLING].append(self._coupling_record())
+        if spool:
+            self.spool.append(self.t, self.step, [self.history[r][-1] for r in self.history])
 
     # ---- output and checkpoints ----------------------------------------------------------------
     def write_output(self) -> None:
@@ -413,6 +440,8 @@ class Coupler:
                 for k, a in self.coupling.state_arrays().items():
                     h.create_dataset(f"coupling/{k}", data=a)
             h.create_dataset("step_control", data=self.clock.state())
+            h.create_dataset("early_steps", data=np.array(self.early, dtype=np.float64))
+            h.attrs["fall_said"] = self._fall_said
             h.create_dataset("history/t", data=np.array(self.history_t))
             h.create_dataset("history/step", data=np.array(self.history_step))
         os.replace(tmp, path)
@@ -438,6 +467,8 @@ class Coupler:
             self.dt_min = float(h.attrs["dt_min"])
             self.dt_max = float(h.attrs["dt_max"])
             self.clock.load(h["step_control"][...])
+            self.early = [float(v) for v in h["early_steps"][...]]
+            self._fall_said = bool(h.attrs["fall_said"])
             self.history_t = list(h["history/t"][...])
             self.history_step = [int(s) for s in h["history/step"][...]]
             for r in self.roles:
@@ -470,9 +501,11 @@ class Coupler:
                 raise RuntimeError(f"stable time step is {stable} at step {self.step}, t={self.t:.6g} s")
             why = collapsed_step({r: self.reply[r][1] for r in self.roles}, self.dt_max)
             if why:
-                raise RuntimeError(f"time step collapsed at step {self.step}, t = {self.t:.6g} s: {why}")
+                raise RuntimeError(f"time step collapsed at step {self.step}, t = {self.t:.6g} s: {why}; "
+                                   f"set by {self.step_limit_text()}")
             # the step control (step_control.py): outputs and checkpoints never change a step
             dt, t_new, done = self.clock.next(self.t, self.dt_scale * stable)
+            self._watch_step(self.clock.dt)
             self.step += 1
             diag = done or self.step % self.diag_every == 0
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
@@ -496,14 +529,16 @@ class Coupler:
             if reached(self.t, self.next_checkpoint_t) and not done:
                 self.checkpoint()
                 self.next_checkpoint_t = next_time(self.t, self.checkpoint_interval)
-            prog.update(self.t, self.step, self._implicit_note)
+            prog.update(self.t, self.step, self._progress_note)
         prog.close()
+        set_by = self.step_limit_text() if self.step > 0 else ""
         self._broadcast(P.command(P.CMD_STOP))
         self._receive_all()
         # each group's time in its own step work, and in its engine (LAMMPS's runs) where it has one
         self.solver_time = {r: P.recv(self.inter[r], 0, P.TAG_TIMING) for r in self.roles}
         wall = _time.perf_counter() - wall0
-        self.log(f"finished: {self.step} steps, t = {self.t:.6e} s, wall {wall:.2f} s")
+        self.log(f"finished: {self.step} steps, t = {self.t:.6e} s, wall {wall:.2f} s"
+                 + (f"; the last step {self.clock.dt:.4g} s set by {set_by}" if set_by else ""))
         return self.summary(wall)
 
     # ---- summary -------------------------------------------------------------------------------
@@ -519,15 +554,15 @@ class Coupler:
         from orchestrator import checks
 
         hist = self.diagnostics_history()
-        with h5py.File(self.out / "diagnostics.h5.tmp", "w") as h:
-            for k, a in hist.items():
-                h.create_dataset(k, data=a)
-        os.replace(self.out / "diagnostics.h5.tmp", self.out / "diagnostics.h5")
+        write_diagnostics(self.out, hist)
         conservation = conservation_residuals(hist, list(self.history))
         final = {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")}
         s = {
             "case": self.case["name"],
             "case_dir": str(self.case["case_dir"]),
+            # completed: the end time reached; max_steps: run.max_steps stopped it before (failed and
+            # interrupted runs get theirs from the launcher, run_record.record_ended_run)
+            "status": "completed" if self.t >= self.end_time * (1 - 1e-12) else "max_steps",
             "wall_time_s": wall,
             "output_time_s": self.output_s,   # of wall_time_s: writing outputs and checkpoints
             # of wall_time_s: each group's rank 0 in its own step work (its waits excluded), and in
@@ -551,9 +586,7 @@ class Coupler:
             s["coupling_share"] = sum(self.coupling_s.values()) / wall if wall > 0 else None
         if self.case.get("check"):
             s["check"] = checks.run_check(self.case, self.out, hist)
-        tmp = self.out / "summary.json.tmp"
-        tmp.write_text(json.dumps(s, indent=2))
-        os.replace(tmp, self.out / "summary.json")
+        write_summary(self.out, s)
         if "check" in s:
             for name, m in s["check"]["metrics"].items():
                 self.log(f"check {name}: {m['value']:.6g} vs {m['reference']:.6g} "

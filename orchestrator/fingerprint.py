@@ -32,7 +32,7 @@ FORMAT = "immerse-case-1"
 RESTART_MAY_CHANGE = (
     ("name",), ("case_dir",), ("case_sha256",), ("ranks",), ("check",),
     ("run", "end_time"), ("run", "max_steps"), ("run", "output_interval"),
-    ("run", "checkpoint_interval"), ("run", "diagnostics_every"),
+    ("run", "checkpoint_interval"), ("run", "diagnostics_every"), ("run", "dt_min"),
 )
 
 _CHUNK = 1 << 20

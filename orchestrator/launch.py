@@ -461,6 +461,17 @@ def run_job(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
             output.write_index(out)
         try:
             result = execute(case, out, ranks, restart, stop)
+            if result.returncode != 0 and out.is_dir():
+                # the history so far and where it stopped (run_record.py), claimed with the run's files
+                from orchestrator.case import solvers_used
+                from orchestrator.run_record import record_ended_run
+
+                try:
+                    record_ended_run(case, out, "interrupted" if result.signal is not None else "failed",
+                                     result.message, started, {r: ranks[r] for r in solvers_used(case)})
+                except (OSError, ValueError, KeyError) as e:   # the run's own message comes first
+                    with (out / "log.txt").open("a") as f:
+                        f.write(f"immerse: the ended run's summary.json and diagnostics.h5 were not written: {e}\n")
         finally:
             outdir.finish_run(out, started)
     if result.message:

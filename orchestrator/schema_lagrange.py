@@ -157,6 +157,9 @@ BODY = table(
         "erosion": table({"strain": number("dimensionless", exclusiveMinimum=0),
                           "time_step": number("dimensionless", exclusiveMinimum=0, exclusiveMaximum=1)},
                          required=("strain",)),
+        # a body coupled to the background thinner than 1.5 of its zones is refused unless this is
+        # true (orchestrator/coupling/thickness.py: gas on both its sides in one zone leaks through)
+        "accept_thin": {"type": "boolean"},
     },
     required=("name", "material", "mesh"),
 )
@@ -293,6 +296,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             "initial_temperature": to_float(t0),
             "erosion": ({"strain": to_float(b["erosion"]["strain"]),
                          "time_step": to_float(b["erosion"].get("time_step", 0.0))} if "erosion" in b else None),
+            "accept_thin": bool(b.get("accept_thin", False)),
         })
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
     if "gravity" in raw:

@@ -146,7 +146,7 @@ def follow(job: str, name: str, out: Path) -> int:
         print(f"immerse: {name} cancelled on {signal.Signals(signum).name}; completed output steps stay "
               f"readable in {out}", file=sys.stderr)
         return 128 + signum
-    if state == "COMPLETED" or (state == "FAILED" and rc == 1 and (out / "summary.json").is_file()):
+    if state == "COMPLETED" or (state == "FAILED" and rc == 1 and _finished(out)):
         from orchestrator.cli import summary_line
 
         line, passed = summary_line(out)
@@ -158,6 +158,17 @@ def follow(job: str, name: str, out: Path) -> int:
     print(f"immerse: {name} ended {state} (exit code {code}): stopped by Slurm; completed output steps "
           f"stay readable in {out}", file=sys.stderr)
     return 1
+
+
+def _finished(out: Path) -> bool:
+    """Whether the run's summary.json is that of a run that reached its end (its check may have failed),
+    not the record a failed or interrupted run leaves (orchestrator/run_record.py)."""
+    import json
+
+    try:
+        return json.loads((out / "summary.json").read_text()).get("status", "completed") in ("completed", "max_steps")
+    except (OSError, ValueError):
+        return False
 
 
 __all__ = ["submit_run", "batch_script", "follow"]

@@ -15,12 +15,16 @@ MODEL_CODES = {"taitwater": TAIT, "idealgas": IDEAL, "tlsph": SOLID}
 
 @njit(cache=True)
 def particle_sums(x, v, f, rho, esph, types, mass, moving, c0, rho0, model, gravity, dim):
-    """(speed_max, acc_max, sums): speed = c + |v| and acc = |f| / m over the moving particles (c from
-    the material: Tait c0 (rho/rho0)^3, ideal gas sqrt(gamma (gamma-1) e), a solid's P-wave speed
-    c0 of its type); sums = [mass, momentum (3), kinetic, internal, gravitational (-m g.x)] over all
-    particles.  mass and moving are per particle (this rank's, in LAMMPS's local order)."""
+    """(speed_max, acc_max, sums, i_speed, i_acc): speed = c + |v| and acc = |f| / m over the moving
+    particles (c from the material: Tait c0 (rho/rho0)^3, ideal gas sqrt(gamma (gamma-1) e), a solid's
+    P-wave speed c0 of its type); sums = [mass, momentum (3), kinetic, internal, gravitational
+    (-m g.x)] over all particles; i_speed, i_acc: the particles of the two maxima (-1 if none: the
+    step's limiter the log names).  mass and moving are per particle (this rank's, in LAMMPS's local
+    order)."""
     speed = 0.0
     acc = 0.0
+    i_speed = -1
+    i_acc = -1
     out = np.zeros(7)
     g1 = IDEALGAS_GAMMA * (IDEALGAS_GAMMA - 1.0)
     for i in range(types.size):
@@ -50,7 +54,9 @@ def particle_sums(x, v, f, rho, esph, types, mass, moving, c0, rho0, model, grav
             s = c + np.sqrt(v2)
             if s > speed:
                 speed = s
+                i_speed = i
             a = np.sqrt(f2) / m
             if a > acc:
                 acc = a
-    return speed, acc, out
+                i_acc = i
+    return speed, acc, out, i_speed, i_acc

@@ -40,6 +40,8 @@ INSTABILITY = re.compile(
 
 
 def classify(rc: int, message: str, summary: dict | None, warnings: list[str] | None = None) -> str:
+    if summary is not None and summary.get("status", "completed") not in ("completed", "max_steps"):
+        summary = None   # a failed or interrupted run's record (run_record.py): no result of a finished run
     if rc in (0, 1) and warnings and summary is not None:
         return "warned"
     if rc == 0:

@@ -499,14 +499,14 @@ class Blocked:
         if bad >= 0:
             s._check((0.0, bad, BAD_STATE))
 
-    def apertures(self, s) -> float:
+    def apertures(self, s) -> tuple[float, int]:
         """Aperture correction of the corner forces and q of the cut zones (after the zone pass);
-        returns their stable step."""
+        returns their stable step and the zone that sets it (-1 if none)."""
         B = s.block
         k = apertures_3d if self.dim == 3 else apertures_2d
-        return float(k(s.x, s.v, s.fc, s.M, s.rho, s.p, s.c, s.q, self.phi, self.A, self.SF, self.solid,
-                       self.touched,
-                       B.zs, B.ns, s.q_lin, s.q_quad, s.q_kind, s.qgrad))
+        dt, at = k(s.x, s.v, s.fc, s.M, s.rho, s.p, s.c, s.q, self.phi, self.A, self.SF, self.solid,
+                   self.touched, B.zs, B.ns, s.q_lin, s.q_quad, s.q_kind, s.qgrad)
+        return float(dt), int(at)
 
     def constrain(self, s, record: bool) -> None:
         """Immersed-wall node constraints into s._acc; when recording, the obstacle's pressure
@@ -1207,13 +1207,15 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
     f_c + ((p + q_new) b^A_c - (p + q_old) b_c) + (phi - 1) (f_c - (p + q_old) b_c) so that a corner
     with an open face and an unchanged q keeps its bits.  SF: the flux a_e . v_surface of a coupled
     body's surface in the zone (the open volume's rate of change has -SF: a retreating surface is
-    no compression), 0 elsewhere.  Returns the zones' stable step."""
+    no compression), 0 elsewhere.  Returns the zones' stable step and the zone that sets it (-1 if
+    none)."""
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
     b = np.empty((4, 2))
     bA = np.empty((4, 2))
     w = np.empty(4)
     dt_min = np.inf
+    dt_at = -1   # the zone that sets dt_min (the step's limiter, named in the log)
     for t in range(zones.shape[0]):
         z = zones[t]
         if not (M[z] > 0.0):
@@ -1260,11 +1262,12 @@ def apertures_2d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
         dte = zone_dt(lc, math.sqrt(u), qq, cz)
         if dte < dt_min:
             dt_min = dte
+            dt_at = z
         for a in range(4):
             for d in range(2):
                 hg = fc[z, a, d] - s_old * b[a, d]
                 fc[z, a, d] = fc[z, a, d] + (s_new * bA[a, d] - s_old * b[a, d]) + (ph - 1.0) * hg
-    return dt_min
+    return dt_min, dt_at
 
 
 @njit(cache=True)
@@ -1281,6 +1284,7 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
         oo[a, 1] = 1 if (a == 2 or a == 3 or a == 6 or a == 7) else 0
         oo[a, 2] = 1 if a >= 4 else 0
     dt_min = np.inf
+    dt_at = -1   # the zone that sets dt_min (the step's limiter, named in the log)
     for t in range(zones.shape[0]):
         z = zones[t]
         if not (M[z] > 0.0):
@@ -1317,11 +1321,12 @@ def apertures_3d(x, v, fc, M, rho, p, c, q, phi, A, SF, solid, zones, zs, ns, q_
         dte = zone_dt(lc, math.sqrt(u), qq, cz)
         if dte < dt_min:
             dt_min = dte
+            dt_at = z
         for a in range(8):
             for d in range(3):
                 hg = fc[z, a, d] - s_old * b[a, d]
                 fc[z, a, d] = fc[z, a, d] + (s_new * bA[a, d] - s_old * b[a, d]) + (ph - 1.0) * hg
-    return dt_min
+    return dt_min, dt_at
 
 
 @njit(cache=True)

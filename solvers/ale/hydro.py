@@ -383,7 +383,8 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
     FORCES); M, e, V, rho, p, c, q, de_h (nz,).  V is always updated to the volume at x.
     qkind: Q_SCALAR or Q_MONOTONIC; grad (nz, 6): the directional strain rates and widths of
     :func:`mono_gradients_3d` (read for Q_MONOTONIC only, on the zone and its 6 face neighbours).
-    Returns ``(dt_min, bad_zone, reason)`` (bad_zone = -1 if none; the pass stops at the first).
+    Returns ``(dt_min, bad_zone, reason, dt_at)`` (bad_zone = -1 if none; the pass stops at the
+    first; dt_at: the zone whose step is dt_min, -1 if none).
     """
     co = np.empty(8, np.int64)
     for a in range(8):
@@ -403,6 +404,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
     advect = (flags & ADVECT) != 0
     half_dt = 0.5 * dt
     dt_min = np.inf
+    dt_at = -1   # the zone that sets dt_min (the step's limiter, named in the log)
     for i in range(zlo[0], zhi[0]):
         ri = rlo[0] <= i < rhi[0]
         for j in range(zlo[1], zhi[1]):
@@ -427,7 +429,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 _, amax = hex_bvectors(xe, b)
                 vol = hex_volume_sym(xe, b)
                 if not (vol > 0.0):
-                    return dt_min, z, BAD_VOLUME
+                    return dt_min, z, BAD_VOLUME, -1
                 if M[z] == 0.0:  # no material (a fully blocked zone, blocked.py): no state, no force
                     V[z] = vol
                     rho[z] = 0.0
@@ -447,7 +449,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                     p[z] = pz
                     c[z] = cz
                     if not ok:
-                        return dt_min, z, BAD_STATE
+                        return dt_min, z, BAD_STATE, -1
                 if not do_forces:
                     continue
                 r = rho[z]
@@ -474,6 +476,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 dte = zone_dt(lc, u, qq, cz)
                 if dte < dt_min:
                     dt_min = dte
+                    dt_at = z
                 s = pz + qz
                 for a in range(8):
                     for d in range(3):
@@ -487,7 +490,7 @@ def zone_pass_3d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                     _hg_mode(1.0, -1.0, -1.0, 1.0, -1.0, 1.0, 1.0, -1.0, xe, b, ve, ivol, ah, fc, z)
                     _hg_mode(1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0, xe, b, ve, ivol, ah, fc, z)
                     _hg_mode(-1.0, 1.0, -1.0, 1.0, 1.0, -1.0, 1.0, -1.0, xe, b, ve, ivol, ah, fc, z)
-    return dt_min, -1, 0
+    return dt_min, -1, 0, dt_at
 
 
 @njit(cache=True)
@@ -533,6 +536,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
     advect = (flags & ADVECT) != 0
     half_dt = 0.5 * dt
     dt_min = np.inf
+    dt_at = -1   # the zone that sets dt_min (the step's limiter, named in the log)
     for i in range(zlo[0], zhi[0]):
         ri = rlo[0] <= i < rhi[0]
         for j in range(zlo[1], zhi[1]):
@@ -554,7 +558,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 e[z] -= dt_avg * work / M[z]
             vol, _ = quad_bvectors(xe, b)
             if not (vol > 0.0):
-                return dt_min, z, BAD_VOLUME
+                return dt_min, z, BAD_VOLUME, -1
             if M[z] == 0.0:  # no material (a fully blocked zone, blocked.py): no state, no force
                 V[z] = vol
                 rho[z] = 0.0
@@ -574,7 +578,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 p[z] = pz
                 c[z] = cz
                 if not ok:
-                    return dt_min, z, BAD_STATE
+                    return dt_min, z, BAD_STATE, -1
             if not do_forces:
                 continue
             r = rho[z]
@@ -608,6 +612,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
             dte = zone_dt(lc, u, qq, cz)
             if dte < dt_min:
                 dt_min = dte
+                dt_at = z
             s = pz + qz
             for a in range(4):
                 fc[z, a, 0] = s * b[a, 0]
@@ -634,7 +639,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 for a in range(4):
                     fc[z, a, 0] -= gam[a] * gx
                     fc[z, a, 1] -= gam[a] * gy
-    return dt_min, -1, 0
+    return dt_min, -1, 0, dt_at
 
 
 @njit(cache=True)

@@ -502,7 +502,7 @@ class AleSolver:
                                self.q_lin, self.q_quad, self.hg, self.q_kind, self.qgrad)
 
     def _check(self, res, what: str = "") -> float:
-        dt_min, bad, reason = res
+        dt_min, bad, reason = res[:3]
         if bad >= 0:
             B = self.block
             ijk = B.zone_ijk(bad)
@@ -576,9 +576,14 @@ class AleSolver:
         if self.q_kind == hydro.Q_MONOTONIC:  # at the mid-step geometry x - dt/2 v in a Lagrange step
             self._mono_grad(self.x, self.v, self.qgrad, 0.5 * self.dt if midstep else 0.0, *self._zall,
                             self.block.zs, self.block.ns)
-        dt_min = self._check(self._pass(self.zr, flags, self.dt, self.dt_avg))
+        res = self._pass(self.zr, flags, self.dt, self.dt_avg)
+        dt_min = self._check(res)
+        self._limiter = (dt_min, int(res[3]), "sound speed")   # this rank's: step_limiter() names it
         if self._blk is not None:  # face apertures of the cut zones
-            dt_min = min(dt_min, self._blk.apertures(self))
+            dt_cut, at = self._blk.apertures(self)
+            if dt_cut < dt_min:
+                dt_min = dt_cut
+                self._limiter = (dt_min, at, "cut zone")
         self._fill_zone_state()
         self._check_cavitation()
         B = self.block
@@ -613,6 +618,22 @@ class AleSolver:
         if self._pending_remap:
             self.remap()
         return self._dt_stable
+
+    def local_limiter(self) -> dict | None:
+        """The zone of this rank that sets its stable step: "sound speed" (its Courant limit
+        l / (|u| + Q + sqrt(Q^2 + c^2))) or "cut zone" (a zone a body's surface cuts, by its aperture
+        corrected compression), with its (i, j[, k]), centre, state and open fraction."""
+        dt, z, kind = getattr(self, "_limiter", (np.inf, -1, ""))
+        if z < 0:
+            return None
+        B = self.block
+        ijk = B.zone_ijk(z)
+        centre = [float(B.lower[d] + (ijk[d] + 0.5) * B.h[d]) for d in range(self.dim)]
+        detail = (f"c = {self.c[z]:.4g} m/s, rho = {self.rho[z]:.4g} kg/m^3, p = {self.p[z]:.4g} Pa, "
+                  f"q = {self.q[z]:.4g} Pa")
+        if self._blk is not None:
+            detail += f", open fraction {float(self._blk.phi[z]):.3g}"
+        return {"dt": float(dt), "kind": kind, "what": f"zone {ijk}", "at": centre, "detail": detail}
 
     def predict(self, dt: float) -> None:
         if self._pending_remap:

@@ -120,6 +120,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     bm = np.empty((8, 3))
     fe = np.empty((8, 3))
     dt_min = np.inf
+    dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
     half_dt = 0.5 * dt
     for e in range(ne):
@@ -135,7 +136,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
                 n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
                 continue
-            return dt_min, e, n_eroded
+            return dt_min, e, n_eroded, -1
         # velocity gradient at the mid-step configuration
         if dt > 0.0:
             for i in range(8):
@@ -146,7 +147,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
                     n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
                     continue
-                return dt_min, e, n_eroded
+                return dt_min, e, n_eroded, -1
             bg = bm
         else:
             vm = vol
@@ -239,7 +240,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
                     n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
                     continue
-                return dt_min, e, n_eroded
+                return dt_min, e, n_eroded, -1
             if dt > 0.0:
                 s0, s1, s2, s3, s4, s5 = n0, n1, n2, n3, n4, n5
             csq = neo_hookean_modulus(jac, G, lam) / rho
@@ -259,7 +260,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                                                                d2, d3, d4, d5, dt, G, K)
             csq = (K + 4.0 / 3.0 * G) / rho
         if _is_bad(s0, s1, s2, s3, s4, s5):
-            return dt_min, e, n_eroded
+            return dt_min, e, n_eroded, -1
         if dt > 0.0:
             pw = ((o0 + s0) * d0 + (o1 + s1) * d1 + (o2 + s2) * d2
                   + 2.0 * ((o3 + s3) * d3 + (o4 + s4) * d4 + (o5 + s5) * d5))
@@ -286,6 +287,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             continue
         if dte < dt_min:
             dt_min = dte
+            dt_at = e
 
         # stress divergence: f_I = -(sigma - q I) b_I
         p0 = s0 - q
@@ -344,7 +346,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 fe_cut[r, i, 0] = fe[i, 0]
                 fe_cut[r, i, 1] = fe[i, 1]
                 fe_cut[r, i, 2] = fe[i, 2]
-    return dt_min, -1, n_eroded
+    return dt_min, -1, n_eroded, dt_at
 
 
 @njit(cache=True)
@@ -358,6 +360,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
     bm = np.empty((4, 2))
     fe = np.empty((4, 2))
     dt_min = np.inf
+    dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
     half_dt = 0.5 * dt
     for e in range(ne):
@@ -373,7 +376,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
                 n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
                 continue
-            return dt_min, e, n_eroded
+            return dt_min, e, n_eroded, -1
         if dt > 0.0:
             for i in range(4):
                 for k in range(2):
@@ -383,7 +386,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                 if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
                     n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
                     continue
-                return dt_min, e, n_eroded
+                return dt_min, e, n_eroded, -1
             bg = bm
         else:
             vm = vol
@@ -441,7 +444,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                 if erode_at[e] < np.inf:  # erosion on: an element that would invert erodes
                     n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
                     continue
-                return dt_min, e, n_eroded
+                return dt_min, e, n_eroded, -1
             if dt > 0.0:
                 s0, s1, s2, s3, s4, s5 = n0, n1, n2, n3, n4, n5
             csq = neo_hookean_modulus(jac, G, lam) / rho
@@ -461,7 +464,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                                                                0.0, d3, 0.0, 0.0, dt, G, K)
             csq = (K + 4.0 / 3.0 * G) / rho
         if _is_bad(s0, s1, s2, s3, s4, s5):
-            return dt_min, e, n_eroded
+            return dt_min, e, n_eroded, -1
         if dt > 0.0:
             pw = (o0 + s0) * d0 + (o1 + s1) * d1 + 2.0 * (o3 + s3) * d3
             e_int[e] += 0.5 * pw * vm * dt
@@ -486,6 +489,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             continue
         if dte < dt_min:
             dt_min = dte
+            dt_at = e
 
         p0 = s0 - q
         p1 = s1 - q
@@ -527,7 +531,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             for i in range(4):
                 fe_cut[r, i, 0] = fe[i, 0]
                 fe_cut[r, i, 1] = fe[i, 1]
-    return dt_min, -1, n_eroded
+    return dt_min, -1, n_eroded, dt_at
 
 
 @njit(cache=True)
@@ -558,10 +562,11 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     erode_dt : (ne,) the stable step below which the element erodes (LS-DYNA's TSMIN with ERODE = 1:
     a crushed element would stop the run by its step long before it inverts), 0 for none
 
-    Returns ``(dt_min, bad, eroded)``: the smallest stable step of the live elements, the first
+    Returns ``(dt_min, bad, eroded, dt_at)``: the smallest stable step of the live elements, the first
     element with non-positive volume (at x^n or at the mid-step configuration), non-positive
-    neo-Hookean J or non-finite stress (-1 if none), and the number of elements eroded in this
-    call.  On ``bad >= 0`` the call returns immediately (state and f are partially updated).
+    neo-Hookean J or non-finite stress (-1 if none), the number of elements eroded in this call,
+    and the element whose stable step is dt_min (-1 if none: the step's limiter the log names).
+    On ``bad >= 0`` the call returns immediately (state and f are partially updated).
     """
     if x.shape[1] == 3:
         return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
@@ -577,7 +582,7 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
                    eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f):
     """element_forces_cut without partition cuts or erosion (one rank, kernel tests): (dt_min, bad)."""
     ne = conn.shape[0]
-    dt_min, bad, _ = element_forces_cut(
+    dt_min, bad, _, _ = element_forces_cut(
         x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p, temp, e_int, q_out,
         hg_coef, q_lin, q_quad, f, np.full(ne, -1, np.int64), np.zeros((0, conn.shape[1], x.shape[1])),
         np.ones(ne, np.uint8), np.zeros(ne), np.full(ne, np.inf), np.zeros(ne))

@@ -33,25 +33,35 @@ def rigid_wall(x, v, point, normal, dt):
 
 
 @njit(cache=True)
-def update_and_account(x, v, v_old, v_free, f, mass, owned, impulse, dt, dt_avg, sums):
+def update_and_account(x, v, v_old, v_free, f, mass, owned, impulse, dt, dt_avg, sums, dv_prev):
     """Close the step on the nodes: reaction R = m (v - v_free) (+ coupling impulse), the exact
     discrete work of the internal forces and of R on the mean velocity, the impulse and torque of R
     (about the origin, at x^n), then x <- x + dt v. Shared nodes count once (owned).
 
-    sums (out): [W_int, W_ext, I_x, I_y, I_z, T_x, T_y, T_z]. Returns the first node whose velocity
-    is not finite, or -1.
+    The highest temporal mode: with the step's velocity change dv = v^{n+1/2} - v^{n-1/2} and the
+    last step's dv_prev (updated in place), sum m |dv - dv_prev|^2 is about 4 m |dv|^2 for a mode
+    that turns each step (an unstable central difference grows one) and O(dt^2) of it for a motion
+    the steps resolve (solvers/step_health.py watches it grow).
+
+    sums (out): [W_int, W_ext, I_x, I_y, I_z, T_x, T_y, T_z, sum m |dv - dv_prev|^2, sum m |v|^2].
+    Returns (the first node whose velocity is not finite or -1, the node of the largest
+    m |dv - dv_prev|^2, that value).
     """
     nn, dim = v.shape
     for k in range(sums.shape[0]):
         sums[k] = 0.0
     has_impulse = impulse.shape[0] == nn
     bad = -1
+    worst = -1
+    worst_val = -1.0
     r = np.zeros(3)
     xi = np.zeros(3)
     for i in range(nn):
         w = 1.0 if owned[i] else 0.0
         wi = 0.0
         we = 0.0
+        hf = 0.0
+        v2 = 0.0
         for c in range(3):
             r[c] = 0.0
             xi[c] = 0.0
@@ -68,6 +78,10 @@ def update_and_account(x, v, v_old, v_free, f, mass, owned, impulse, dt, dt_avg,
             r[c] = rc
             xi[c] = x[i, c]
             x[i, c] += dt * vc
+            dv = vc - v_old[i, c]
+            hf += (dv - dv_prev[i, c]) ** 2
+            dv_prev[i, c] = dv
+            v2 += vc * vc
         sums[0] += w * wi
         sums[1] += w * we
         for c in range(3):
@@ -75,4 +89,10 @@ def update_and_account(x, v, v_old, v_free, f, mass, owned, impulse, dt, dt_avg,
         sums[5] += w * (xi[1] * r[2] - xi[2] * r[1])
         sums[6] += w * (xi[2] * r[0] - xi[0] * r[2])
         sums[7] += w * (xi[0] * r[1] - xi[1] * r[0])
-    return bad
+        hf *= mass[i]
+        sums[8] += w * hf
+        sums[9] += w * mass[i] * v2
+        if hf > worst_val:
+            worst_val = hf
+            worst = i
+    return bad, worst, worst_val

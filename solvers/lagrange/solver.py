@@ -32,6 +32,7 @@ from solvers.lagrange.mesh import body_mesh, cell_volumes, concatenate
 from solvers.lagrange.partition import partition
 from solvers.lagrange.shared_sums import OrderedSharedSums
 from solvers.lagrange.surface import exterior_facets
+from solvers.step_health import GrowthWatch
 
 
 class SolverError(RuntimeError):
@@ -62,6 +63,8 @@ def _material_table(case: dict):
 
 
 class LagrangeSolver:
+    WATCHES_HIGH_MODES = True   # the central difference's energy watch (diagnostic created_energy_rel)
+
     # element fields written to output (name -> attribute); stress is (ne, 6) Voigt xx yy zz xy yz zx
     CELL_FIELDS = ("stress", "plastic_strain", "temperature", "density", "bulk_viscosity")
 
@@ -163,8 +166,12 @@ class LagrangeSolver:
         # work arrays of the step (allocated once)
         self.v_old = np.zeros((nn, dim))
         self.v_free = np.zeros((nn, dim))
-        self._sums = np.zeros(8)
+        self._sums = np.zeros(10)
         self._no_impulse = np.zeros((0, dim))
+        # the highest temporal mode (solvers/step_health.py): the last step's velocity change per node
+        self._dv_prev = np.zeros((nn, dim))
+        self.watch = GrowthWatch()
+        self.supplied_gross = 0.0   # the energy put in: the initial energy plus every external work, gross
 
         span = float(np.max(np.ptp(self.global_points, axis=0)))
         self.bcs = BoundaryConditions(case.get("boundaries", []), X, tol=1e-9 * span)
@@ -221,6 +228,7 @@ class LagrangeSolver:
         share = np.array([float(b["erosion"].get("time_step", 0.0)) if b.get("erosion") else 0.0 for b in bodies])
         self.erode_dt = share[my_body] * self._dt_stable
         self.ke0 = self.kinetic_energy()
+        self.se0 = float(self._allsum(self.e_int.sum()))
         self.p0 = self.momentum()
         self.l0 = self.angular_momentum()
 
@@ -239,7 +247,7 @@ class LagrangeSolver:
     # ---- the step --------------------------------------------------------------------------------
     def _forces(self, dt_prev: float) -> float:
         self.f[:] = 0.0
-        dt_min, bad, eroded = kernels.element_forces_cut(
+        dt_min, bad, eroded, dt_at = kernels.element_forces_cut(
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
             self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
@@ -264,6 +272,7 @@ class LagrangeSolver:
             self.f += self.mass[:, None] * self.gravity
         if self.loads is not None:  # (global: every copy of a node gets its full load)
             self.f += self._load_local(self.time)
+        self._limiter = (float(dt_min), int(dt_at))   # this rank's: local_limiter() names it
         return self._min(dt_min)
 
     def _load_local(self, t: float) -> np.ndarray:
@@ -279,6 +288,21 @@ class LagrangeSolver:
 
     def stable_dt(self) -> float:
         return self._dt_stable
+
+    def local_limiter(self) -> dict | None:
+        """The element of this rank that sets its stable step: its body, its index in the body, its
+        centroid now and its volume over its initial one (a crushed element is the usual cause of a
+        falling step)."""
+        dt, at = getattr(self, "_limiter", (np.inf, -1))
+        if at < 0:
+            return None
+        gid = int(self.part.cells[at])
+        b = int(self.body_of_cell[gid])
+        xe = self.x[self.conn[at]]
+        vol = float(cell_volumes(xe, np.arange(len(xe))[None, :])[0])
+        return {"dt": dt, "kind": "sound speed",
+                "what": f"element {gid - int(self._body_first_cell[b])} of body {self.body_names[b]!r}",
+                "at": xe.mean(axis=0).tolist(), "detail": f"volume {vol / float(self.vol0[at]):.3g} of its initial"}
 
     def predict(self, dt: float) -> None:
         self.dt = dt
@@ -304,19 +328,22 @@ class LagrangeSolver:
             impulse = contact if impulse is None else impulse + contact
         np.copyto(self.v_free, self.v)
         self.bcs.apply(self.x, self.v, self.dt)
-        bad = nodal.update_and_account(
+        bad, worst, worst_hf = nodal.update_and_account(
             self.x, self.v, self.v_old, self.v_free, self.f, self.mass, self.part.owned,
-            impulse if impulse is not None else self._no_impulse, self.dt, self.dt_avg, self._sums)
+            impulse if impulse is not None else self._no_impulse, self.dt, self.dt_avg, self._sums,
+            self._dv_prev)
         if bad >= 0:
             node = int(self.part.nodes[bad])
             b = int(self.body_of_node[node])
             raise SolverError(f"non-finite velocity at node {node} at step {step}, t={time:.6g} s "
                               f"(body {self.body_names[b]!r}, its node {node - int(self._body_first_node[b])})")
         w = self.part.owned
+        w_other = self.w_gravity + self.w_load
         if self.has_gravity:
             self.w_gravity += self._book_force(self.mass[w, None] * self.gravity)
         if self.loads is not None:  # (the surface loads at t^n: those in this step's forces)
             self.w_load += self._book_force(self._load_local(self.time)[w])
+        w_other = self.w_gravity + self.w_load - w_other
         # exact discrete work, impulse and torque of this step (shared nodes counted once)
         # the gross size of the impulses (scale of the momentum balance: a clamped body's coupling
         # impulses and reactions cancel, its momentum stays 0)
@@ -327,6 +354,7 @@ class LagrangeSolver:
         self.impulse += tot[2:2 + self.dim]
         self.ang_impulse += tot[5:8] if self.dim == 3 else tot[7:8]
         self.impulse_gross += tot[-1]
+        self.supplied_gross += abs(tot[1]) + abs(w_other)
 
         self.step, self.time = step, time
         self.first_step = False
@@ -334,6 +362,30 @@ class LagrangeSolver:
         dt = self._forces(self.dt)
         # (no live element left, every one eroded: the free nodes fly at any step; the last one kept)
         self._dt_stable = dt if np.isfinite(dt) else self._dt_stable
+        # energy made from nothing (solvers/step_health.py): kinetic + stored (stress power, at n+1)
+        # against what was put in; collective, every rank decides the same
+        stored = float(self._allsum(self.e_int.sum()))
+        created = 0.5 * tot[9] + stored - self.ke0 - self.se0 - (self.w_ext + self.w_gravity + self.w_load)
+        if self.watch.update(step, tot[8] / 8.0, created, self.ke0 + self.se0 + self.supplied_gross):
+            raise SolverError(self._growing_mode(step, time, worst, worst_hf))
+
+    def _growing_mode(self, step: int, time: float, worst: int, worst_hf: float) -> str:
+        """The message of a growing highest mode: the body, the node where it is largest, its
+        position, the step it grew from and how much (collective)."""
+        node = int(self.part.nodes[worst]) if worst >= 0 else -1
+        where = (worst_hf, node, self.x[worst].tolist() if worst >= 0 else [])
+        if self.comm.size > 1:
+            where = max(self.comm.allgather(where))
+        _, node, x = where
+        b = int(self.body_of_node[node])
+        at = ", ".join(f"{v:.4g}" for v in x)
+        w = self.watch
+        return (f"unstable: the central difference made {w.last:.3g} times the energy put in at step {step}, "
+                f"t={time:.6g} s (kinetic + stored against the initial energy and the external work); the mode "
+                f"that turns every step grew {w.growth():.3g} times since step {w.since()}, largest in body "
+                f"{self.body_names[b]!r} at its node {node - int(self._body_first_node[b])} at ({at}) m (a step "
+                f"sequence or a step beyond the scheme's limit: the energy balance books the scheme's own work "
+                f"and cannot show it)")
 
     def _book_force(self, f: np.ndarray) -> float:
         """Book a force f (on the owned nodes, in the step's forces) as the node kernel books the
@@ -637,6 +689,9 @@ class LagrangeSolver:
             "momentum_balance_rel": float(p_err),
             "angular_momentum_balance_rel": float(l_err),
         }
+        if self.WATCHES_HIGH_MODES:   # the energy the scheme made from nothing, over that put in
+            created = ke + e_int - self.ke0 - self.se0 - d["external_work"]
+            d["created_energy_rel"] = created / max(self.ke0 + self.se0 + self.supplied_gross, 1e-300)
         if self.has_gravity:
             d["gravity_work"] = self.w_gravity
         if self.loads is not None:
@@ -696,7 +751,8 @@ class LagrangeSolver:
     # ---- checkpoint / restart (global arrays, so any rank count can read; same count is bitwise) --
     STATE_NODES = ("x", "v", "f")
     STATE_CELLS = ("sig", "eps_p", "temp", "e_int", "q")
-    STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0")
+    STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0",
+                     "se0", "supplied_gross")
     STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0", "impulse_gross")
 
     # cells, and the scalars eroded and surface_version (erode_dt follows from the initial state,

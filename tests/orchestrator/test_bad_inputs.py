@@ -206,6 +206,41 @@ method = "multiplier"
 condition = "slip"
 """
 
+# issue 40: a 1 mm steel panel clamped in a shock tube; its thickness in zones set by the grid's
+# x cells (0.1 m / 150 = 0.667 mm: 1.5 zones, the least that passes; 100, 40, 20: 1.0, 0.4, 0.2)
+PANEL = """\
+[run]
+dimension = 2
+end_time = 1e-4
+
+[ale]
+mode = "eulerian"
+grid = { lower = [0.0, 0.0], upper = [0.1, 0.05], cells = [150, 10] }
+boundaries = { x_lower = "outflow", x_upper = "outflow", y_lower = "wall", y_upper = "wall" }
+materials.air = { eos = "ideal_gas", gamma = 1.4 }
+regions = [ { material = "air", density = 1.2, pressure = 1.0e5 } ]
+
+[materials.steel]
+model = "linear_elastic"
+density = 7850.0
+youngs_modulus = 200.0e9
+poisson_ratio = 0.3
+
+[[lagrange.bodies]]
+name = "panel"
+material = "steel"
+mesh = { box = { lower = [0.05, 0.0], upper = [0.051, 0.03], cells = [1, 12] } }
+
+[[boundaries]]
+type = "fixed"
+region = "y < 1e-9"
+
+[coupling]
+method = "multiplier"
+condition = "slip"
+"""
+BASES["PANEL"] = PANEL
+
 SPH = """\
 [run]
 dimension = 2
@@ -335,6 +370,10 @@ BAD_INPUTS = [
         edit(COUPLED, "upper = [0.55, 0.01]", "upper = [1.55, 0.01]")),
     Bad("coupling_mesh_file_a_hair_outside_grid", "lagrange.bodies[0].mesh.file = 'block.vtu'",
         "inside the background grid", make=_coupled_mesh_a_hair_outside),
+    # -- a coupled body thinner than 1.5 zones (issue 40): named with its thickness in zones and elements --
+    *[Bad(f"coupling_thin_panel_{zones}", "lagrange.bodies[0].mesh", f"body 'panel' is {zones} zones thick (0.001 m",
+          edit(PANEL, "cells = [150, 10]", f"cells = [{cells}, 10]"))
+      for zones, cells in (("0.2", 20), ("0.4", 40), ("1", 100))],
     Bad("coupling_without_background", "ale", "needs the background grid",
         STEEL_BAR_HEAD + 'mesh = { box = { lower = [0.0, 0.0, 0.0], upper = [0.1, 0.01, 0.01], cells = [10, 1, 1] } }\n'
         + '[coupling]\nmethod = "multiplier"\n'),

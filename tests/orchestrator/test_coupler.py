@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from orchestrator.coupler import conservation_residuals
+from orchestrator.run_record import conservation_residuals
 from tests.conftest import immerse
 
 # a shock tube moving through open ends (outflow at both faces): mass leaves and enters, so

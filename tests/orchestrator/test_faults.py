@@ -1,6 +1,8 @@
 """Faults: a solver rank killed with SIGKILL mid-run brings the job down within 30 s with a non-zero
 exit naming role and rank, and every completed output step stays readable; a rank that hits a
-physical failure names the element, step and time."""
+physical failure names the element, step and time. Every such run leaves summary.json (status
+"failed", the message, the last recorded step and time) and a readable diagnostics.h5 with the
+history up to there (orchestrator/run_record.py)."""
 from __future__ import annotations
 
 import os
@@ -10,7 +12,10 @@ import subprocess
 import sys
 import time
 
+import json
+
 import h5py
+import numpy as np
 import pytest
 
 from tests.conftest import CASES, REPO
@@ -32,6 +37,24 @@ def _pids(out):
     for f in d.glob("[0-9]*"):
         found[f.read_text().strip()] = int(f.name)
     return found
+
+
+def assert_ended_record(out, status: str, message: str | None = None) -> dict:
+    """summary.json of a run that did not reach its end: ``status``, the message, the last recorded
+    step and time equal to diagnostics.h5's last row (readable, every recorded step since the start)."""
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == status, s
+    if message is not None:
+        assert message in s["message"], s["message"]
+    with h5py.File(out / "diagnostics.h5", "r") as h:
+        t, steps = h["time"][()], h["step"][()]
+        assert len(t) >= 1 and np.all(np.diff(t) > 0)
+        assert steps[0] == 0 and np.all(np.diff(steps) > 0)   # every recorded step since the start
+        assert steps[-1] == s["steps"] and t[-1] == s["end_time"]
+        assert 0.0 <= s["end_time"] < s["requested_end_time"]
+        assert all(h[k].shape == t.shape for k in h)
+    assert "energy_rel" in s["conservation"] or "mass_rel" in s["conservation"], s["conservation"]
+    return s
 
 
 def _kill_rank_mid_run(case, out, role, rank, ranks):
@@ -77,6 +100,8 @@ def test_sigkill_of_a_solver_rank(tmp_path):
         for key in h["lagrange"]:
             if key.isdigit():  # the step links (also: times, steps, indices, mesh)
                 assert h[f"lagrange/{key}/points"].shape[1] == 3
+    s = assert_ended_record(out, "failed", "lagrange rank 1")
+    assert s["end_time"] >= times[-1]   # the history reaches past the last output
 
 
 def test_physical_failure_names_element_step_time(tmp_path, run_immerse):
@@ -91,6 +116,8 @@ def test_physical_failure_names_element_step_time(tmp_path, run_immerse):
     assert r.returncode != 0
     assert "lagrange rank 0" in r.stderr
     assert "element" in r.stderr and "step" in r.stderr and "t=" in r.stderr, r.stderr
+    s = assert_ended_record(tmp_path / "out", "failed", "inverted or invalid element")
+    assert s["steps"] > 0
 
 
 def _ale_case(tmp_path, name, **replace):
@@ -132,6 +159,7 @@ def test_ale_physical_failure_names_zone_step_time(tmp_path, run_immerse):
     assert "ale rank 0" in r.stderr, r.stderr
     assert "ALE zone (" in r.stderr and "invalid thermodynamic state" in r.stderr, r.stderr
     assert "step" in r.stderr and "t=" in r.stderr and "rho=" in r.stderr
+    assert_ended_record(tmp_path / "out", "failed", "invalid thermodynamic state")
 
 
 @pytest.mark.parametrize("role", ["ale", "lagrange"])

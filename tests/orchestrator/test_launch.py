@@ -15,7 +15,7 @@ import h5py
 import pytest
 
 from tests.conftest import REPO, immerse
-from tests.orchestrator.test_faults import _ale_case, _pids, _spinning_case
+from tests.orchestrator.test_faults import _ale_case, _pids, _spinning_case, assert_ended_record
 
 CASES = {
     # a block spinning for 10^8 steps on 2 Lagrangian ranks; outputs every 0.05 s
@@ -184,6 +184,9 @@ def test_signal_ends_the_whole_job(tmp_path, role, sig):
     assert float(m[3]) == pytest.approx(times[-1], rel=1e-6)
     assert float(m[2]) >= float(m[3])
     assert lines[0] in (out / "log.txt").read_text()
+    # the history up to the signal and where it stopped (issue 40: it was lost)
+    s = assert_ended_record(out, "interrupted", f"interrupted by {sig.name}")
+    assert 0 < s["steps"] <= int(m[1])   # the last recorded (diagnostics_every) before the signal's step
 
 
 def test_nohup_keeps_running(tmp_path):

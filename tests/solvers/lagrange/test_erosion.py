@@ -140,20 +140,20 @@ def test_the_kernel_erodes_on_strain_and_on_inversion_and_skips_the_dead():
         return out, alive[0], eps[0], f
 
     x_now = X + 0.5 * dt * v   # so that the mid-step configuration x - dt/2 v is the unit square
-    (dtm, bad, n), alive, eps, f = call(0.33, x_now)
+    (dtm, bad, n, _), alive, eps, f = call(0.33, x_now)
     assert (bad, n, alive) == (-1, 1, 0) and dtm == np.inf and not f.any()
     assert eps == pytest.approx(1.0 / 3.0, rel=1e-12)
-    (dtm, bad, n), alive, eps, f = call(0.34, x_now)
+    (dtm, bad, n, _), alive, eps, f = call(0.34, x_now)
     assert (bad, n, alive) == (-1, 0, 1) and np.isfinite(dtm) and f.any()
     # erosion by the stable step (erosion.time_step): below the limit it erodes, above it lives
-    (_, bad, n), alive, _, f = call(0.34, x_now, erode_dt=dtm * (1.0 + 1e-9))
+    (_, bad, n, _), alive, _, f = call(0.34, x_now, erode_dt=dtm * (1.0 + 1e-9))
     assert (bad, n, alive) == (-1, 1, 0) and not f.any()
-    (_, bad, n), alive, _, f = call(0.34, x_now, erode_dt=dtm * (1.0 - 1e-9))
+    (_, bad, n, _), alive, _, f = call(0.34, x_now, erode_dt=dtm * (1.0 - 1e-9))
     assert (bad, n, alive) == (-1, 0, 1) and f.any()
     inverted = X[[1, 0, 3, 2]]
-    (dtm, bad, n), alive, _, f = call(0.34, inverted)
+    (dtm, bad, n, _), alive, _, f = call(0.34, inverted)
     assert (bad, n, alive) == (-1, 1, 0) and not f.any()
-    (dtm, bad, n), alive, _, _ = call(np.inf, inverted)
+    (dtm, bad, n, _), alive, _, _ = call(np.inf, inverted)
     assert (bad, n, alive) == (0, 0, 1)
 
 
