@@ -896,8 +896,13 @@ def clip_surface(grid: Grid, x, facets, body=None) -> Pieces:
         b = int(body[bad].min())
         nodes = facets[bad & (body == b)].reshape(-1)
         node = int(nodes[outside[nodes]].min())
+        past = float(np.max(np.maximum(grid.lower - x[node], x[node] - grid.upper) / grid.h))
+        hint = ("" if past > 1e-3 else
+                f" ({past:.2g} of a zone past the face: a body on a face of the grid must be held on it, by a "
+                f"[[boundaries]] symmetry (axis, at) or a fixed or velocity boundary there; the gas presses on "
+                f"its other sides only)")
         raise GeometryError(f"body {b} is not inside the grid box [{grid.lower.tolist()}, "
-                            f"{grid.upper.tolist()}]: node {node} at {x[node].tolist()}")
+                            f"{grid.upper.tolist()}]: node {node} at {x[node].tolist()}{hint}")
     if dim == 3:   # the quads' two triangles along the diagonal 0-2
         elems = np.concatenate([facets[:, [0, 1, 2]], facets[:, [0, 2, 3]]])
         e_facet = np.concatenate([np.arange(facets.shape[0])] * 2)

@@ -26,6 +26,9 @@ MIN_ZONES = 1.5
 """The thinnest a coupled body may be, in zones of the background (README: thicker than 1.5 zones;
 embedded_piston_sod's block is 1.5 zones thick and holds Sod's contact to 0.65 %)."""
 
+PAIR_BUDGET = 5_000_000
+"""Facet pairs examined at most (about 100 MB): finer surfaces are searched from every k-th facet."""
+
 OPPOSED = -0.5
 """Two facets face each other across the body when their unit normals' product is below this
 (antiparallel -1 for a plate; a curved wall's facets across from each other are not exactly)."""
@@ -62,17 +65,23 @@ def thinnest(points: np.ndarray, cells: np.ndarray, cell_type: str, lower, upper
         size = np.sqrt(size)                       # a quadrilateral's edge
     c = points[facets].mean(axis=1)
     width = np.abs(n) @ h                          # the zone's width along each normal
-    pairs = cKDTree(c).query_pairs(reach * float(width.max()) + float(size.max()), output_type="ndarray")
+    radius = reach * float(width.max()) + float(size.max())
+    # facets searched from: all, or every stride-th when elements much finer than the zones would give
+    # more than PAIR_BUDGET pairs (a thin place spans many facets; a stride keeps the memory bounded)
+    per = 4.0 * (radius / max(float(np.median(size)), 1e-300)) ** (points.shape[1] - 1)
+    stride = max(1, int(np.ceil(len(c) * per / PAIR_BUDGET)))
+    src = np.arange(0, len(c), stride)
+    m = cKDTree(c[src]).sparse_distance_matrix(cKDTree(c), radius, output_type="ndarray")
     best = np.full(len(c), np.inf)
-    if len(pairs):
-        i, j = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
+    if len(m):
+        i, j = src[m["i"]], m["j"]
         d = c[i] - c[j]
         depth = np.einsum("kd,kd->k", d, n[i])     # how far j lies behind i, along i's inward normal
         side = np.linalg.norm(d - depth[:, None] * n[i], axis=1)
         ok = (np.einsum("kd,kd->k", n[i], n[j]) < OPPOSED) & (depth > 0.0) & (side <= 0.5 * (size[i] + size[j]))
         np.minimum.at(best, i[ok], depth[ok])
     zones = best / width
-    k = int(np.argmin(zones))
+    k = int(np.argmin(zones))   # (a facet searched from: the others stay inf)
     if not np.isfinite(zones[k]):
         return Thinnest(np.inf, np.inf, c[k], 0)
     x = points[cells[facet_cell[k]]]                # the facet's own cell: its extent along the normal

@@ -104,7 +104,7 @@ def test_box2d_loads_with_all_defaults():
     assert case["run"] == {"dimension": 2, "end_time": 1e-4, "dt_scale": 0.9,
                            "output_interval": pytest.approx(5e-6, rel=1e-15),
                            "checkpoint_interval": None, "max_steps": 10_000_000,
-                           "diagnostics_every": 1}
+                           "diagnostics_every": 1, "dt_min": None}
     assert case["ranks"] == {"lagrange": 1}
     assert case["materials"] == {"steel": {"model": "linear_elastic", "density": 7850.0,
                                            "youngs_modulus": 210e9, "poisson_ratio": 0.3}}
