@@ -23,6 +23,7 @@ import h5py
 import numpy as np
 
 from adapters import protocol as P
+from orchestrator.history_spool import HistorySpool, remove_spool
 from orchestrator.restart import FORMAT as CHECKPOINT_FORMAT
 from orchestrator.restart import check_restart
 from orchestrator.run_record import conservation_residuals, contact_balances, write_diagnostics, write_summary
@@ -132,8 +133,6 @@ class Coupler:
             self._load(Path(restart))
         # every recorded row also on disk at once (history_spool.py): a run that fails or is
         # interrupted still leaves its history; a restart's loaded rows first
-        from orchestrator.history_spool import HistorySpool
-
         self.spool = HistorySpool(out, {r: self.names[r] for r in self.history})
         for k in range(len(self.history_t)):
             self.spool.append(self.history_t[k], self.history_step[k], [self.history[r][k] for r in self.history])
@@ -555,6 +554,8 @@ class Coupler:
 
         hist = self.diagnostics_history()
         write_diagnostics(self.out, hist)
+        self.spool.close()
+        remove_spool(self.out)   # (diagnostics.h5 holds it now)
         conservation = conservation_residuals(hist, list(self.history))
         final = {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")}
         s = {

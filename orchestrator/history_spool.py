@@ -8,7 +8,8 @@ partial row at the end, which the reader drops. ``OUT/.run/history.json`` names 
 restarted coupler writes the history it loaded from its checkpoint first.
 
 When a job ends without the coupler's own summary (orchestrator/run_record.py), the launcher reads
-the rows back into the form of diagnostics.h5.
+the rows back into the form of diagnostics.h5. Once diagnostics.h5 is written (by the coupler at the
+end, or by the launcher) the spool is removed.
 """
 from __future__ import annotations
 
@@ -48,6 +49,12 @@ class HistorySpool:
 
     def close(self) -> None:
         os.close(self.fd)
+
+
+def remove_spool(out: Path) -> None:
+    """The spooled history once diagnostics.h5 holds it."""
+    for p in _paths(out):
+        p.unlink(missing_ok=True)
 
 
 def read_history(out: Path) -> dict[str, np.ndarray] | None:

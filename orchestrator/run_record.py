@@ -117,7 +117,7 @@ def record_ended_run(case: dict, out: Path, status: str, message: str, started: 
                      ranks: dict[str, int]) -> None:
     """After a failed or interrupted job: diagnostics.h5 and summary.json from the spooled history,
     unless the coupler's own summary of this run says it completed (a failure after its end)."""
-    from orchestrator.history_spool import read_history
+    from orchestrator.history_spool import read_history, remove_spool
 
     out = Path(out)
     try:
@@ -131,3 +131,4 @@ def record_ended_run(case: dict, out: Path, status: str, message: str, started: 
         hist["step"] = hist["step"].astype(np.int64)
         write_diagnostics(out, hist)
     write_summary(out, ended_summary(case, hist, status, message, time.time() - started, ranks))
+    remove_spool(out)

@@ -63,7 +63,7 @@ def _material_table(case: dict):
 
 
 class LagrangeSolver:
-    WATCHES_HIGH_MODES = True   # the central difference's energy watch (diagnostic created_energy_rel)
+    WATCHES_HIGH_MODES = True   # the central difference's energy watch (diagnostic created_energy_share)
 
     # element fields written to output (name -> attribute); stress is (ne, 6) Voigt xx yy zz xy yz zx
     CELL_FIELDS = ("stress", "plastic_strain", "temperature", "density", "bulk_viscosity")
@@ -691,7 +691,7 @@ class LagrangeSolver:
         }
         if self.WATCHES_HIGH_MODES:   # the energy the scheme made from nothing, over that put in
             created = ke + e_int - self.ke0 - self.se0 - d["external_work"]
-            d["created_energy_rel"] = created / max(self.ke0 + self.se0 + self.supplied_gross, 1e-300)
+            d["created_energy_share"] = created / max(self.ke0 + self.se0 + self.supplied_gross, 1e-300)
         if self.has_gravity:
             d["gravity_work"] = self.w_gravity
         if self.loads is not None:

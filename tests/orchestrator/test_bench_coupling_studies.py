@@ -44,8 +44,11 @@ def test_plate_convergence_structure(plate):
     assert [m["params"]["zone_width_m"] for m in meshes] == pytest.approx([0.02, 0.01, 0.005])
     assert [m["params"]["grid_cells"] for m in meshes] == [[25, 30], [50, 60], [100, 120]]
     assert [m["params"]["plate_cells"] for m in meshes] == [[2, 15], [4, 30], [8, 60]]
-    times = [m["params"]["times_s"] for m in meshes]
-    assert all(t == pytest.approx(times[0]) for t in times) and len(times[0]) == 15  # 0 .. 0.7 ms every 0.05
+    # outputs at the first step reaching 0, 0.05, ..., 0.7 ms (each mesh its own steps, under 10 us;
+    # the study interpolates the histories onto the first mesh's times)
+    due = 0.05e-3 * np.arange(15)
+    for t in (np.array(m["params"]["times_s"]) for m in meshes):
+        assert len(t) == 15 and np.all(t >= due * (1 - 1e-12)) and np.all(t - due < 1e-5), t
     assert all(m["params"]["tip_node_m"] == pytest.approx([0.615, 0.3]) for m in meshes)
     assert all(m["unit"] == "mm" and m["value"] == m["params"]["tip_dx_mm"][-1] for m in meshes)
     assert len(_rows(doc, "tip_difference_max_over_time")) == 2 and len(_rows(doc, "tip_difference_final")) == 2

@@ -36,9 +36,9 @@ def old_clipped_steps(s, interval, end=END, scale=0.9):
 
 
 def test_the_old_clipping_at_240_outputs_is_stopped_by_name():
-    """Measured: stopped at step 23 (t = 0.78 us; the largest stress then 1.17e8 Pa, 2.9 times the
-    exact 4e7; unwatched the run went on to +3.8 GPa), the energy made 0.77 of that put in, the
-    turning mode grown 74 times since step 3, largest 1 mm from the struck end."""
+    """Measured: stopped at step 27 (t = 0.91 us; the largest stress then 1.9e8 Pa, 4.7 times the
+    exact 4e7; unwatched the run went on to +3.8 GPa), the energy made 2.46 times that put in, the
+    turning mode grown 295 times since step 3, largest 1 mm from the struck end."""
     s = bar()
     with pytest.raises(SolverError) as e:
         old_clipped_steps(s, END / 240)
@@ -47,7 +47,7 @@ def test_the_old_clipping_at_240_outputs_is_stopped_by_name():
     assert "body 'bar'" in msg and "since step" in msg and " m (a step sequence" in msg
     step = int(msg.split("at step ")[1].split(",")[0])
     assert MIN_STEPS <= step < 60
-    assert np.abs(s.sig[:, 0]).max() < 5 * 4.0e7
+    assert np.abs(s.sig[:, 0]).max() < 10 * 4.0e7
 
 
 def test_the_bar_at_its_stable_step_makes_no_energy():
@@ -63,13 +63,15 @@ def test_the_bar_at_its_stable_step_makes_no_energy():
         k += 1
         s.correct(None, step=k, time=t)
     assert s.watch.created_max <= 0.0
-    assert s.diagnostics()["created_energy_rel"] == pytest.approx(s.watch.last, rel=1e-12, abs=1e-15)
+    assert s.diagnostics()["created_energy_share"] == pytest.approx(s.watch.last, rel=1e-12, abs=1e-15)
 
 
 def test_the_watch_waits_its_warm_up_then_judges_the_share():
     w = GrowthWatch()
+    for k in range(50):              # nothing supplied yet (a body the loading reaches late): no warm-up
+        assert not w.update(k + 1, 0.0, 0.0, 0.0)
     for k in range(MIN_STEPS - 1):   # the staggering's whole supply at first: not judged
-        assert not w.update(k + 1, 1.0, 2.0, 1.0)
+        assert not w.update(k + 1, 1.0, 2.0 * CREATED, 1.0)
     assert w.update(MIN_STEPS, 1.0, 1.01 * CREATED, 1.0)
     w = GrowthWatch()
     assert not any(w.update(k + 1, 1.0, 0.99 * CREATED, 1.0) for k in range(100))
