@@ -506,7 +506,10 @@ class Coupler:
             dt, t_new, done = self.clock.next(self.t, self.dt_scale * stable)
             self._watch_step(self.clock.dt)
             self.step += 1
-            diag = done or self.step % self.diag_every == 0
+            # a record at every output step too: the history of a run that ends early reaches its
+            # last written output (run_record.py)
+            diag = (done or self.step % self.diag_every == 0 or reached(t_new, self.next_output_t)
+                    or reached(t_new, self.next_checkpoint_t))
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
             if self.coupling is not None:
                 self._coupled_step(dt)

@@ -39,6 +39,18 @@ class GatheredStepSolver(LagrangeSolver):
     def stable_dt(self) -> float:
         return self._dt_stable
 
+    def step_choice(self) -> tuple[str, str]:
+        """(kind of limit, what chose it) for the step this solver asks for (subclasses say)."""
+        return "step control", "the solver's own step"
+
+    def local_limiter(self) -> dict | None:
+        """No element sets this step (no stability limit): the integrator chose it (the same on every
+        rank; rank 0 says it)."""
+        if self.comm.rank != 0:
+            return None
+        kind, what = self.step_choice()
+        return {"dt": self._dt_stable * self.case_dt_scale / (1.0 + 1e-12), "kind": kind, "what": what, "at": None}
+
     def predict(self, dt: float) -> None:
         self.dt = dt
 

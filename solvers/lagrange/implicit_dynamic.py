@@ -61,8 +61,8 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.energy_limit = float(opts.get("energy_limit", 0.01))
         self.case_dt_scale = float(case["run"].get("dt_scale", 0.9))
         self.substeps = 0
-        # the coupler takes run.dt_scale times the step asked for and clips it to land on output and
-        # end times: ask for a hair more than dt_scale's share so the steps are time_step
+        # the coupler takes run.dt_scale times the step asked for (landing on the end in two equal
+        # steps): ask for a hair more than dt_scale's share so the steps are time_step
         self._dt_stable = self.time_step / float(case["run"].get("dt_scale", 0.9)) * (1.0 + 1e-12)
         P, C = self.global_points, self.global_cells
         n, dim = len(P), self.dim
@@ -276,6 +276,10 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.impulse_gross += gross + float(np.abs(f).sum()) * dt
         self.contact_active = int(active)
         self.contact_force = c.force.reshape(P.shape)[self.body_of_node == self._contact_body].sum(axis=0)
+
+    def step_choice(self) -> tuple[str, str]:
+        return ("step control", f"the {self.scheme} step's Newton control (time_step {self.time_step:g} s, "
+                f"{int(self.iterations)} iterations last step)")
 
     def _control(self, smallest: float) -> None:
         """The next step from this one's Newton iterations (item 4 of issue 12): more than 8 halve it,

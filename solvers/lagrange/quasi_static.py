@@ -75,10 +75,11 @@ class QuasiStaticSolver(GatheredStepSolver):
         dim = self.dim
         opts = case["lagrange"]
         self.end_time = float(case["run"]["end_time"])
-        # the coupler takes run.dt_scale times the step asked for and clips it to land on the end and
-        # output times: ask for a hair more than dt_scale's share so the load steps are end / load_steps
-        self._dt_stable = (self.end_time / int(opts.get("load_steps", 1))
-                           / float(case["run"].get("dt_scale", 0.9)) * (1.0 + 1e-12))
+        # the coupler takes run.dt_scale times the step asked for (landing on the end in two equal
+        # steps): ask for a hair more than dt_scale's share so the load steps are end / load_steps
+        self.case_dt_scale = float(case["run"].get("dt_scale", 0.9))
+        self.load_steps = int(opts.get("load_steps", 1))
+        self._dt_stable = self.end_time / self.load_steps / self.case_dt_scale * (1.0 + 1e-12)
         P, C = self.global_points, self.global_cells
         n = len(P)
         # the stiffness of every body (its material's Hooke matrix) and the stresses' matrices
@@ -150,6 +151,9 @@ class QuasiStaticSolver(GatheredStepSolver):
         return out
 
     # ---- the step --------------------------------------------------------------------------------
+    def step_choice(self) -> tuple[str, str]:
+        return "load step", f"lagrange.load_steps = {self.load_steps} over the end time"
+
     def correct(self, impulse=None, step: int = 0, time: float = 0.0, surface_impulse=None) -> None:
         if impulse is not None or surface_impulse is not None:
             raise ValueError("quasi_static: no coupling impulses (a static solve has no inertia)")

@@ -37,7 +37,7 @@ def test_a_run_as_one_batch_job_same_result_log_followed_failures_named(tmp_path
         r = _run(senv, "run", CASES / "sod_immersed_wall", "--out", out, "--engine", "slurm")
         assert r.returncode == 0, r.stdout + r.stderr
         assert "submitted slurm job" in r.stdout and "3 tasks" in r.stdout, r.stdout
-        assert "] finished: 294 steps" in r.stdout and "check passed" in r.stdout, r.stdout  # the log, followed
+        assert "] finished: 296 steps" in r.stdout and "check passed" in r.stdout, r.stdout  # the log, followed
         a = json.loads((tmp_path / "local" / "summary.json").read_text())
         b = json.loads((out / "summary.json").read_text())
         assert a["steps"] == b["steps"] and a["final"] == b["final"] and a["check"] == b["check"]

@@ -52,6 +52,12 @@ KINDS = {
                  r"set by ale: cut zone limit in zone \(21, 0\) at \(0\.05375, \S+\) m \(.*open fraction 0\.\d+\)"),
     "particle": ("sph_shock_tube", [_few_steps("0.2")],
                  r"set by sph: (signal speed|acceleration) limit in particle \d+ at \(\S+, \S+\) m \((c \+ \|v\||\|a\|) ="),
+    # the implicit and quasi-static integrators: no element limits their step, their control chose it
+    "step control": ("l_block_free_flight", [_few_steps("30.0")],
+                     r"set by lagrange: step control limit in the midpoint step's Newton control "
+                     r"\(time_step 0\.1 s, \d+ iterations last step\)$"),
+    "load step": ("contact_patch_2d", [],
+                  r"set by lagrange: load step limit in lagrange\.load_steps = 1 over the end time$"),
 }
 
 
