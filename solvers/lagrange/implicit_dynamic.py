@@ -286,7 +286,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         3 or fewer grow it by 1.25 up to time_step (not counting the contact's iterations that changed
         its active set: the rotating rod's steps took 4 with one such, and a step halved once never
         grew back), a step that had to be split continues at the smallest part that converged; never
-        below time_step_min. (A step shortened to land on an output
+        below time_step_min. (A step shortened to land on the end
         time is judged against the controller's step, not its own.)"""
         scale = float(self.case_dt_scale)
         ctrl = self._dt_stable * scale / (1.0 + 1e-12)
