@@ -75,6 +75,7 @@ CASES_RUN = ({name: FACTORS for name in explicit_cases()} if os.environ.get("IMM
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(3600 if os.environ.get("IMMERSE_ALL_CASES") else 300)   # (the sweep's longest: 4 runs)
 @pytest.mark.parametrize("name", CASES_RUN)
 def test_output_intervals_leave_the_solution_and_the_check_alone(name, tmp_path):
     own, hist = run(CASES / name, tmp_path / "own")
