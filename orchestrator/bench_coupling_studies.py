@@ -248,8 +248,8 @@ def _label(r: dict) -> str:
 def plate_study(runs: list[dict], split: list[dict] = (), name: str = PLATE) -> list[dict]:
     """Result rows: per mesh its history; per pair of successive meshes their differences (the finer
     history interpolated onto the coarser's output times: each mesh writes at its first step past
-    the same times): largest over time, root mean square over time, at the end; for every two successive pairs the ratio of their
-    differences and the observed order log2(ratio).  At the end the differences are signed: a ratio
+    the same times): largest over time, root mean square over time, at the end; for every two
+    successive pairs the ratio of their differences and the observed order log2(ratio).  At the end the differences are signed: a ratio
     > 1 converges monotonically (then the Richardson extrapolation and the finest mesh's error
     estimate d_fine / (2^p - 1)), a ratio < -1 converges oscillating (no extrapolation: the estimate
     is |d_fine|), |ratio| < 1 does not converge.  The split runs: their difference from the middle

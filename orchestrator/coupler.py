@@ -506,10 +506,11 @@ class Coupler:
             dt, t_new, done = self.clock.next(self.t, self.dt_scale * stable)
             self._watch_step(self.clock.dt)
             self.step += 1
-            # a record at every output step too: the history of a run that ends early reaches its
-            # last written output (run_record.py)
-            diag = (done or self.step % self.diag_every == 0 or reached(t_new, self.next_output_t)
-                    or reached(t_new, self.next_checkpoint_t))
+            output_due = reached(t_new, self.next_output_t) or done
+            checkpoint_due = reached(t_new, self.next_checkpoint_t) and not done
+            # a record at every output and checkpoint step too: the history of a run that ends
+            # early reaches its last written output (run_record.py)
+            diag = output_due or checkpoint_due or self.step % self.diag_every == 0
             self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
             if self.coupling is not None:
                 self._coupled_step(dt)
@@ -525,10 +526,10 @@ class Coupler:
                              f"(imports, set-up, kernels loaded or compiled)")
             if diag:
                 self._record()
-            if reached(self.t, self.next_output_t) or done:
+            if output_due:
                 self.write_output()
                 self.next_output_t = next_time(self.t, self.output_interval)
-            if reached(self.t, self.next_checkpoint_t) and not done:
+            if checkpoint_due:
                 self.checkpoint()
                 self.next_checkpoint_t = next_time(self.t, self.checkpoint_interval)
             prog.update(self.t, self.step, self._progress_note)

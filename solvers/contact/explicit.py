@@ -29,8 +29,8 @@ row resting in contact the floor is 0 (its offset made up), so nothing sinks ste
 Stabilization: J scaled so that alpha = 1 weighs it like the nodes'
 inertia over the stable step dt_s, J_dyn = alpha * median(diag(dt_s^2 B M^-1 B^T)) / median(diag(J_1))
 * J_1, with J_1 the operator of gamma h = 1 (J's static scale gamma = alpha / E has no meaning for
-the inertia). dt_s, not the step's own dt: a shortened step (the landing on the end time) keeps J (see
-impulses).
+the inertia). dt_s, not the step's own dt: a shortened step (the landing on the end time) keeps
+J (see impulses).
 
 Prescribed velocity components (boundary conditions) are fixed dofs of the solve at their
 prescribed values (the solver passes them so): the contact cannot move them. With friction (mu > 0)
@@ -136,10 +136,11 @@ class ExplicitContact:
         impulse) of the surface nodes.  dt_force: the time the step's forces act over in the central
         difference ((dt_prev + dt) / 2; default dt), by which the reported pressures are impulses
         (the impulses are dt B^T p: a shortened step, the landing on the end time, would otherwise
-        show its pressure dt_force / dt too high).  dt_scale: the step J's scale is weighed with (default
-        dt; the solver passes its stable step). J p is the offset of the stabilized gap the surfaces
-        rest at: a J that shrank with a shortened step (once: steps clipped onto output times) pushed
-        them apart in that step (a kick of |J p| / dt, 5e-5 m/s on a block resting on an incline, that made it slip).
+        show its pressure dt_force / dt too high).  dt_scale: the step J's scale is weighed with
+        (default dt; the solver passes its stable step). J p is the offset of the stabilized gap the
+        surfaces rest at: a J that shrank with a shortened step (once: steps clipped onto output
+        times) pushed them apart in that step (a kick of |J p| / dt, 5e-5 m/s on a block resting on
+        an incline, that made it slip).
         zone: (ns,) bool, the surface nodes whose states x and v hold (zone.py: the nodes near a
         partner body); only the facets all of whose nodes are in it are searched (default: all)."""
         x = np.asarray(x, float)
@@ -163,10 +164,10 @@ class ExplicitContact:
             return self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
 
         # J p is the offset of the stabilized gap: with p the physical pressure, the same in a
-        # shortened step (the landing on the end time). The step's p is its impulse over dt, which the central
-        # difference's forces give over dt_force: p dt / dt_force is the pressure, so J is scaled by
-        # dt / dt_force (with J fixed, a block resting in 3-D was kicked at every output time when steps were clipped
-        # onto them)
+        # shortened step (the landing on the end time). The step's p is its impulse over dt, which
+        # the central difference's forces give over dt_force: p dt / dt_force is the pressure, so J
+        # is scaled by dt / dt_force (with J fixed, a block resting in 3-D was kicked at every output
+        # time when steps were clipped onto them)
         scale = weight(B, (dt_scale or dt) ** 2) * (dt / (dt_force or dt))
         xstar = (x + dt * np.asarray(v, float)).reshape(-1)
         # K = M/dt^2 is diagonal: the displacements u = dt^2 M^-1 B^T p eliminate, leaving the

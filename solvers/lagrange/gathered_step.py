@@ -39,6 +39,15 @@ class GatheredStepSolver(LagrangeSolver):
     def stable_dt(self) -> float:
         return self._dt_stable
 
+    def _ask_for(self, step: float) -> None:
+        """Ask the coupler for ``step``: it takes run.dt_scale times the step asked for (and lands on
+        the end in two equal steps), so ask for a hair more than dt_scale's share."""
+        self._dt_stable = step / self.case_dt_scale * (1.0 + 1e-12)
+
+    def _asked(self) -> float:
+        """The step this solver asks for (the inverse of _ask_for)."""
+        return self._dt_stable * self.case_dt_scale / (1.0 + 1e-12)
+
     def step_choice(self) -> tuple[str, str]:
         """(kind of limit, what chose it) for the step this solver asks for (subclasses say)."""
         return "step control", "the solver's own step"
@@ -49,7 +58,7 @@ class GatheredStepSolver(LagrangeSolver):
         if self.comm.rank != 0:
             return None
         kind, what = self.step_choice()
-        return {"dt": self._dt_stable * self.case_dt_scale / (1.0 + 1e-12), "kind": kind, "what": what, "at": None}
+        return {"dt": self._asked(), "kind": kind, "what": what, "at": None}
 
     def predict(self, dt: float) -> None:
         self.dt = dt

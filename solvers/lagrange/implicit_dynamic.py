@@ -61,9 +61,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         self.energy_limit = float(opts.get("energy_limit", 0.01))
         self.case_dt_scale = float(case["run"].get("dt_scale", 0.9))
         self.substeps = 0
-        # the coupler takes run.dt_scale times the step asked for (landing on the end in two equal
-        # steps): ask for a hair more than dt_scale's share so the steps are time_step
-        self._dt_stable = self.time_step / float(case["run"].get("dt_scale", 0.9)) * (1.0 + 1e-12)
+        self._ask_for(self.time_step)
         P, C = self.global_points, self.global_cells
         n, dim = len(P), self.dim
         self._blocks = []
@@ -288,8 +286,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         grew back), a step that had to be split continues at the smallest part that converged; never
         below time_step_min. (A step shortened to land on the end
         time is judged against the controller's step, not its own.)"""
-        scale = float(self.case_dt_scale)
-        ctrl = self._dt_stable * scale / (1.0 + 1e-12)
+        ctrl = self._asked()
         if self.substeps > 1:
             ctrl = min(ctrl, smallest)
         elif self.iterations > 8:
@@ -297,7 +294,7 @@ class _ImplicitDynamicSolver(GatheredStepSolver):
         elif self.equilibrium_iterations <= 3:
             ctrl = min(1.25 * ctrl, self.time_step)
         ctrl = max(ctrl, self.time_step_min)
-        self._dt_stable = ctrl / scale * (1.0 + 1e-12)
+        self._ask_for(ctrl)
 
     def diagnostics(self) -> dict[str, float]:
         d = super().diagnostics()

@@ -75,11 +75,9 @@ class QuasiStaticSolver(GatheredStepSolver):
         dim = self.dim
         opts = case["lagrange"]
         self.end_time = float(case["run"]["end_time"])
-        # the coupler takes run.dt_scale times the step asked for (landing on the end in two equal
-        # steps): ask for a hair more than dt_scale's share so the load steps are end / load_steps
         self.case_dt_scale = float(case["run"].get("dt_scale", 0.9))
         self.load_steps = int(opts.get("load_steps", 1))
-        self._dt_stable = self.end_time / self.load_steps / self.case_dt_scale * (1.0 + 1e-12)
+        self._ask_for(self.end_time / self.load_steps)   # load steps of end / load_steps
         P, C = self.global_points, self.global_cells
         n = len(P)
         # the stiffness of every body (its material's Hooke matrix) and the stresses' matrices
