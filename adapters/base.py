@@ -65,6 +65,13 @@ class SolverAdapter(ABC):
         found = [c for c in every if c]
         return min(found, key=lambda c: c["dt"]) if found else None
 
+    def probe_points(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For the case's ``[probes]`` of this role (solvers/probes.py; collective): ``(X, x, v)``,
+        initial positions, positions and velocities of the points this rank counts, each point on
+        exactly one rank.  Asked right after setup() (then X is the start's) and at every
+        diagnostics step.  A solver without points (the background) has none."""
+        raise NotImplementedError(f"{self.role}: no points to probe")
+
     def central_difference(self) -> bool:
         """Whether the solver steps by explicit central differences (leapfrog, velocity Verlet): the
         coupler's step control then keeps the step from following a jittering stable step

@@ -84,6 +84,12 @@ class LagrangeAdapter(SolverAdapter):
     def diagnostics(self) -> dict[str, float]:
         return self.solver.diagnostics()
 
+    def probe_points(self):
+        """(X, x, v) of the nodes this rank owns: reference positions, positions, velocities."""
+        s = self.solver
+        w = s.part.owned
+        return s.X[w], s.x[w], s.v[w]
+
     def write(self, index: int, step: int, time: float) -> None:
         from orchestrator import output
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from adapters import protocol as P
 from adapters.registry import coupling_side
+from solvers.probes import PointProbes
 
 
 def parse_args(argv=None):
@@ -83,18 +84,23 @@ def serve(adapter_cls, argv=None) -> None:
     if side == "background":  # the bodies' initial geometry in the grid, before the initial state
         adapter.bodies = adapter.unpack_geometry(P.share(comm, P.recv(ic, 0, P.TAG_GEOMETRY) if rank == 0 else None))
     adapter.setup()
+    probes = PointProbes(case.get("probes"), args.role, comm)
+    if probes:  # the probes' sets, from the initial positions (before a restart moves them)
+        probes.check_sets(adapter.probe_points()[0], args.role)
     if args.restart:
         adapter.restart(restart_file(Path(args.restart), args.role))
     if side == "foreground":  # the surface (fixed), its positions and velocities now
         buf = pack_surface(adapter)
         if rank == 0:
             P.send(ic, buf, 0, P.TAG_SURFACE)
-    names = adapter.diagnostic_names()
+    names = adapter.diagnostic_names() + probes.names
     reply = np.zeros(P.REPLY_HEAD + len(names))
 
     def answer(with_diagnostics: bool) -> None:
         dt = adapter.stable_dt()
         diag = adapter.diagnostics() if with_diagnostics else None
+        if with_diagnostics and probes:
+            diag.update(probes.values(*adapter.probe_points()))
         if rank == 0:
             reply[0] = 0.0
             reply[1] = dt

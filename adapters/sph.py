@@ -116,8 +116,11 @@ class SphAdapter(SolverAdapter):
         # per particle in id order (masses and held particles never change)
         self._types = parts["type"].astype(np.int64)
         self._mass, self._fixed = parts["mass"], parts["fixed"]
+        self._x0 = np.asarray(parts["x"], dtype=float)[:, : self.dim]  # initial positions (probes)
         self._components = lammps_model.held_components(sph, self.body)  # (n, dim) 0 where held
         self._summed = None
+        # tlsph's internal-energy shift (_shifted) and the LAMMPS batches run (correct())
+        self._shift, self._d_last, self._batches, self._batches_shifted = None, 0.0, 0, 0
         self.gravity = np.zeros(3)
         self.gravity[: self.dim] = sph["gravity"]
         self._dt = None
@@ -230,8 +233,13 @@ class SphAdapter(SolverAdapter):
                 # the internal energy ran half a step of power ahead: the clamped plate of
                 # tests/adapters/test_sph.py 9.3e-4 off its energy (3.4e-5 shifted), and the first step
                 # of cases/embedded_sph_piston, a body pushed from rest, 0.43 (0.20 shifted; what
-                # is left: vest carries half the step's impulse, see correct()).
-                esph = esph - (0.5 * (self._dt or 0.0)) * a["desph"]
+                # is left: vest carries half the step's impulse, see correct()).  With steps of
+                # changing length the shift is not dt/2 desph of the last step: a batch of LAMMPS
+                # steps of dt from D0 = sum desph to D1 adds dt D1 + ... to esph and the trapezoid
+                # dt/2 (D0 + D1) + ...: the shift grows by dt/2 (D1 - D0) a batch (_shifted).  A fixed
+                # dt/2 desph booked the landing on the end time (a step 0.6x the others) as 5.6e-4
+                # of the clamped bar's energy (cases/sph_elastic_bar: 2.0e-4 before, 7.6e-4 after).
+                d_local = float(np.sum(a["desph"]))
             speed, acc, sums, i_speed, i_acc = particle_sums(
                 a["x"], a["v"], a["f"], a["rho"], esph, a["type"].astype(np.int64), self._mass[i], ~self._fixed[i],
                 self._c0, self._rho0, MODEL_CODES[self.model], self.gravity, self.dim)
@@ -240,9 +248,33 @@ class SphAdapter(SolverAdapter):
                               for k, val, j in (("speed", speed, i_speed), ("acceleration", acc, i_acc)) if j >= 0}
             both = np.array([speed, acc])
             self.comm.Allreduce(MPI.IN_PLACE, both, op=MPI.MAX)
-            self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+            if "desph" in a:  # with the sum of desph, for the shift of the internal energy
+                sums = np.append(sums, d_local)
+                self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
+                sums, d_sum = sums[:-1], float(sums[-1])
+                sums[5] -= self._shifted(d_sum)
+            else:
+                self.comm.Allreduce(MPI.IN_PLACE, sums, op=MPI.SUM)
             self._summed = (float(both[0]), float(both[1]), sums)
         return self._summed
+
+    def _shifted(self, d_sum: float) -> float:
+        """tlsph: the internal energy's shift to the kinetic energy's time level (see _sums), S = dt/2
+        D at the start (D the sum of desph), then S += dt/2 (D - D_last) after each batch of LAMMPS
+        steps of dt (a state summed again without a step, e.g. after a checkpoint: unchanged).  The
+        start is the first sum after set-up's force computation (before it desph holds whatever the
+        allocation held: once -1.5e40)."""
+        if self._dt is None:  # before the first force computation (desph not set yet): no shift
+            return 0.0
+        dt = self._dt
+        if self._shift is None:
+            self._shift = 0.5 * dt * d_sum
+        elif self._batches != self._batches_shifted:
+            self._shift += 0.5 * dt * (d_sum - self._d_last)
+        else:
+            return self._shift
+        self._d_last, self._batches_shifted = d_sum, self._batches
+        return self._shift
 
     def _limits(self, include_force: bool = True) -> float:
         speed, acc, _ = self._sums()
@@ -343,6 +375,7 @@ class SphAdapter(SolverAdapter):
         self.engine_s += _time.perf_counter() - t0
         self._invalidate()
         self._stepped = True
+        self._batches += 1
 
     def _cavitate(self) -> None:
         """The pressure cutoff of a taitwater material (LAMMPS's pair has none): before each step
@@ -413,6 +446,11 @@ class SphAdapter(SolverAdapter):
                  energy_balance_rel=(e - self._energy0 - self._external_work) / scale, particles=n)
         return {k: float(v) for k, v in d.items()}
 
+    def probe_points(self):
+        """(X, x, v) of this rank's particles: initial positions by id, positions, velocities."""
+        a = self._local()
+        return self._x0[a["id"] - 1], a["x"][:, : self.dim], a["v"][:, : self.dim]
+
     # ---- output -----------------------------------------------------------------------------
     def write(self, index: int, step: int, time: float) -> None:
         from orchestrator import output
@@ -454,6 +492,8 @@ class SphAdapter(SolverAdapter):
                 h.attrs["ntimestep"] = step
                 h.attrs["energy0"] = self._energy0
                 h.attrs["external_work"] = self._external_work
+                if self._shift is not None:  # tlsph's internal-energy shift (_shifted)
+                    h.attrs["energy_shift"] = (self._shift, self._d_last)
                 h.attrs["ranks"] = self.comm.size
                 # the last step's dt and whether one was taken: velocities() gives the coupler
                 # v^{n+1/2} = v^{n+1} - dt/2 f/m with them (a restart without them handed the
@@ -473,6 +513,8 @@ class SphAdapter(SolverAdapter):
             self._energy0 = float(h.attrs["energy0"])
             self._external_work = float(h.attrs["external_work"])
             dt, stepped = float(h.attrs.get("dt", np.nan)), bool(h.attrs.get("stepped", False))
+            if "energy_shift" in h.attrs:
+                self._shift, self._d_last = (float(v) for v in h.attrs["energy_shift"])
         if np.isfinite(dt):
             self._set_dt(dt)
         self._stepped = stepped

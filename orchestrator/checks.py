@@ -1360,18 +1360,33 @@ def coupled_balances(case, out, history, params):
     return vals
 
 
-@register_check("free_end", params=table(
+def _probe_of_role(case, params):
+    """A check reading a probe's history: the probe is a ``[probes]`` entry of the check's role."""
+    if "probe" not in params:
+        return None
+    role = params.get("role", "sph")
+    p = (case.get("probes") or {}).get(params["probe"])
+    if p is None or p["role"] != role:
+        have = [n for n, q in (case.get("probes") or {}).items() if q["role"] == role]
+        return ("probe", f"not a [probes] entry of role {role!r}; allowed: {', '.join(have) or 'none (add one)'}")
+    return None
+
+
+@register_check("free_end", rule=_probe_of_role, params=table(
     {"role": {"type": "string"}, "axis": {"type": "string", "enum": ["x", "y", "z"]},
      "length": number("m", exclusiveMinimum=0), "speed": number("m/s", exclusiveMinimum=0),
-     "wave_speed": number("m/s", exclusiveMinimum=0)},
+     "wave_speed": number("m/s", exclusiveMinimum=0), "probe": {"type": "string"}},
     required=("axis", "length", "speed", "wave_speed")))
 def free_end(case, out, history, params):
     """A bar of length L along ``axis``, clamped at one end and moving at v0 away from the clamp at
     t = 0 (1-D wave theory, bar speed c): the clamp sends a tension wave that the free end reflects,
     so the free end's displacement is a triangle wave of amplitude v0 L / c and period 4 L / c,
     through zero at t = 2 L / c.  Measured on the particles (or nodes) that start at the free end:
-    their mean displacement along the axis from the output steps; the peak (parabola through the
-    largest sample and its neighbours) and the first downward zero crossing (linear).  Metrics:
+    their mean displacement along the axis, from the history of the case's probe ``probe`` (a
+    ``[probes]`` entry of ``role``: displacement, the axis's component, mean over the free end; the
+    diagnostics steps, so the figures do not depend on the output interval) or else from the output
+    steps; the peak (parabola through the largest sample and its neighbours) and the first downward
+    zero crossing (linear).  Metrics:
     relative errors of the peak displacement (the particle discretisation rounds the triangle's
     corner, so it converges slowly), of the peak's time (L / c), of the rebound time (2 L / c) and
     of the rebound speed (-v0, the slope over [1.5, 2.5] L / c)."""
@@ -1379,11 +1394,20 @@ def free_end(case, out, history, params):
 
     role, a = params.get("role", "sph"), "xyz".index(params["axis"])
     length, v0, c = float(params["length"]), float(params["speed"]), float(params["wave_speed"])
-    steps = output.read_steps(out, role)
-    x0 = output.read_step(out, role, steps[0][2])[0][:, a]
-    tip = x0 >= x0.max() - 1e-9 * max(abs(x0.max()), 1.0)
-    ts = np.array([t for t, _, _ in steps])
-    us = np.array([np.mean(output.read_step(out, role, i)[0][tip, a] - x0[tip]) for _, _, i in steps])
+    if "probe" in params:
+        key = f"{role}.probe_{params['probe']}"
+        if key not in history:
+            raise ValueError(f"check.params.probe = {params['probe']!r}: no history {key!r} (a [probes] "
+                             f"entry of role {role!r})")
+        # (a step recorded twice, at its diagnostics and at its output, counts once)
+        _, first = np.unique(history["step"], return_index=True)
+        ts, us = history["time"][first], history[key][first]
+    else:
+        steps = output.read_steps(out, role)
+        x0 = output.read_step(out, role, steps[0][2])[0][:, a]
+        tip = x0 >= x0.max() - 1e-9 * max(abs(x0.max()), 1.0)
+        ts = np.array([t for t, _, _ in steps])
+        us = np.array([np.mean(output.read_step(out, role, i)[0][tip, a] - x0[tip]) for _, _, i in steps])
     k = int(np.argmax(us))
     if 0 < k < len(us) - 1:  # the vertex of the parabola through three samples
         t3, u3 = ts[k - 1:k + 2], us[k - 1:k + 2]

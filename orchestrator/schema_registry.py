@@ -50,7 +50,7 @@ from typing import Any, Callable
 __all__ = ["FRAGMENTS", "CORE_TABLES", "Table", "register_table", "tables", "table"]
 
 FRAGMENTS = ("orchestrator.schema_lagrange", "orchestrator.schema_ale", "orchestrator.schema_sph",
-             "orchestrator.schema_coupling", "orchestrator.schema_contact")
+             "orchestrator.schema_coupling", "orchestrator.schema_contact", "orchestrator.schema_probes")
 """Modules that register tables, imported on first use.  A new table: a module with one
 ``register_table(...)`` call per table, named here."""
 

@@ -20,7 +20,7 @@ from tests.conftest import REPO
 
 def test_the_schema_is_the_core_and_the_registered_tables_by_order():
     names = [t.name for t in R.tables()]
-    assert names == ["materials", "lagrange", "contact", "ale", "boundaries", "sph", "coupling"]
+    assert names == ["materials", "lagrange", "contact", "ale", "boundaries", "sph", "coupling", "probes"]
     assert list(CASE_SCHEMA["properties"]) == ["run", "ranks", *names, "check"]
     for t in R.tables():
         assert CASE_SCHEMA["properties"][t.name] is t.schema
@@ -135,7 +135,7 @@ def test_a_new_table_is_one_call_and_runs_at_its_place(tmp_path):
     assert out["unknown_key"]["error"] == "probe.bogus = 1: unknown key; allowed: gain, at"
     assert out["unknown_key"]["seen"] == []  # the schema runs before any hook
     assert out["top_level"]["error"] == ("nope = {'x': 1}: unknown key; allowed: run, ranks, materials, "
-                                         "lagrange, contact, ale, probe, boundaries, sph, coupling, check")
+                                         "lagrange, contact, ale, probe, boundaries, sph, coupling, probes, check")
     assert out["short"]["error"] == ("probe.at = [0.5]: dimension mismatch: must have 2 items "
                                      "(run.dimension = 2)")
     # two bad tables: the lower order's check speaks first ([ale] 40 before [probe] 45)
