@@ -193,6 +193,13 @@ def cmd_report(args) -> int:
     out = Path(args.out)
     if not (out / "campaign.h5").is_file():
         return _fail(f"OUT = {str(out)!r}: no campaign.h5 there (run `immerse campaign` first)")
+    from orchestrator.campaign.rundir import check_owned
+    from orchestrator.case import CaseError
+
+    try:  # the report overwrites report.* and figures/: only where the campaign wrote them
+        check_owned(out, key="OUT")
+    except CaseError as e:
+        return _fail(str(e))
     for p in write_report(out):
         print(p)
     return 0

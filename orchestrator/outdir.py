@@ -321,6 +321,19 @@ def _is_real_dir(p: Path) -> bool:
     return p.is_dir() and not p.is_symlink()
 
 
+def _plain_file(out: Path, rel: str) -> bool:
+    """``out/rel`` is a regular file reached through real directories only (no link on the way: a
+    record line ``foo/x.txt`` with ``foo`` a link to the user's folder names the user's file)."""
+    parts = Path(rel).parts
+    try:
+        for i in range(1, len(parts)):
+            if not stat.S_ISDIR(os.lstat(out.joinpath(*parts[:i])).st_mode):
+                return False
+        return stat.S_ISREG(os.lstat(out / rel).st_mode)
+    except OSError:
+        return False
+
+
 def prepare(p: Plan, started: float | None = None) -> None:
     """Carry out a plan: create OUT, delete the files it names, write the ownership record with the
     launcher as the running writer. OutDirError (one line) if the file system refuses; a directory
@@ -342,10 +355,9 @@ def prepare(p: Plan, started: float | None = None) -> None:
             shutil.rmtree(run_dir)
         parents = set()
         for rel in p.delete:
-            f = out / rel
-            if f.is_symlink() or not f.is_file():
-                continue  # never through a link, never a directory
-            f.unlink()
+            if not _plain_file(out, rel):
+                continue  # never through a link (the file's or a folder's on the way), never a directory
+            (out / rel).unlink()
             parents.update(Path(rel).parents)
         for rel in sorted((str(d) for d in parents if str(d) != "."), key=lambda s: -s.count("/")):
             d = out / rel

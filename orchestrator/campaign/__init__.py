@@ -61,7 +61,7 @@ def run_campaign(path, out=None, engine: str = "local", retry_failed: bool = Fal
         d, is_done = rundir.prepare_run(out, run)
         res = rundir.read_result(d) if is_done else None
         if is_done and retry_failed and res and res["status"] not in ("passed", "check_failed", "warned"):
-            (d / "result.json").unlink(missing_ok=True)
+            rundir.remove_recorded(out, f"runs/{d.name}/result.json")
             is_done = False
         if is_done:
             done += 1

@@ -193,6 +193,9 @@ def collect(out: Path, spec: dict, names: list[str] | None = None) -> list[dict]
     found = gather(out, names)
     rows = [row_of(m, r) for m, r in found]
     apply_references(rows, [m for m, _ in found])
+    from orchestrator.campaign.rundir import record
+
+    record(out, out / "campaign.csv", out / "campaign.h5")
     write_csv(out / "campaign.csv", rows)
     write_h5(out / "campaign.h5", rows, spec, found)
     return rows

@@ -206,10 +206,26 @@ def _pictures(out: Path, spec, names, rows, figdir: Path) -> list[tuple[str, str
             pics.append((f"{name}: no picture ({type(e).__name__}: {e})", ""))
             continue
         for p in paths[:1]:
-            dest = figdir / f"picture_{_slug(best['run'])}.png"
+            dest = figdir / f"picture_{_slug(best['run'])}.png"  # (recorded: _Figures)
             shutil.copyfile(p, dest)
             pics.append((f"{name}, finest run {best['run']}: {field} at the end time", dest.name))  # (orchestrator.view)
     return pics
+
+
+class _Figures:
+    """OUT/figures/: each path asked for is in the campaign's record before it is written
+    (orchestrator/campaign/rundir.py: a campaign overwrites only what it wrote)."""
+
+    def __init__(self, out: Path):
+        self.out, self.path = out, out / "figures"
+        self.path.mkdir(exist_ok=True)
+
+    def __truediv__(self, name: str) -> Path:
+        from orchestrator.campaign.rundir import record
+
+        p = self.path / name
+        record(self.out, p)
+        return p
 
 
 def write_report(out: Path) -> list[Path]:
@@ -221,8 +237,7 @@ def write_report(out: Path) -> list[Path]:
 
     out = Path(out)
     spec, rows, summaries = read_h5(out / "campaign.h5", summaries=True)
-    figdir = out / "figures"
-    figdir.mkdir(exist_ok=True)
+    figdir = _Figures(out)
     ref = spec["report"].get("reference", "the cases' own check references")
     metric = spec["report"].get("error_label") or spec["report"].get("error", "error")
     sections = []
@@ -274,8 +289,9 @@ def write_report(out: Path) -> list[Path]:
                 sec["figures"].append((name, f"{caption} (immerse view)."))
         sections.append(sec)
     md, page = _markdown(spec_all, sections), _html(spec_all, sections)
-    from orchestrator.campaign.rundir import atomic_write
+    from orchestrator.campaign.rundir import atomic_write, record
 
+    record(out, out / "report.md", out / "report.html")
     atomic_write(out / "report.md", md)
     atomic_write(out / "report.html", page)
     return [out / "report.md", out / "report.html"]

@@ -13,18 +13,39 @@
 
 The fingerprint is a hash of every file of the run's case directory: a run whose case changed (the
 campaign file or its base case edited) is run again; one whose case is unchanged is kept.
+
+Ownership (the rules of orchestrator/outdir.py for a run's output, applied to a campaign's): the
+marker holds the identity of the folder it was written in (device and inode), so a copy of it in
+another folder is no record (a copied or moved-across-file-systems output is refused: immerse
+cannot tell its files from yours); ``OUT/.immerse-campaign-written`` lists every file the campaign
+wrote (paths relative to OUT, appended by each writer).  Before anything is written, a file at a
+path the campaign writes (CAMPAIGN_FILES) that the list does not hold refuses the campaign, naming
+it; so a run's case directory is replaced, and a file overwritten, only when immerse wrote it.
+Deleting never follows a link.  Each run's ``out/`` is a run output with its own record.
 """
 from __future__ import annotations
 
 import hashlib
 import json
 import os
+import re
 import shutil
+import stat
+import tempfile
 from pathlib import Path
 
 from orchestrator.schema_rules import CaseError
 
 MARKER = ".immerse-campaign.json"
+RECORD = ".immerse-campaign-written"
+CAMPAIGN_FILES = re.compile(
+    r"^(?:campaign\.(?:csv|h5)|report\.(?:md|html)"
+    r"|figures/(?:picture_[^/]*|[^/]*_(?:cost|order|stability|plot\d+))\.png"
+    r"|slurm/(?:runs_\d+\.txt|campaign_\d+\.sbatch|job\.json)"
+    r"|runs/[^/]+/(?:run\.json|result\.json|stdout\.txt|stderr\.txt)"
+    r"|runs/([^/]+)/\1(?:/.*)?)$")
+"""Paths (relative to OUT) the campaign writes, overwrites or deletes: runs/RUN/RUN/ is the run's case
+directory (its whole tree); runs/RUN/out/ is left to the run's own record."""
 MAX_COPY_BYTES = 256 << 20
 """Most a base case directory may hold (its outputs left out) to be copied into each run."""
 
@@ -38,27 +59,154 @@ def atomic_write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+def _folder_id(p: Path) -> list[int]:
+    st = os.stat(p)
+    return [st.st_dev, st.st_ino]
+
+
+def _safe_rel(line: str) -> str | None:
+    """A record line as a clean relative path (a tampered line never reaches outside OUT)."""
+    line = line.strip()
+    parts = line.split("/")
+    if not line or line.startswith("/") or "\\" in line or any(q in ("", ".", "..") for q in parts):
+        return None
+    return line
+
+
+def read_record(out: Path) -> set[str]:
+    p = Path(out) / RECORD
+    try:
+        if p.is_symlink():
+            return set()
+        text = p.read_text(errors="replace")
+    except OSError:
+        return set()
+    return {r for r in map(_safe_rel, text.splitlines()) if r}
+
+
+def record(out: Path, *paths) -> None:
+    """Add files the campaign wrote in ``out`` (absolute, or relative to the working directory) to
+    its record: one write() with O_APPEND (concurrent runs' records do not interleave)."""
+    root = Path(os.path.abspath(out))
+    rels = []
+    for p in paths:
+        try:
+            rel = Path(os.path.abspath(p)).relative_to(root).as_posix()
+        except ValueError:
+            continue
+        if _safe_rel(rel):
+            rels.append(rel)
+    data = "".join(f"{r}\n" for r in rels).encode()
+    if data:
+        fd = os.open(root / RECORD, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
+        try:
+            os.write(fd, data)
+        finally:
+            os.close(fd)
+
+
+def _entries(out: Path):
+    """(relative path, lstat) of every entry below ``out`` that the campaign may write (CAMPAIGN_FILES),
+    without following links; a run's out/ is not entered."""
+    for root, dirs, files in os.walk(out):
+        here = Path(root)
+        rel_here = here.relative_to(out).as_posix()
+        parts = rel_here.split("/")
+        if len(parts) == 2 and parts[0] == "runs":
+            dirs[:] = [d for d in dirs if d != "out"]
+        for n in dirs + files:
+            rel = (here / n).relative_to(out).as_posix()
+            if CAMPAIGN_FILES.match(rel):
+                yield rel, (here / n).lstat()
+
+
+def foreign(out: Path) -> list[str]:
+    """Entries at the campaign's paths it did not record writing (a directory counts by its files;
+    a link in place of one is foreign)."""
+    rec = read_record(out)
+    return sorted(rel for rel, st in _entries(out)
+                  if not stat.S_ISDIR(st.st_mode) and rel not in rec)
+
+
 def claim_out(out: Path, camp) -> None:
     """Make ``out`` this campaign's output directory, or raise CaseError (nothing written) if it
-    holds anything else: a file, a non-empty directory without the record, another campaign's."""
+    holds anything else: a file, a non-empty directory without the record, another campaign's, a
+    marker copied from another folder, or a file the campaign did not write at one of its paths."""
     if out.exists() and not out.is_dir():
         raise CaseError("--out", str(out), "is a file; must be a directory for the campaign's output")
     marker = out / MARKER
     if out.is_dir() and any(out.iterdir()):
-        if not marker.is_file():
-            raise CaseError("--out", str(out), "is a non-empty directory that is not a campaign's "
-                            "output; give a new or empty directory")
-        try:
-            owner = json.loads(marker.read_text())
-        except (OSError, ValueError):
-            raise CaseError("--out", str(out), f"its {MARKER} is unreadable; give a new directory") from None
-        if owner.get("name") != camp.name:
-            raise CaseError("--out", str(out), f"holds the output of campaign {owner.get('name')!r}, "
-                            f"not {camp.name!r}")
+        check_owned(out, camp.name)
         return
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(marker, json.dumps({"format": "immerse-campaign-1", "name": camp.name,
-                                     "campaign": str(camp.path)}, indent=1) + "\n")
+                                     "campaign": str(camp.path), "folder": _folder_id(out)},
+                                    indent=1) + "\n")
+
+
+def check_owned(out: Path, name: str | None = None, key: str = "--out") -> None:
+    """``out`` is a campaign output this campaign (``name``; None: any) may write into: its marker
+    is a real file written in this folder, and no file at the campaign's paths is unrecorded.
+    Else CaseError naming ``key``."""
+    marker = out / MARKER
+    if marker.is_symlink() or not marker.is_file():
+        raise CaseError(key, str(out), "is a non-empty directory that is not a campaign's "
+                        "output; give a new or empty directory")
+    try:
+        owner = json.loads(marker.read_text())
+    except (OSError, ValueError):
+        raise CaseError(key, str(out), f"its {MARKER} is unreadable; give a new directory") from None
+    if not isinstance(owner, dict) or (name is not None and owner.get("name") != name):
+        other = owner.get("name") if isinstance(owner, dict) else None
+        raise CaseError(key, str(out), f"holds the output of campaign {other!r}, not {name!r}")
+    if owner.get("folder") != _folder_id(out):
+        raise CaseError(key, str(out), f"its {MARKER} was written in another folder (a copy, or an "
+                        "output of an older immerse): immerse cannot tell its files from yours; "
+                        "give a new or empty directory")
+    bad = foreign(out)
+    if bad:
+        more = f" (and {len(bad) - 1} more)" if len(bad) > 1 else ""
+        raise CaseError(key, str(out), f"{bad[0]} was not written by this campaign, which would "
+                        f"write or delete it{more}; move it away or give another directory")
+
+
+def remove_recorded(out: Path, rel: str) -> None:
+    """Delete ``out/rel`` (a file, or a directory tree) if the campaign recorded writing it: every
+    file and link in the tree recorded (unlinked, never followed), every directory real; else
+    CaseError naming the first foreign entry (claim_out refused those before: a race)."""
+    rec = read_record(out)
+    top = out / rel
+    parts = Path(rel).parts
+    for i in range(1, len(parts)):  # no link on the way
+        if not stat.S_ISDIR(os.lstat(out.joinpath(*parts[:i])).st_mode):
+            raise CaseError("--out", str(out), f"{Path(*parts[:i]).as_posix()} is not a directory "
+                            "the campaign made (a link or a file)")
+    try:
+        st = os.lstat(top)
+    except FileNotFoundError:
+        return
+    if not stat.S_ISDIR(st.st_mode):
+        if rel not in rec:
+            raise CaseError("--out", str(out), f"{rel} was not written by this campaign; move it away")
+        top.unlink()
+        return
+    tree = [(Path(r).relative_to(out).as_posix(), ds, fs) for r, ds, fs in os.walk(top)]
+    for r, _, fs in tree:
+        for f in fs:
+            if f"{r}/{f}" not in rec:
+                raise CaseError("--out", str(out), f"{r}/{f} was not written by this campaign; move it away")
+    for r, ds, fs in reversed(tree):  # the deepest first
+        for f in fs:
+            (out / r / f).unlink()
+        for d in ds:
+            p = out / r / d
+            if p.is_symlink():
+                if f"{r}/{d}" not in rec:
+                    raise CaseError("--out", str(out), f"{r}/{d} was not written by this campaign; move it away")
+                p.unlink()
+            else:
+                p.rmdir()
+    top.rmdir()
 
 
 def _is_output(d: Path) -> bool:
@@ -92,8 +240,6 @@ def write_case(run, dest: Path) -> Path:
     if _tree_size(base) > MAX_COPY_BYTES:
         raise CaseError(f"run {run.name}: case", str(base), f"holds more than {MAX_COPY_BYTES >> 20} MiB "
                         "(outputs left out); a campaign copies its case into every run")
-    if dest.exists():
-        shutil.rmtree(dest)
     shutil.copytree(base, dest, ignore=_copy_ignore(base), symlinks=True)
     header = (f"# written by `immerse campaign` from {base.name}/case.toml with:\n"
               + "".join(f"#   {k} = {json.dumps(v)}\n" for k, v in run.settings.items()))
@@ -126,18 +272,22 @@ def prepare_run(out: Path, run) -> tuple[Path, bool]:
     (run directory, done). A run not done gets its case directory (re)written and its result removed."""
     d = run_dir(out, run)
     d.mkdir(parents=True, exist_ok=True)
-    staged = d / "case.new"
+    # staged in a folder of its own (made here: nobody else's files are in it)
+    staged = Path(tempfile.mkdtemp(prefix=".case-", dir=d)) / run.name
     write_case(run, staged)
     fp = fingerprint(staged)
     res = read_result(d)
     case = d / run.name
-    if res is not None and res.get("fingerprint") == fp and case.is_dir():
-        shutil.rmtree(staged)
+    if res is not None and res.get("fingerprint") == fp and case.is_dir() and not case.is_symlink():
+        shutil.rmtree(staged.parent)
         return d, True
-    (d / "result.json").unlink(missing_ok=True)
-    if case.exists():
-        shutil.rmtree(case)
+    remove_recorded(out, f"runs/{run.name}/result.json")
+    remove_recorded(out, f"runs/{run.name}/{run.name}")
+    # recorded before it is in place (a kill between leaves a record of nothing, never a file unrecorded)
+    record(out, *(case / p.relative_to(staged) for p in staged.rglob("*")))
     os.replace(staged, case)
+    staged.parent.rmdir()
+    record(out, d / "run.json")
     atomic_write(d / "run.json", json.dumps({
         "name": run.name, "series": run.series, "chart": run.chart, "index": run.index,
         "levels": run.levels, "settings": run.settings, "base_case": str(run.case_dir),

@@ -78,7 +78,7 @@ def _cancel_previous(out: Path) -> None:
 def run_slurm(camp, out: Path, pending: list, on_done) -> None:
     """Submit ``pending`` [(RunSpec, run directory)] as one job array and follow it to its end."""
     from orchestrator.campaign.local import run_weight
-    from orchestrator.campaign.rundir import atomic_write
+    from orchestrator.campaign.rundir import atomic_write, record
 
     if not pending:
         return
@@ -87,6 +87,7 @@ def run_slurm(camp, out: Path, pending: list, on_done) -> None:
     _cancel_previous(out)
     k = len(list(sdir.glob("campaign_*.sbatch")))
     runs_file = sdir / f"runs_{k}.txt"
+    record(out, runs_file, sdir / f"campaign_{k}.sbatch", sdir / "job.json")
     atomic_write(runs_file, "".join(f"{d}\n" for _, d in pending))
     cap = node_cpus() or max(run_weight(r, 1 << 20) for r, _ in pending)
     cpus = max(run_weight(r, cap) for r, _ in pending)

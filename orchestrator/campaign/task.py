@@ -81,11 +81,13 @@ def _wait_for_previous(out: Path, limit: float = 30.0) -> None:
 
 
 def run_task(d: Path, timeout: float | None = None, engine: str = "local") -> int:
-    from orchestrator.campaign.rundir import atomic_write
+    from orchestrator.campaign.rundir import atomic_write, record, remove_recorded
     from orchestrator.launch import dies_with_parent
 
     meta = json.loads((d / "run.json").read_text())
-    (d / "result.json").unlink(missing_ok=True)
+    camp_out = d.parent.parent
+    remove_recorded(camp_out, f"runs/{d.name}/result.json")
+    record(camp_out, d / "stdout.txt", d / "stderr.txt", d / "result.json")
     out = d / "out"
     _wait_for_previous(out)
     cmd = [sys.executable, "-m", "orchestrator.cli", "run", str(d / meta["name"]), "--out", str(out), "--replace"]

@@ -173,6 +173,30 @@ def test_foreign_file_at_a_path_of_the_run_is_refused(earlier, tmp_path, foreign
     assert snapshot(out) == before
 
 
+@pytest.mark.parametrize("route", ["linked_folder", "linked_file", "outside"])
+def test_replace_deletes_nothing_through_a_link(earlier, tmp_path, route):
+    """A record line naming a path through a link to the user's folder (``foo/x.txt``, ``foo`` a
+    link), a link itself (``y.txt`` -> the user's file) or a path out of OUT: --replace deletes the
+    run's own files and never the user's (issue 41: ``foo/x.txt`` was deleted)."""
+    case, first = earlier
+    out = tmp_path / "out"
+    shutil.copytree(first, out, symlinks=True)
+    user = tmp_path / "user"
+    user.mkdir()
+    (user / "x.txt").write_text("the user's data\n")
+    line = {"linked_folder": "foo/x.txt", "linked_file": "y.txt", "outside": "../user/x.txt"}[route]
+    if route == "linked_folder":
+        (out / "foo").symlink_to(user)
+    elif route == "linked_file":
+        (out / "y.txt").symlink_to(user / "x.txt")
+    with open(out / ".immerse" / "written", "a") as f:
+        f.write(line + "\n")
+    r = immerse("run", case, "--out", out, "--replace", timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (user / "x.txt").read_text() == "the user's data\n"
+    assert (out / "summary.json").is_file()
+
+
 def test_output_of_another_case_is_refused(earlier, tmp_path):
     case, first = earlier
     out = tmp_path / "out"
