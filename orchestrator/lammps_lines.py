@@ -13,7 +13,11 @@ file, or take the time loop from the coupler.  A line is accepted when
   in :data:`FIX_STYLES`, :data:`COMPUTE_STYLES`, :data:`VARIABLE_STYLES`;
 * no word of it is a keyword that names a file or a stream (:data:`FILE_KEYWORDS`: ``file``,
   ``append``, ``screen``, ``out``, ...), whatever the command;
-* its fix and compute IDs do not start with ``immerse`` (the adapter's own).
+* its fix and compute IDs do not start with ``immerse`` (the adapter's own);
+* its memory and distance settings are bounded (:data:`LIMITS`): neighbour pages and the most
+  neighbours of a particle (``neigh_modify page/one``), bin sizes no finer than a quarter of the
+  smoothing length, ghost cutoffs and skins no longer than the domain (a cutoff of 1e6 m ghosts
+  every particle thousands of times over a periodic face).
 
 Everything else (``shell``, ``python``, ``include``, ``write_*``, ``dump``, ``log``, ``fix print``,
 ``print``, ``plugin``, ``run``, ``timestep``, ``read_*``, ``jump``, ``label``, ...) is refused with
@@ -61,12 +65,88 @@ OWN_PREFIX = "immerse"
 _PRINTABLE = re.compile(r"^[\x20-\x7e]*$")
 
 
+ONE_MAX = 100_000
+"""neigh_modify one: the most neighbours of one particle (LAMMPS's default 2000; a 3-D particle at
+h = 3 dx has about 500 inside 2 h)."""
+PAGE_MAX = 10_000_000
+"""neigh_modify page: neighbour-list entries a page (LAMMPS's default 100000, 0.4 MB a page)."""
+
+LIMITS = {
+    # command: {keyword: (kind, what it bounds)}; kinds: "int:<max>", "length" (0 .. the domain's
+    # extent), "bin" (0, or h / 4 .. the domain's extent)
+    "neigh_modify": {"one": f"int:{ONE_MAX}", "page": f"int:{PAGE_MAX}", "binsize": "bin"},
+    "comm_modify": {"cutoff": "length"},
+    "atom_modify": {"sort": "sort"},
+}
+
+
 class LammpsLineError(ValueError):
     """A refused line: str() says why."""
 
 
-def check_line(line: str) -> None:
-    """Raise :class:`LammpsLineError` naming why ``line`` may not run; return for an allowed line."""
+def _number(word: str, what: str) -> float:
+    try:
+        v = float(word)
+    except ValueError:
+        raise LammpsLineError(f"{what} must be a number, not {word!r}") from None
+    if v != v or v in (float("inf"), float("-inf")):
+        raise LammpsLineError(f"{what} must be a finite number, not {word!r}")
+    return v
+
+
+def _check_bounds(words: list[str], extent: float | None, h: float | None) -> None:
+    """The memory and distance settings of ``words`` (a command and its arguments) within LIMITS."""
+    cmd = words[0]
+    far = extent if extent is not None else float("inf")
+    fine = h / 4.0 if h is not None else 0.0
+
+    def length(word, what, lo=0.0):
+        v = _number(word, what)
+        if v < lo or v > far:
+            raise LammpsLineError(f"{what} = {word} must be >= {lo:g} and <= the domain's extent "
+                                  f"({far:g} m)")
+        return v
+
+    def binsize(word, what):
+        v = _number(word, what)
+        if v != 0.0 and (v < fine or v > far):
+            raise LammpsLineError(f"{what} = {word} must be 0 (LAMMPS's choice) or between a quarter of "
+                                  f"the smoothing length ({fine:g} m) and the domain's extent ({far:g} m)")
+
+    if cmd == "neighbor" and len(words) > 1:
+        length(words[1], "neighbor skin")
+    limits = LIMITS.get(cmd, {})
+    one = 2000
+    for i, w in enumerate(words[1:], start=1):
+        kind = limits.get(w)
+        if kind is None:
+            continue
+        arg = words[i + 1] if i + 1 < len(words) else None
+        if arg is None:
+            raise LammpsLineError(f"{cmd} {w} needs a value")
+        what = f"{cmd} {w}"
+        if kind.startswith("int:"):
+            top = int(kind[4:])
+            if not re.fullmatch(r"\d{1,12}", arg) or not 1 <= int(arg) <= top:
+                raise LammpsLineError(f"{what} = {arg} must be an integer from 1 to {top}")
+            if w == "one":
+                one = int(arg)
+            elif int(arg) < 10 * one and "one" not in words[i + 2:]:
+                raise LammpsLineError(f"{what} = {arg} must be >= 10 x neigh_modify one ({10 * one})")
+        elif kind == "length":
+            length(arg, what)
+        elif kind == "bin":
+            binsize(arg, what)
+        elif kind == "sort":  # sort Nfreq binsize
+            if not re.fullmatch(r"\d{1,9}", arg):
+                raise LammpsLineError(f"{what} = {arg}: Nfreq must be an integer >= 0")
+            binsize(words[i + 2] if i + 2 < len(words) else "", f"{what} binsize")
+
+
+def check_line(line: str, extent: float | None = None, h: float | None = None) -> None:
+    """Raise :class:`LammpsLineError` naming why ``line`` may not run; return for an allowed line.
+    ``extent``, ``h``: the SPH domain's largest extent and the smoothing length (m), which bound
+    the line's distances (LIMITS); without them only the absolute limits apply."""
     if not isinstance(line, str):
         raise LammpsLineError("must be a string")
     if not _PRINTABLE.match(line):
@@ -96,6 +176,7 @@ def check_line(line: str) -> None:
     if cmd in ("fix", "compute", "unfix", "uncompute", "fix_modify", "compute_modify"):
         if len(words) > 1 and words[1].lower().startswith(OWN_PREFIX):
             raise LammpsLineError(f"IDs starting with {OWN_PREFIX!r} belong to immerse")
+    _check_bounds(words, extent, h)
     if cmd == "variable":
         if len(words) < 3:
             raise LammpsLineError("variable needs a name and a style")

@@ -321,6 +321,10 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
         check_length("sph.gravity", raw["gravity"], dim)
     check_faces("sph", sph["boundaries"], raw.get("boundaries", {}), dim)
     h = sph["smoothing_length"]
+    extent = line_scales(sph)[0]
+    for key in ("smoothing_length", "neighbor_skin"):  # a longer reach ghosts the domain many times over
+        if key in sph and sph[key] > extent:
+            raise CaseError(f"sph.{key}", raw[key], f"must be <= the domain's largest extent ({extent:g} m)")
     if h < sph["spacing"]:
         raise CaseError("sph.smoothing_length", raw["smoothing_length"],
                         f"must be >= sph.spacing = {raw['spacing']} m (the kernel must reach the neighbours)")
@@ -406,9 +410,16 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
     sph["particles"] = total
     for i, line in enumerate(sph["lammps_commands"]):
         try:
-            check_line(line)
+            check_line(line, *line_scales(sph))
         except LammpsLineError as exc:
             raise CaseError(format_key(["sph", "lammps_commands", i]), line, str(exc)) from None
+
+
+def line_scales(sph: dict) -> tuple[float, float]:
+    """(the domain's largest extent, the smoothing length) in m: what bounds the distances of a
+    ``lammps_commands`` line (orchestrator/lammps_lines.py)."""
+    d = sph["domain"]
+    return (max(hi - lo for lo, hi in zip(d["lower"], d["upper"])), float(sph["smoothing_length"]))
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:

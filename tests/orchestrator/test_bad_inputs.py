@@ -271,6 +271,10 @@ SPH_FORBIDDEN = [  # the issue's list: shell, python, include, write_*, dump, lo
     ("dump d all atom 1 d.txt", "command 'dump'"),
     ("log run.log", "command 'log'"),
     ("fix p all print 1 hello file out.txt", "keyword 'file'"),
+    # memory and distance settings (issue 41): bounded by LIMITS and the case's domain and h
+    ("neigh_modify page 2000000000 one 1000000000", "neigh_modify page = 2000000000 must be an integer from 1 to 10000000"),
+    ("comm_modify cutoff 1000000", "comm_modify cutoff = 1000000 must be >= 0 and <= the domain's extent (0.2 m)"),
+    ("neigh_modify binsize 1e-9", "between a quarter of the smoothing length (0.0075 m)"),
 ]
 
 
@@ -390,6 +394,8 @@ BAD_INPUTS = [
         edit(SPH, "density = 1000.0 } ]", "density = 1000.0, pressure = 100.0 } ]")),
     Bad("sph_1e12_particles", "sph.bodies[0].region", "more than sph.max_particles",
         edit(edit(SPH, "spacing = 0.01", "spacing = 1e-7"), "smoothing_length = 0.03", "smoothing_length = 3e-7")),
+    Bad("sph_neighbor_skin_1e300", "sph.neighbor_skin = 1e+300", "must be <= the domain's largest extent (0.2 m)",
+        edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\nneighbor_skin = 1e300")),
     Bad("sph_ranks_beyond_particles", "ranks.sph = 101", "more ranks than the 100 particles",
         SPH + "[ranks]\nsph = 101\n", args=("--oversubscribe",)),
     # -- files that are not regular, too big, or not text --

@@ -53,6 +53,20 @@ FORBIDDEN = [
     ("unfix immerse_integrate", "belong to immerse"),
     ("fix immerse_gravity all setforce 0 0 0", "belong to immerse"),
     ("fix g all", "needs an ID, a group and a style"),
+    # memory and distance bounds (issue 41: these passed and could take the machine's memory)
+    ("neigh_modify page 2000000000 one 1000000000", "neigh_modify page = 2000000000 must be an integer from 1 to 10000000"),
+    ("neigh_modify one 1000000000", "neigh_modify one = 1000000000 must be an integer from 1 to 100000"),
+    ("neigh_modify one 5000 page 20000", "must be >= 10 x neigh_modify one (50000)"),
+    ("neigh_modify one -1", "must be an integer from 1"),
+    ("neigh_modify binsize 1e-9", "between a quarter of the smoothing length"),
+    ("neigh_modify binsize nan", "must be a finite number"),
+    ("comm_modify cutoff 1000000", "comm_modify cutoff = 1000000 must be >= 0 and <= the domain's extent (2 m)"),
+    ("comm_modify mode single cutoff 1e300", "<= the domain's extent"),
+    ("comm_modify cutoff inf", "must be a finite number"),
+    ("neighbor 1e300 bin", "neighbor skin = 1e300 must be >= 0 and <= the domain's extent"),
+    ("neighbor -1 bin", "neighbor skin = -1 must be >= 0"),
+    ("atom_modify sort 100 1e-12", "sort binsize = 1e-12 must be 0"),
+    ("neigh_modify page", "needs a value"),
 ]
 
 ALLOWED = [
@@ -67,6 +81,11 @@ ALLOWED = [
     "compute ke all ke",
     "variable f equal 2.0*step",
     "neigh_modify every 1 delay 0 check yes",
+    "neigh_modify one 5000 page 100000 binsize 0.02",
+    "neigh_modify page 100000 one 5000",
+    "comm_modify vel yes cutoff 0.3",
+    "neighbor 0.01 bin",
+    "atom_modify sort 1000 0.05",
     "velocity lid set 0.0 -1.0 0.0",
     "set type 1 mass 2.0",
     "thermo 100",
@@ -76,14 +95,15 @@ ALLOWED = [
 @pytest.mark.parametrize("line, fragment", FORBIDDEN, ids=[f[0].split()[0] + "-" + str(i) for i, f in enumerate(FORBIDDEN)])
 def test_forbidden_line_refused_with_its_reason(line, fragment):
     with pytest.raises(LammpsLineError) as ei:
-        check_line(line)
+        check_line(line, 2.0, 0.03)   # a domain 2 m across, h = 3 cm
     assert fragment in str(ei.value)
     assert "\n" not in str(ei.value)
 
 
 @pytest.mark.parametrize("line", ALLOWED)
 def test_allowed_line_passes(line):
-    check_line(line)
+    check_line(line, 2.0, 0.03)
+    check_line(line)   # without the case's scales: the absolute limits only
 
 
 def test_not_a_string_refused():
