@@ -230,16 +230,20 @@ cores every poll takes a working process's core: the launcher sets 0 then, and s
 suite (two jobs at once on 2 cores)."""
 
 
+SPIN_MAX_S = 1.0
+"""The longest a wait may spin before it sleeps (s): beyond, every waiting rank holds a core."""
+
+
 def spin_s_from(text: str | None) -> float | None:
     """SPIN_ENV's value in seconds (default 200e-6 when unset), or None if it is not a finite number
-    >= 0 (immerse check and run refuse it, orchestrator/cli.py, before anything starts)."""
+    from 0 to SPIN_MAX_S (immerse check and run refuse it, orchestrator/cli.py, before anything starts)."""
     if text is None:
         return 200e-6
     try:
         v = float(text)
     except ValueError:
         return None
-    return v if math.isfinite(v) and v >= 0.0 else None
+    return v if math.isfinite(v) and 0.0 <= v <= SPIN_MAX_S else None
 
 
 def _spin_s() -> float:

@@ -34,10 +34,10 @@ def _parse_ranks(items: list[str]) -> dict[str, int] | str:
         role, sep, n = it.partition("=")
         if not sep or not role:
             return f"--ranks {it!r}: expected ROLE=N, e.g. lagrange=2"
-        try:
-            ranks[role] = int(n)
-        except ValueError:
-            return f"--ranks {role} = {n!r}: must be an integer >= 1"
+        # ASCII digits only: int() also takes '٢', ' 3', '1_0'
+        if not (n.isascii() and n.isdigit() and len(n) <= 6) or int(n) < 1:
+            return f"--ranks {role} = {n!r}: must be an integer >= 1 (ASCII digits)"
+        ranks[role] = int(n)
     return ranks
 
 
@@ -61,8 +61,13 @@ def _admit(args, case: dict, ranks: dict, overridden) -> int:
     from orchestrator.resources import check_resources, this_machine
 
     if spin_s_from(os.environ.get(SPIN_ENV)) is None:
-        raise CaseError(SPIN_ENV, os.environ[SPIN_ENV], "must be a number of seconds >= 0 (unset: 200e-6)")
-    machine = this_machine(args.nodes, args.memory_per_node, args.oversubscribe)
+        raise CaseError(SPIN_ENV, os.environ[SPIN_ENV], "must be a number of seconds from 0 to 1 (unset: 200e-6)")
+    cluster = None
+    if getattr(args, "engine", "local") == "slurm" and (args.nodes or args.memory_per_node):
+        from orchestrator.slurm_commands import cluster_size   # (the job goes to Slurm: ask it)
+
+        cluster = cluster_size()
+    machine = this_machine(args.nodes, args.memory_per_node, args.oversubscribe, cluster=cluster)
     estimate = check_resources(case, ranks, machine, overridden)
     check_expressions(case)
     check_thin_bodies(case)

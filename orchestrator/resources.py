@@ -149,17 +149,45 @@ def parse_size(text: str) -> int:
     return value
 
 
+def allocation() -> tuple[int, int] | None:
+    """(nodes, memory a node in bytes, 0 if unknown) of the Slurm allocation this process runs in
+    (SLURM_JOB_NUM_NODES, SLURM_MEM_PER_NODE in MB), or None outside one."""
+    n = os.environ.get("SLURM_JOB_NUM_NODES", "")
+    if not (n.isascii() and n.isdigit() and int(n) > 0):
+        return None
+    m = os.environ.get("SLURM_MEM_PER_NODE", "")
+    return int(n), (int(m) << 20 if m.isascii() and m.isdigit() else 0)
+
+
+MAX_NODES = 10_000
+"""--nodes beyond this is refused wherever Slurm does not say the cluster's size (the largest
+machines have about 10,000 nodes)."""
+MAX_MEMORY_PER_NODE = 64 << 40
+"""--memory-per-node beyond 64 TiB is refused wherever Slurm does not say the nodes' memory (the
+largest shared-memory nodes have 24-32 TiB)."""
+
+
 def this_machine(nodes: str | int | None = None, memory_per_node: str | None = None,
-                 oversubscribe: bool = False) -> Machine:
+                 oversubscribe: bool = False, cluster=None) -> Machine:
     """The machine of the command line (``--nodes``, ``--memory-per-node``, ``--oversubscribe``),
-    defaults from this machine; CaseError on the flag for a bad value."""
+    defaults from this machine; CaseError on the flag for a bad value.  The figures a flag gives
+    are bounded by the batch system's (``cluster``: (nodes, largest node's memory): sinfo's for a
+    job going to Slurm, orchestrator/cli.py; by default the allocation this runs in, if any) or,
+    without one, by MAX_NODES and MAX_MEMORY_PER_NODE."""
     n = 1
+    if cluster is None:
+        cluster = allocation()
+    cluster = cluster or None   # (False: none; tests)
     if nodes is not None:
         text = str(nodes).strip()
-        if not re.fullmatch(r"\+?\d{1,9}", text) or int(text) < 1:
+        if not re.fullmatch(r"\+?[0-9]{1,9}", text) or int(text) < 1:
             raise CaseError("--nodes", nodes, "must be an integer >= 1 (nodes of this machine's "
                                               "kind the job spans)")
         n = int(text)
+        top, where = ((cluster[0], "the nodes Slurm has") if cluster
+                      else (MAX_NODES, "the most immerse accepts without Slurm to ask"))
+        if n > top:
+            raise CaseError("--nodes", nodes, f"must be <= {top} ({where})")
     if memory_per_node is None:
         mem, given = machine_memory(), False
     else:
@@ -167,6 +195,10 @@ def this_machine(nodes: str | int | None = None, memory_per_node: str | None = N
             mem, given = parse_size(memory_per_node), True
         except ValueError:
             raise CaseError("--memory-per-node", memory_per_node, SIZE_TEXT) from None
+        top, where = ((cluster[1], "the largest node's memory Slurm has") if cluster and cluster[1]
+                      else (MAX_MEMORY_PER_NODE, "the most immerse accepts without Slurm to ask"))
+        if mem > top:
+            raise CaseError("--memory-per-node", memory_per_node, f"must be <= {format_bytes(top)} ({where})")
     return Machine(nodes=n, memory_per_node=mem, cores_per_node=machine_cores(),
                    oversubscribe=bool(oversubscribe), memory_given=given)
 

@@ -38,6 +38,22 @@ def node_cpus() -> int | None:
     return max(vals) if vals else None
 
 
+def cluster_size() -> tuple[int, int] | None:
+    """(nodes, memory of the largest node in bytes) of the Slurm cluster this machine can reach
+    (sinfo, within 3 s), or None: no Slurm, or it did not answer."""
+    try:
+        r = command("sinfo", "-h", "-o", "%D %m", check=False, timeout=3)
+    except (SlurmError, subprocess.TimeoutExpired, OSError):
+        return None
+    nodes, mem = 0, 0
+    for line in r.stdout.splitlines() if r.returncode == 0 else ():
+        parts = [p.rstrip("+") for p in line.split()]
+        if len(parts) == 2 and parts[0].isdigit() and parts[1].isdigit():
+            nodes += int(parts[0])
+            mem = max(mem, int(parts[1]) << 20)   # sinfo's %m: MB
+    return (nodes, mem) if nodes > 0 else None
+
+
 def queued_tasks(job: str) -> dict[int, str] | None:
     """{array task id: state} of the job's tasks still in the queue; None if squeue failed."""
     try:

@@ -430,6 +430,11 @@ BAD_INPUTS = [
     Bad("ranks_flag_grid_cannot_split", "--ranks ale = 7", "cannot be split over 7 ranks",
         edit(ALE2D, "cells = [100, 1]", "cells = [10, 10]"), args=("--ranks", "ale=7")),
     Bad("ranks_flag_not_integer", "--ranks lagrange", "integer", BAR, args=("--ranks", "lagrange=1e5")),
+    # (issue 41: a non-ASCII digit was taken as 2; int() also takes ' 2' and '1_0')
+    *[Bad(f"ranks_flag_digits_{i}", "--ranks lagrange", "ASCII digits", BAR, args=("--ranks", f"lagrange={n}"))
+      for i, n in enumerate(("\u0662", " 2", "1_0"))],
+    Bad("nodes_beyond_any_cluster", "--nodes = '100000'", "must be <= 10000", BAR, args=("--nodes", "100000")),
+    Bad("memory_per_node_1PiB", "--memory-per-node = '1PiB'", "must be <= 64 TiB", BAR, args=("--memory-per-node", "1PiB")),
     Bad("nodes_zero", "--nodes = '0'", "integer >= 1", ALE2D, args=("--nodes", "0")),
     Bad("nodes_word", "--nodes = 'two'", "integer >= 1", ALE2D, args=("--nodes", "two")),
     Bad("nodes_missing_value", "argument --nodes", "expected one argument", ALE2D, args=("--nodes",)),

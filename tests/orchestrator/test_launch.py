@@ -370,7 +370,7 @@ def test_a_failed_mpi_call_is_reported_as_one(tmp_path, monkeypatch):
     assert aborted == [1, 1, 1]
 
 
-@pytest.mark.parametrize("value", ["abc", "-1", "nan"])
+@pytest.mark.parametrize("value", ["abc", "-1", "nan", "inf", "1e300"])
 def test_a_bad_wait_spin_is_refused_before_anything_starts(tmp_path, monkeypatch, value):
     """IMMERSE_WAIT_SPIN_S (adapters.protocol.SPIN_ENV) that is not a number of seconds >= 0: check
     and run stop with one line naming it and its value, exit 2, no output directory (the ranks used
@@ -384,5 +384,5 @@ def test_a_bad_wait_spin_is_refused_before_anything_starts(tmp_path, monkeypatch
         r = immerse(*args)
         lines = r.stderr.strip().splitlines()
         assert r.returncode == 2 and len(lines) == 1, r.stderr
-        assert lines[0] == f"immerse: {SPIN_ENV} = {value!r}: must be a number of seconds >= 0 (unset: 200e-6)"
+        assert lines[0] == f"immerse: {SPIN_ENV} = {value!r}: must be a number of seconds from 0 to 1 (unset: 200e-6)"
         assert not out.exists()

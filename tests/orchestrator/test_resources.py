@@ -246,6 +246,35 @@ def test_this_machine_flags():
     assert ei.value.key == "--memory-per-node" and "64GiB" in ei.value.allowed
 
 
+@pytest.mark.parametrize("nodes, memory, cluster, key, fragment", [
+    # no batch system to ask: the explicit caps (issue 41: --nodes 100000 --memory-per-node 1PiB passed)
+    ("100000", None, False, "--nodes", "must be <= 10000 (the most immerse accepts without Slurm"),
+    (None, "1PiB", False, "--memory-per-node", "must be <= 64 TiB"),
+    ("\u0662", None, False, "--nodes", "must be an integer >= 1"),   # a non-ASCII digit
+    # Slurm says the cluster's size
+    ("3", None, (2, 256 << 30), "--nodes", "must be <= 2 (the nodes Slurm has)"),
+    (None, "512GiB", (2, 256 << 30), "--memory-per-node", "must be <= 256 GiB (the largest node's memory Slurm has)"),
+])
+def test_the_flags_are_bounded_by_the_cluster(nodes, memory, cluster, key, fragment):
+    with pytest.raises(CaseError) as ei:
+        R.this_machine(nodes, memory, cluster=cluster or None) if cluster else R.this_machine(nodes, memory, cluster=False)
+    assert ei.value.key == key and fragment in ei.value.allowed, ei.value.allowed
+    m = R.this_machine("2", "256GiB", cluster=(2, 256 << 30))
+    assert m.memory == 2 * (256 << 30)
+
+
+def test_the_allocation_bounds_the_flags(monkeypatch):
+    """Inside a Slurm allocation its size is the bound (no process asked)."""
+    monkeypatch.setenv("SLURM_JOB_NUM_NODES", "4")
+    monkeypatch.setenv("SLURM_MEM_PER_NODE", "65536")
+    assert R.allocation() == (4, 64 << 30)
+    with pytest.raises(CaseError, match="must be <= 4 "):
+        R.this_machine("5")
+    with pytest.raises(CaseError, match="must be <= 64 GiB"):
+        R.this_machine("4", "65GiB")
+    assert R.this_machine("4", "64GiB").memory == 4 * (64 << 30)
+
+
 def test_machine_memory_reads_meminfo():
     text = open("/proc/meminfo").read()
     total = int(text.split("MemTotal:")[1].split()[0]) * 1024
