@@ -30,6 +30,7 @@ from solvers.expressions import BOOL, NUM, ExpressionError, compile_expression
 from solvers.lagrange.mesh import body_mesh, box_axes
 
 from .case import CaseError, format_key
+from .schema_rules import expression_refusal
 
 __all__ = ["check_expressions", "CHECK_BUDGET"]
 
@@ -42,15 +43,7 @@ full."""
 _CHUNK = 1 << 16
 
 
-def _refusal(key: str, text: str, exc: ExpressionError, where: str) -> CaseError:
-    if exc.segment is None:  # pragma: no cover - compile errors are load_case's
-        return CaseError(key, text, str(exc))
-    sub = "" if exc.segment == text.strip() else f" (sub-expression {exc.segment!r} = {exc.value})"
-    what = f"{exc.value}" if not sub else "a non-finite value"
-    at = ", ".join(f"{k} = {v:.9g}" for k, v in (exc.point or {}).items())
-    return CaseError(key, text, f"gives {what}{sub} at {at or 'every point'} ({where}); allowed: "
-                                "finite values at every point (guard divisions and roots with "
-                                "where(cond, a, b))")
+_refusal = expression_refusal
 
 
 def _evaluate(key: str, text: str, fn, points: np.ndarray, where: str) -> np.ndarray:

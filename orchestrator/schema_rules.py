@@ -145,6 +145,19 @@ def num_or_expression(v):
     return v if isinstance(v, str) else float(v)
 
 
+def expression_refusal(key: str, text: str, exc: ExpressionError, where: str) -> CaseError:
+    """The CaseError of an expression that gave a non-finite value at a point (``where``: which
+    kind of point, e.g. "a node of body 'bar'"): the key, the sub-expression and the point."""
+    if exc.segment is None:  # pragma: no cover - compile errors are load_case's
+        return CaseError(key, text, str(exc))
+    sub = "" if exc.segment == text.strip() else f" (sub-expression {exc.segment!r} = {exc.value})"
+    what = f"{exc.value}" if not sub else "a non-finite value"
+    at = ", ".join(f"{k} = {v:.9g}" for k, v in (exc.point or {}).items())
+    return CaseError(key, text, f"gives {what}{sub} at {at or 'every point'} ({where}); allowed: "
+                                "finite values at every point (guard divisions and roots with "
+                                "where(cond, a, b))")
+
+
 def check_length(key: str, value: list, dim: int) -> None:
     """A vector of the case has run.dimension components."""
     if len(value) != dim:

@@ -45,7 +45,8 @@ from solvers.expressions import BOOL
 from .lammps_lines import LammpsLineError, check_line
 from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, vector
 from .schema_registry import register_table
-from .schema_rules import CaseError, check_expression, check_faces, check_length, format_key, to_float
+from .schema_rules import (CaseError, check_expression, check_faces, check_length, expression_refusal,
+                           format_key, to_float)
 
 MAX_PARTICLES = 20_000_000
 """More particles than this in one case is refused (memory of the SPH group and of its output)."""
@@ -309,7 +310,8 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
     particle count."""
     import numpy as np
 
-    from solvers.particles import body_points, cells_box, lattice_counts, tait_b
+    from solvers.expressions import ExpressionError
+    from solvers.particles import body_points, cells_box, lattice_counts, points_in, tait_b
 
     for k in ("lower", "upper"):
         check_length(format_key(["sph", "domain", k]), raw["domain"][k], dim)
@@ -392,7 +394,19 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
                                                          dtype=np.float64)) > sph["max_particles"] * 4:
             raise CaseError(format_key(base + [where]), rreg,  # the lattice alone is too big to build
                             f"the bodies give more than sph.max_particles = {sph['max_particles']} particles")
-        x = body_points(body, dim)
+        # the where expressions on the points the adapter evaluates them on: the lattice of the
+        # region's box, the clamp's on the body's particles (adapters/lammps_tlsph.py)
+        try:
+            x = body_points(body, dim)
+        except ExpressionError as exc:
+            raise expression_refusal(format_key(base + ["region", "where"]), reg["where"], exc,
+                                     f"a lattice point of the region of sph.bodies[{i}]") from None
+        if "clamp" in body and body["clamp"].get("where"):
+            try:
+                points_in(body["clamp"], x, dim)
+            except ExpressionError as exc:
+                raise expression_refusal(format_key(base + ["clamp", "where"]), body["clamp"]["where"], exc,
+                                         f"a particle of sph.bodies[{i}]") from None
         n = len(x)
         clo, chi = cells_box(body, dim, x)  # the particles' cells: a where may cut the region at a face
         slack = 1e-9 * body["spacing"]

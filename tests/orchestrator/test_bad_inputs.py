@@ -256,6 +256,19 @@ bodies = [ { material = "water", region = { box = { lower = [0.0, 0.0], upper = 
 lammps_commands = ["fix drag all viscous 0.01"]
 """
 BASES["SPH"] = SPH
+SPH_SOLID = """\
+[run]
+dimension = 2
+end_time = 1e-4
+
+[sph]
+spacing = 0.01
+smoothing_length = 0.03
+domain = { lower = [-0.1, -0.1], upper = [1.2, 0.2] }
+materials.rubber = { model = "tlsph", density = 1000.0, youngs_modulus = 1.0e9, poisson_ratio = 0.0 }
+bodies = [ { material = "rubber", region = { box = { lower = [0.0, 0.0], upper = [1.0, 0.08] } }, density = 1000.0, clamp = { box = { lower = [0.0, 0.0], upper = [0.01, 0.08] } } } ]
+"""
+BASES["SPH_SOLID"] = SPH_SOLID
 
 
 def _sph_line(line: str) -> str:
@@ -394,6 +407,13 @@ BAD_INPUTS = [
         edit(SPH, "density = 1000.0 } ]", "density = 1000.0, pressure = 100.0 } ]")),
     Bad("sph_1e12_particles", "sph.bodies[0].region", "more than sph.max_particles",
         edit(edit(SPH, "spacing = 0.01", "spacing = 1e-7"), "smoothing_length = 0.03", "smoothing_length = 3e-7")),
+    # -- expressions evaluated on the points they will be evaluated on (issue 41: a traceback, a launch) --
+    Bad("sph_region_where_sqrt_negative", "sph.bodies[0].region.where", "gives a non-finite value",
+        edit(SPH, "upper = [0.1, 0.1] } }", 'upper = [0.1, 0.1] }, where = "sqrt(0.05 - x) > 0.1" }')),
+    Bad("sph_clamp_where_zero_over_zero", "sph.bodies[0].clamp.where", "at x = ",
+        edit(SPH_SOLID, "upper = [0.01, 0.08] } }", 'upper = [0.01, 0.08] }, where = "1/(x-x) > 0" }')),
+    Bad("sph_clamp_where_log", "sph.bodies[0].clamp.where", "a particle of sph.bodies[0]",
+        edit(SPH_SOLID, "upper = [0.01, 0.08] } }", 'upper = [0.01, 0.08] }, where = "log(0.5 - x) < 0" }')),
     Bad("sph_neighbor_skin_1e300", "sph.neighbor_skin = 1e+300", "must be <= the domain's largest extent (0.2 m)",
         edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\nneighbor_skin = 1e300")),
     Bad("sph_ranks_beyond_particles", "ranks.sph = 101", "more ranks than the 100 particles",
