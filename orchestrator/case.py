@@ -163,18 +163,20 @@ def _unit(schema: Mapping) -> str:
     return f" ({unit})" if unit else ""
 
 
-def _range_text(schema: Mapping) -> str:
-    parts = []
-    if "minimum" in schema:
-        parts.append(f">= {_fmt_num(schema['minimum'])}")
-    if "exclusiveMinimum" in schema:
-        parts.append(f"> {_fmt_num(schema['exclusiveMinimum'])}")
-    if "maximum" in schema:
-        parts.append(f"<= {_fmt_num(schema['maximum'])}")
-    if "exclusiveMaximum" in schema:
-        parts.append(f"< {_fmt_num(schema['exclusiveMaximum'])}")
+def _range_text(schema: Mapping, with_unit: bool = False) -> str:
+    """"must be > 0 (kg/m^3)"; the physical range a unit adds (schema_parts.UNIT_LIMITS) after the
+    key's own bounds: "must be > 0 (kg/m^3), at most 1e+06 (the physical range)"."""
+    physical = schema.get("x-physical", ())
+    parts, extra = [], []
+    for k, op in (("minimum", ">="), ("exclusiveMinimum", ">"), ("maximum", "<="), ("exclusiveMaximum", "<")):
+        if k in schema:
+            (extra if k in physical else parts).append(f"{op} {_fmt_num(schema[k])}")
     kind = "an integer " if schema.get("type") == "integer" else ""
-    return f"must be {kind}" + " and ".join(parts)
+    unit = _unit(schema) if with_unit else ""
+    if not parts:
+        return f"must be {kind}" + " and ".join(extra) + unit + " (the physical range)"
+    text = f"must be {kind}" + " and ".join(parts) + unit
+    return text + (f", and {' and '.join(extra)} (the physical range)" if extra else "")
 
 
 def _type_text(schema: Mapping) -> str:
@@ -186,6 +188,7 @@ def _type_text(schema: Mapping) -> str:
     text = "must be " + _TYPE_WORDS.get(types, str(types))
     if any(k in schema for k in ("minimum", "exclusiveMinimum", "maximum", "exclusiveMaximum")):
         text += " " + _range_text(schema).removeprefix("must be ").removeprefix("an integer ")
+        return text   # (the caller adds the unit)
     elif "enum" in schema:
         text += ", one of: " + ", ".join(repr(v) for v in schema["enum"])
     return text
@@ -237,7 +240,7 @@ def _schema_error_to_case_error(err: ValidationError, prefix: tuple = ()) -> Cas
     if v == "type":
         return CaseError(key, inst, _type_text(schema) + _unit(schema))
     if v in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
-        return CaseError(key, inst, _range_text(schema) + _unit(schema))
+        return CaseError(key, inst, _range_text(schema, with_unit=True))
     if v == "enum":
         return CaseError(key, inst, "must be one of: " + ", ".join(repr(x) for x in err.validator_value))
     if v == "const":
@@ -348,11 +351,11 @@ def load_case(case_dir: str | os.PathLike, checked_sha256: str | None = None) ->
             raise CaseError(CASE_FILE, str(toml_path), "changed since the run was checked and launched "
                             "(a case file must stay as it is while its run starts)")
         schema = checked_sha256 is None
+        _check_finite(data)   # (first: an inf is "not finite", not "beyond the range")
         if schema:
             err = _best_schema_error(None, data)
             if err is not None:
                 raise _schema_error_to_case_error(err)
-        _check_finite(data)
 
         case = _normalise(data, case_dir)
         _check(case, data, schema)

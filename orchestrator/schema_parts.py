@@ -7,10 +7,11 @@ by the validator, used by :mod:`orchestrator.case` to word messages):
 ``x-unit``     unit shown after the allowed range, e.g. ``must be > 0 (kg/m^3)``;
 ``x-allowed``  replaces the generated "allowed" text for errors on that node;
 ``x-when``     for per-variant key sets (``if``/``then``): names the variant in messages.
+``x-physical`` the bounds :func:`number` added from :data:`UNIT_LIMITS` (named as the physical range).
 """
 from __future__ import annotations
 
-__all__ = ["SCHEMA_URI", "NAME_PATTERN", "NAME_TEXT", "number", "integer", "vector", "table",
+__all__ = ["SCHEMA_URI", "NAME_PATTERN", "NAME_TEXT", "UNIT_LIMITS", "number", "integer", "vector", "table",
            "variants", "name", "BOX"]
 
 SCHEMA_URI = "https://json-schema.org/draft/2020-12/schema"
@@ -19,10 +20,41 @@ NAME_PATTERN = r"^[A-Za-z_][A-Za-z0-9_-]*$"
 NAME_TEXT = "must start with a letter or '_' and contain only letters, digits, '_' and '-'"
 
 
+UNIT_LIMITS = {
+    "m": 1e6,            # 1000 km: lengths and coordinates
+    "s": 1e9,            # 30 years
+    "m/s": 1e6,          # 1000 km/s (non-relativistic: the fastest impacts are ~10 km/s)
+    "m/s^2": 1e9,
+    "Pa": 1e14,          # 100 TPa (moduli ~1e12, detonation ~1e11, impact pressures ~1e12)
+    "kg/m^3": 1e6,       # (osmium 2.26e4)
+    "K": 1e7,
+    "J": 1e20,           # (a 20 Mt explosion: 8e16 J)
+    "J/kg": 1e13,
+    "J/(kg K)": 1e6,
+    "1/s": 1e12,
+    "dimensionless": 1e6,   # ratios, exponents, coefficients
+}
+"""The physical range of a number with a unit: ``number(unit)`` refuses beyond +- this (finite
+but absurd values, e.g. gravity 1e308 or a velocity 1e308, overflow what is derived from them: a
+sound speed, an energy, a stable step) unless the key gives its own bounds.  Non-dimensional
+cases (Sod: pressures of 1) are well inside."""
+
+
 def number(unit: str | None = None, **bounds) -> dict:
     s: dict = {"type": "number", **bounds}
     if unit:
         s["x-unit"] = unit
+    lim = UNIT_LIMITS.get(unit)
+    if lim is not None:
+        added = []
+        if "maximum" not in bounds and "exclusiveMaximum" not in bounds:
+            s["maximum"] = lim
+            added.append("maximum")
+        if "minimum" not in bounds and "exclusiveMinimum" not in bounds:
+            s["minimum"] = -lim
+            added.append("minimum")
+        if added:
+            s["x-physical"] = added   # (named apart in messages: orchestrator/case.py _range_text)
     return s
 
 
@@ -37,7 +69,7 @@ def vector(unit: str | None, items: dict | None = None) -> dict:
     """A 2- or 3-vector (its length against run.dimension is a cross-field check)."""
     s: dict = {
         "type": "array",
-        "items": items if items is not None else {"type": "number"},
+        "items": items if items is not None else (number(unit) if unit in UNIT_LIMITS else {"type": "number"}),
         "minItems": 2,
         "maxItems": 3,
     }

@@ -152,7 +152,7 @@ SPH = table(
     {
         "spacing": number("m", exclusiveMinimum=0),
         "smoothing_length": number("m", exclusiveMinimum=0),
-        "cfl": number("dimensionless", exclusiveMinimum=0, maximum=1),
+        "cfl": number("dimensionless", minimum=1e-4, maximum=1),   # (5e-324: a step of nothing)
         "domain": REGION_BOX,
         "boundaries": table({f: SPH_FACE for f in FACES}),
         "gravity": vector("m/s^2"),

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from orchestrator.schema_parts import number
 from orchestrator.schema_rules import CaseError, MISSING, format_key
 
 CAMPAIGN_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*(\[\d+\]|\.[A-Za-z0-9_-]+)*$")
@@ -52,7 +53,7 @@ SCHEMA = {
     "properties": {
         "name": _NAME,
         "description": {"type": "string"},
-        "timeout": {"type": "number", "exclusiveMinimum": 0, "x-unit": "s"},
+        "timeout": number("s", exclusiveMinimum=0),   # (<= 1e9 s: orchestrator/schema_parts.py)
         "axes": {"type": "object", "propertyNames": {"pattern": r"^[A-Za-z_][A-Za-z0-9_-]*$"},
                  "additionalProperties": _AXIS},
         "series": {
@@ -214,6 +215,7 @@ def read_campaign(path: str | Path) -> dict:
         data, _ = case_mod._read_toml(p.resolve())
     except CaseError as e:  # the reader names case.toml: this is the campaign file
         raise CaseError(p.name, e.value, e.allowed) from None
+    case_mod._check_finite(data)   # (nan and inf pass the schema's ranges: a timeout of nan ran)
     err = case_mod._best_schema_error(SCHEMA, data)   # (the case file's rule: first 100 errors, best match)
     if err is not None:
         raise case_mod._schema_error_to_case_error(err)

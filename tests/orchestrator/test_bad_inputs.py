@@ -310,6 +310,15 @@ BAD_INPUTS = [
              "base = [0.0, 0.0] } }")),
     Bad("erosion_without_strain", "lagrange.bodies[0].erosion", "strain",
         edit(BAR, "initial_velocity = [0.0, 0.0, 0.0]", "initial_velocity = [0.0, 0.0, 0.0]\nerosion = { plastic_strain = 1.0 }")),
+    # -- finite but absurd numbers (issue 41): every number with a unit has a physical range --
+    Bad("gravity_1e308", "lagrange.gravity[2] = 1e+308", "<= 1e+09 (m/s^2) (the physical range)",
+        edit(BAR, "initial_velocity = [0.0, 0.0, 0.0]", "initial_velocity = [0.0, 0.0, 0.0]\n[lagrange]\ngravity = [0.0, 0.0, 1e308]")
+        .replace("[[lagrange.bodies]]", "[[lagrange.bodies]]", 1)),
+    Bad("boundary_velocity_1e308", "boundaries[0].velocity.x = 1e+308", "<= 1e+06 (m/s) (the physical range)", edit(BAR, "velocity = { x = 1.0 }", "velocity = { x = 1e308 }")),
+    Bad("energy_source_1e308", "ale.energy_sources[0].energy = 1e+308", "<= 1e+20 (the physical range)", edit(ALE3D, "energy = 0.1", "energy = 1e308")),
+    Bad("gamma_1e308", "ale.materials.gas.gamma = 1e+308", "<= 1e+06 (the physical range)", edit(ALE2D, "gamma = 1.4", "gamma = 1e308")),
+    Bad("pressure_1e308", "ale.regions[0].pressure = 1e+308", "<= 1e+14 (Pa) (the physical range)", edit(ALE2D, "density = 1.0, pressure = 1.0", "density = 1.0, pressure = 1e308")),
+    Bad("sph_cfl_denormal", "sph.cfl = 5e-324", "must be >= 0.0001", edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\ncfl = 5e-324")),
     Bad("energy_source_inf", "ale.energy_sources[0].energy = inf", "finite", edit(ALE3D, "energy = 0.1", "energy = inf")),
     Bad("grid_lower_minus_inf", "ale.grid.lower[0] = -inf", "finite", edit(ALE2D, "lower = [0.0, 0.0]", "lower = [-inf, 0.0]")),
     Bad("region_pressure_nan", "ale.regions[1].pressure = nan", "finite", edit(ALE2D, "pressure = 0.1", "pressure = nan")),
@@ -338,7 +347,7 @@ BAD_INPUTS = [
     # -- finite but absurd --
     Bad("output_interval_1e-300", "run.output_interval = 1e-300", "more than 1,000,000",
         edit(ALE2D, "end_time = 0.2", "end_time = 0.2\noutput_interval = 1e-300")),
-    Bad("box_extent_overflows", "lagrange.bodies[0].mesh.box.upper", "overflows",
+    Bad("box_extent_overflows", "lagrange.bodies[0].mesh.box.lower[0]", "<= 1e+06 (m) (the physical range)",
         edit(BAR, "lower = [0.0, 0.0, 0.0], upper = [0.1,", "lower = [-1e308, 0.0, 0.0], upper = [1e308,")),
     Bad("grid_zones_underflow", "ale.grid.cells", "underflows", edit(ALE2D, "upper = [1.0, 0.01]", "upper = [1e-200, 1e-200]")),
     Bad("energy_source_outside_grid", "ale.energy_sources[0].at", "must lie in the grid",
@@ -346,7 +355,7 @@ BAD_INPUTS = [
     Bad("wall_normal_overflows", "boundaries[1].normal", "finite float",
         BAR + '[[boundaries]]\ntype = "rigid_wall"\npoint = [0.0, 0.0, 0.0]\nnormal = [1e200, 0.0, 0.0]\n'),
     Bad("wave_speed_overflows", "materials.steel.youngs_modulus", "wave speed",
-        edit(edit(BAR, "density = 8000.0", "density = 1e-300"), "youngs_modulus = 200e9", "youngs_modulus = 1e300")),
+        edit(edit(BAR, "density = 8000.0", "density = 1e-300"), "youngs_modulus = 200e9", "youngs_modulus = 1e14")),
     Bad("obstacle_subsamples_1000", "ale.obstacles[0].subsamples = 1000", "<= 64", edit(OBSTACLE, "subsamples = 2", "subsamples = 1000")),
     # -- hostile expressions --
     Bad("velocity_9_9_9_9", "lagrange.bodies[0].initial_velocity[0] = '9**9**9**9'", "non-finite",
@@ -414,8 +423,10 @@ BAD_INPUTS = [
         edit(SPH_SOLID, "upper = [0.01, 0.08] } }", 'upper = [0.01, 0.08] }, where = "1/(x-x) > 0" }')),
     Bad("sph_clamp_where_log", "sph.bodies[0].clamp.where", "a particle of sph.bodies[0]",
         edit(SPH_SOLID, "upper = [0.01, 0.08] } }", 'upper = [0.01, 0.08] }, where = "log(0.5 - x) < 0" }')),
-    Bad("sph_neighbor_skin_1e300", "sph.neighbor_skin = 1e+300", "must be <= the domain's largest extent (0.2 m)",
+    Bad("sph_neighbor_skin_1e300", "sph.neighbor_skin = 1e+300", "<= 1e+06 (the physical range)",
         edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\nneighbor_skin = 1e300")),
+    Bad("sph_neighbor_skin_beyond_domain", "sph.neighbor_skin = 0.5", "must be <= the domain's largest extent (0.2 m)",
+        edit(SPH, "smoothing_length = 0.03", "smoothing_length = 0.03\nneighbor_skin = 0.5")),
     Bad("sph_ranks_beyond_particles", "ranks.sph = 101", "more ranks than the 100 particles",
         SPH + "[ranks]\nsph = 101\n", args=("--oversubscribe",)),
     # -- files that are not regular, too big, or not text --

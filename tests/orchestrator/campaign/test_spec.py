@@ -87,6 +87,10 @@ def test_a_series_can_leave_out_keys_of_its_base_case(tmp_path):
     (lambda t: t.replace('name = "mid"', 'name = "conforming"'), "series[1].name", "must differ"),
     (lambda t: t + '[report]\nresolution = "cells"\n', "report.resolution", "must name an axis"),
     (lambda t: t.replace("[axes.zones]", "[axes.zones\n"), "campaign.toml", "TOML syntax error"),
+    # (issue 41: a timeout of nan or inf started runs)
+    (lambda t: t.replace('name = "t"', 'name = "t"\ntimeout = nan'), "timeout", "must be a finite number"),
+    (lambda t: t.replace('name = "t"', 'name = "t"\ntimeout = inf'), "timeout", "must be a finite number"),
+    (lambda t: t.replace('name = "t"', 'name = "t"\ntimeout = 1e300'), "timeout", "<= 1e+09 (the physical range)"),
 ])
 def test_a_bad_campaign_is_one_line_naming_the_key(tmp_path, edit, key, allowed):
     with pytest.raises(CaseError) as e:
