@@ -144,11 +144,28 @@ def summary_line(out: Path) -> tuple[str, bool]:
     return line, s.get("check", {}).get("passed", True)
 
 
+def _reindex(out: Path) -> None:
+    """An immerse output no run is writing gets its index rebuilt from its step files when the
+    index does not list exactly them (a launcher killed by SIGKILL, a damaged results.h5): every
+    completed output step readable and listed (orchestrator/output.py write_index)."""
+    from orchestrator import outdir, output
+
+    owner = outdir.read_owner(out)
+    if owner is None or outdir._alive(owner.get("run")):
+        return
+    try:
+        output.write_index(out)
+        outdir.record_written(out, out / output.INDEX_H5, out / output.INDEX_XDMF)
+    except (OSError, output.OutputError, KeyError, ValueError):
+        pass   # (the readers below name what is wrong)
+
+
 def cmd_view(args) -> int:
     from orchestrator.output import OutputError
     from orchestrator.view import ViewError, render
 
     out = Path(args.out)
+    _reindex(out)
     if not (out / "results.h5").is_file():
         return _fail(f"OUT = {str(out)!r}: no results.h5 there (run the case first)")
     steps = tuple(args.step) if args.step else ("last",)
@@ -156,6 +173,9 @@ def cmd_view(args) -> int:
         paths = render(out, fields=args.field or None, steps=steps)
     except (ViewError, OutputError) as e:
         return _fail(str(e))
+    except (OSError, KeyError, ValueError, TypeError) as e:   # an index or step file damaged
+        return _fail(f"OUT = {str(out)!r}: its output files are damaged or not immerse's "
+                     f"({type(e).__name__}: {' '.join(str(e).split())[:200]})")
     for p in paths:
         print(p)
     return 0
@@ -203,8 +223,14 @@ def cmd_report(args) -> int:
 
     try:  # the report overwrites report.* and figures/: only where the campaign wrote them
         check_owned(out, key="OUT")
+        from orchestrator.campaign.collect import read_h5
+
+        read_h5(out / "campaign.h5")
     except CaseError as e:
         return _fail(str(e))
+    except (OSError, KeyError, ValueError, TypeError) as e:   # (json's errors are ValueErrors)
+        return _fail(f"OUT = {str(out)!r}: its campaign.h5 is damaged or not immerse's "
+                     f"({type(e).__name__}: {' '.join(str(e).split())[:200]})")
     for p in write_report(out):
         print(p)
     return 0

@@ -138,10 +138,23 @@ def claim_out(out: Path, camp) -> None:
     if out.is_dir() and any(out.iterdir()):
         check_owned(out, camp.name)
         return
-    out.mkdir(parents=True, exist_ok=True)
-    atomic_write(marker, json.dumps({"format": "immerse-campaign-1", "name": camp.name,
-                                     "campaign": str(camp.path), "folder": _folder_id(out)},
-                                    indent=1) + "\n")
+    made = []
+    try:
+        a = out.absolute()
+        while not os.path.lexists(a):
+            made.append(a)
+            a = a.parent
+        if not a.is_dir():
+            raise CaseError("--out", str(out), f"cannot be created: {str(a)!r} is not a directory")
+        for d in reversed(made):
+            d.mkdir()
+        atomic_write(marker, json.dumps({"format": "immerse-campaign-1", "name": camp.name,
+                                         "campaign": str(camp.path), "folder": _folder_id(out)},
+                                        indent=1) + "\n")
+    except OSError as e:   # (under /proc, read-only, no permission: nothing left behind)
+        for d in made:
+            shutil.rmtree(d, ignore_errors=True)
+        raise CaseError("--out", str(out), f"cannot be created: {e.strerror or e}") from None
 
 
 def check_owned(out: Path, name: str | None = None, key: str = "--out") -> None:
@@ -221,13 +234,31 @@ def _copy_ignore(base: Path):
     return ignore
 
 
-def _tree_size(base: Path) -> int:
+def _tree_size(base: Path, key: str = "case") -> int:
+    """Bytes the base case's files hold (a link counts its target's), walking without following
+    links; CaseError (``key``) for an entry that is not a regular file, a directory or a link to a
+    regular file: a FIFO would block the copy, a socket or a device cannot be copied."""
     total = 0
     ignore = _copy_ignore(base)
     for dirpath, dirnames, filenames in os.walk(base):
         skip = ignore(dirpath, dirnames)
         dirnames[:] = [n for n in dirnames if n not in skip]
-        total += sum(os.lstat(os.path.join(dirpath, f)).st_size for f in filenames)
+        for f in filenames + [d for d in dirnames if os.path.islink(os.path.join(dirpath, d))]:
+            p = os.path.join(dirpath, f)
+            try:
+                st = os.stat(p)   # (through a link: what the copy and the fingerprint read)
+            except OSError:
+                raise CaseError(key, p, "is a dangling link; allowed in a campaign's base case: "
+                                "regular files and directories") from None
+            if not stat.S_ISREG(st.st_mode):
+                from orchestrator.schema_rules import file_kind
+
+                kind = file_kind(st.st_mode) if not stat.S_ISDIR(st.st_mode) else "a link to a directory"
+                raise CaseError(key, p, f"is {kind}; allowed in a campaign's base case: regular "
+                                "files and directories")
+            total += st.st_size
+            if total > MAX_COPY_BYTES:
+                return total
     return total
 
 
@@ -237,7 +268,7 @@ def write_case(run, dest: Path) -> Path:
     from orchestrator.campaign.toml_write import dumps
 
     base = run.case_dir
-    if _tree_size(base) > MAX_COPY_BYTES:
+    if _tree_size(base, f"run {run.name}: case") > MAX_COPY_BYTES:
         raise CaseError(f"run {run.name}: case", str(base), f"holds more than {MAX_COPY_BYTES >> 20} MiB "
                         "(outputs left out); a campaign copies its case into every run")
     shutil.copytree(base, dest, ignore=_copy_ignore(base), symlinks=True)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 import pytest
 
 from tests.conftest import CASES
@@ -110,3 +111,53 @@ def test_the_campaign_replaces_its_own_files(done, tmp_path, run_immerse):
     assert (first / "my_notes.md").read_text() == "mine\n"
     assert (first / "runs" / RUN / "my_plot.py").read_text() == "mine\n"
     assert "end_time = 0.02" in (first / "runs" / RUN / RUN / "case.toml").read_text()
+
+
+@pytest.mark.parametrize("entry", ["fifo", "socket", "link_to_64GiB", "dangling_link"])
+def test_a_base_case_that_cannot_be_copied_is_one_line(tmp_path, run_immerse, entry):
+    """A FIFO (the copy would block on it), a socket, a link to a 64 GiB sparse file (read whole by
+    the copy's fingerprint), a dangling link: refused naming it, no output folder made."""
+    import os
+    import socket
+
+    base = tmp_path / "base"
+    shutil.copytree(CASES / "sod", base, ignore=shutil.ignore_patterns("out"))
+    p = base / "extra"
+    if entry == "fifo":
+        os.mkfifo(p)
+    elif entry == "socket":
+        s = socket.socket(socket.AF_UNIX)
+        s.bind(str(p))
+    elif entry == "link_to_64GiB":
+        big = tmp_path / "sparse"
+        with open(big, "wb") as f:
+            f.truncate(64 << 30)
+        p.symlink_to(big)
+    else:
+        p.symlink_to(tmp_path / "nowhere")
+    camp = _campaign(tmp_path)
+    camp.write_text(camp.read_text().replace(str(CASES / "sod"), str(base)))
+    r = run_immerse("campaign", camp, "--out", tmp_path / "out", timeout=60)
+    _refused(r, "run sod-zones50: case")
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("where", ["/proc/immerse-campaign", "a_file/out"])
+def test_an_out_that_cannot_be_made_is_one_line(tmp_path, run_immerse, where):
+    (tmp_path / "a_file").write_text("mine\n")
+    out = where if where.startswith("/") else tmp_path / where
+    r = run_immerse("campaign", _campaign(tmp_path), "--out", out, timeout=60)
+    _refused(r, "--out", "cannot be created")
+    assert (tmp_path / "a_file").read_text() == "mine\n"
+
+
+def test_a_damaged_table_is_one_line_for_report(done, tmp_path, run_immerse):
+    p, first = done
+    h5 = first / "campaign.h5"
+    keep = h5.read_bytes()
+    try:
+        h5.write_bytes(b"\x89HDF not really" * 100)
+        r = run_immerse("report", first)
+        _refused(r, "OUT", "campaign.h5 is damaged")
+    finally:
+        h5.write_bytes(keep)
