@@ -14,7 +14,13 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
+import math
+import os
+
 FORMAT = "immerse-checkpoint-1"
+MAX_IDENTITY_BYTES = 1 << 20
+"""The case identity a manifest carries (canonical JSON of the case: ~10 KB) may not be longer."""
+MAX_RANKS = 1 << 20
 EXPECTED = "expected a checkpoint manifest OUT/checkpoints/checkpoint_<step>.h5"
 COUPLER_STATE = ("t", "step", "out_index", "dt_min", "dt_max")
 
@@ -86,20 +92,93 @@ def read_checkpoint(path) -> Checkpoint:
             missing = [k for k in COUPLER_STATE if k not in a]
             if missing:
                 raise RestartError(path, f"damaged checkpoint: no attribute {missing[0]!r}")
-            files = {k[5:]: p.parent / _text(a[k]) for k in a if k.startswith("file_")}
-            ranks = {k[6:]: int(a[k]) for k in a if k.startswith("ranks_")}
-            ck = Checkpoint(path=p.resolve(), step=int(a["step"]), t=float(a["t"]),
-                            out_index=int(a["out_index"]), case_name=_text(a["case_name"]),
-                            fingerprint=_text(a["case_fingerprint"]),
-                            identity=json.loads(_text(a["case_identity"])), ranks=ranks, files=files)
+            files = {k[5:]: _state_file(path, p, k, a[k]) for k in a if k.startswith("file_")}
+            ranks = {k[6:]: _whole(path, k, a[k], 1, MAX_RANKS) for k in a if k.startswith("ranks_")}
+            text = _text(a["case_identity"])
+            if len(text) > MAX_IDENTITY_BYTES:
+                raise RestartError(path, f"damaged checkpoint: case_identity of {len(text)} characters "
+                                         f"(at most {MAX_IDENTITY_BYTES})")
+            identity = json.loads(text)
+            if not isinstance(identity, dict):
+                raise RestartError(path, "damaged checkpoint: case_identity is not a table")
+            ck = Checkpoint(path=p.resolve(), step=_whole(path, "step", a["step"], 0, 10**15),
+                            t=_time(path, "t", a["t"]),
+                            out_index=_whole(path, "out_index", a["out_index"], 0, 10**9),
+                            case_name=_text(a["case_name"]), fingerprint=_text(a["case_fingerprint"]),
+                            identity=identity, ranks=ranks, files=files)
+            for k in ("dt_min", "dt_max"):
+                v = float(a[k].item() if hasattr(a[k], "item") else a[k])
+                if math.isnan(v) or v < 0.0:
+                    raise RestartError(path, f"damaged checkpoint: {k} = {v!r}, allowed: a step >= 0 s")
     except RestartError:
         raise
+    except RecursionError:
+        raise RestartError(path, "damaged checkpoint: case_identity nested too deeply") from None
     except (OSError, KeyError, ValueError, TypeError) as e:
         raise RestartError(path, f"unreadable checkpoint ({type(e).__name__}: {e})".replace("\n", " ")) from None
-    for role, f in ck.files.items():
-        if not f.is_file():
-            raise RestartError(path, f"the {role} state it names is missing: {f}")
     return ck
+
+
+def _whole(path, key: str, v, lo: int, hi: int) -> int:
+    """An integer attribute within [lo, hi] (a float that is a whole number passes)."""
+    v = v.item() if hasattr(v, "item") else v   # (numpy scalars print as np.int64(...))
+    try:
+        f = float(v)
+    except (TypeError, ValueError):
+        raise RestartError(path, f"damaged checkpoint: {key} = {v!r}, allowed: an integer") from None
+    if not (math.isfinite(f) and f == int(f) and lo <= f <= hi):
+        raise RestartError(path, f"damaged checkpoint: {key} = {v!r}, allowed: an integer from {lo} to {hi}")
+    return int(f)
+
+
+def _time(path, key: str, v) -> float:
+    v = v.item() if hasattr(v, "item") else v
+    f = float(v)
+    if not (math.isfinite(f) and f >= 0.0):
+        raise RestartError(path, f"damaged checkpoint: {key} = {v!r}, allowed: a finite time >= 0 s")
+    return f
+
+
+def _state_file(path, p: Path, key: str, v) -> Path:
+    """A solver's state file the manifest names: a relative path of plain names (no '..', not
+    absolute) that resolves, links followed, to a regular file inside the manifest's folder."""
+    rel = _text(v)
+    parts = rel.split("/")
+    if not rel or rel.startswith("/") or "\\" in rel or any(q in ("", ".", "..") for q in parts):
+        raise RestartError(path, f"damaged checkpoint: {key} = {rel!r}, allowed: a path inside the "
+                                 "checkpoint's folder")
+    f = p.parent / rel
+    root = p.parent.resolve()
+    try:
+        real = f.resolve(strict=True)
+        real.relative_to(root)
+    except (OSError, ValueError):
+        if not os.path.lexists(f):
+            raise RestartError(path, f"the {key[5:]} state it names is missing: {f}") from None
+        raise RestartError(path, f"damaged checkpoint: {key} = {rel!r} leads outside the checkpoint's "
+                                 "folder") from None
+    if not real.is_file():
+        raise RestartError(path, f"damaged checkpoint: {key} = {rel!r} is not a regular file")
+    return f
+
+
+def _stored_bytes(path, f: Path) -> int:
+    """Bytes the datasets of an HDF5 file declare (what reading them would allocate)."""
+    import h5py
+
+    total = 0
+
+    def add(name, obj):
+        nonlocal total
+        if isinstance(obj, h5py.Dataset):
+            total += int(obj.size) * obj.dtype.itemsize
+
+    try:
+        with h5py.File(f, "r") as h:
+            h.visititems(add)
+    except (OSError, ValueError, RecursionError) as e:
+        raise RestartError(path, f"unreadable state file {f.name} ({type(e).__name__})") from None
+    return total
 
 
 def _short(v) -> str:
@@ -127,4 +206,13 @@ def check_restart(path, case: dict) -> Checkpoint:
     if sorted(ck.files) != sorted(roles):
         raise RestartError(path, f"holds solvers {', '.join(sorted(ck.files)) or '(none)'}, the case "
                                  f"uses {', '.join(roles)}")
+    # what reading the state would allocate, against the machine (a dataset may declare 8 TiB)
+    from orchestrator.resources import format_bytes, machine_memory
+
+    have = machine_memory()
+    for f in [ck.path, *ck.files.values()]:
+        n = _stored_bytes(path, f)
+        if n > have:
+            raise RestartError(path, f"damaged checkpoint: {f.name} declares {format_bytes(n)} of data, "
+                                     f"more than this machine's {format_bytes(have)}")
     return ck

@@ -86,6 +86,55 @@ def test_restart_on_what_is_not_a_checkpoint(run_a, tmp_path, kind):
     assert time.perf_counter() - t0 < 5.0
 
 
+def _tampered(run_a, tmp_path, how):
+    """A copy of the output with its real checkpoint (the right fingerprint) tampered with."""
+    out = tmp_path / "copy"
+    shutil.copytree(run_a[1], out, symlinks=True)
+    ck = out / "checkpoints" / run_a[2].name
+    with h5py.File(ck, "a") as h:
+        a = h.attrs
+        if how == "state_at_etc_passwd":
+            a["file_lagrange"] = "/etc/passwd"
+        elif how == "state_up_the_tree":
+            a["file_lagrange"] = "../../../../../../etc/passwd"
+        elif how == "state_link_out":
+            (ck.parent / "link.h5").symlink_to("/etc/passwd")
+            a["file_lagrange"] = "link.h5"
+        elif how == "step_negative":
+            a["step"] = -5
+        elif how == "t_nan":
+            a["t"] = float("nan")
+        elif how == "ranks_1e9":
+            a["ranks_lagrange"] = 10**9
+        elif how == "identity_100000_deep":
+            a["case_identity"] = "[" * 100_000 + "]" * 100_000
+        elif how == "dataset_8TiB":
+            h.create_dataset("history/huge", shape=(1 << 40,), dtype="f8", chunks=(1024,))
+    return ck
+
+
+@pytest.mark.parametrize("how, fragment", [
+    ("state_at_etc_passwd", "allowed: a path inside the checkpoint's folder"),
+    ("state_up_the_tree", "allowed: a path inside the checkpoint's folder"),
+    ("state_link_out", "leads outside the checkpoint's folder"),
+    ("step_negative", "step = -5, allowed: an integer from 0"),
+    ("t_nan", "t = nan, allowed: a finite time >= 0 s"),
+    ("ranks_1e9", "ranks_lagrange = 1000000000, allowed: an integer from 1 to 1048576"),
+    ("identity_100000_deep", "case_identity nested too deeply"),
+    ("dataset_8TiB", "declares 8 TiB of data"),
+])
+def test_a_tampered_checkpoint_is_refused(run_a, tmp_path, how, fragment):
+    """Issue 41: a checkpoint with its real fingerprint but state pointing out of its folder, step
+    -5, t = nan, 1e9 ranks, a 100,000-deep identity, an 8 TiB dataset: launched or a RecursionError.
+    Everything read from it is validated: one line, exit 2, nothing created, under 5 s."""
+    ck = _tampered(run_a, tmp_path, how)
+    out = tmp_path / "new_out"
+    t0 = time.perf_counter()
+    r = immerse("run", run_a[0], "--out", out, "--restart", ck, timeout=60)
+    refused(r, out, fragment)
+    assert time.perf_counter() - t0 < 5.0
+
+
 @pytest.mark.parametrize("change, key", [
     ({"cells = [400, 1, 1]": "cells = [200, 1, 1]"}, "lagrange.bodies[0].mesh.box.cells"),
     ({"density = 8000.0": "density = 7900.0"}, "materials.steel.density"),
