@@ -60,6 +60,18 @@ def lattice_points(region: dict, spacing: float, dim: int) -> np.ndarray:
     return x[points_in(region, x, dim, box=False)]
 
 
+def sample_points(body: dict, dim: int, size: int, seed: int = 0) -> np.ndarray:
+    """The body's particles among ``size`` lattice points drawn uniformly at random from its region's
+    box lattice (each axis index independently: no product of counts that could overflow): what a
+    check can afford on a lattice too large to build."""
+    region, spacing = body["region"], body["spacing"]
+    lo, _ = bounds(region, dim)
+    counts = lattice_counts(region, spacing, dim)
+    rng = np.random.default_rng(seed)
+    x = np.stack([lo[d] + (rng.integers(0, counts[d], size) + 0.5) * spacing for d in range(dim)], axis=1)
+    return x[points_in(region, x, dim, box=False)]
+
+
 def points_in(region: dict, x: np.ndarray, dim: int, box: bool = True) -> np.ndarray:
     """(n,) bool: which points lie in the region (its box or shape, and its ``where``); ``box``
     False skips the box test (a lattice built inside it)."""

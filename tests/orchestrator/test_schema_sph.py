@@ -167,3 +167,51 @@ def test_a_where_may_cut_a_region_at_the_domain_faces(tmp_path):
     with pytest.raises(CaseError) as ei:
         load_case(tmp_path)
     assert ei.value.key == "sph.bodies[0].region" and "must lie inside sph.domain" in str(ei.value)
+
+
+def _big(tmp_path, spacing: str, where: str = "", extra: str = ""):
+    text = edit(edit(SPH, "spacing = 0.01", f"spacing = {spacing}"), "smoothing_length = 0.03",
+                f"smoothing_length = {float(spacing) * 3}{extra}")
+    if where:
+        text = edit(text, "upper = [0.1, 0.1] } }", f'upper = [0.1, 0.1] }}, where = "{where}" }}')
+    d = tmp_path / "big"
+    d.mkdir(exist_ok=True)
+    (d / "case.toml").write_text(text)
+    return d
+
+
+def test_a_lattice_too_large_to_build_is_counted_from_a_sample(tmp_path):
+    """Issue 41: a lattice of 79M points was built (57 s) before its refusal.  Beyond EXACT_LATTICE
+    a sample counts the body: 5e7 lattice points over max_particles refused, and the same box cut
+    by a where to a quarter disc of radius 0.01 m (pi/4 1e-4 m^2 of 1e-2: 3.9e5 particles)
+    estimated within its sampling error, each check in under 5 s."""
+    import time
+
+    t0 = time.perf_counter()
+    with pytest.raises(CaseError) as e:
+        load_case(_big(tmp_path, "1.4142e-05"))
+    assert e.value.key == "sph.bodies[0].region" and "more than sph.max_particles = 20000000" in e.value.allowed
+    assert "from a sample of 200000" in e.value.allowed
+    assert time.perf_counter() - t0 < 5.0
+    t0 = time.perf_counter()
+    case = load_case(_big(tmp_path, "1.4142e-05", where="x*x + y*y < 1e-4"))
+    exact = 3.14159265 / 4 * (0.01 / 1.4142e-05) ** 2
+    # a binomial sample: 1571 of 200,000 points inside, one standard deviation 2.5 % (measured 2.6 %)
+    assert case["sph"]["particles"] == pytest.approx(exact, rel=0.1)
+    assert time.perf_counter() - t0 < 5.0
+
+
+def test_a_max_particles_of_1e15_meets_the_machine(tmp_path, run_immerse):
+    """max_particles lifted to 1e15 (it allocated 50.7 GiB for a 1e10-particle body: a MemoryError
+    traceback): refused at the key (LAMMPS's ids are 32-bit); at its most, a 1e9-particle body is
+    counted from a sample and refused by the memory it needs, one line, in under 5 s."""
+    import time
+
+    with pytest.raises(CaseError) as e:
+        load_case(_big(tmp_path, "1e-06", extra="\nmax_particles = 1000000000000000"))
+    assert e.value.key == "sph.max_particles" and "<= 2.14748e+09" in e.value.allowed
+    t0 = time.perf_counter()
+    r = run_immerse("check", _big(tmp_path, "3.1623e-06", extra="\nmax_particles = 2147483647"), timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert "needs about" in r.stderr and "of memory" in r.stderr, r.stderr
+    assert time.perf_counter() - t0 < 5.0
