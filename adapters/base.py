@@ -9,7 +9,8 @@ Hook order, per coupled step n -> n+1 (driven by the coupler, see orchestrator.c
     stable_dt()        the solver's own explicit limit for the next step (collective, same on all ranks)
     diagnostics()      mass, momentum, energies (collective; meaningful on the group root)
 and when the coupler asks: write(index, step, time), checkpoint(path), step_limiter() (what sets the
-stable step: local_limiter() of every rank); close() after the last command.
+stable step: local_limiter() of every rank); close() after the last command.  A case with
+``[probes]`` of the role: probe_points() after setup() and with every diagnostics() (solvers/probes.py).
 Every hook is collective over the solver group's communicator `self.comm`.
 """
 from __future__ import annotations
