@@ -26,7 +26,7 @@ UNIT_LIMITS = {
     "m/s": 1e6,          # 1000 km/s (non-relativistic: the fastest impacts are ~10 km/s)
     "m/s^2": 1e9,
     "Pa": 1e14,          # 100 TPa (moduli ~1e12, detonation ~1e11, impact pressures ~1e12)
-    "kg/m^3": 1e6,       # (osmium 2.26e4)
+    "kg/m^3": 1e9,       # (osmium 2.26e4; an idealised heavy, nearly rigid body: 1e8)
     "K": 1e7,
     "J": 1e20,           # (a 20 Mt explosion: 8e16 J)
     "J/kg": 1e13,
