@@ -91,6 +91,10 @@ def test_a_series_can_leave_out_keys_of_its_base_case(tmp_path):
     (lambda t: t.replace('name = "t"', 'name = "t"\ntimeout = nan'), "timeout", "must be a finite number"),
     (lambda t: t.replace('name = "t"', 'name = "t"\ntimeout = inf'), "timeout", "must be a finite number"),
     (lambda t: t.replace('name = "t"', 'name = "t"\ntimeout = 1e300'), "timeout", "<= 1e+09 (the physical range)"),
+    # (issue 41: a 10,000-run campaign took 13 s to name its first bad run)
+    (lambda t: t.replace('values = [100, 200]\n"ale.grid.cells" = [[100, 1], [200, 1]]',
+                         f'values = {list(range(100, 400))}\n"ale.grid.cells" = {[[n, 1] for n in range(100, 400)]}'),
+     "axes", "a campaign may have at most 500 runs"),
 ])
 def test_a_bad_campaign_is_one_line_naming_the_key(tmp_path, edit, key, allowed):
     with pytest.raises(CaseError) as e:
