@@ -34,6 +34,7 @@ import stat
 import tempfile
 from pathlib import Path
 
+from orchestrator.outdir import _safe_rel   # (a record line as a clean relative path: the run's rule)
 from orchestrator.schema_rules import CaseError
 
 MARKER = ".immerse-campaign.json"
@@ -62,15 +63,6 @@ def atomic_write(path: Path, text: str) -> None:
 def _folder_id(p: Path) -> list[int]:
     st = os.stat(p)
     return [st.st_dev, st.st_ino]
-
-
-def _safe_rel(line: str) -> str | None:
-    """A record line as a clean relative path (a tampered line never reaches outside OUT)."""
-    line = line.strip()
-    parts = line.split("/")
-    if not line or line.startswith("/") or "\\" in line or any(q in ("", ".", "..") for q in parts):
-        return None
-    return line
 
 
 def read_record(out: Path) -> set[str]:
