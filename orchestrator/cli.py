@@ -144,6 +144,12 @@ def summary_line(out: Path) -> tuple[str, bool]:
     return line, s.get("check", {}).get("passed", True)
 
 
+def _damaged(out: Path, what: str, e: Exception) -> int:
+    """One line for a file of OUT that could not be read (view, report)."""
+    return _fail(f"OUT = {str(out)!r}: {what} damaged or not immerse's "
+                 f"({type(e).__name__}: {' '.join(str(e).split())[:200]})")
+
+
 def _reindex(out: Path) -> None:
     """An immerse output no run is writing gets its index rebuilt from its step files when the
     index does not list exactly them (a launcher killed by SIGKILL, a damaged results.h5): every
@@ -174,8 +180,7 @@ def cmd_view(args) -> int:
     except (ViewError, OutputError) as e:
         return _fail(str(e))
     except (OSError, KeyError, ValueError, TypeError) as e:   # an index or step file damaged
-        return _fail(f"OUT = {str(out)!r}: its output files are damaged or not immerse's "
-                     f"({type(e).__name__}: {' '.join(str(e).split())[:200]})")
+        return _damaged(out, "its output files are", e)
     for p in paths:
         print(p)
     return 0
@@ -229,8 +234,7 @@ def cmd_report(args) -> int:
     except CaseError as e:
         return _fail(str(e))
     except (OSError, KeyError, ValueError, TypeError) as e:   # (json's errors are ValueErrors)
-        return _fail(f"OUT = {str(out)!r}: its campaign.h5 is damaged or not immerse's "
-                     f"({type(e).__name__}: {' '.join(str(e).split())[:200]})")
+        return _damaged(out, "its campaign.h5 is", e)
     for p in write_report(out):
         print(p)
     return 0

@@ -43,14 +43,11 @@ full."""
 _CHUNK = 1 << 16
 
 
-_refusal = expression_refusal
-
-
 def _evaluate(key: str, text: str, fn, points: np.ndarray, where: str) -> np.ndarray:
     try:
         return fn(*points.T)
     except ExpressionError as exc:
-        raise _refusal(key, text, exc, where) from None
+        raise expression_refusal(key, text, exc, where) from None
 
 
 # ---- Lagrangian bodies --------------------------------------------------------------------------

@@ -103,26 +103,27 @@ def read_record(out) -> set[str]:
     return {r for r in map(_safe_rel, text.splitlines()) if r}
 
 
-def _append(out: Path, rels) -> None:
+def append_lines(path: Path, rels) -> None:
+    """Append ``rels`` to a record file, one a line, in one write() with O_APPEND (records of
+    concurrent writers do not interleave), never through a link (also a campaign's record)."""
     data = "".join(f"{r}\n" for r in rels).encode()
     if not data:
         return
-    # one write() with O_APPEND: records of concurrent writers do not interleave
-    fd = os.open(_marker(out) / RECORD, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+    fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
     try:
         os.write(fd, data)
     finally:
         os.close(fd)
 
 
-def record_written(out_dir, *paths) -> None:
-    """Record files immerse wrote into the output directory ``out_dir`` (absolute or relative to the
-    working directory); --replace deletes them later. A no-op outside an immerse output directory.
-    `immerse view` calls it once per picture after writing it."""
-    out = Path(out_dir)
-    if read_owner(out) is None:
-        return
-    root = out.resolve()
+def _append(out: Path, rels) -> None:
+    append_lines(_marker(out) / RECORD, rels)
+
+
+def rels_inside(out, paths) -> list[str]:
+    """``paths`` (absolute, or relative to the working directory) as clean paths relative to
+    ``out``; those outside it left out."""
+    root = Path(out).resolve()
     rels = []
     for p in paths:
         try:
@@ -134,7 +135,17 @@ def record_written(out_dir, *paths) -> None:
                 continue  # not inside OUT
         if _safe_rel(rel):
             rels.append(rel)
-    _append(out, rels)
+    return rels
+
+
+def record_written(out_dir, *paths) -> None:
+    """Record files immerse wrote into the output directory ``out_dir`` (absolute or relative to the
+    working directory); --replace deletes them later. A no-op outside an immerse output directory.
+    `immerse view` calls it once per picture after writing it."""
+    out = Path(out_dir)
+    if read_owner(out) is None:
+        return
+    _append(out, rels_inside(out, paths))
 
 
 def may_write(out_dir, path) -> bool:
@@ -321,15 +332,25 @@ def _is_real_dir(p: Path) -> bool:
     return p.is_dir() and not p.is_symlink()
 
 
-def _plain_file(out: Path, rel: str) -> bool:
-    """``out/rel`` is a regular file reached through real directories only (no link on the way: a
-    record line ``foo/x.txt`` with ``foo`` a link to the user's folder names the user's file)."""
+def linked_on_the_way(out: Path, rel: str) -> str | None:
+    """The first folder on the way from ``out`` to ``out/rel`` that is there but not a real
+    directory (a link, a file), relative to out, or None (a missing one leads nowhere): a record
+    line ``foo/x.txt`` with ``foo`` a link to the user's folder names the user's file."""
     parts = Path(rel).parts
+    for i in range(1, len(parts)):
+        try:
+            mode = os.lstat(out.joinpath(*parts[:i])).st_mode
+        except FileNotFoundError:
+            return None
+        if not stat.S_ISDIR(mode):
+            return Path(*parts[:i]).as_posix()
+    return None
+
+
+def _plain_file(out: Path, rel: str) -> bool:
+    """``out/rel`` is a regular file reached through real directories only."""
     try:
-        for i in range(1, len(parts)):
-            if not stat.S_ISDIR(os.lstat(out.joinpath(*parts[:i])).st_mode):
-                return False
-        return stat.S_ISREG(os.lstat(out / rel).st_mode)
+        return linked_on_the_way(out, rel) is None and stat.S_ISREG(os.lstat(out / rel).st_mode)
     except OSError:
         return False
 

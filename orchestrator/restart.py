@@ -107,7 +107,7 @@ def read_checkpoint(path) -> Checkpoint:
                             case_name=_text(a["case_name"]), fingerprint=_text(a["case_fingerprint"]),
                             identity=identity, ranks=ranks, files=files)
             for k in ("dt_min", "dt_max"):
-                v = float(a[k].item() if hasattr(a[k], "item") else a[k])
+                v = float(_py(a[k]))
                 if math.isnan(v) or v < 0.0:
                     raise RestartError(path, f"damaged checkpoint: {k} = {v!r}, allowed: a step >= 0 s")
     except RestartError:
@@ -119,9 +119,14 @@ def read_checkpoint(path) -> Checkpoint:
     return ck
 
 
+def _py(v):
+    """An HDF5 attribute as a Python value (numpy scalars print as np.int64(...) in messages)."""
+    return v.item() if hasattr(v, "item") else v
+
+
 def _whole(path, key: str, v, lo: int, hi: int) -> int:
     """An integer attribute within [lo, hi] (a float that is a whole number passes)."""
-    v = v.item() if hasattr(v, "item") else v   # (numpy scalars print as np.int64(...))
+    v = _py(v)
     try:
         f = float(v)
     except (TypeError, ValueError):
@@ -132,7 +137,7 @@ def _whole(path, key: str, v, lo: int, hi: int) -> int:
 
 
 def _time(path, key: str, v) -> float:
-    v = v.item() if hasattr(v, "item") else v
+    v = _py(v)
     f = float(v)
     if not (math.isfinite(f) and f >= 0.0):
         raise RestartError(path, f"damaged checkpoint: {key} = {v!r}, allowed: a finite time >= 0 s")

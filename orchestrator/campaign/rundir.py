@@ -34,7 +34,7 @@ import stat
 import tempfile
 from pathlib import Path
 
-from orchestrator.outdir import _safe_rel   # (a record line as a clean relative path: the run's rule)
+from orchestrator.outdir import _safe_rel, append_lines, linked_on_the_way, rels_inside
 from orchestrator.schema_rules import CaseError
 
 MARKER = ".immerse-campaign.json"
@@ -79,22 +79,7 @@ def read_record(out: Path) -> set[str]:
 def record(out: Path, *paths) -> None:
     """Add files the campaign wrote in ``out`` (absolute, or relative to the working directory) to
     its record: one write() with O_APPEND (concurrent runs' records do not interleave)."""
-    root = Path(os.path.abspath(out))
-    rels = []
-    for p in paths:
-        try:
-            rel = Path(os.path.abspath(p)).relative_to(root).as_posix()
-        except ValueError:
-            continue
-        if _safe_rel(rel):
-            rels.append(rel)
-    data = "".join(f"{r}\n" for r in rels).encode()
-    if data:
-        fd = os.open(root / RECORD, os.O_WRONLY | os.O_APPEND | os.O_CREAT | os.O_NOFOLLOW, 0o644)
-        try:
-            os.write(fd, data)
-        finally:
-            os.close(fd)
+    append_lines(Path(out) / RECORD, rels_inside(out, paths))
 
 
 def _entries(out: Path):
@@ -181,11 +166,10 @@ def remove_recorded(out: Path, rel: str) -> None:
     CaseError naming the first foreign entry (claim_out refused those before: a race)."""
     rec = read_record(out)
     top = out / rel
-    parts = Path(rel).parts
-    for i in range(1, len(parts)):  # no link on the way
-        if not stat.S_ISDIR(os.lstat(out.joinpath(*parts[:i])).st_mode):
-            raise CaseError("--out", str(out), f"{Path(*parts[:i]).as_posix()} is not a directory "
-                            "the campaign made (a link or a file)")
+    on_the_way = linked_on_the_way(out, rel)
+    if on_the_way is not None:
+        raise CaseError("--out", str(out), f"{on_the_way} is not a directory the campaign made "
+                        "(a link or a file)")
     try:
         st = os.lstat(top)
     except FileNotFoundError:
