@@ -230,60 +230,23 @@ def sliding(case, out, history, params):
     return out_metrics
 
 
-def surface_penetration(points: np.ndarray, facets: np.ndarray, nodes: np.ndarray, depth: float) -> np.ndarray:
-    """(len(nodes),) how far each of ``nodes`` lies behind the surface ``facets`` (outward
-    quadrilaterals or segments of ``points``), 0 where it lies in front or off it.
-
-    A node is measured against the facets whose plane (line) it projects into the inside of, up to
-    ``depth`` on either side; of those the nearest along its normal is the surface it belongs to (a
-    node behind a plate's top face is also behind its bottom face's plane, by the thickness: the
-    nearer face decides). The facets are taken as planar (centroid, unit area vector): the deformed
-    quadrilaterals of an impact warp by round-off-to-micrometres, far below an element."""
-    from solvers.contact.search import candidate_pairs, facet_boxes
-    from solvers.lagrange.surface import facet_area_vectors
-
-    points = np.asarray(points, float)
-    dim = points.shape[1]
-    x = points[facets]                                   # (nf, k, dim)
-    n = facet_area_vectors(points, facets)
-    n = n / np.linalg.norm(n, axis=1, keepdims=True)
-    p = points[nodes]
-    pairs = candidate_pairs(facet_boxes(points, nodes[:, None]), facet_boxes(points, facets, depth))
-    i, j = pairs[:, 0], pairs[:, 1]
-    d = np.einsum("ij,ij->i", p[i] - x[j].mean(axis=1), n[j])   # signed: < 0 behind the facet
-    q = p[i] - d[:, None] * n[j]                                # the projection into its plane
-    e0 = x[j]
-    e1 = np.roll(x[j], -1, axis=1)
-    # inside: on the inner side of every edge (a little slack: a node over a shared edge counts for both)
-    edge = e1 - e0
-    rel = q[:, None, :] - e0
-    if dim == 3:
-        side = np.einsum("ikc,ic->ik", np.cross(edge, rel), n[j])
-    else:  # a segment, its two "edges" a->b and b->a: the projection between its ends
-        side = np.einsum("ikc,ikc->ik", edge, rel)
-    scale = np.einsum("ikc,ikc->ik", edge, edge)
-    inside = np.all(side >= -1e-9 * scale, axis=1) & (np.abs(d) <= depth)
-    i, d = i[inside], d[inside]
-    order = np.lexsort((np.abs(d), i))                 # per node, the nearest facet first
-    i, d = i[order], d[order]
-    first = np.r_[True, i[1:] != i[:-1]] if len(i) else np.zeros(0, bool)
-    out = np.zeros(len(nodes))
-    out[i[first]] = np.maximum(-d[first], 0.0)
-    return out
-
-
 @register_check("no_penetration", params=table({"depth": number(exclusiveMinimum=0.0)}))
 def no_penetration(case, out, history, params):
-    """Bodies in contact (every pair of the [contact] table, both ways; self contact is not measured)
-    at every output step: how far the surface nodes of one body lie behind the deformed exterior
-    facets of the other (surface_penetration), the largest over the run relative to the median edge
-    of the penetrated body's facets (``penetration_max_rel``; ``penetration_max`` in m; ``depth``
-    the deepest still measured, in those edges, default 1: a node deeper sits nearer another face).
+    """Bodies in contact (every pair of the [contact] table, both ways; self contact is not measured):
+    how far the surface nodes of one body lie behind the deformed exterior facets of the other
+    (solvers/contact/penetration.py), the largest over the run relative to the median edge of the
+    penetrated body's facets (``penetration_max_rel``; ``penetration_max`` in m). The explicit
+    contact measures it at the end of every step (down to its capture: the record
+    ``contact_penetration_other_max``, or ``contact_penetration_max`` without self pairs; relative to
+    the smallest of the paired bodies' edges), so the figure is the same whichever steps are written;
+    for a solver without that record, at every output step (``depth`` the deepest still measured, in
+    those edges, default 1: a node deeper sits nearer another face).
     With the contact's record: ``contact_impulse`` (N s, |the time integral of the force the first
     pair's first body takes|), ``contact_force_peak`` (N), ``contact_time`` (from the record before
     the force first exceeds 1 % of its peak to the last record above it), ``contact_dissipation_rel``
     (-contact_work over the initial kinetic energy) and the balances' largest residuals."""
     from orchestrator import output
+    from solvers.contact.penetration import surface_penetration
     from solvers.lagrange.surface import exterior_facets
 
     dim = case["run"]["dimension"]
@@ -297,7 +260,12 @@ def no_penetration(case, out, history, params):
         surfaces.append((f + first[k], np.unique(f) + first[k], float(np.median(edge))))
     pairs = [(names.index(a), names.index(b)) for a, b in case["contact"]["pairs"] if a != b]
     worst, worst_rel = 0.0, 0.0
-    for _, _, index in output.read_steps(out, "lagrange"):
+    record = next((f"lagrange.contact_penetration_{k}" for k in ("other_max", "max")
+                   if f"lagrange.contact_penetration_{k}" in history), None)
+    if record is not None:
+        worst = float(history[record][-1])
+        worst_rel = worst / min((surfaces[k][2] for pair in pairs for k in pair), default=np.inf)
+    for _, _, index in output.read_steps(out, "lagrange") if record is None else ():
         points = output.read_step(out, "lagrange", index)[0][:, :dim]
         for a, b in pairs:
             for s, t in ((a, b), (b, a)):   # t's nodes behind s's facets
@@ -444,28 +412,6 @@ def hertz(case, out, history, params):
             "peak_pressure": float(np.mean(peaks)), "contact_nodes": float(count)}
 
 
-def _inside_cells(x: np.ndarray, nodes: np.ndarray, cells: np.ndarray) -> np.ndarray:
-    """Which of the points x[nodes] lie strictly inside a quad of ``cells`` (counter-clockwise, ids
-    into x) that does not have the point as a corner: (nodes,) bool. A point on a cell's edge (a
-    closed contact, gap 0) is not inside; the cells are taken as convex (their edges' half-planes)."""
-    from solvers.contact.search import candidate_pairs, facet_boxes
-
-    if len(nodes) == 0 or len(cells) == 0:
-        return np.zeros(len(nodes), bool)
-    pts = x[nodes]
-    pairs = candidate_pairs(np.stack([pts, pts], axis=1), facet_boxes(x, cells))
-    i, c = pairs[:, 0], pairs[:, 1]
-    corner = (cells[c] == nodes[i, None]).any(axis=1)
-    i, c = i[~corner], c[~corner]
-    q = x[cells[c]]                                    # (np, 4, 2)
-    e = np.roll(q, -1, axis=1) - q                     # the edges a -> b
-    r = pts[i, None, :] - q
-    cross = e[..., 0] * r[..., 1] - e[..., 1] * r[..., 0]
-    inside = np.zeros(len(nodes), bool)
-    inside[i[(cross > 0.0).all(axis=1)]] = True
-    return inside
-
-
 def _segment_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Distances of the points p (n, 2) to every segment a-b (m, 2): (n, m)."""
     d = b - a
@@ -479,16 +425,16 @@ def _segment_distances(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarra
 def self_contact(case, out, history, params):
     """A 2-D body in contact with itself and with other bodies ([contact] pairs naming ``body``).
 
-    At every output, on the deformed meshes: a surface node of one body of a pair that lies strictly
-    inside a cell of the other (of its own body, for the self pair: a cell it is not a corner of)
-    has interpenetrated; its depth is its distance to the nearest exterior facet of that body that
-    does not have it as a node. ``penetration_rel``: the deepest over the run over ``thickness``
-    (``penetration_self_rel`` and ``penetration_other_rel`` split by pair; ``penetration_time``).
-    ``self_contact_nodes``: surface nodes of ``body`` that carry contact pressure at the last output
-    and whose nearest exterior facet (of the bodies paired with it, its own not counting the two at
-    the node) is its own: the self contact, both sides of it (the dual pass puts multipliers on both);
-    ``self_contact_pressure`` their mean pressure. ``energy_balance_rel``: the largest |solver's
-    energy balance| over the run (it books the boundaries' reactions and the contact's work)."""
+    ``penetration_rel``: the deepest a surface node went behind its partner's surface over the run,
+    over ``thickness``, as the explicit contact measured it at the end of every step
+    (solvers/contact/penetration.py; so whichever steps are written, the same figure);
+    ``penetration_self_rel`` and ``penetration_other_rel`` split by pair; ``penetration_time`` the
+    recorded step with the deepest. ``self_contact_nodes``: surface nodes of ``body`` that carry
+    contact pressure at the last output and whose nearest exterior facet (of the bodies paired with
+    it, its own not counting the two at the node) is its own: the self contact, both sides of it
+    (the dual pass puts multipliers on both); ``self_contact_pressure`` their mean pressure.
+    ``energy_balance_rel``: the largest |solver's energy balance| over the run (it books the
+    boundaries' reactions and the contact's work)."""
     from orchestrator import output
     from solvers.lagrange.surface import exterior_facets
 
@@ -502,10 +448,9 @@ def self_contact(case, out, history, params):
     if (name, name) not in pairs:
         raise ValueError(f"check.params.body = {name!r}: no self contact pair [{name!r}, {name!r}] in [contact] pairs")
     meshes, first = _body_meshes(case)
-    cells, facets = [], []
+    facets = []
     for k, m in enumerate(meshes):
         f, _ = exterior_facets(m.cells, m.cell_type, m.num_points, m.points)
-        cells.append(m.cells + first[k])
         facets.append(f + first[k])
     surf = [np.unique(f) for f in facets]
 
@@ -516,22 +461,12 @@ def self_contact(case, out, history, params):
         dist[(f[None, :, :] == nodes[:, None, None]).any(axis=2)] = np.inf
         return dist.min(axis=1)
 
-    worst = {"self": 0.0, "other": 0.0}
-    worst_time = 0.0
+    if "lagrange.contact_penetration_self_max" not in history:
+        raise ValueError("check kind self_contact reads the explicit contact's penetration record "
+                         "(lagrange.contact_penetration_self_max): this run's solver keeps none")
+    worst = {k: float(history[f"lagrange.contact_penetration_{k}_max"][-1]) for k in ("self", "other")}
+    worst_time = float(history["time"][int(np.argmax(history["lagrange.contact_penetration"]))])
     steps = output.read_steps(out, "lagrange")
-    for time, _, index in steps:
-        x = output.read_step(out, "lagrange", index)[0][:, :2]
-        for a, b in pairs:
-            ka, kb = names.index(a), names.index(b)
-            for src, dst in ((ka, kb),) if ka == kb else ((ka, kb), (kb, ka)):
-                nodes = surf[src]
-                hit = nodes[_inside_cells(x, nodes, cells[dst])]
-                if len(hit):
-                    d = float(depth(x, hit, dst).max())
-                    key = "self" if ka == kb else "other"
-                    if d > max(worst.values()):
-                        worst_time = time
-                    worst[key] = max(worst[key], d)
     # the last output: the self contact's nodes
     x, pd, _ = output.read_step(out, "lagrange", steps[-1][2])
     x = x[:, :2]

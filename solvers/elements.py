@@ -43,7 +43,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ["HEX_XI", "QUAD_XI", "HEX_FACES", "HEX_HG", "QUAD_HG", "hex_bvectors", "quad_bvectors"]
+__all__ = ["HEX_XI", "QUAD_XI", "HEX_FACES", "HEX_HG", "QUAD_HG", "hex_bvectors", "quad_bvectors",
+           "facet_area_vectors"]
 
 # Natural coordinates of the VTK nodes.
 HEX_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -164,3 +165,15 @@ def quad_bvectors(xe, b):
     area = 0.5 * (d1x * d2y - d1y * d2x)
     dm = max(d1x * d1x + d1y * d1y, d2x * d2x + d2y * d2y)
     return area, math.sqrt(dm)
+
+
+def facet_area_vectors(points: np.ndarray, facets: np.ndarray) -> np.ndarray:
+    """Outward normal times area (3-D) or length (2-D) of every facet, shape (nf, dim).
+
+    2-D: (dy, -dx) of the segment a->b. 3-D: (c - a) x (d - b) / 2, the exact integral of the unit
+    normal over a bilinear quadrilateral (also for a warped one)."""
+    x = np.asarray(points, dtype=np.float64)[facets]
+    if facets.shape[1] == 2:
+        d = x[:, 1] - x[:, 0]
+        return np.stack([d[:, 1], -d[:, 0]], axis=1)
+    return 0.5 * np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1])

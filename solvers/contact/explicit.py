@@ -44,6 +44,7 @@ import scipy.sparse as sp
 from solvers.contact import methods
 from solvers.contact.kkt import solve_schur_complement
 from solvers.contact.nodal_values import constraint_weights, nodal_mean
+from solvers.contact.penetration import paired_penetration
 
 __all__ = ["ExplicitContact"]
 
@@ -78,6 +79,11 @@ class ExplicitContact:
         # step (sorted by key): the floor of the next step's gap (module docstring)
         self._last_keys, self._last_offset = np.zeros(0, np.int64), np.zeros(0)
         self.last_sweeps = 0                            # the friction solve's sweeps of the last step
+        # the deepest a surface node lay behind its partner's surface at the end of the last step and
+        # over the run, [self pairs, pairs of two bodies] (m; penetration.py, measured every step)
+        self.last_penetration = np.zeros(2)
+        self.penetration_max = np.zeros(2)
+        self._measured = np.zeros(0, np.int64)          # the last step's measured nodes
 
     def set_surface(self, facets: np.ndarray, body: np.ndarray, mass: np.ndarray, free: np.ndarray) -> None:
         """facets (nf, 2 | 4) outward segments or quadrilaterals as indices into the surface nodes; body (nf,); mass (ns,);
@@ -88,6 +94,9 @@ class ExplicitContact:
         # the steps, the rate of each multiplier row T v over its weight, averaged per node
         if self.slip is None or len(self.slip) != len(self.mass):
             self.slip = np.zeros(len(self.mass))
+        self.node_body = np.full(len(self.mass), -1, np.int64)
+        self.node_body[self.facets] = self.body[:, None]
+        self._measured = self._measured[self._measured < len(self.mass)]
 
     def _operators(self, x: np.ndarray, zone: np.ndarray | None = None):
         if self.capture is None:  # a segment: far more than a step's approach, less than a body
@@ -153,6 +162,7 @@ class ExplicitContact:
         self._gap_rows, self._gap_op, self._dim = np.zeros(len(self.multiplier_nodes)), None, dim
         if B is None:
             self._remember(np.zeros(0))
+            self._measure_penetration(x + dt * np.asarray(v, float), zone)
             return out
         inv_m = np.repeat(np.where(self.mass > 0, 1.0 / np.where(self.mass > 0, self.mass, 1.0), 0.0), dim)
         inv_m = inv_m * self.free.reshape(-1)
@@ -207,6 +217,7 @@ class ExplicitContact:
             q_size = np.linalg.norm(q.reshape(-1, k), axis=1)
             self.last_sliding = int(np.sum((bound > 0) & (q_size >= bound * (1 - 1e-9))))
             impulse = impulse + T.T @ q
+            u = u + dt * inv_m * (T.T @ q)
             # slip where the surfaces touch: pressed, or closed to within the stabilized gap's offset
             # J p (a dual pass's redundant row may rest at p = 0; the gaps of pressed rows scatter by
             # J p, +-1e-8 m on a sliding block). An open row's tangential rate is flight, not slip.
@@ -214,14 +225,35 @@ class ExplicitContact:
             rate = (np.linalg.norm((T @ (v1 + inv_m * (T.T @ q))).reshape(-1, k), axis=1)[on]
                     / constraint_weights(T, dim)[::k][on])
             self.slip += dt * nodal_mean(self.multiplier_nodes[on], rate, ns, 0.0)
+        self._measure_penetration((xstar + u).reshape(ns, dim), zone)
         return impulse.reshape(ns, dim)
+
+    def _measure_penetration(self, x_end: np.ndarray, zone: np.ndarray | None) -> None:
+        """The deepest a surface node lies behind its partner's surface at the end of the step
+        (penetration.py, down to the capture: the deepest still paired), for the self pairs and the
+        pairs of two bodies; and their maxima over the run. Measured: the nodes that carry a
+        multiplier this step or did the last (a node behind a facet within the capture has a row; one
+        that crossed the band in a step had one the step before), against the facets of the bodies
+        paired with its own, the nearest deciding (one search for all pairs)."""
+        cand = np.union1d(self.multiplier_nodes, self._measured)
+        keep = np.ones(len(self.facets), bool)
+        if zone is not None:                 # (only the zone's states hold)
+            cand = cand[zone[cand]]
+            keep = np.all(zone[self.facets], axis=1)
+        self._measured = self.multiplier_nodes.copy()
+        pen, own = paired_penetration(x_end, self.facets[keep], self.body[keep], cand, self.node_body[cand],
+                                      self.pairs, float(self.capture))
+        step = np.array([pen[own].max(initial=0.0), pen[~own].max(initial=0.0)])
+        self.last_penetration = step
+        self.penetration_max = np.maximum(self.penetration_max, step)
 
     def state(self) -> dict[str, np.ndarray]:
         """What a restart needs to continue bit for bit: the rows' keys and stabilized offsets of the
         last step (the next floor); with friction the accumulated slip, and the last friction
         impulses with their multipliers' nodes (the next solve's warm start)."""
         out = {} if self.slip is None else {"slip": self.slip}
-        out.update(last_keys=self._last_keys, last_offset=self._last_offset)
+        out.update(last_keys=self._last_keys, last_offset=self._last_offset,
+                   penetration_max=self.penetration_max, measured_nodes=self._measured)
         if self._q_last is not None:
             out.update(friction_q=self._q_last, friction_nodes=self._q_nodes)
         return out
@@ -232,6 +264,9 @@ class ExplicitContact:
         if "last_keys" in state:   # (checkpoints before the floor: none, every row new)
             self._last_keys = np.asarray(state["last_keys"], dtype=np.int64)
             self._last_offset = np.asarray(state["last_offset"], dtype=np.float64)
+        if "penetration_max" in state:   # (checkpoints before the measure: from the restart on)
+            self.penetration_max = np.asarray(state["penetration_max"], dtype=np.float64)
+            self._measured = np.asarray(state["measured_nodes"], dtype=np.int64)
         if "friction_q" in state:
             self._q_last = np.asarray(state["friction_q"], dtype=np.float64)
             self._q_nodes = np.asarray(state["friction_nodes"], dtype=np.int64)

@@ -701,6 +701,15 @@ class LagrangeSolver:
             d["contact_active"] = float(self.contact.last_active)
             if self.contact.friction > 0.0:
                 d["contact_sliding"] = float(self.contact.last_sliding)
+            # the deepest a surface node lay behind its partner (m): at the end of this step, and over
+            # the run (every step, whichever are recorded); split into self and other pairs when the
+            # case has self contact
+            pen, pen_max = self.contact.last_penetration, self.contact.penetration_max
+            d["contact_penetration"] = float(pen.max())
+            d["contact_penetration_max"] = float(pen_max.max())
+            if any(a == b for a, b in self.contact.pairs):
+                d["contact_penetration_self_max"] = float(pen_max[0])
+                d["contact_penetration_other_max"] = float(pen_max[1])
             for c, name in enumerate("xyz"[: self.dim]):
                 d[f"contact_force_{name}"] = float(self.contact_force[c])
         if self.erosion:  # the eroded elements' internal energy leaves the body with them

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solvers.elements import facet_area_vectors  # (re-exported: the surface's area vectors)
 from solvers.lagrange.mesh import HEX_FACES, QUAD_FACES
 
 __all__ = ["exterior_facets", "facet_area_vectors"]
@@ -29,18 +30,6 @@ __all__ = ["exterior_facets", "facet_area_vectors"]
 _FACE_TABLES = {"quad": (4, QUAD_FACES), "hexahedron": (8, HEX_FACES)}
 # reversal of a facet's orientation that keeps its first node: (a, b) -> (b, a); (a,b,c,d) -> (a,d,c,b)
 _REVERSE = {2: np.array([1, 0]), 4: np.array([0, 3, 2, 1])}
-
-
-def facet_area_vectors(points: np.ndarray, facets: np.ndarray) -> np.ndarray:
-    """Outward normal times area (3-D) or length (2-D) of every facet, shape (nf, dim).
-
-    2-D: (dy, -dx) of the segment a->b. 3-D: (c - a) x (d - b) / 2, the exact integral of the unit
-    normal over a bilinear quadrilateral (also for a warped one)."""
-    x = np.asarray(points, dtype=np.float64)[facets]
-    if facets.shape[1] == 2:
-        d = x[:, 1] - x[:, 0]
-        return np.stack([d[:, 1], -d[:, 0]], axis=1)
-    return 0.5 * np.cross(x[:, 2] - x[:, 0], x[:, 3] - x[:, 1])
 
 
 def exterior_facets(cells: np.ndarray, cell_type: str, n_nodes: int, points: np.ndarray | None = None):

@@ -63,3 +63,21 @@ def test_a_row_resting_in_contact_does_not_sink_step_by_step(method):
         depth.append(float(x[na:, 1].min()))
     assert c.last_active > 0
     assert abs(depth[-1] - depth[10]) < 1e-8, (depth[10], depth[-1])
+
+
+@pytest.mark.parametrize("method", ["dual_pass_mortar", "node_to_surface"])
+def test_the_step_measures_how_far_nodes_end_it_behind_the_other_surface(method):
+    """b starts 1 mm into a (penetration.py, at the end of the step): at rest it ends the step 1 mm
+    in (held where it is); leaving at 0.5 m/s for 1 ms, 0.5 mm in; the run's maximum keeps the 1 mm.
+    b 0.2 mm above a, at rest: 0."""
+    c, pts, na = _faces(-1e-3, method)
+    v = np.zeros(pts.shape)
+    c.impulses(pts, v, dt=DT)
+    assert c.last_penetration[1] == pytest.approx(1e-3, rel=1e-9) and c.last_penetration[0] == 0.0
+    v[na:, 1] = 0.5
+    c.impulses(pts, v, dt=DT)
+    assert c.last_penetration[1] == pytest.approx(5e-4, rel=1e-9)
+    assert c.penetration_max[1] == pytest.approx(1e-3, rel=1e-9)
+    c, pts, na = _faces(2e-4, method)
+    c.impulses(pts, np.zeros(pts.shape), dt=DT)
+    assert c.last_penetration.max() == 0.0 and c.penetration_max.max() == 0.0
