@@ -464,7 +464,7 @@ def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> tuple[dict, di
     expected = _CELL_TYPE[dim]
 
     try:
-        mesh = read_mesh(path, dim)
+        mesh = read_mesh(path, dim, max_inflated=limit)
     except MeshError as exc:
         raise CaseError(key, raw, f"must be a readable {expected} mesh ({exc})") from None
     except Exception as exc:  # noqa: BLE001 - any reader failure is a bad input file

@@ -259,10 +259,11 @@ DATA_FILE_LIMIT = 1 << 30
 """A particle data file larger than this is refused (1 GiB: ~20 M particles of a text data file)."""
 
 
-def _read_body_file(body: dict, key: str, raw: str, case_dir, dim: int) -> None:
+def _read_body_file(body: dict, key: str, raw: str, case_dir, dim: int, max_atoms: int) -> None:
     """A body's LAMMPS data file: inside the case directory, a regular file, its Atoms positions
-    (solvers/particles.py) kept as ``_points``; the body's region becomes the box of its particles
-    (half a spacing around them) for the domain and grid checks."""
+    (solvers/particles.py: a header declaring more than ``max_atoms`` is refused before the atoms
+    are parsed) kept as ``_points``; the body's region becomes the box of its particles (half a
+    spacing around them) for the domain and grid checks."""
     from solvers.particles import DataFileError, read_data_positions
 
     from .schema_rules import check_path_inside, stat_regular
@@ -278,11 +279,12 @@ def _read_body_file(body: dict, key: str, raw: str, case_dir, dim: int) -> None:
     if len(data) > DATA_FILE_LIMIT:
         raise CaseError(key, raw, "is more than 1 GiB; allowed: a LAMMPS data file up to 1 GiB")
     try:
-        x = read_data_positions(data.decode("utf-8"), dim)
+        x = read_data_positions(data.decode("utf-8"), dim, max_atoms)
     except UnicodeDecodeError as exc:
         raise CaseError(key, raw, f"not UTF-8 text (byte {exc.start}); allowed: a LAMMPS data file") from None
     except DataFileError as exc:
-        raise CaseError(key, raw, f"{exc}; allowed: a LAMMPS data file with an Atoms section") from None
+        raise CaseError(key, raw, f"{exc}; allowed: " + (f"{exc.allowed} (sph.max_particles less the other bodies')"
+                                                         if exc.allowed else "a LAMMPS data file with an Atoms section")) from None
     body["_points"] = x
     half = 0.5 * body["spacing"]
     body["region"] = {"box": {"lower": [float(v) for v in x.min(axis=0) - half],
@@ -385,7 +387,8 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
         if "velocity" in rb:
             check_length(format_key(base + ["velocity"]), rb["velocity"], dim)
         if "data_file" in body:  # its region: the box around its particles (for the checks below)
-            _read_body_file(body, format_key(base + ["data_file"]), rb["data_file"], case_dir, dim)
+            _read_body_file(body, format_key(base + ["data_file"]), rb["data_file"], case_dir, dim,
+                            sph["max_particles"] - total)
             where, rreg = "data_file", rb["data_file"]
         else:
             where, rreg = "region", rb["region"]

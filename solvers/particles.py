@@ -10,6 +10,10 @@ dx^dim add up to the box's); each particle carries the volume dx^dim.
 """
 from __future__ import annotations
 
+import io
+import re
+import warnings
+
 import numpy as np
 
 from solvers.expressions import BOOL, compile_expression
@@ -104,43 +108,56 @@ DATA_STYLES = {"atomic": (2, 5), "charge": (3, 6), "sphere": (4, 7), "sph": (5, 
 
 
 class DataFileError(ValueError):
-    """A LAMMPS data file this reader cannot take (the message names the line)."""
+    """A LAMMPS data file this reader cannot take (the message names the line); ``allowed``: what
+    would be taken, where the file is fine but too large."""
+
+    def __init__(self, message: str, allowed: str | None = None):
+        super().__init__(message)
+        self.allowed = allowed
 
 
-def read_data_positions(text: str, dim: int) -> np.ndarray:
+_ATOMS_COUNT = re.compile(r"^[ \t]*(\d+)[ \t]+atoms[ \t\r]*(?:#.*)?$", re.MULTILINE)
+_ATOMS_HEADER = re.compile(r"^[ \t]*Atoms[ \t\r]*(?:#(.*))?$", re.MULTILINE)
+
+
+def read_data_positions(text: str, dim: int, max_atoms: int | None = None) -> np.ndarray:
     """(n, dim) particle positions from the text of a LAMMPS data file, in atom-id order: the
-    ``Atoms`` section, its style from the section's comment (``Atoms # sph``; atomic when none), the
-    x y z columns of that style (DATA_STYLES).  Only positions are read: the case gives each body's
-    material, density, velocity and spacing (the particles' volume)."""
-    lines = text.splitlines()
-    start = next((i for i, ln in enumerate(lines) if ln.split("#")[0].strip() == "Atoms"), None)
-    if start is None:
+    header's ``N atoms`` (refused above ``max_atoms`` before anything is parsed), then the N lines of
+    the ``Atoms`` section, its style from the section's comment (``Atoms # sph``; atomic when none),
+    the x y z columns of that style (DATA_STYLES; image flags may follow). Parsed by numpy's text
+    reader (C: ~1 s a million lines), not line by line in Python. Only positions are read: the case
+    gives each body's material, density, velocity and spacing (the particles' volume)."""
+    section = _ATOMS_HEADER.search(text)
+    if section is None:
         raise DataFileError("has no Atoms section")
-    comment = lines[start].split("#", 1)[1].strip() if "#" in lines[start] else "atomic"
+    count = _ATOMS_COUNT.search(text, 0, section.start())
+    if count is None:
+        raise DataFileError("has no 'N atoms' line in its header (LAMMPS needs one)")
+    n = int(count.group(1))
+    if n < 1:
+        raise DataFileError("declares 0 atoms")
+    if max_atoms is not None and n > max_atoms:
+        raise DataFileError(f"declares {n} atoms in its header", f"at most {max_atoms} atoms")
+    comment = (section.group(1) or "").strip()
     style = comment.split()[0] if comment else "atomic"
     if style not in DATA_STYLES:
-        raise DataFileError(f"line {start + 1}: Atoms style {style!r}; allowed: " + ", ".join(DATA_STYLES))
+        line = text.count("\n", 0, section.start()) + 1
+        raise DataFileError(f"line {line}: Atoms style {style!r}; allowed: " + ", ".join(DATA_STYLES))
     at, ncol = DATA_STYLES[style]
-    ids, xs = [], []
-    for k in range(start + 1, len(lines)):
-        body = lines[k].split("#")[0].split()
-        if not body:
-            if xs:
-                break  # the blank line that ends the section
-            continue
-        if body[0][0].isalpha():  # the next section's header
-            break
-        if len(body) not in (ncol, ncol + 3):
-            raise DataFileError(f"line {k + 1}: {len(body)} columns; Atoms # {style} has {ncol} (or {ncol + 3} "
-                                f"with image flags)")
-        try:
-            ids.append(int(body[0]))
-            xs.append([float(v) for v in body[at:at + 3]])
-        except ValueError:
-            raise DataFileError(f"line {k + 1}: not a number in {' '.join(body)!r}") from None
-    if not xs:
-        raise DataFileError(f"line {start + 1}: the Atoms section is empty")
-    ids_a, x = np.array(ids), np.array(xs)
+    try:
+        with warnings.catch_warnings():   # (numpy notes that blank lines do not count towards max_rows: wanted)
+            warnings.simplefilter("ignore", UserWarning)
+            rows = np.loadtxt(io.StringIO(text[section.end():]), comments="#", usecols=range(ncol), max_rows=n,
+                              ndmin=2)
+    except ValueError as exc:
+        raise DataFileError(f"the Atoms # {style} section ({n} lines of at least {ncol} numbers, the "
+                            f"header's count): {exc}") from None
+    if len(rows) < n:
+        raise DataFileError(f"the Atoms section has {len(rows)} lines; the header declares {n} atoms")
+    ids, x = rows[:, 0], rows[:, at:at + 3]
+    if not np.all((ids == np.round(ids)) & (ids >= 1) & (ids < 2.0 ** 53)):
+        raise DataFileError("has an atom id that is not a positive integer")
+    ids_a = ids.astype(np.int64)
     if len(np.unique(ids_a)) != len(ids_a):
         raise DataFileError("repeats an atom id")
     if not np.all(np.isfinite(x)):

@@ -344,11 +344,73 @@ def quarter_cylinder_mesh(radius: float, length: float, radial_cells: int,
 
 
 # ----------------------------------------------------------------------------- file input
-def read_mesh(path, dim: int) -> Mesh:
+class _Inflated(Exception):
+    """The compressed blocks of a file inflate past the budget."""
+
+
+class _BoundedInflate:
+    """zlib or lzma as meshio's VTU reader calls them (``decompress(block)``), each block inflated
+    only up to what is left of a budget shared by all: a few kilobytes of compressed zeros can claim
+    gigabytes, which the file's size (all that is checked before reading) does not show."""
+
+    def __init__(self, module, left: list):
+        self.module, self.left = module, left
+
+    def decompress(self, data):
+        import zlib
+
+        d = self.module.decompressobj() if self.module is zlib else self.module.LZMADecompressor()
+        out = d.decompress(data, self.left[0] + 1)
+        if len(out) > self.left[0]:
+            raise _Inflated
+        self.left[0] -= len(out)
+        return out
+
+
+@contextlib.contextmanager
+def _bounded_vtu_inflate(budget: int | None):
+    """meshio's VTU reader with its decompressors bounded to ``budget`` bytes in all (None: as is)."""
+    import lzma
+    import zlib
+
+    from meshio.vtu import _vtu
+
+    if budget is None:
+        yield
+        return
+    left = [int(budget)]
+    saved = _vtu.zlib, getattr(_vtu, "lzma", None)
+    _vtu.zlib, _vtu.lzma = _BoundedInflate(zlib, left), _BoundedInflate(lzma, left)
+    try:
+        yield
+    finally:
+        _vtu.zlib, _vtu.lzma = saved
+
+
+VTU_BYTES_PER_ENTITY = 1200
+"""What a VTU's compressed data may inflate to, per point and cell its Pieces declare (plus 1 MiB):
+the coordinates (24 bytes a point), a hexahedron's connectivity, offset and type (73 bytes a cell)
+and some 140 more doubles of point and cell data each; a file claiming more holds something else."""
+
+
+def _vtu_declared_budget(path: Path) -> int:
+    """The inflation budget of a VTU from the counts its Pieces declare (VTU_BYTES_PER_ENTITY)."""
+    import re
+
+    with open(path, "rb") as f:
+        raw = f.read()
+    counts = [int(v) for v in re.findall(rb'Number(?:OfPoints|OfCells)\s*=\s*"\s*(\d+)\s*"', raw)]
+    return (1 << 20) + VTU_BYTES_PER_ENTITY * sum(counts)
+
+
+def read_mesh(path, dim: int, max_inflated: int | None = None) -> Mesh:
     """Read a quad (dim 2) or hexahedron (dim 3) mesh with meshio (.msh, .vtu, ...).
 
     Keeps only quad/hexahedron cells, drops unused points, flips inverted cells, drops
     a constant z coordinate for dim 2. Raises MeshError with a one-line reason.
+    ``max_inflated``: the most bytes a compressed file's blocks may inflate to (VTU's zlib and
+    lzma; refused past it, before it is all in memory); a VTU's own points and cells bound it
+    further (_vtu_declared_budget: a small file of compressed zeros is refused within a megabyte).
     """
     import meshio
 
@@ -357,11 +419,16 @@ def read_mesh(path, dim: int) -> Mesh:
         raise MeshError(f"{path.name}: dimension must be 2 or 3, got {dim}")
     if not path.is_file():
         raise MeshError(f"{path}: no such file")
+    if max_inflated is not None and path.suffix.lower() == ".vtu":
+        max_inflated = min(max_inflated, _vtu_declared_budget(path))
     # meshio prints diagnostics and may even call sys.exit() on unreadable files.
     sink = io.StringIO()
     try:
-        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink):
+        with contextlib.redirect_stdout(sink), contextlib.redirect_stderr(sink), _bounded_vtu_inflate(max_inflated):
             raw = meshio.read(str(path))
+    except _Inflated:
+        raise MeshError(f"{path.name}: its compressed data inflate to more than {max_inflated} bytes "
+                        "(allowed: what its declared points and cells need, within this machine's memory)") from None
     except (Exception, SystemExit) as exc:  # many error types on bad input
         text = str(exc) if not isinstance(exc, SystemExit) else sink.getvalue()
         reason = " ".join(text.replace(str(path), path.name).split()) or type(exc).__name__

@@ -638,3 +638,16 @@ def test_every_check_kind_has_a_closed_params_schema():
             jsonschema.validate(check.get("params", {}), PARAMS[check["kind"]])
             seen.add(check["kind"])
     assert len(seen) >= 10   # the shipped cases use most kinds (measured: 13)
+
+
+def test_a_mesh_file_whose_compressed_data_inflate_past_their_counts_is_one_line(tmp_path):
+    """A VTU of one hexahedron whose points' zlib blocks inflate to 8 GiB (tests/solvers/lagrange's
+    bomb): refused on its key, one line, without inflating it."""
+    from tests.solvers.lagrange.test_mesh import _vtu_bomb
+
+    d = _file_case(tmp_path, "bomb.vtu")
+    _vtu_bomb(d / "bomb.vtu")
+    with pytest.raises(CaseError) as ei:
+        load_case(d)
+    assert ei.value.key == "lagrange.bodies[0].mesh.file" and "inflate to more than" in str(ei.value)
+    assert "\n" not in str(ei.value)

@@ -127,9 +127,13 @@ def test_a_solid_with_its_defaults(tmp_path):
 
 @pytest.mark.parametrize("content, fragment", [
     ("no atoms here\n", "has no Atoms section"),
-    ("Atoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.5 0.5 0.0\n", "must lie inside sph.domain"),
-    ("Atoms # atomic\n\n1 1 0.05 0.05\n", "line 3: 4 columns"),
-    (b"Atoms\n\n1 1 0.05 \xff 0.0\n", "not UTF-8 text"),
+    ("2 atoms\n\nAtoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.5 0.5 0.0\n", "must lie inside sph.domain"),
+    ("1 atoms\n\nAtoms # atomic\n\n1 1 0.05 0.05\n", "with 4 columns"),
+    ("Atoms # atomic\n\n1 1 0.05 0.05 0.0\n", "no 'N atoms' line in its header"),
+    # the header's count against sph.max_particles, before the section (here not numbers) is parsed
+    ("3000000000 atoms\n\nAtoms # atomic\n\nx y z\n",
+     "declares 3000000000 atoms in its header; allowed: at most 20000000 atoms (sph.max_particles"),
+    (b"1 atoms\n\nAtoms\n\n1 1 0.05 \xff 0.0\n", "not UTF-8 text"),
 ])
 def test_a_bad_data_file_is_one_line_naming_the_key(tmp_path, content, fragment):
     """A body's data file is read while the case is checked: what is wrong with it, on its key."""
@@ -143,7 +147,7 @@ def test_a_bad_data_file_is_one_line_naming_the_key(tmp_path, content, fragment)
 
 def test_a_data_file_body_counts_its_particles(tmp_path):
     (tmp_path / "case.toml").write_text(FROM_FILE)
-    (tmp_path / "water.data").write_text("Atoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.06 0.05 0.0\n")
+    (tmp_path / "water.data").write_text("2 atoms\n\nAtoms # atomic\n\n1 1 0.05 0.05 0.0\n2 1 0.06 0.05 0.0\n")
     case = load_case(tmp_path)
     assert case["sph"]["particles"] == 2
     box = case["sph"]["bodies"][0]["region"]["box"]  # half a spacing (0.01) around the particles

@@ -359,3 +359,39 @@ def test_ring_refuses_bad_input(args, match):
 
     with pytest.raises(MeshError, match=match):
         ring_mesh(*args)
+
+
+def _vtu_bomb(path, blocks=128):
+    """A valid compressed VTU of one hexahedron whose points' zlib blocks are replaced by ``blocks``
+    copies of 64 MiB of compressed zeros (8 GiB inflated for 128; the file ~11 MB)."""
+    import base64
+    import zlib
+
+    m = box_mesh([0, 0, 0], [1, 1, 1], [1, 1, 1])
+    meshio.write(path, meshio.Mesh(m.points, [("hexahedron", m.cells)]), compression="zlib")
+    text = path.read_text()
+    block = zlib.compress(bytes(64 << 20), 9)
+    header = np.array([blocks, 64 << 20, 64 << 20] + [len(block)] * blocks, dtype=np.uint32).tobytes()
+    bomb = base64.b64encode(header).decode() + base64.b64encode(block * blocks).decode()
+    start = text.index(">", text.index('<DataArray type="Float64" Name="Points"')) + 1
+    end = text.index("</DataArray>", start)
+    path.write_text(text[:start] + "\n" + bomb + "\n" + text[end:])
+
+
+def test_a_vtu_whose_blocks_inflate_past_what_it_declares_is_refused(tmp_path):
+    """A VTU declaring 8 points and 1 cell whose points inflate to 8 GiB: refused by the budget its
+    counts give (1 MiB + 1200 bytes each) in 0.16 s, not inflated (the read's peak memory: measured
+    43 MiB, the 11 MB file and its base64 decoding); the same file's genuine points read."""
+    import tracemalloc
+
+    path = tmp_path / "bomb.vtu"
+    _vtu_bomb(path)
+    tracemalloc.start()
+    with pytest.raises(MeshError, match="inflate to more than 1059376 bytes"):
+        read_mesh(path, 3, max_inflated=1 << 40)
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    assert peak < 100 << 20, peak
+    m = box_mesh([0, 0, 0], [1, 1, 1], [1, 1, 1])
+    meshio.write(tmp_path / "ok.vtu", meshio.Mesh(m.points, [("hexahedron", m.cells)]), compression="zlib")
+    assert read_mesh(tmp_path / "ok.vtu", 3, max_inflated=1 << 40).cells.shape == (1, 8)
