@@ -61,19 +61,30 @@ def grid_points(lower, upper, cells, k: int | None = None, zones_per_chunk: int 
     visits every stride-th zone only (in flat x-slowest order).  Memory stays bounded by the chunk
     whatever the grid."""
     cells = [int(c) for c in cells]
-    dim = len(cells)
-    lo = np.asarray(lower, dtype=np.float64)
-    h = spacing(lower, upper, cells)
-    offs = None if k is None else subcell_offsets(k, h)
     total = math.prod(cells)
     step = max(1, int(zones_per_chunk)) * stride
     for start in range(0, total, step):
         ids = np.arange(start, min(start + step, total), stride, dtype=np.int64)
         ijk = np.stack(np.unravel_index(ids, cells), axis=1)
-        centres = np.empty((ids.size, dim))
-        for d in range(dim):
-            centres[:, d] = axis_centres(lo[d], h[d], ijk[:, d])
-        if offs is None:
-            yield ijk, centres
-        else:
-            yield ijk, (centres[:, None, :] + offs[None, :, :]).reshape(-1, dim)
+        yield ijk, _zone_points(lower, upper, cells, k, ijk)
+
+
+def box_points(lower, upper, cells, box, k: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(ijk, points)`` of the zones in the index box ((i0, i1), (j0, j1)[, (k0, k1)]) of the grid:
+    grid_points' arithmetic, so the same values."""
+    ijk = np.stack([g.ravel() for g in np.meshgrid(*(np.arange(a, b) for a, b in box), indexing="ij")], axis=1)
+    return ijk, _zone_points(lower, upper, [int(c) for c in cells], k, ijk)
+
+
+def _zone_points(lower, upper, cells, k, ijk) -> np.ndarray:
+    """The points of the zones ``ijk`` (zone centres, or their k^dim sub-cell centres, zone by zone)."""
+    dim = len(cells)
+    lo = np.asarray(lower, dtype=np.float64)
+    h = spacing(lower, upper, cells)
+    centres = np.empty((len(ijk), dim))
+    for d in range(dim):
+        centres[:, d] = axis_centres(lo[d], h[d], ijk[:, d])
+    if k is None:
+        return centres
+    offs = subcell_offsets(k, h)
+    return (centres[:, None, :] + offs[None, :, :]).reshape(-1, dim)

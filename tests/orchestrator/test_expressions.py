@@ -180,18 +180,45 @@ def test_ale_refusals(tmp_path):
     check.check_expressions(_case(tmp_path, OBSTACLE.replace('"x > 0.83"', '"x > 0.02 or y > 0.02"'), "sliver"))
 
 
-def test_large_cases_are_evaluated_on_a_subset_within_the_budget(tmp_path, monkeypatch):
-    """Past the budget every n-th zone is evaluated: the cost stays bounded, a bad value at a visited
-    zone is still found (and the whole-grid rules that a subset cannot decide are skipped)."""
-    monkeypatch.setattr(check, "CHECK_BUDGET", 200)
+def test_past_the_budget_a_grid_is_bounded_by_boxes_not_sampled(tmp_path, monkeypatch):
+    """Past the budget (3000 here) the grid of 100 x 30 zones is walked by boxes of zones: the disc
+    region bounds finite over the whole grid at once (no point evaluated); a pole at one zone centre
+    (57, 13) that every-n-th-zone sampling skipped (stride 196 visited 16 zones) is found and named;
+    a finite expression the bounds cannot follow (sin^2 + cos^2 holds 0 in its interval) is refused
+    on its key once the leaves it must evaluate pass the budget; and two materials' sample points
+    (8^2 a zone) are bounded the same way."""
+    monkeypatch.setattr(check, "CHECK_BUDGET", 3000)
+    monkeypatch.setattr(check, "LEAF", 16)
     text = ALE2D.replace("REGION_MATERIAL", "gas").replace("cells = [10, 3]", "cells = [100, 30]")
     seen = _checked_points(monkeypatch, _case(tmp_path, text, "big"))
-    n = sum(len(p) for _, p in seen.calls)
-    assert 0 < n <= 3000 / 10  # 3000 zones x 13 nodes > 200 x 100: stride 196 (16 zones evaluated)
-    bad = text.replace("< 0.04", "< 0.04 + 1 / (x - 0.005)")   # inf at the centres of the first column
+    assert sum(len(p) for _, p in seen.calls) == 0
+    x0, y0 = 0.0 + (57 + 0.5) * 0.01, 0.0 + (13 + 0.5) * 0.01      # (the solver's centre arithmetic)
+    pole = text.replace("< 0.04", f"< 0.04 + 1 / ((x - {x0!r})**2 + (y - {y0!r})**2)")
     with pytest.raises(CaseError) as ei:
-        check.check_expressions(_case(tmp_path, bad, "bigbad"))
-    assert "x = 0.005" in str(ei.value)
+        check.check_expressions(_case(tmp_path, pole, "pole"))
+    assert ei.value.key == "ale.regions[1].region" and f"x = {x0:.9g}, y = {y0:.9g}" in str(ei.value), str(ei.value)
+    odd = text.replace("< 0.04", "< 0.04 / (sin(x)**2 + cos(x)**2)")
+    with pytest.raises(CaseError) as ei:
+        check.check_expressions(_case(tmp_path, odd, "odd"))
+    assert ei.value.key == "ale.regions[1].region" and "cannot be checked on all 3000 zones" in str(ei.value)
+    seen = _checked_points(monkeypatch, _case(tmp_path, ALE2D.replace("REGION_MATERIAL", "heavy").replace(
+        "cells = [10, 3]", "cells = [100, 30]"), "heavy"))
+    assert sum(len(p) for _, p in seen.calls) == 0
+
+
+def test_past_the_budget_a_box_body_is_bounded_by_boxes(tmp_path, monkeypatch):
+    """A box body past the budget: where(x > 0, 1e-3 / x, 0) bounds finite away from x = 0 and is
+    evaluated at the nodes near it (finite there: the guard holds); 1e-3 / (x - 0.04) has a node at
+    x = 0.04 and is refused naming it."""
+    monkeypatch.setattr(check, "CHECK_BUDGET", 600)
+    monkeypatch.setattr(check, "LEAF", 8)
+    big = BODIES.replace("cells = [5, 2, 3]", "cells = [50, 2, 3]")
+    seen = _checked_points(monkeypatch, _case(tmp_path, big, "guarded"))
+    n = sum(len(p) for t, p in seen.calls if "1e-3" in t)
+    assert 0 < n < 51 * 3 * 4, n                  # (the nodes near x = 0 only, of 612)
+    with pytest.raises(CaseError) as ei:
+        check.check_expressions(_case(tmp_path, big.replace("where(x > 0, 1e-3 / x, 0)", "1e-3 / (x - 0.04)"), "pole"))
+    assert ei.value.key == "lagrange.bodies[0].initial_velocity[0]" and "x = 0.04" in str(ei.value), str(ei.value)
 
 
 def test_guarded_expressions_pass(tmp_path):
