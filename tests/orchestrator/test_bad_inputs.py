@@ -170,6 +170,20 @@ def _mesh_claims_huge(case, root):  # a header promising 10^12 nodes
     (case / "case.toml").write_text(FILEBAR)
 
 
+def _mesh_vtu_bomb(case, root):  # one hexahedron whose points' zlib blocks inflate to 8 GiB
+    from tests.solvers.lagrange.test_mesh import _vtu_bomb
+
+    _vtu_bomb(case / "block.vtu")
+    (case / "case.toml").write_text(FILEBAR.replace("block.msh", "block.vtu"))
+
+
+def _data_file_3e9(case, root):  # a LAMMPS data file whose header declares 3e9 atoms (4 lines follow)
+    (case / "water.data").write_text("water\n\n3000000000 atoms\n\nAtoms # atomic\n\n" +
+                                     "".join(f"{i} 1 0.05 0.05 0.0\n" for i in range(1, 5)))
+    (case / "case.toml").write_text(SPH.replace("region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }",
+                                                'data_file = "water.data"'))
+
+
 def _mesh_garbage(case, root):
     (case / "block.msh").write_bytes(bytes(range(256)) * 64)
     (case / "case.toml").write_text(FILEBAR)
@@ -372,6 +386,13 @@ BAD_INPUTS = [
         edit(MIXED, 'region = "x > 0.8"', 'region = "sqrt(x - 0.25) > 0.5"')),
     Bad("obstacle_region_exp_overflow", "ale.obstacles[0].region = 'exp(1000 * x) > 1'", "non-finite",
         edit(OBSTACLE, 'region = "x > 0.75"', 'region = "exp(1000 * x) > 1"')),
+    # (issue 41: past the check's budget it sampled every n-th zone and launched a pole between them;
+    # an 8e9-zone grid described over 2000 nodes: the pole at one zone centre is found by the bounds)
+    Bad("ale_region_pole_at_one_zone_of_8e9", "ale.regions[0].region", "at x = 1.4005, y = 0.3005, z = 1.7005 (a zone centre",
+        edit(edit(ALE3D, "cells = [8, 8, 8]", "cells = [2000, 2000, 2000]"), "upper = [1.2, 1.2, 1.2]", "upper = [2.0, 2.0, 2.0]").replace(
+            "regions = [ { material = \"gas\", density = 1.0, pressure = 1e-6 } ]",
+            "regions = [ { material = \"gas\", region = \"x < 3 + 1e-9 / ((x - 1.4005)**2 + (y - 0.3005)**2 + "
+            "(z - 1.7005000000000001)**2)\", density = 1.0, pressure = 1e-6 } ]"), args=("--nodes", "2000")),
     Bad("huge_integer_literal", "boundaries[0].region", "too large",
         edit(BAR, 'region = "x < 1e-9"', f'region = "x < {"9" * 400}"')),
     Bad("expression_nested_60_deep", "lagrange.bodies[0].initial_velocity[0]", "nested too deeply",
@@ -448,6 +469,9 @@ BAD_INPUTS = [
     Bad("mesh_file_directory", "lagrange.bodies[0].mesh.file", "is a directory", make=_mesh_dir),
     Bad("mesh_header_claims_1e12_nodes", "lagrange.bodies[0].mesh.file", "readable hexahedron mesh", make=_mesh_claims_huge),
     Bad("mesh_random_bytes", "lagrange.bodies[0].mesh.file", "readable hexahedron mesh", make=_mesh_garbage),
+    Bad("mesh_vtu_inflates_to_8GiB", "lagrange.bodies[0].mesh.file", "inflate to more than", make=_mesh_vtu_bomb),
+    Bad("sph_data_file_declares_3e9_atoms", "sph.bodies[0].data_file", "declares 3000000000 atoms in its header",
+        make=_data_file_3e9),
     # -- resources beyond the machine --
     Bad("grid_1e15_zones", "ale.grid.cells = [100000, 100000, 100000]", "of memory (estimate",
         edit(ALE3D, "cells = [8, 8, 8]", "cells = [100000, 100000, 100000]")),
