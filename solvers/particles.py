@@ -125,7 +125,7 @@ def read_data_positions(text: str, dim: int, max_atoms: int | None = None) -> np
     header's ``N atoms`` (refused above ``max_atoms`` before anything is parsed), then the N lines of
     the ``Atoms`` section, its style from the section's comment (``Atoms # sph``; atomic when none),
     the x y z columns of that style (DATA_STYLES; image flags may follow). Parsed by numpy's text
-    reader (C: ~1 s a million lines), not line by line in Python. Only positions are read: the case
+    reader (C: 0.5 s a million lines of 46 bytes here), not line by line in Python. Only positions are read: the case
     gives each body's material, density, velocity and spacing (the particles' volume)."""
     section = _ATOMS_HEADER.search(text)
     if section is None:
@@ -157,14 +157,15 @@ def read_data_positions(text: str, dim: int, max_atoms: int | None = None) -> np
     ids, x = rows[:, 0], rows[:, at:at + 3]
     if not np.all((ids == np.round(ids)) & (ids >= 1) & (ids < 2.0 ** 53)):
         raise DataFileError("has an atom id that is not a positive integer")
-    ids_a = ids.astype(np.int64)
-    if len(np.unique(ids_a)) != len(ids_a):
+    order = np.argsort(ids.astype(np.int64), kind="stable")
+    ids_sorted = ids[order]
+    if np.any(ids_sorted[1:] == ids_sorted[:-1]):
         raise DataFileError("repeats an atom id")
     if not np.all(np.isfinite(x)):
         raise DataFileError("has a position that is not finite")
     if dim == 2 and np.any(x[:, 2] != 0.0):
         raise DataFileError("a 2-D run needs z = 0 for every atom")
-    return x[np.argsort(ids_a)][:, :dim]
+    return x[order][:, :dim]
 
 
 def body_points(body: dict, dim: int) -> np.ndarray:
