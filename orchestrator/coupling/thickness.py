@@ -20,7 +20,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 MIN_ZONES = 1.5
 """The thinnest a coupled body may be, in zones of the background (README: thicker than 1.5 zones;
@@ -71,6 +70,8 @@ def thinnest(points: np.ndarray, cells: np.ndarray, cell_type: str, lower, upper
     per = 4.0 * (radius / max(float(np.median(size)), 1e-300)) ** (points.shape[1] - 1)
     stride = max(1, int(np.ceil(len(c) * per / PAIR_BUDGET)))
     src = np.arange(0, len(c), stride)
+    from scipy.spatial import cKDTree   # (here: scipy.spatial takes 0.25 s to import, every check and run paid it)
+
     m = cKDTree(c[src]).sparse_distance_matrix(cKDTree(c), radius, output_type="ndarray")
     best = np.full(len(c), np.inf)
     if len(m):
