@@ -55,11 +55,8 @@ def _pow(a, b):
         if n < 0 and a[0] <= 0.0 <= a[1]:
             raise Unproven
         ends = [a[0] ** n, a[1] ** n] + ([0.0] if a[0] < 0.0 < a[1] and n > 0 else [])
-    elif a[0] > 0.0:
-        try:   # x > 0: x^y monotone in each argument, extremes at the corners
-            ends = [a[i] ** b[j] for i in (0, 1) for j in (0, 1)]
-        except OverflowError:
-            raise Unproven from None
+    elif a[0] > 0.0:   # x > 0: x^y monotone in each argument, extremes at the corners
+        ends = [a[i] ** b[j] for i in (0, 1) for j in (0, 1)]
     else:
         raise Unproven
     return _out(min(ends), max(ends))
@@ -183,4 +180,7 @@ def bounds(text: str, box: dict[str, tuple[float, float]]):
     """Bounds of the (already compiled, so valid) expression ``text`` over the box {name: (lo, hi)}:
     (lo, hi) of a number, (may be false, may be true) of a boolean; Unproven where an operation may
     not be finite in the box."""
-    return _eval(ast.parse(text, mode="eval"), box)
+    try:
+        return _eval(ast.parse(text, mode="eval"), box)
+    except ArithmeticError:   # (Python's float ** raises where numpy's gives inf: 1e200 ** 2)
+        raise Unproven from None
