@@ -407,8 +407,8 @@ def _read_toml(path: Path) -> tuple[dict, str]:
     """The parsed file and the SHA-256 (hex) of its bytes."""
     raw = _read_regular(path, CASE_FILE, str(path), MAX_CASE_BYTES, "TOML file")
     sha = hashlib.sha256(raw).hexdigest()
-    try:
-        text = raw.decode("utf-8")
+    try:   # (utf-8-sig: a byte-order mark, which some Windows editors write first, is not text)
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise CaseError(CASE_FILE, str(path), f"not UTF-8 text (byte {exc.start})") from None
     try:

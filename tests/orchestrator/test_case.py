@@ -651,3 +651,19 @@ def test_a_mesh_file_whose_compressed_data_inflate_past_their_counts_is_one_line
         load_case(d)
     assert ei.value.key == "lagrange.bodies[0].mesh.file" and "inflate to more than" in str(ei.value)
     assert "\n" not in str(ei.value)
+
+
+def test_a_case_file_with_a_byte_order_mark_reads_as_without(tmp_path):
+    """Windows editors may write a UTF-8 byte-order mark first: the case reads as without it (tomllib
+    alone refuses it: 'Invalid statement' at line 1, column 1); Windows line ends read too."""
+    text = (VALID / "box3d" / "case.toml").read_text()
+    plain, bom, crlf = (tmp_path / n for n in ("plain", "bom", "crlf"))
+    for d, data in ((plain, text.encode()), (bom, b"\xef\xbb\xbf" + text.encode()),
+                    (crlf, b"\xef\xbb\xbf" + text.replace("\n", "\r\n").encode())):
+        d.mkdir()
+        (d / "case.toml").write_bytes(data)
+    ref = load_case(plain)
+    for d in (bom, crlf):
+        got = load_case(d)
+        skip = ("case_dir", "name", "case_sha256")   # (the folder, and the hash of the bytes as written)
+        assert {k: v for k, v in got.items() if k not in skip} == {k: v for k, v in ref.items() if k not in skip}
