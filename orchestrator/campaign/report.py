@@ -184,9 +184,11 @@ def _chart_map(spec, chart, names, rows, path: Path) -> list[dict]:
     return notes
 
 
-def _pictures(out: Path, spec, names, rows, figdir: Path) -> list[tuple[str, str]]:
+def _pictures(out: Path, spec, names, rows, figdir: Path) -> list[tuple[str, str, str]]:
     """A picture of the last step of each series' finest finished run (the last level of the
-    resolution axis that ran): the report's `picture` field, default density."""
+    resolution axis that ran): the report's `picture` field, default density. (series, caption,
+    figure name) each; a picture that cannot be drawn (a damaged or missing results.h5) has the
+    reason as its caption and no name: the report lists it, it does not cost the report."""
     field = spec["report"].get("picture", "density")
     axis = spec["report"].get("resolution")
     pics = []
@@ -197,18 +199,19 @@ def _pictures(out: Path, spec, names, rows, figdir: Path) -> list[tuple[str, str
         best = max(rs, key=lambda r: _float(r.get(f"level.{axis}")) if axis else r["index"])
         run_out = out / "runs" / best["run"] / "out"
         if not (run_out / "results.h5").is_file():
+            pics.append((name, f"{best['run']}: no results.h5 in its output", ""))
             continue
         try:
             from orchestrator.view import render
 
             paths = render(run_out, fields=[field], steps=("last",))
-        except Exception as e:  # a picture that cannot be drawn must not cost the report
-            pics.append((f"{name}: no picture ({type(e).__name__}: {e})", ""))
+        except Exception as e:  # noqa: BLE001 - a picture that cannot be drawn must not cost the report
+            pics.append((name, f"{best['run']}: {type(e).__name__}: {' '.join(str(e).split())[:200]}", ""))
             continue
         for p in paths[:1]:
             dest = figdir / f"picture_{_slug(best['run'])}.png"  # (recorded: _Figures)
             shutil.copyfile(p, dest)
-            pics.append((f"{name}, finest run {best['run']}: {field} at the end time", dest.name))  # (orchestrator.view)
+            pics.append((name, f"{name}, finest run {best['run']}: {field} at the end time", dest.name))  # (orchestrator.view)
     return pics
 
 
@@ -284,9 +287,11 @@ def write_report(out: Path) -> list[Path]:
             sec["tables"].append(("Runs that did not pass, with their messages",
                                   ["series", "run", "status", "message"],
                                   [[n["series"], n["run"], n["status"], n["message"]] for n in notes]))
-        for caption, name in _pictures(out, spec, names, rows, figdir):
-            if name:
-                sec["figures"].append((name, f"{caption} (immerse view)."))
+        pics = _pictures(out, spec, names, rows, figdir)
+        sec["figures"] += [(name, f"{caption} (immerse view).") for _, caption, name in pics if name]
+        if any(not name for _, _, name in pics):
+            sec["tables"].append(("Pictures not drawn", ["series", "why"],
+                                  [[series, caption] for series, caption, name in pics if not name]))
         sections.append(sec)
     md, page = _markdown(spec_all, sections), _html(spec_all, sections)
     from orchestrator.campaign.rundir import atomic_write, record

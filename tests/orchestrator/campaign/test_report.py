@@ -74,3 +74,28 @@ def test_a_plot_no_run_has_values_for_draws_no_figure(tmp_path):
     rows[0]["v"], rows[1]["v"] = 1e-3, 4e-3
     assert _chart_vs_resolution(spec, "c", ["a"], rows, lambda r: r["v"], "v", "v", f, fit=False) is not None
     assert f.exists()
+
+
+def test_a_picture_that_cannot_be_drawn_is_listed_with_its_reason(tmp_path, monkeypatch):
+    """The finest run's picture of each series: drawn where it can be; a damaged results.h5 (the
+    renderer raising) and a missing one are listed with the run and the reason, not dropped."""
+    import orchestrator.view as view
+    from orchestrator.campaign.report import _pictures
+
+    rows = [{"series": s, "run": f"{s}-2", "status": "passed", "level.n": 2, "index": 0} for s in ("a", "b", "c")]
+    for s in ("a", "b"):
+        (tmp_path / "runs" / f"{s}-2" / "out").mkdir(parents=True)
+        (tmp_path / "runs" / f"{s}-2" / "out" / "results.h5").write_bytes(b"x")
+    picture = tmp_path / "p.png"
+    picture.write_bytes(b"png")
+
+    def render(run_out, fields, steps):
+        if "b-2" in str(run_out):
+            raise OSError("Unable to open file (file signature not found)")
+        return [picture]
+    monkeypatch.setattr(view, "render", render)
+    (tmp_path / "figures").mkdir()
+    pics = _pictures(tmp_path, {"report": {"resolution": "n"}}, ["a", "b", "c"], rows, tmp_path / "figures")
+    assert pics[0] == ("a", "a, finest run a-2: density at the end time", "picture_a-2.png")
+    assert pics[1] == ("b", "b-2: OSError: Unable to open file (file signature not found)", "")
+    assert pics[2] == ("c", "c-2: no results.h5 in its output", "")
