@@ -159,11 +159,22 @@ def _reindex(out: Path) -> None:
     owner = outdir.read_owner(out)
     if owner is None or outdir._alive(owner.get("run")):
         return
+    import warnings
+
     try:
-        output.write_index(out)
+        with warnings.catch_warnings():   # (its per-file warnings: one line below instead)
+            warnings.simplefilter("ignore", UserWarning)
+            output.write_index(out)
         outdir.record_written(out, out / output.INDEX_H5, out / output.INDEX_XDMF)
+        found, _ = output._scan(out)
+        bad = [path for role, steps in found.items() for index, path in steps
+               if index not in {i for _, _, i in output.read_steps(out, role)}]
     except (OSError, output.OutputError, KeyError, ValueError):
-        pass   # (the readers below name what is wrong)
+        return   # (the readers below name what is wrong)
+    if bad:   # a step file that cannot be read is left out of the index: say so, not in silence
+        names = ", ".join(f"{output.STEPS_DIR}/{p.name}" for p in bad[:5]) + (f" and {len(bad) - 5} more" if len(bad) > 5 else "")
+        print(f"immerse: warning: OUT = {str(out)!r}: {len(bad)} step file(s) damaged or unreadable, left "
+              f"out of the index: {names}", file=sys.stderr)
 
 
 def cmd_view(args) -> int:

@@ -70,3 +70,18 @@ def test_not_an_immerse_output_is_one_line(tmp_path, run_immerse):
     lines = r.stderr.strip().splitlines()
     assert len(lines) == 1 and "damaged or not immerse's" in lines[0], r.stderr
     assert snapshot(out) == before
+
+
+def test_a_damaged_step_file_is_left_out_of_the_index_by_name(finished, tmp_path, run_immerse):
+    """A step file of random bytes: view rebuilds the index without it, draws the others, and says
+    which file it left out in one warning line (output.py's per-file UserWarning printed two lines of source)."""
+    out = tmp_path / "out"
+    shutil.copytree(finished, out, symlinks=True)
+    n = len(output.read_steps(finished, "sph"))
+    (out / "steps" / "sph_000002.h5").write_bytes(os.urandom(500))
+    r = run_immerse("view", out, "--step", "all", "--field", "velocity")
+    assert r.returncode == 0, r.stderr
+    assert r.stderr.strip() == (f"immerse: warning: OUT = {str(out)!r}: 1 step file(s) damaged or unreadable, "
+                                "left out of the index: steps/sph_000002.h5"), r.stderr
+    assert [s[2] for s in output.read_steps(out, "sph")] == [i for i in range(n) if i != 2]
+    assert len(r.stdout.split()) == n - 1
