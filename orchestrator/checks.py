@@ -265,13 +265,14 @@ def no_penetration(case, out, history, params):
     if record is not None:
         worst = float(history[record][-1])
         worst_rel = worst / min((surfaces[k][2] for pair in pairs for k in pair), default=np.inf)
-    for _, _, index in output.read_steps(out, "lagrange") if record is None else ():
-        points = output.read_step(out, "lagrange", index)[0][:, :dim]
-        for a, b in pairs:
-            for s, t in ((a, b), (b, a)):   # t's nodes behind s's facets
-                facets, _, h = surfaces[s]
-                pen = surface_penetration(points, facets, surfaces[t][1], float(params.get("depth", 1.0)) * h)
-                worst, worst_rel = max(worst, float(pen.max())), max(worst_rel, float(pen.max()) / h)
+    else:
+        for _, _, index in output.read_steps(out, "lagrange"):
+            points = output.read_step(out, "lagrange", index)[0][:, :dim]
+            for a, b in pairs:
+                for s, t in ((a, b), (b, a)):   # t's nodes behind s's facets
+                    facets, _, h = surfaces[s]
+                    pen = surface_penetration(points, facets, surfaces[t][1], float(params.get("depth", 1.0)) * h)
+                    worst, worst_rel = max(worst, float(pen.max())), max(worst_rel, float(pen.max()) / h)
     t = history["time"]
     force = np.stack([history[f"lagrange.contact_force_{c}"] for c in "xyz"[:dim]], axis=1)
     mag = np.linalg.norm(force, axis=1)
