@@ -104,30 +104,60 @@ def _tangents_3d(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return t1, np.cross(n, t1)
 
 
-def _interleave(t1: sp.csr_matrix, t2: sp.csr_matrix) -> sp.csr_matrix:
-    """Rows t1_0, t2_0, t1_1, t2_1, ...: each multiplier's two tangential rows side by side."""
-    n = t1.shape[0]
-    order = np.empty(2 * n, dtype=np.int64)
-    order[0::2], order[1::2] = np.arange(n), n + np.arange(n)
-    return sp.vstack([t1, t2], format="csr")[order]
+def _summed(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, n_cols: int) -> tuple:
+    """The triplets with the duplicates of each (row, column) summed, in (row, column) order: every
+    entry of D, M and E is then one number, whichever order the pairs came in (the two passes of a
+    dual pass give equal operators with the sides swapped, bit for bit)."""
+    if len(rows) == 0:
+        return rows, cols, vals
+    key = rows * n_cols + cols
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    return rows[order][start], cols[order][start], np.add.reduceat(vals[order], start)
+
+
+def _csr(rows: np.ndarray, cols: np.ndarray, vals: np.ndarray, shape: tuple[int, int]) -> sp.csr_matrix:
+    """One csr matrix from triplets (duplicates summed)."""
+    return sp.csr_matrix((vals, (rows, cols)), shape=shape)
 
 
 @dataclass
 class MortarPass:
     """One pass with side a as the non-mortar side: its multiplier nodes and integrals.
 
-    nodes (nm,) sorted node ids of side a with contact area; D, M (nm, n_nodes) csr: D_AB and M_AC
-    (module docstring) on global node ids; E (n_nodes, n_nodes) csr: E_CC' of the mortar nodes on
-    global node ids (the stabilization's); normals (nm, dim) unit nodal normals of side a's facets
-    with contact area, at ``nodes``;
-    area (nm,) = row sums of D = integral of phi_A over the contact area.
+    nodes (nm,) sorted node ids of side a with contact area; normals (nm, dim) unit nodal normals of
+    side a's facets with contact area, at ``nodes``; area (nm,) = row sums of D = integral of phi_A
+    over the contact area; n_points: the number of nodes the ids count.
+    d, m: (row, column, value) triplets of D_AB and M_AC (module docstring), rows the multiplier index
+    (into ``nodes``), columns global node ids, each (row, column) once; e: E_CC' of the mortar nodes,
+    rows and columns global node ids. The operators are assembled from the triplets once (each
+    scipy.sparse construction costs ~50 us of overhead, more than a small contact's arithmetic: the
+    explicit step of a block on an incline spent 3/4 of its time building matrices); D, M and E as csr
+    matrices on demand.
     """
     nodes: np.ndarray
-    D: sp.csr_matrix
-    M: sp.csr_matrix
     normals: np.ndarray
     area: np.ndarray
-    E: sp.csr_matrix | None = None
+    n_points: int
+    d: tuple
+    m: tuple
+    e: tuple
+
+    @property
+    def D(self) -> sp.csr_matrix:
+        """(nm, n_points) csr."""
+        return _csr(*self.d, (len(self.nodes), self.n_points))
+
+    @property
+    def M(self) -> sp.csr_matrix:
+        """(nm, n_points) csr."""
+        return _csr(*self.m, (len(self.nodes), self.n_points))
+
+    @property
+    def E(self) -> sp.csr_matrix:
+        """(n_points, n_points) csr."""
+        return _csr(*self.e, (self.n_points, self.n_points))
 
     def index_of(self, node_ids: np.ndarray) -> np.ndarray:
         """Multiplier index of each node id (-1 where the node has no contact area in this pass)."""
@@ -175,15 +205,17 @@ def mortar_pass(points: np.ndarray, seg_a: np.ndarray, seg_b: np.ndarray, captur
     rows = np.repeat(seg_a[pairs[:, 0]], k, axis=1).ravel()           # A of [A, B] for B in seg_a
     d_cols = np.tile(seg_a[pairs[:, 0]], (1, k)).ravel()
     m_cols = np.tile(seg_b[pairs[:, 1]], (1, k)).ravel()
-    D = sp.csr_matrix((d.ravel(), (rows, d_cols)), shape=(n, n))
-    M = sp.csr_matrix((m.ravel(), (rows, m_cols)), shape=(n, n))
-    E = sp.csr_matrix((e.ravel(), (np.repeat(seg_b[pairs[:, 1]], k, axis=1).ravel(), m_cols)), shape=(n, n))
-    area = np.asarray(D.sum(axis=1)).ravel()
+    d, m = d.ravel(), m.ravel()
+    area = np.bincount(rows, weights=d, minlength=n)
     nodes = np.flatnonzero(area > 0.0)
+    on = area[rows] > 0.0                                              # the rows of nodes with contact area
+    local = np.searchsorted(nodes, rows[on])
+    e_trip = _summed(np.repeat(seg_b[pairs[:, 1]], k, axis=1).ravel(), m_cols, e.ravel(), n)
     # the normals of the contact surface: from the segments with contact area only (a block's corner
     # would otherwise lean towards its side face and push sideways: the patch test fails)
     normals = nodal_normals(x, seg_a[np.unique(pairs[:, 0])])
-    return MortarPass(nodes=nodes, D=D[nodes], M=M[nodes], normals=normals[nodes], area=area[nodes], E=E)
+    return MortarPass(nodes=nodes, normals=normals[nodes], area=area[nodes], n_points=n,
+                      d=_summed(local, d_cols[on], d[on], n), m=_summed(local, m_cols[on], m[on], n), e=e_trip)
 
 
 class DualPassContact:
@@ -220,19 +252,31 @@ class DualPassContact:
         """G (n_multipliers, dim n): weighted gaps g = G x.ravel() (x (n, dim) positions)."""
         return self._directed_operator(lambda n: n)
 
-    def _directed_operator(self, direction) -> sp.csr_matrix:
+    def _differences(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per pass the triplets of M - D (rows: multiplier index in the pass; columns: node ids),
+        gathered once for every directed operator of this configuration."""
+        if getattr(self, "_diff", None) is None:
+            self._diff = [(np.concatenate([p.m[0], p.d[0]]), np.concatenate([p.m[1], p.d[1]]),
+                           np.concatenate([p.m[2], -p.d[2]])) for p in self.passes]
+        return self._diff
+
+    def _directed_operator(self, *directions) -> sp.csr_matrix:
         """Rows d_A (x) (M_A - D_A) with d_A = direction(normals) of each pass: column dim * C + k
-        holds (M_AC - D_AC) d_A[k]."""
-        dim = self.points.shape[1]
-        blocks = []
-        for p in self.passes:
-            diff = (p.M - p.D).tocoo()
-            nrm = direction(p.normals)[diff.row]
-            rows = np.concatenate([diff.row] * dim)
-            cols = np.concatenate([dim * diff.col + k for k in range(dim)])
-            vals = np.concatenate([diff.data * nrm[:, k] for k in range(dim)])
-            blocks.append(sp.csr_matrix((vals, (rows, cols)), shape=(len(p.nodes), dim * len(self.points))))
-        return sp.vstack(blocks, format="csr")
+        holds (M_AC - D_AC) d_A[k]. With several directions, each multiplier's rows follow one
+        another (row len(directions) A + j along directions[j])."""
+        dim, nd = self.points.shape[1], len(directions)
+        rows, cols, vals = [], [], []
+        for off, p, (r, c, v) in zip(self.offsets, self.passes, self._differences()):
+            for j, direction in enumerate(directions):
+                nrm = direction(p.normals)[r]
+                for k in range(dim):
+                    rows.append(nd * (r + off) + j)
+                    cols.append(dim * c + k)
+                    vals.append(v * nrm[:, k])
+        if not rows:
+            return sp.csr_matrix((nd * self.n_multipliers, dim * len(self.points)))
+        return _csr(np.concatenate(rows), np.concatenate(cols), np.concatenate(vals),
+                    (nd * self.n_multipliers, dim * len(self.points)))
 
     def constraint_operator(self) -> sp.csr_matrix:
         """B = G / 2, the dual pass's b(mu, u) = mu . B u (both passes averaged)."""
@@ -243,8 +287,7 @@ class DualPassContact:
         -n_x); in 3-D two, along t1_A and t2_A, interleaved (friction.py's blocks)."""
         if self.points.shape[1] == 2:
             return self._directed_operator(_tangent)
-        return _interleave(self._directed_operator(lambda n: _tangents_3d(n)[0]),
-                           self._directed_operator(lambda n: _tangents_3d(n)[1]))
+        return self._directed_operator(lambda n: _tangents_3d(n)[0], lambda n: _tangents_3d(n)[1])
 
     def tangent_operator(self) -> sp.csr_matrix:
         """T: the constraint operator with each multiplier's tangent(s) in place of its normal (the
@@ -268,15 +311,16 @@ class DualPassContact:
         other = (0,) if len(self.passes) == 1 else (1, 0)
         rows, cols, vals = [], [], []
 
-        def add(mat, p_row, off_row, p_col, off_col, row_ids, transpose=False):
-            """mat's entries (row ids: local if not row_ids else global node ids; cols global) times
-            the nodal normals' dot product, where both nodes carry a multiplier of their pass."""
-            c = mat.tocoo()
-            i = p_row.index_of(c.row) if row_ids else c.row
-            j = p_col.index_of(c.col)
+        def add(trip, p_row, off_row, p_col, off_col, row_ids, transpose=False):
+            """The entries of triplets trip (row ids: local if not row_ids else global node ids; cols
+            global) times the nodal normals' dot product, where both nodes carry a multiplier of their
+            pass."""
+            row, col, data = trip
+            i = p_row.index_of(row) if row_ids else row
+            j = p_col.index_of(col)
             ok = (i >= 0) & (j >= 0)
             i, j = i[ok], j[ok]
-            v = c.data[ok] * np.einsum("ij,ij->i", p_row.normals[i], p_col.normals[j])
+            v = data[ok] * np.einsum("ij,ij->i", p_row.normals[i], p_col.normals[j])
             r, s = i + off_row, j + off_col
             rows.append(s if transpose else r)
             cols.append(r if transpose else s)
@@ -284,10 +328,10 @@ class DualPassContact:
 
         for k, p in enumerate(self.passes):
             q, op, oq = self.passes[other[k]], self.offsets[k], self.offsets[other[k]]
-            add(p.D, p, op, p, op, row_ids=False)                   # a-a: D_AB n_A.n_B
-            add(p.M, p, op, q, oq, row_ids=False)                   # a-b: M_AC n_A.n_C
-            add(p.M, p, op, q, oq, row_ids=False, transpose=True)   # b-a: its transpose
-            add(p.E, q, oq, q, oq, row_ids=True)                    # b-b: E_CC' n_C.n_C'
+            add(p.d, p, op, p, op, row_ids=False)                   # a-a: D_AB n_A.n_B
+            add(p.m, p, op, q, oq, row_ids=False)                   # a-b: M_AC n_A.n_C
+            add(p.m, p, op, q, oq, row_ids=False, transpose=True)   # b-a: its transpose
+            add(p.e, q, oq, q, oq, row_ids=True)                    # b-b: E_CC' n_C.n_C'
         n = self.n_multipliers
         J = sp.csr_matrix((0.25 * gamma * h * np.concatenate(vals),
                            (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))

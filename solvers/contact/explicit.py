@@ -43,7 +43,7 @@ import scipy.sparse as sp
 
 from solvers.contact import methods
 from solvers.contact.kkt import solve_schur_complement
-from solvers.contact.nodal_values import constraint_weights, nodal_mean
+from solvers.contact.nodal_values import constraint_weights, nodal_mean, row_sums, scale_columns
 from solvers.contact.penetration import paired_penetration
 
 __all__ = ["ExplicitContact"]
@@ -122,6 +122,8 @@ class ExplicitContact:
         self._keys = np.concatenate(keys).astype(np.int64) if keys else np.zeros(0, np.int64)
         if not blocks_b:
             return None, None, None
+        if len(blocks_b) == 1:  # (one pair: no stacking, each scipy call costs ~50 us)
+            return blocks_b[0].tocsr(), blocks_j[0].tocsr(), blocks_t[0].tocsr() if blocks_t else None
         T = sp.vstack(blocks_t, format="csr") if blocks_t else None
         return sp.vstack(blocks_b, format="csr"), sp.block_diag(blocks_j, format="csr"), T
 
@@ -170,7 +172,7 @@ class ExplicitContact:
 
         def weight(op, factor):
             """J's scale: alpha times the median of diag(factor op M^-1 op^T) over J_1's (module docstring)."""
-            w = np.asarray(op.multiply(op) @ inv_m).ravel() * factor
+            w = row_sums(op, op.data * op.data * inv_m[op.indices]) * factor
             return self.alpha * np.median(w[w > 0]) / np.median(j1[j1 > 0]) if np.any(j1 > 0) and np.any(w > 0) else 0.0
 
         # J p is the offset of the stabilized gap: with p the physical pressure, the same in a
@@ -188,7 +190,7 @@ class ExplicitContact:
         # iteration from p = 0 would pick), not from all of them: the first factorisation is of the
         # approaching surface's rows only, not the whole system's (mostly gaps that stay open). The
         # solution (p > 0 exactly where its set settles) is the same: the same last factorisation.
-        sol = solve_schur_complement(((dt * dt) * (B @ sp.diags(inv_m) @ B.T) + scale * J1).tocsc(), g0,
+        sol = solve_schur_complement(((dt * dt) * (scale_columns(B, inv_m) @ B.T) + scale * J1).tocsc(), g0,
                                      active=g0 < 0.0, gap_tol=1e-12 * float((abs(B) @ np.abs(xstar)).max()))
         self.last_active = int(sol.active.sum())
         self.last_pressure = sol.p * (dt / (dt_force or dt))
@@ -207,7 +209,7 @@ class ExplicitContact:
             # without, it stays to 1e-16 m/s. W is singular (the passes' rows are redundant); the
             # Gauss-Seidel iteration takes any of the equivalent splittings of q.
             v1 = np.asarray(v, float).reshape(-1) + u / dt
-            W = (T @ sp.diags(inv_m) @ T.T).tocsr()
+            W = (scale_columns(T, inv_m) @ T.T).tocsr()
             bound = self.friction * dt * sol.p
             k = dim - 1                      # tangential components per multiplier (T's row blocks)
             # warm start: the last step's q where the multipliers are the same nodes

@@ -82,15 +82,27 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     return _active_set(nm, c, solve_on, max_iterations, active, c * gap_tol)
 
 
+RESIDUAL_TOL = 1e-8
+"""A direct solve whose residual exceeds this fraction of |rhs| met a singular system."""
+
+
 def _lu_solve(mat: sp.spmatrix, rhs: np.ndarray, n_active: int, it: int, why: str,
               permc_spec: str = "COLAMD") -> np.ndarray:
-    """mat^-1 rhs by SuperLU (column ordering ``permc_spec``); a singular system (SuperLU's "Factor
-    is exactly singular", or a non-finite result) raises one RuntimeError naming the active
-    multipliers and ``why``."""
+    """mat^-1 rhs by SuperLU (column ordering ``permc_spec``); a singular system raises one
+    RuntimeError naming the active multipliers and ``why``: SuperLU's "Factor is exactly singular",
+    a non-finite result, or a residual above RESIDUAL_TOL of |rhs|. Whether round-off leaves a
+    dependent row's pivot exactly zero depends on the CPU's kernels: where it left 2e-23 instead,
+    the solve returned multipliers of 7e23 with a residual of 1.9e3 |rhs| and the active set went on
+    from them to a wrong answer (a good solve's residual: 3e-16 |rhs|)."""
+    mat = sp.csc_matrix(mat)
     try:
-        sol = spla.splu(sp.csc_matrix(mat), permc_spec=permc_spec).solve(rhs)
+        sol = spla.splu(mat, permc_spec=permc_spec).solve(rhs)
     except RuntimeError:
         sol = np.full(mat.shape[0], np.nan)
+    if np.all(np.isfinite(sol)):
+        scale = float(np.linalg.norm(rhs))
+        if np.linalg.norm(mat @ sol - rhs) > RESIDUAL_TOL * scale if scale > 0 else np.any(sol != 0):
+            sol[:] = np.nan
     if not np.all(np.isfinite(sol)):
         raise RuntimeError(f"the contact KKT system is singular ({n_active} active multipliers, iteration {it}): {why}")
     return sol

@@ -30,13 +30,17 @@ def _invariants(pts, mass, v):
         np.sum(mass * (pts[:, 0] * vv[:, 1] - pts[:, 1] * vv[:, 0]))
 
 
-@pytest.mark.parametrize("method, rate_tol, energy_tol", [("mortar", 1e-14, 5e-15), ("dual_pass", 2e-12, 5e-15)])
-def test_gap_rate_removed_dissipatively_with_momenta_kept(method, rate_tol, energy_tol):
+@pytest.mark.parametrize("method, rate_tol, energy_tol, momentum_tol",
+                         [("mortar", 1e-14, 5e-15, 1e-15), ("dual_pass", 2e-12, 5e-15, 1e-13)])
+def test_gap_rate_removed_dissipatively_with_momenta_kept(method, rate_tol, energy_tol, momentum_tol):
     """Single-pass mortar rows (independent, cond 27) and the dual pass's (two passes on one
     interface: dependent rows, cond 2.5e17), both by dense least squares: G vbar = 0 (measured 2.3e-15
     and 3.4e-13 of |G v|), the kinetic energy falls by the reported kappa (> 0, from the velocities;
     the rows' shares sum to it; measured 4.4e-16 and 0 relative), linear and angular momentum kept
-    to 2.5e-15 of sum m |v|."""
+    to round-off of sum m |v|: the mortar's rows 0 here (1.1e-16 at most over 30 random states);
+    the dual pass's dependent rows amplify their row sums' round-off (1.4e-17) through the
+    pseudo-inverse: 1.6e-14 here, median 3e-15 and at most 3.1e-14 over 30 states, varying with the
+    BLAS kernels a CPU gets."""
     pts, sa, sb = _faces()
     c = (SinglePassMortar if method == "mortar" else DualPassContact)(pts, sa, sb, capture=0.01)
     G = c.constraint_operator()
@@ -48,7 +52,7 @@ def test_gap_rate_removed_dissipatively_with_momenta_kept(method, rate_tol, ener
     assert up.dissipated > 0 and up.per_row.sum() == pytest.approx(up.dissipated, rel=1e-12)
     assert e0 - e1 == pytest.approx(up.dissipated, rel=energy_tol)
     gross = np.sum(mass * np.abs(v.reshape(-1, 2)).sum(1))
-    assert np.abs(l1 - l0).max() <= 1e-14 * gross and abs(a1 - a0) <= 1e-14 * gross  # 1.6e-15, 1.8e-15
+    assert np.abs(l1 - l0).max() <= momentum_tol * gross and abs(a1 - a0) <= momentum_tol * gross
 
 
 def test_energy_returned_exactly_along_the_contact_forces():

@@ -111,7 +111,8 @@ def _brute_force(points, facets, nodes, depth):
 def test_the_binned_search_finds_what_every_pair_does():
     """A wavy surface of 60 segments and 300 random points within 3 segment lengths of it, depths
     from a tenth of a segment to 4 (one bin holds many facets, or a box spans two bins): the
-    binned kernel's depths equal the all-pairs ones exactly."""
+    binned kernel finds the same nodes behind, at the all-pairs depths to the last bit (2e-16
+    relative measured where the compiled kernel fuses multiply-adds and numpy does not)."""
     rng = np.random.default_rng(7)
     s = np.linspace(0.0, 6.0, 61)
     surf = np.stack([s, 0.2 * np.sin(2.0 * s)], axis=1)
@@ -120,5 +121,7 @@ def test_the_binned_search_finds_what_every_pair_does():
     nodes = np.arange(61, 361)
     for depth, behind in ((0.01, 1), (0.1, 43), (0.4, 130)):     # (nodes found behind: measured)
         got = surface_penetration(pts, facets, nodes, depth)
-        np.testing.assert_array_equal(got, _brute_force(pts, facets, nodes, depth))
+        want = _brute_force(pts, facets, nodes, depth)
+        np.testing.assert_array_equal(got > 0, want > 0)
+        np.testing.assert_allclose(got, want, rtol=1e-15, atol=0)
         assert np.count_nonzero(got) == behind
