@@ -19,7 +19,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 # CPU 1.10 -> 0.76 s, the coupler's 0.34 -> 0.27 s, the launcher's 0.45 -> 0.34 s)
 unexport PYTHONDONTWRITEBYTECODE
 
-.PHONY: venv demo test test-serial test-mpi bench clean
+.PHONY: venv demo test test-fast test-serial test-mpi bench clean
 
 $(STAMP): requirements.txt pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -50,6 +50,11 @@ test: test-serial test-mpi
 # own waits sleep after their first polls (adapters/protocol.py SPIN_ENV: every job beside another)
 test-serial: venv
 	IMMERSE_WAIT_SPIN_S=0 $(PY) -m pytest -q -p no:cacheprovider -n auto --durations=25 tests
+
+# for iteration: the suite without the tests marked `slow` (the long validations; every test module
+# keeps tests that run), on the same workers
+test-fast: venv
+	IMMERSE_WAIT_SPIN_S=0 $(PY) -m pytest -q -p no:cacheprovider -n auto -m "not slow" --durations=15 tests
 
 test-mpi: venv
 	$(MPIEXEC) -n 2 $(PY) -m pytest -q -p no:cacheprovider -m mpi tests

@@ -84,3 +84,17 @@ if importlib.util.find_spec("xdist") is not None:
                 return _unit_of_work(nodeid)
 
         return Units(config, log)
+
+
+def pytest_collection_modifyitems(config, items):
+    """The units of work (`_unit_of_work`) holding a test marked `slow` run first, in their collected
+    order, then the rest: the long validations start while the short tests fill the other worker,
+    instead of one of them starting last and the suite waiting minutes for it on one core. The items
+    of a unit stay together (a module's shared fixture is built once). The same order on every
+    worker (xdist compares them)."""
+    units: dict[str, list] = {}
+    for item in items:
+        units.setdefault(_unit_of_work(item.nodeid), []).append(item)
+    slow = [u for u, its in units.items() if any(it.get_closest_marker("slow") for it in its)]
+    rest = [u for u in units if u not in set(slow)]
+    items[:] = [it for u in slow + rest for it in units[u]]

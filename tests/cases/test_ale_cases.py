@@ -35,11 +35,13 @@ def test_toro123(tmp_path):
     assert m["invalid_values"]["value"] == 0 and r["min_specific_internal_energy"] > 0
 
 
+@pytest.mark.slow
 def test_sedov_2d(tmp_path):
     out, s = run_case("sedov_2d", tmp_path)
     assert {"shock_radius", "l1_density", "energy_balance_rel"} <= set(s["check"]["metrics"])
 
 
+@pytest.mark.slow
 def test_sedov_3d(tmp_path):
     out, s = run_case("sedov_3d", tmp_path)
     assert {"shock_radius", "l1_density", "energy_balance_rel"} <= set(s["check"]["metrics"])
@@ -131,6 +133,7 @@ def test_advected_square(tmp_path):
     assert {"volume_drift_rel", "symmetric_difference"} <= set(s["check"]["metrics"])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("case_name, ranks", [("water_air_shock_tube", ()), ("sedov_2d", ("--ranks", "ale=2"))])
 def test_ale_restart_is_bitwise_identical(tmp_path, case_name, ranks):
     """`immerse run --restart` from an ALE checkpoint at step k ends bitwise equal to the uninterrupted

@@ -17,6 +17,7 @@ def _rows(out: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_shock_tube_immersed_walls_converge_at_the_conforming_order(tmp_path, run_immerse):
     """Sod into a wall at 100, 200, 400 zones per unit length (the full campaign runs to 1600), L1 density
@@ -49,6 +50,7 @@ def test_shock_tube_immersed_walls_converge_at_the_conforming_order(tmp_path, ru
         assert (out / "figures" / png).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_ale_resolution_3d_costs_far_more_for_the_same_sedov_error(tmp_path, run_immerse):
     """Sedov in 2-D (30^2, 60^2) and 3-D (10^3, 20^3), the two coarser levels of the campaign. Measured
@@ -84,6 +86,7 @@ def test_taylor_bar_impact_diameter_converges_towards_the_measured_one(tmp_path,
         assert float(x["metric.final_length.rel_error"]) < 2e-3, x["metric.final_length.rel_error"]
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_coupling_methods_multiplier_most_accurate_penalty_stopped_beyond_its_limit(tmp_path, run_immerse):
     """The embedded piston with the multipliers, Nitsche and the penalty at 10 and 1e4 Pa/m. Measured:
@@ -106,6 +109,7 @@ def test_coupling_methods_multiplier_most_accurate_penalty_stopped_beyond_its_li
     assert "coupling method &#x27;penalty&#x27; is unstable" in (out / "report.html").read_text()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_multiplier_stabilisation_keeps_cond_h_constant_and_the_multipliers_smooth(tmp_path, run_immerse):
     """Gas against an inclined fixed wall at 25 and 50 zones across, beta = 1 and beta = 0. Measured:
@@ -128,6 +132,7 @@ def test_multiplier_stabilisation_keeps_cond_h_constant_and_the_multipliers_smoo
     assert (out / "figures" / "multiplier_stabilization_plot0.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immerse):
     """The plate in a shock as FE quads (3 x 30, 6 x 60) and tlsph particles (dx 5, 2.5 mm): the tip
@@ -157,6 +162,7 @@ def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immer
     assert len(a) == len(b) == 17 and np.abs(a - b).max() <= 0.1 * np.abs(a).max()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_fe_vs_sph_bodies_penetrator_reaches_tates_depth(tmp_path, run_immerse):
     """The campaign's penetrator at its coarse level (cases/penetrator_tate on 0.5 mm zones, dx = 0.25
@@ -175,6 +181,7 @@ def test_fe_vs_sph_bodies_penetrator_reaches_tates_depth(tmp_path, run_immerse):
     assert (out / "figures" / "penetrator_cost.png").is_file()
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_contact_methods_where_each_fails(tmp_path, run_immerse):
     """The contact methods at alpha 1e-6 and 1 (patch) and 40 and 80 arc segments (Hertz). Measured
@@ -203,6 +210,7 @@ def test_contact_methods_where_each_fails(tmp_path, run_immerse):
     assert bias > 0.02, e   # measured 0.028
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_time_integrators_where_each_fails(tmp_path, run_immerse):
     """The L-block to t = 10 s at steps of 0.1 and 0.2 s and the rotating rod to 0.3 s at 1 ms (the

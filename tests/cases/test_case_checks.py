@@ -7,6 +7,8 @@ from __future__ import annotations
 import json
 import shutil
 
+import pytest
+
 from tests.conftest import CASES, immerse
 
 
@@ -22,6 +24,7 @@ def run_modified(tmp_path, name, old, new):
     return r, s, sorted(k for k, m in s["check"]["metrics"].items() if not m["passed"])
 
 
+@pytest.mark.slow
 def test_taylor_bar_with_a_10_percent_lower_yield_stress_fails(tmp_path):
     """A = 725.4 MPa instead of 806 MPa: the rod ends 1.3 % shorter and 1.2 % wider at the impact
     face (tolerances 0.4 % and 0.8 %; the real rod: 0.12 % and 0.31 %)."""

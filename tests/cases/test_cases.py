@@ -6,6 +6,7 @@ import json
 import shutil
 
 import h5py
+import pytest
 
 from tests.conftest import CASES, immerse
 
@@ -101,6 +102,7 @@ def test_taylor_bar_two_ranks_equals_one(tmp_path):
     assert cd1["plastic_strain"].max() > 0.1  # the comparison covers plastic flow
 
 
+@pytest.mark.slow
 def test_spinning_block(tmp_path):
     out, s = run_case("spinning_block", tmp_path)
     assert s["steps"] == 10_000
@@ -133,6 +135,7 @@ def test_restart_is_bitwise_identical(tmp_path):
     assert sa["final"] == sb["final"] and sa["steps"] == sb["steps"]
 
 
+@pytest.mark.slow
 def test_taylor_bar(tmp_path):
     """42CrMo4 Taylor impact, quarter model: final length and impact-face diameter against the
     published code results (26.52-26.56 mm, 11.15-11.22 mm; references are mid-points), within the

@@ -63,6 +63,7 @@ def test_bars_impact(tmp_path):
     assert np.abs((g1 - g0) / (t1 - t0) / 10.0 - 1).max() < 1e-3
 
 
+@pytest.mark.slow
 def test_bars_impact_on_two_ranks_and_from_a_checkpoint(tmp_path):
     """2 ranks (the bars' nodes on both; every rank solves the gathered contact) equal 1 rank bit for
     bit; a checkpoint at 30 us (in contact) continues bit for bit."""
@@ -86,6 +87,7 @@ def test_bars_impact_on_two_ranks_and_from_a_checkpoint(tmp_path):
     assert sa["final"] == sb["final"]
 
 
+@pytest.mark.slow
 def test_block_on_incline_slides_at_newtons_rate(tmp_path):
     """Coulomb friction mu = 0.2 (cases/block_on_incline): at 20 degrees the block accelerates at
     g (sin - mu cos) = 1.511541 m/s^2 (its own check; measured 3.5e-5 off over 0.02-0.1 s)."""
@@ -107,6 +109,7 @@ def test_block_on_incline_slides_at_newtons_rate(tmp_path):
     assert np.abs(ratio[1:] - 1).max() < 0.01 and 0.96 < ratio[0] < 1.001, ratio
 
 
+@pytest.mark.slow
 def test_block_sticks_below_the_friction_angle(tmp_path):
     """At 10 degrees (tan 0.176 < mu = 0.2; cases/block_on_incline_stick) the block, after its landing,
     does not slide: its own check holds the slip of its nodes over 0.1-0.3 s to round-off (measured
@@ -124,6 +127,7 @@ def test_block_sticks_below_the_friction_angle(tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
 
 
+@pytest.mark.slow
 def test_block_on_incline_3d_slides_along_gravity_at_newtons_rate(tmp_path):
     """3-D Coulomb friction (cases/block_on_incline_3d: two tangents per multiplier, the impulses
     bounded by a disc): gravity tilted 20 degrees towards 30 degrees off x; the block accelerates
@@ -146,6 +150,7 @@ def test_block_on_incline_3d_slides_along_gravity_at_newtons_rate(tmp_path):
     assert_same_steps(out, tmp_path / "two", roles=("lagrange",))
 
 
+@pytest.mark.slow
 def test_block_on_incline_3d_sticks_below_the_friction_angle(tmp_path):
     """The 3-D block at 10 degrees (tan 0.176 < mu = 0.2), tilted towards 30 degrees off x: after its
     landing no node slides more than 1e-14 m over 0.1-0.3 s (measured 3.8e-16 m; 2.2e-10 m while J
@@ -162,6 +167,7 @@ def test_block_on_incline_3d_sticks_below_the_friction_angle(tmp_path):
     assert set(m) == {"slip_max", "energy_balance_rel", "momentum_balance_rel"}
 
 
+@pytest.mark.slow
 def test_ring_self_contact(tmp_path):
     """A thin rubber ring crushed between a held and a driven plate until its walls meet inside
     (cases/ring_self_contact, issue 11): its own check passes (no surface node, at any step, deeper
@@ -180,6 +186,7 @@ def test_ring_self_contact(tmp_path):
         assert h["lagrange.external_work"][-1] > 0 and h["lagrange.kinetic_energy"][0] == 0.0
 
 
+@pytest.mark.slow
 def test_impacting_plates(tmp_path):
     """A spinning striker plate, its corner leading, falls at an angle on a free plate
     (cases/impacting_plates, 3-D, hexahedra, frictionless explicit contact): the contact happens
@@ -204,6 +211,7 @@ def test_impacting_plates(tmp_path):
         "lagrange_von_mises_stress_000030.png", "lagrange_contact_pressure_000030.png"}
 
 
+@pytest.mark.slow
 def test_friction_slip_continues_from_a_checkpoint(tmp_path):
     """block_on_incline checkpointed at 0.05 s (sliding) and continued: the last step, the slip
     accumulated by friction included, equals the uninterrupted run's bit for bit."""

@@ -53,6 +53,7 @@ def test_single_pass_node_to_surface_fails_the_patch_test(tmp_path):
     assert err > 1e-3, err  # measured 4.9e-2
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_hertz_cylinder_at_three_meshes(tmp_path):
     """Half-width a = 0.107641 and peak pressure p0 = 0.059143 within the issue's 3 % at 40, 80 and 160

@@ -86,6 +86,7 @@ def _conforming(tmp_path, x_wall):
     return case
 
 
+@pytest.mark.slow
 def test_sod_immersed_wall_mid_zone_on_a_face_and_conforming(tmp_path):
     """The wall through the middle of a zone (the shipped case), on a zone face, and the grid's own
     wall: each within its tolerance of the exact reflected state, and the immersed runs within 1e-3
@@ -104,6 +105,7 @@ def test_sod_immersed_wall_mid_zone_on_a_face_and_conforming(tmp_path):
             assert s["check"]["metrics"][name]["value"] == pytest.approx(ref, rel=1e-3), name
 
 
+@pytest.mark.slow
 def test_immersed_wall_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
     """The background on 2 ranks and the body on 2 ranks give the 1 + 1 run's fields bit for bit
     (the coupler gathers the interface in global-id order; values reach it as owner sums)."""
@@ -151,6 +153,7 @@ def restarted_equals_full(tmp_path, name, end_time, roles=("ale", "lagrange")):
     return ckpts[0]
 
 
+@pytest.mark.slow
 def test_moving_piston_on_two_plus_two_ranks_equals_one_plus_one_and_restarts_bitwise(tmp_path):
     """A free body moving through the grid (zones it uncovers and covers, small cut zones merged
     with their neighbours across the ranks' cut at x = 0.5): 2 + 2 ranks equal 1 + 1 bit for bit.
@@ -173,6 +176,7 @@ def test_embedded_piston_water_air(tmp_path):
     coupled_balances(s)
 
 
+@pytest.mark.slow
 def test_two_labels_of_one_gas_give_the_one_gas_run(tmp_path):
     """The piston in Sod's tube with the gas left and right of it as two materials of one EOS
     (mixed.py beside a coupled body: the material states, their merge and the remap's material
@@ -208,6 +212,7 @@ def _water_air_box(tmp_path, end_time, extra=""):
     return case
 
 
+@pytest.mark.slow
 def test_water_air_box_body(tmp_path):
     """A block crossing the water surface in a closed box (cut zones holding water, air or both): the
     case's check (each material's mass, energy and momentum balances, no material in the zones the
@@ -217,6 +222,7 @@ def test_water_air_box_body(tmp_path):
     coupled_balances(s)
 
 
+@pytest.mark.slow
 def test_water_air_box_on_two_plus_two_ranks_equals_one_plus_one_and_restarts_bitwise(tmp_path):
     """Several materials in the small cut zones' merge across the background ranks' cut (the block
     moved onto the cut at x = 0.5; the groups' material totals handed to the ghost layers like the
@@ -261,6 +267,7 @@ def closed_box_with_void_above(tmp_path, y: float):
     return case
 
 
+@pytest.mark.slow
 def test_closed_box_with_void_above_the_gas(tmp_path):
     """Void beside a coupled body (mixed.py's void material with blocked fractions): the closed box of
     cases/closed_box_body with void above y = 0.305, just over the block; the gas expands into the
@@ -281,6 +288,7 @@ def test_closed_box_with_void_above_the_gas(tmp_path):
     assert f["ale.volume_empty"] < 1e-9 and f["ale.volume_air"] == pytest.approx(0.6 - 0.02, rel=1e-4)
 
 
+@pytest.mark.slow
 def test_plate_in_shock_2d_runs_with_coupled_balances(tmp_path):
     """`make demo`'s scene: the plate bends downstream (its tip moves +x) and the coupled balances
     hold to round-off (measured: mass 1.3e-13, momentum 4.6e-14, energy 4.5e-14; the coupling's
@@ -309,6 +317,7 @@ def _penalty_case(tmp_path, stiffness, end_time=0.05):
     return case
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("stiffness, how", [(1e7, "far"), (1e4, "energy"), (5200.0, "solver"), (7000.0, "solver")])
 def test_penalty_beyond_its_stable_step_is_stopped_naming_the_limit(tmp_path, stiffness, how):
     """A penalty spring whose explicit limit lies below the solvers' step: stopped, non-zero exit, the
@@ -371,6 +380,7 @@ def _piston_variant(tmp_path, name, up=None, cells_y=None):
     return case
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name, up, cells_y", [("slow_piston", 0.5, None), ("channel", None, 8)])
 def test_piston_into_gas_variants(tmp_path, name, up, cells_y):
     """The driven piston at up = 0.5 (the column), and at up = 1 in a channel 8 zones wide: each within
@@ -395,6 +405,7 @@ def test_closed_box_body(tmp_path):
     coupled_balances(s)
 
 
+@pytest.mark.slow
 def test_plate_in_shock_3d_runs_with_coupled_balances(tmp_path):
     """The 3-D plate: quads of the body's surface clipped against hexahedral zones, the same coupled
     step; balances to round-off (measured: mass 7e-13, momentum 6.5e-14, energy 2.3e-14, the
@@ -432,6 +443,7 @@ def test_acoustic_transmission(tmp_path):
     # behind the surface (stopped at step 161), stable with every corner (measured 1.1e-3, 3.3e-4)
     (5.0e8, "[0.712, 0.77]", 4e-3, 1.5e-3),
 ], ids=["stiff", "soft"])
+@pytest.mark.slow
 def test_acoustic_transmission_into_a_lower_impedance_solid(tmp_path, youngs, window, tol_r, tol_t):
     """The same pulse onto a light block (rho = 500): the reflection is a rarefaction,
     R = (Z2-Z1)/(Z1+Z2), T = 2 Z2/(Z1+Z2)."""
@@ -464,6 +476,7 @@ def test_oblique_slip_wall(tmp_path):
     assert abs(f["ale.momentum_balance_rel"]) < 3e-14, f
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("angle, cells", [(10.0, 50), (20.0, 100), (75.0, 50)])
 def test_oblique_slip_wall_at_other_angles_and_meshes(tmp_path, angle, cells):
     """The same channel at other angles and resolutions (the wall.vtu and the flow rebuilt by
@@ -501,6 +514,7 @@ def test_oblique_slip_wall_at_other_angles_and_meshes(tmp_path, angle, cells):
     assert abs(s["final"]["ale.energy_balance_rel"]) < 1e-14, s["final"]
 
 
+@pytest.mark.slow
 def test_oblique_slip_wall_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
     """The wall's slivers merge with their neighbours across the ranks' cut and the periodic faces
     (targets decided where the zone is real, handed to the ghost layers): 2 + 2 ranks equal 1 + 1
@@ -549,6 +563,7 @@ def test_a_coupled_body_that_erodes_away_leaves_its_room_to_the_air(tmp_path):
     assert abs(f["ale.energy_balance_rel"]) < 1e-13 and abs(f["ale.mass_balance_rel"]) < 1e-12, f
 
 
+@pytest.mark.slow
 def test_an_eroding_fe_rod_penetrates_aluminium(tmp_path):
     """cases/penetrator_tate_fe over its first 6 us (its full run, 32 us, goes to the campaign
     fe_vs_sph_bodies: depth 15.33 mm at Tate's 29.7 us, -10 %, penetration velocity 551 m/s, -4 %):
@@ -609,6 +624,7 @@ condition = "slip"
 """
 
 
+@pytest.mark.slow
 def test_a_steel_block_thrown_into_water_runs_at_the_steels_step(tmp_path):
     """It struck the water at 0.09 ms and then crawled (12,500 steps to 86 % of the end time, the step
     1e-9 s against 5e-7 s): a sliver of air squeezed hot between block and water, 0.03 % of a zone at

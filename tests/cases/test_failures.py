@@ -64,6 +64,7 @@ map = "push"
 '''
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_each_failure_is_detected_named_and_on_the_stability_map(tmp_path, run_immerse):
     """Level 1 of each series runs; level 2 is stopped, 'unstable', its message naming the cause:

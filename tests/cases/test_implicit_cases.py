@@ -24,6 +24,7 @@ def assert_restart_bitwise(case, tmp_path):
     assert sa["final"] == sb["final"]
 
 
+@pytest.mark.slow
 def test_spinning_block_midpoint_on_two_ranks_and_from_a_checkpoint(tmp_path):
     """Its check (energy 1.4e-12, momentum 1.7e-14, angular momentum 7.8e-13 measured) at 8 ms steps
     (16.6x the explicit limit), at most 6 Newton iterations a step (measured 5); 2 ranks (a gathered
@@ -99,6 +100,7 @@ metrics.angular_momentum_balance_rel = { reference = 0.0, tolerance = 5e-14 }
         assert h["lagrange.gravity_work"][-1] > 1.5 and h["lagrange.kinetic_energy"][-1] > 1.5
 
 
+@pytest.mark.slow
 def test_l_block_free_flight_and_newmark_stopped(tmp_path):
     """Simo & Tarnow's L-block (its check: after the pulses, energy 1.2e-13, momentum 3.0e-15,
     angular momentum 2.9e-14 measured, at 10 times the explicit step) in steps of 0.1 s with at most 5
@@ -146,6 +148,7 @@ COARSE_BARS = (("cells = [800, 1]", "cells = [200, 1]"), ("cells = [640, 1]", "c
                 "velocity_target_rel = { reference = 1.0, tolerance = 0.03 }"))
 
 
+@pytest.mark.slow
 def test_bars_impact_implicit_swaps_the_velocities_within_one_percent(tmp_path):
     """The two-bar impact at 10 times the explicit limit with the three-step contact update (its
     check: the striker keeps 0.92 % of its speed, stress 197.37 MPa, contact 39.94 us, the contact's
@@ -158,6 +161,7 @@ def test_bars_impact_implicit_swaps_the_velocities_within_one_percent(tmp_path):
         assert stored.max() > 0.06 and stored[-1] == 0.0     # held over the episode, given back
 
 
+@pytest.mark.slow
 def test_bars_impact_implicit_without_step_3_loses_the_contacts_energy(tmp_path):
     """Without step 3 ([contact] return_energy = false) the 0.27 J the first step and the gap-rate
     updates took stays lost: 1.39e-3 of the kinetic energy (measured on the coarse bars), booked as
@@ -179,6 +183,7 @@ def test_bars_impact_implicit_without_step_3_loses_the_contacts_energy(tmp_path)
     assert s3["check"]["metrics"]["velocity_striker_rel"]["value"] == pytest.approx(0.02338, rel=1e-3)
 
 
+@pytest.mark.slow
 def test_bars_impact_implicit_continues_bit_for_bit_from_a_checkpoint_inside_the_contact(tmp_path):
     """A checkpoint at 15 us (in the contact: energy stored, rows active) continues bit for bit: the
     stored energies, the active rows and the contact's works are in it (the coarse bars)."""
@@ -187,6 +192,7 @@ def test_bars_impact_implicit_continues_bit_for_bit_from_a_checkpoint_inside_the
     assert_restart_bitwise(case, tmp_path)
 
 
+@pytest.mark.slow
 def test_ring_bounce_gives_back_every_episodes_energy(tmp_path):
     """A ring dropped on a held floor (its check: 17 episodes, the energy after each within 7.4e-13 of
     before, at most 11 changes of the active rows in one, 1.0 % of an edge deep, measured); without
@@ -201,6 +207,7 @@ def test_ring_bounce_gives_back_every_episodes_energy(tmp_path):
     assert m["contact_dissipation_rel"]["value"] > 0.05 and m["energy_rebound_rel"]["value"] > 0.03
 
 
+@pytest.mark.slow
 def test_rotating_rod_wall_strikes_without_losing_energy(tmp_path):
     """The spinning rod between two held walls over its first 0.15 s (5 strikes; the case runs 5 s,
     2 x 10^4 steps: README): each strike gives the energy back to 1.3e-13, at most 2 changes of the
@@ -240,6 +247,7 @@ def test_newmark_with_contact_gains_energy_in_the_contact_and_is_stopped_on_the_
             "(> lagrange.energy_limit = 0.01)") in r.stdout + r.stderr, r.stdout + r.stderr
 
 
+@pytest.mark.slow
 def test_newmark_with_contact_continues_bit_for_bit_from_a_checkpoint_inside_the_contact(tmp_path):
     """The trapezoid's next step starts from the last step's end contact force (its a0): the
     checkpoint holds it (the coarse bars under Newmark, their [check] left out: it fails by design)."""

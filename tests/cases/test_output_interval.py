@@ -74,9 +74,8 @@ CASES_RUN = ({name: FACTORS for name in explicit_cases()} if os.environ.get("IMM
              else CI_CASES)
 
 
-@pytest.mark.slow
 @pytest.mark.timeout(3600 if os.environ.get("IMMERSE_ALL_CASES") else 300)   # (the sweep's longest: 4 runs)
-@pytest.mark.parametrize("name", CASES_RUN)
+@pytest.mark.parametrize("name", [pytest.param(n, marks=() if n == "sod" else pytest.mark.slow) for n in CASES_RUN])
 def test_output_intervals_leave_the_solution_and_the_check_alone(name, tmp_path):
     own, hist = run(CASES / name, tmp_path / "own")
     dt = float(np.median(np.diff(hist["time"])))

@@ -29,6 +29,7 @@ def test_sph_shock_tube(tmp_path):
     assert len(pts) == 3000 and set(pd) >= {"velocity", "density", "pressure", "specific_internal_energy", "body"}
 
 
+@pytest.mark.slow
 def test_sph_restart_is_bitwise(tmp_path):
     """A restart from the checkpoint at t = 0.1 ends bit for bit where the run that wrote it ended,
     and that run where one without a checkpoint ends (serial: the reload keeps every array the
@@ -51,6 +52,7 @@ def test_sph_restart_is_bitwise(tmp_path):
         assert np.array_equal(a[1][k], b[1][k]) and np.array_equal(a[1][k], c[1][k]), k
 
 
+@pytest.mark.slow
 def test_dam_break(tmp_path):
     """Surge front against Martin & Moyce (1952) within 10 % from T = 1.2 (measured 6.9 % at T = 3.3;
     1.9 % at T = 0.83 and 1.2)."""

@@ -16,6 +16,7 @@ import json
 
 import h5py
 import numpy as np
+import pytest
 
 from tests.conftest import immerse
 
@@ -71,6 +72,7 @@ def _run(tmp_path, name, *extra):
     return s, balance
 
 
+@pytest.mark.slow
 def test_sph_piston_follows_the_contact_and_balances_momentum(tmp_path):
     """On 2 SPH ranks: piston velocity within 1.5 % of u* at t = 0.05 (measured 0.57 %; 1 rank gives
     the same to 4e-10: the coupled loop amplifies LAMMPS's round-off between decompositions, and
@@ -83,6 +85,7 @@ def test_sph_piston_follows_the_contact_and_balances_momentum(tmp_path):
     assert balance < 1e-13
 
 
+@pytest.mark.slow
 def test_embedded_sph_piston(tmp_path):
     """cases/embedded_sph_piston: the Sod piston made of tlsph particles to t = 0.2, against the
     massless piston's exact motion (centre 6.3e-3, the block's own start-up lag; velocity 1.8e-3,
@@ -109,6 +112,7 @@ def _tip_history(out, role):
     return np.array([np.mean(output.read_step(out, role, i)[0][top, 0] - x0[top, 0]) for _, _, i in steps])
 
 
+@pytest.mark.slow
 def test_tate_penetration_rate(tmp_path):
     """cases/tate_penetration_rate: a strength-free steel rod of SPH particles into Mie-Grueneisen
     aluminium under void (pressure_cutoff 0, the constraint only where the zones hold metal:
@@ -151,6 +155,7 @@ def test_tate_penetrator_with_outflow_faces_runs(tmp_path):
     assert s["end_time"] == 4.0e-6 and s["conservation"]["mass_rel"] < 1e-12, s
 
 
+@pytest.mark.slow
 def test_two_pistons_fe_sph(tmp_path):
     """cases/two_pistons_fe_sph: an FE piston and an SPH (tlsph) piston in one tube, Sod's problem and
     its mirror (the three solver groups from one case file, one constraint solve per foreground,
@@ -167,6 +172,7 @@ def test_two_pistons_fe_sph(tmp_path):
     assert s["final"]["coupling.momentum_balance_rel"] < 1e-14
 
 
+@pytest.mark.slow
 def test_two_pistons_restart_is_bitwise(tmp_path):
     """A checkpoint of the three-group run (each foreground's multipliers and totals under its role's
     name, orchestrator/coupling/foregrounds.py) continues bit for bit: the last output of every group

@@ -26,6 +26,7 @@ def test_bench_unknown_name():
     assert r.returncode == 2 and "bench NAME = 'nonsense'" in r.stderr
 
 
+@pytest.mark.slow
 def test_bench_advect_quick(tmp_path):
     """Two-material bench: the square's symmetric difference falls with the mesh, volumes are kept,
     the water-air tube's interface sits within 2 cells; the cost of two materials is reported."""
@@ -44,6 +45,7 @@ def test_bench_advect_quick(tmp_path):
     assert set(ball) == {"one_material", "two_materials"} and ball["two_materials"]["params"]["mixed_zone_share"] > 0
 
 
+@pytest.mark.slow
 def test_bench_output_quick(tmp_path):
     """The output bench: per-output cost at 10 and 100 outputs (the bench itself fails if the
     appended index differs from the one rebuilt from the step files) and the bar wave's wall time
@@ -61,6 +63,7 @@ def test_bench_output_quick(tmp_path):
     assert extra["params"]["outputs"] == [13, 49] and "write_time_per_output_ms" in extra["params"]
 
 
+@pytest.mark.slow
 def test_bench_sph_quick(tmp_path):
     """The SPH bench writes LAMMPS alone and the driver alone for the same particles and steps, and the
     coupler's share of a coupled embedded run (speed itself is not asserted: `immerse bench sph`

@@ -35,6 +35,7 @@ def _rows(doc, metric, name=None):
     return [x for x in doc["results"] if x["metric"] == metric and (name is None or x["name"] == name)]
 
 
+@pytest.mark.slow
 def test_plate_convergence_structure(plate):
     out, doc = plate
     assert set(doc) == {"results", "machine"}
@@ -85,6 +86,7 @@ def plate3d(tmp_path_factory):
     return _bench(tmp_path_factory, "plate_convergence_3d")
 
 
+@pytest.mark.slow
 def test_plate_3d_tip_bends_downstream_and_converges(plate3d):
     """cases/plate_in_shock_3d on its half z >= 0.2 m (the symmetry plane through the plate's middle),
     cropped tube (y up to 0.45 m: the same tip history as to 0.6 m within 1.1e-4 mm, measured), to 0.7
@@ -117,6 +119,7 @@ def _runs(doc):
     return {x["params"]["stiffness_pa_per_m"]: x["params"] for x in _rows(doc, "run")}
 
 
+@pytest.mark.slow
 def test_penalty_sweep_structure(penalty):
     out, doc = penalty
     assert set(doc) == {"results", "machine"}

@@ -100,7 +100,8 @@ def _kill_once(case, out, target, delay):
 
 
 @pytest.mark.timeout(120 + INSTANTS * 90)
-@pytest.mark.parametrize("target", ["launcher", "coupler 0", "sph 0"])
+@pytest.mark.parametrize("target", ["launcher", pytest.param("coupler 0", marks=pytest.mark.slow),
+                                    pytest.param("sph 0", marks=pytest.mark.slow)])
 def test_every_completed_step_is_listed_and_readable_after_a_kill(tmp_path, target, run_immerse):
     from orchestrator import output
 

@@ -61,6 +61,7 @@ KINDS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind", sorted(KINDS))
 def test_the_last_line_names_what_set_the_step(kind, tmp_path):
     name, edits, phrase = KINDS[kind]

@@ -29,6 +29,7 @@ def _rows(out: Path) -> list[dict]:
         return list(csv.DictReader(f))
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_a_failed_run_is_recorded_with_its_message_and_the_others_complete(tmp_path, run_immerse):
     """Penalty coupling of the embedded piston at k = 10 Pa/m (stable) and 1e7 Pa/m (its explicit limit
@@ -147,6 +148,7 @@ def test_a_campaign_killed_midway_runs_only_the_missing_runs_again(tmp_path):
         assert json.loads((d / "result.json").read_text())["summary"]["steps"] > 0
 
 
+@pytest.mark.slow
 @pytest.mark.timeout(300)
 def test_runs_share_the_cores_by_their_ranks(tmp_path, run_immerse):
     """`--cores 2`: three 1-rank runs go two at a time (some pair overlaps, never three at once); the

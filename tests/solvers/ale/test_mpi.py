@@ -122,6 +122,7 @@ def test_failure_on_one_rank_raises_on_every_rank():
         assert f"on rank {world.size - 1} of the ALE group" in msg
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_four_ranks_in_a_subprocess():
     """`mpiexec -n 4` (oversubscribed on small machines) of every comparison case."""
@@ -205,6 +206,7 @@ def _steps(out: Path) -> dict:
     return data
 
 
+@pytest.mark.slow
 @pytest.mark.mpi
 def test_immerse_run_sod_on_two_ale_ranks(tmp_path, run_immerse):
     """`immerse run cases/sod --ranks ale=2` end to end: the checks pass and every output step
