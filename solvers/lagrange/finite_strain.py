@@ -125,6 +125,58 @@ def _assemble_matrix(cells, d, ke, n):
     return sp.csr_matrix((ke.ravel(), (rows, cols)), shape=(n * d, n * d))
 
 
+class AssemblyPattern:
+    """The CSR pattern of the element blocks of several meshes (the bodies) over one set of nodes,
+    with each element entry's slot in it: matrix(values) sums the entries (ke of every mesh, raveled
+    and concatenated in order) into their slots in entry order, duplicates included."""
+
+    def __init__(self, cells_list, d: int, n_points: int):
+        nd = n_points * d
+        rows, cols = [], []
+        for cells in cells_list:
+            dof = _dofs(np.asarray(cells, dtype=np.int64), d)
+            k = dof.shape[1]
+            rows.append(np.repeat(dof, k, axis=1).ravel())
+            cols.append(np.tile(dof, (1, k)).ravel())
+        key = np.concatenate(rows) * nd + np.concatenate(cols) if rows else np.zeros(0, np.int64)
+        unique, self.slot = np.unique(key, return_inverse=True)
+        self.indices = (unique % nd).astype(np.int32)
+        self.indptr = np.searchsorted(unique // nd, np.arange(nd + 1)).astype(np.int32)
+        self.shape = (nd, nd)
+        diag = np.arange(nd, dtype=np.int64) * (nd + 1)
+        at = np.minimum(np.searchsorted(unique, diag), max(len(unique) - 1, 0))
+        # each dof's diagonal slot (None if a dof belongs to no element: then a sparse sum)
+        self.diag_slot = at if len(unique) and np.array_equal(unique[at], diag) else None
+
+    def matrix(self, values: np.ndarray, diagonal: np.ndarray | None = None) -> sp.csr_matrix:
+        """The matrix of the entries ``values``; plus diag(``diagonal``) (added to the summed
+        entries: the same as sp.diags(diagonal) + K)."""
+        data = np.bincount(self.slot, weights=values, minlength=len(self.indices))
+        if diagonal is not None and self.diag_slot is not None:
+            data[self.diag_slot] = np.asarray(diagonal, dtype=np.float64) + data[self.diag_slot]
+            diagonal = None
+        k = sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape)
+        return k if diagonal is None else sp.diags(diagonal) + k
+
+
+_PATTERNS: list = []
+"""The last few (cells arrays, their copies, d, n, pattern), as _REFERENCE: keyed by the arrays'
+identity and compared unchanged."""
+
+
+def assembly_pattern(cells_list, d: int, n_points: int) -> AssemblyPattern:
+    """The AssemblyPattern of these meshes, from the cache when the very arrays were seen before."""
+    for entry in _PATTERNS:
+        cl, copies, dd, nn, pattern = entry
+        if (dd == d and nn == n_points and len(cl) == len(cells_list)
+                and all(a is b and np.array_equal(a, c) for a, b, c in zip(cl, cells_list, copies))):
+            return pattern
+    pattern = AssemblyPattern(cells_list, d, n_points)
+    _PATTERNS.insert(0, (list(cells_list), [np.array(c, copy=True) for c in cells_list], d, n_points, pattern))
+    del _PATTERNS[4:]
+    return pattern
+
+
 def _assemble_vector(cells, d, fe, n):
     out = np.zeros(n * d)
     np.add.at(out, _dofs(cells, d).ravel(), fe.ravel())
