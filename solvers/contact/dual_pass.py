@@ -260,13 +260,15 @@ class DualPassContact:
                            np.concatenate([p.m[2], -p.d[2]])) for p in self.passes]
         return self._diff
 
-    def _directed_operator(self, *directions) -> sp.csr_matrix:
+    def _directed_operator(self, *directions, factor: float = 1.0) -> sp.csr_matrix:
         """Rows d_A (x) (M_A - D_A) with d_A = direction(normals) of each pass: column dim * C + k
         holds (M_AC - D_AC) d_A[k]. With several directions, each multiplier's rows follow one
-        another (row len(directions) A + j along directions[j])."""
+        another (row len(directions) A + j along directions[j]). ``factor``: a power of two the
+        entries are scaled by (exactly, before their sums: the same as scaling the matrix)."""
         dim, nd = self.points.shape[1], len(directions)
         rows, cols, vals = [], [], []
         for off, p, (r, c, v) in zip(self.offsets, self.passes, self._differences()):
+            v = v * factor if factor != 1.0 else v
             for j, direction in enumerate(directions):
                 nrm = direction(p.normals)[r]
                 for k in range(dim):
@@ -280,19 +282,24 @@ class DualPassContact:
 
     def constraint_operator(self) -> sp.csr_matrix:
         """B = G / 2, the dual pass's b(mu, u) = mu . B u (both passes averaged)."""
-        return 0.5 * self.gap_operator()
+        return self._directed_operator(lambda n: n, factor=0.5)
 
-    def _tangential(self) -> sp.csr_matrix:
+    def _tangential(self, factor: float = 1.0) -> sp.csr_matrix:
         """G with tangents in place of the normals: in 2-D one row per multiplier along t_A = (n_y,
         -n_x); in 3-D two, along t1_A and t2_A, interleaved (friction.py's blocks)."""
         if self.points.shape[1] == 2:
-            return self._directed_operator(_tangent)
-        return self._directed_operator(lambda n: _tangents_3d(n)[0], lambda n: _tangents_3d(n)[1])
+            return self._directed_operator(_tangent, factor=factor)
+        tangents = {}   # (both tangents of a pass's normals from one call)
+
+        def tangent(k):
+            return lambda n: tangents.setdefault(id(n), _tangents_3d(n))[k]
+
+        return self._directed_operator(tangent(0), tangent(1), factor=factor)
 
     def tangent_operator(self) -> sp.csr_matrix:
         """T: the constraint operator with each multiplier's tangent(s) in place of its normal (the
         weighted tangential slip of the friction, friction.py): (n_multipliers (dim - 1), dim n)."""
-        return 0.5 * self._tangential()
+        return self._tangential(factor=0.5)
 
     def gaps(self, x: np.ndarray | None = None) -> np.ndarray:
         """Weighted gaps g_A of every multiplier at positions x (default: the operators' own)."""

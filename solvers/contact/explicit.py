@@ -190,11 +190,12 @@ class ExplicitContact:
         # iteration from p = 0 would pick), not from all of them: the first factorisation is of the
         # approaching surface's rows only, not the whole system's (mostly gaps that stay open). The
         # solution (p > 0 exactly where its set settles) is the same: the same last factorisation.
-        sol = solve_schur_complement(((dt * dt) * (scale_columns(B, inv_m) @ B.T) + scale * J1).tocsc(), g0,
+        BT = B.T   # (one transposed view for the step's products)
+        sol = solve_schur_complement(((dt * dt) * (scale_columns(B, inv_m) @ BT) + scale * J1).tocsc(), g0,
                                      active=g0 < 0.0, gap_tol=1e-12 * float((abs(B) @ np.abs(xstar)).max()))
         self.last_active = int(sol.active.sum())
         self.last_pressure = sol.p * (dt / (dt_force or dt))
-        u = (dt * dt) * inv_m * (B.T @ sol.p)
+        u = (dt * dt) * inv_m * (BT @ sol.p)
         self._gap_rows, self._gap_op = g0 + floor + B @ u, B
         self._remember(scale * (J1 @ sol.p))
         impulse = np.repeat(self.mass, dim) * u / dt
@@ -209,7 +210,8 @@ class ExplicitContact:
             # without, it stays to 1e-16 m/s. W is singular (the passes' rows are redundant); the
             # Gauss-Seidel iteration takes any of the equivalent splittings of q.
             v1 = np.asarray(v, float).reshape(-1) + u / dt
-            W = (scale_columns(T, inv_m) @ T.T).tocsr()
+            TT = T.T
+            W = (scale_columns(T, inv_m) @ TT).tocsr()
             bound = self.friction * dt * sol.p
             k = dim - 1                      # tangential components per multiplier (T's row blocks)
             # warm start: the last step's q where the multipliers are the same nodes
@@ -218,13 +220,14 @@ class ExplicitContact:
             self._q_last, self._q_nodes = q, self.multiplier_nodes
             q_size = np.linalg.norm(q.reshape(-1, k), axis=1)
             self.last_sliding = int(np.sum((bound > 0) & (q_size >= bound * (1 - 1e-9))))
-            impulse = impulse + T.T @ q
-            u = u + dt * inv_m * (T.T @ q)
+            tq = TT @ q
+            impulse = impulse + tq
+            u = u + dt * inv_m * tq
             # slip where the surfaces touch: pressed, or closed to within the stabilized gap's offset
             # J p (a dual pass's redundant row may rest at p = 0; the gaps of pressed rows scatter by
             # J p, +-1e-8 m on a sliding block). An open row's tangential rate is flight, not slip.
             on = (sol.p > 0.0) | (self._gap_rows <= np.abs(scale * (J1 @ sol.p)).max())
-            rate = (np.linalg.norm((T @ (v1 + inv_m * (T.T @ q))).reshape(-1, k), axis=1)[on]
+            rate = (np.linalg.norm((T @ (v1 + inv_m * tq)).reshape(-1, k), axis=1)[on]
                     / constraint_weights(T, dim)[::k][on])
             self.slip += dt * nodal_mean(self.multiplier_nodes[on], rate, ns, 0.0)
         self._measure_penetration((xstar + u).reshape(ns, dim), zone)

@@ -71,10 +71,11 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
     # scale of the comparison p - c g~: pressures against gaps, by the stiffness over the constraint
     # norm (a pushed node: g ~ |B|^2 p / k); k of the softest dof the constraints move, which sets the
     # gaps of two bodies in series (a stiff side's k would make c g~ swamp p: the set cycles)
-    touched = np.flatnonzero(np.asarray(abs(B).sum(axis=0)).ravel() > 0) if nm else np.zeros(0, np.int64)
+    touched = np.unique(B.indices[B.data != 0.0])   # the dofs the constraints move
     kd = abs(K.diagonal())[touched]
     kd = kd[kd > 0]
-    c = (float(kd.min()) if len(kd) else 1.0) / max(float(abs(B).max()), 1e-300) ** 2 if nm else 1.0
+    b_max = float(np.abs(B.data).max()) if B.nnz else 0.0
+    c = (float(kd.min()) if len(kd) else 1.0) / max(b_max, 1e-300) ** 2 if nm else 1.0
 
     def solve_on(a: np.ndarray, it: int):
         # [[K_ff, -B_a^T], [-B_a, -J_aa]]
@@ -97,7 +98,10 @@ def solve_frictionless(K: sp.spmatrix, F: np.ndarray, B: sp.spmatrix, J: sp.spma
         p[a] = sol[len(free):]
         return u, p, g0 + Bf @ u[free] + J @ p
 
-    gap_tol = 1e-12 * float((abs(B) @ abs(X + ud)).max()) if nm else 0.0
+    # |B| |X + u_d| row by row, summed in B's stored order (as the sparse product)
+    scale = np.bincount(np.repeat(np.arange(nm), np.diff(B.indptr)), minlength=nm,
+                        weights=np.abs(B.data) * np.abs(X + ud)[B.indices]) if nm else np.zeros(0)
+    gap_tol = 1e-12 * float(scale.max()) if nm else 0.0
     return _active_set(nm, c, solve_on, max_iterations, active, c * gap_tol)
 
 
