@@ -87,6 +87,8 @@ class AleAdapter(SolverAdapter):
 
 
 if __name__ == "__main__":
+    from adapters.protocol import exit_after_clean_end
     from adapters.runtime import serve
 
     serve(AleAdapter)
+    exit_after_clean_end()

@@ -121,6 +121,8 @@ class LagrangeAdapter(SolverAdapter):
 
 
 if __name__ == "__main__":
+    from adapters.protocol import exit_after_clean_end
     from adapters.runtime import serve
 
     serve(LagrangeAdapter)
+    exit_after_clean_end()

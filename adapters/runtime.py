@@ -67,14 +67,13 @@ def unpack_surface(buf: np.ndarray, dim: int) -> dict:
 
 
 def serve(adapter_cls, argv=None) -> None:
-    from orchestrator.case import load_case
-
     args = parse_args(argv)
     out = Path(args.out)
     place = P.join(args.role, args.roles.split(","))
     rank = place.comm.rank
     P.install_fault_handler(out, args.role, rank)
     P.register_process(out, args.role, rank)
+    from orchestrator.case import load_case   # (after joining: every rank waits in MPI_Init for the last)
 
     case = load_case(args.case, checked_sha256=args.case_sha256)
     adapter = adapter_cls(place.comm, case, out)

@@ -545,6 +545,8 @@ class SphAdapter(SolverAdapter):
 
 
 if __name__ == "__main__":
+    from adapters.protocol import exit_after_clean_end
     from adapters.runtime import serve
 
     serve(SphAdapter)
+    exit_after_clean_end()

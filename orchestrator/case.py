@@ -54,6 +54,7 @@ import copy
 import hashlib
 import itertools
 import math
+import numbers
 import os
 import re
 import stat
@@ -132,16 +133,144 @@ _VALIDATORS: dict[int, tuple] = {}
 that its id is not reused)."""
 
 
+class _Unsupported(Exception):
+    """A schema construct :func:`_conforms` does not evaluate itself (jsonschema decides)."""
+
+
+_ANNOTATIONS = frozenset({"$schema", "$id", "$comment", "title", "description", "default", "examples",
+                          "deprecated", "readOnly", "writeOnly", "then", "else"})
+"""Keywords that assert nothing by themselves ("then"/"else" are evaluated under "if"; "x-..." keys,
+this project's annotations, are skipped too)."""
+
+
+def _json_type(inst: Any, name: str) -> bool:
+    """jsonschema's Draft 2020-12 type checker (bool is no number; 1.0 is an integer)."""
+    if name == "object":
+        return isinstance(inst, dict)
+    if name == "array":
+        return isinstance(inst, list)
+    if name == "string":
+        return isinstance(inst, str)
+    if name == "boolean":
+        return isinstance(inst, bool)
+    if name == "null":
+        return inst is None
+    if name in ("number", "integer"):
+        if isinstance(inst, bool):
+            return False
+        if not isinstance(inst, (int, float)):
+            return False   # (another kind of number never gets here: _conforms leaves it to jsonschema)
+        return name == "number" or isinstance(inst, int) or inst.is_integer()
+    raise _Unsupported(name)
+
+
+def _json_equal(one: Any, two: Any) -> bool:
+    """jsonschema's equality (``jsonschema._utils.equal``: True is not 1, lists and tables by item)."""
+    if one is two:
+        return True
+    if isinstance(one, str) or isinstance(two, str):
+        return one == two
+    if isinstance(one, list) and isinstance(two, list):
+        return len(one) == len(two) and all(_json_equal(a, b) for a, b in zip(one, two))
+    if isinstance(one, dict) and isinstance(two, dict):
+        return len(one) == len(two) and all(k in two and _json_equal(v, two[k]) for k, v in one.items())
+    if isinstance(one, (tuple, list, dict, bytes)) or isinstance(two, (tuple, list, dict, bytes)):
+        raise _Unsupported("equal")
+    if isinstance(one, bool) or isinstance(two, bool):
+        return type(one) is type(two) and one == two
+    return one == two
+
+
+def _conforms(schema: Any, inst: Any) -> bool:
+    """Whether ``inst`` is valid against ``schema`` as Draft 2020-12 (jsonschema) has it, for the
+    keywords this project's schemas use; raises _Unsupported for any other.  The accepting path of
+    the schema check: jsonschema (0.1 s to import, a third of `immerse check`'s and of the launcher's
+    start) is imported only to name the error of a case this finds invalid, or to decide what this
+    does not evaluate (tests/orchestrator/test_case.py checks both agree on every case text)."""
+    if schema is True:
+        return True
+    if schema is False:
+        return False
+    if not isinstance(schema, dict):
+        raise _Unsupported("schema")
+    is_obj, is_arr = isinstance(inst, dict), isinstance(inst, list)
+    is_num = not isinstance(inst, bool) and isinstance(inst, (int, float))
+    if not is_num and not isinstance(inst, (bool, str, dict, list)) and isinstance(inst, numbers.Number):
+        raise _Unsupported("number")   # another kind of number (not from TOML): jsonschema decides
+    for key, value in schema.items():
+        if key in _ANNOTATIONS or key.startswith("x-"):
+            continue
+        if key == "type":
+            types = value if isinstance(value, list) else [value]
+            ok = any(_json_type(inst, t) for t in types)
+        elif key == "properties":
+            ok = not is_obj or all(_conforms(sub, inst[k]) for k, sub in value.items() if k in inst)
+        elif key == "required":
+            ok = not is_obj or all(k in inst for k in value)
+        elif key == "additionalProperties":
+            if "patternProperties" in schema:
+                raise _Unsupported(key)
+            props = schema.get("properties", {})
+            extras = [k for k in inst if k not in props] if is_obj else []
+            ok = (all(_conforms(value, inst[k]) for k in extras) if isinstance(value, dict)
+                  else bool(value) or not extras)
+        elif key == "items":
+            if "prefixItems" in schema or not isinstance(value, (dict, bool)):
+                raise _Unsupported(key)
+            ok = not is_arr or all(_conforms(value, item) for item in inst)
+        elif key in ("minItems", "maxItems", "minProperties", "maxProperties", "minLength", "maxLength"):
+            applies = is_arr if key.endswith("Items") else is_obj if key.endswith("Properties") else isinstance(inst, str)
+            ok = not applies or (len(inst) >= value if key.startswith("min") else len(inst) <= value)
+        elif key in ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum"):
+            ok = not is_num or {"minimum": lambda: not inst < value, "maximum": lambda: not inst > value,
+                                "exclusiveMinimum": lambda: not inst <= value,
+                                "exclusiveMaximum": lambda: not inst >= value}[key]()
+        elif key == "enum":
+            ok = any(_json_equal(e, inst) for e in value)
+        elif key == "const":
+            ok = _json_equal(value, inst)
+        elif key == "pattern":
+            ok = not isinstance(inst, str) or re.search(value, inst) is not None
+        elif key == "uniqueItems":
+            ok = not (value and is_arr) or not any(
+                _json_equal(a, b) for i, a in enumerate(inst) for b in inst[i + 1:])
+        elif key == "propertyNames":
+            ok = not is_obj or all(_conforms(value, k) for k in inst)
+        elif key == "allOf":
+            ok = all(_conforms(sub, inst) for sub in value)
+        elif key == "anyOf":
+            ok = any(_conforms(sub, inst) for sub in value)
+        elif key == "oneOf":
+            ok = sum(1 for sub in value if _conforms(sub, inst)) == 1
+        elif key == "not":
+            ok = not _conforms(value, inst)
+        elif key == "if":
+            branch = "then" if _conforms(value, inst) else "else"
+            ok = branch not in schema or _conforms(schema[branch], inst)
+        else:
+            raise _Unsupported(key)
+        if not ok:
+            return False
+    return True
+
+
 def _best_schema_error(schema: Mapping | None, data: Any):
     """The most relevant of the first ``_MAX_SCHEMA_ERRORS`` errors of ``data`` against ``schema``
     (the case schema when None), or None.  jsonschema is imported here, where a schema is checked
     (the CLI), not at import: the ranks load a case the launcher has checked
-    (``load_case(checked_sha256=...)``) and skip its 0.07-0.12 s.  (The schema itself is validated
-    against the metaschema by the tests, not here: that took 0.3-0.6 s of every `immerse` command.)"""
+    (``load_case(checked_sha256=...)``) and skip its 0.07-0.12 s; and only for data that
+    :func:`_conforms` does not accept (a valid case is accepted without it: 0.1 s of every
+    `immerse check` and `immerse run`).  (The schema itself is validated against the metaschema by
+    the tests, not here: that took 0.3-0.6 s of every `immerse` command.)"""
+    schema = CASE_SCHEMA if schema is None else schema
+    try:
+        if _conforms(schema, data):
+            return None
+    except (_Unsupported, TypeError, re.error):   # (decided by jsonschema, which says what is wrong)
+        pass
     from jsonschema import Draft202012Validator
     from jsonschema.exceptions import best_match
 
-    schema = CASE_SCHEMA if schema is None else schema
     if id(schema) not in _VALIDATORS:
         _VALIDATORS[id(schema)] = (schema, Draft202012Validator(schema))
     errors = itertools.islice(_VALIDATORS[id(schema)][1].iter_errors(data), _MAX_SCHEMA_ERRORS)

@@ -617,6 +617,94 @@ def test_body_sizes(tmp_path):
                                                                {"elements": 4, "nodes": 3 * 3 * 2}]
 
 
+
+def _mutations(data, rng, n):
+    """``n`` seeded variants of a TOML document: a value replaced by another type or a number out of
+    range, a key dropped or an unknown one added, an array grown or shortened."""
+    import copy
+
+    values = [0, 1, -1, 2, 0.5, -0.5, 1.0, 1e300, -1e-300, True, False, "", "x", "wall", "x > 0.5",
+              "ideal_gas", [], {}, [1.0, 2.0], [1, 2, 3], {"a": 1}, float("inf")]
+    out = []
+    for _ in range(n):
+        d = copy.deepcopy(data)
+        node, path = d, []
+        for _ in range(rng.randint(1, 6)):
+            if isinstance(node, dict) and node:
+                k = rng.choice(list(node))
+            elif isinstance(node, list) and node:
+                k = rng.randrange(len(node))
+            else:
+                break
+            path.append((node, k))
+            node = node[k]
+        if path:
+            parent, k = path[-1]
+            op, v = rng.random(), parent[k]
+            if op < 0.5:
+                parent[k] = copy.deepcopy(rng.choice(values))
+            elif op < 0.65 and isinstance(parent, dict):
+                del parent[k]
+            elif op < 0.8 and isinstance(parent, dict):
+                parent[rng.choice(["extra", f"{k}_", "Bad Name"])] = rng.choice(values)
+            elif op < 0.9 and isinstance(parent, list):
+                parent.append(copy.deepcopy(v))
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                parent[k] = rng.choice([-v, v * 1e10, v + 0.5, -v - 1, 0, v * 1e-10])
+            else:
+                parent[k] = v[:-1] if isinstance(v, list) and v else rng.choice(values)
+        out.append(d)
+    return out
+
+
+def test_the_schema_check_accepts_exactly_what_jsonschema_accepts():
+    """A case is accepted without importing jsonschema (orchestrator.case._conforms: 0.1 s of every
+    check and run); jsonschema names the error of one that is not. The two agree on every case,
+    campaign and [check] params document of the repository and on seeded mutations of each (a
+    disagreement would let a bad case through, or refuse a good one without a message)."""
+    import random
+    import tomllib
+
+    from jsonschema import Draft202012Validator
+
+    from orchestrator import case as case_mod
+    from orchestrator.campaign.spec import SCHEMA as CAMPAIGN_SCHEMA
+    from orchestrator.checks import PARAMS
+
+    root = Path(__file__).resolve().parents[2]
+    rng = random.Random(20261203)
+    validators, compared, accepted = {}, 0, 0
+    for toml in sorted([*root.glob("cases/**/*.toml"), *root.glob("tests/**/*.toml")]):
+        try:
+            data = tomllib.loads(toml.read_text(encoding="utf-8-sig"))
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError):
+            continue
+        docs = [(CASE_SCHEMA, data)]
+        if "campaign" in toml.name or "axes" in data or "series" in data:
+            docs.append((CAMPAIGN_SCHEMA, data))
+        check = data.get("check")
+        if isinstance(check, dict) and check.get("kind") in PARAMS and isinstance(check.get("params", {}), dict):
+            docs.append((PARAMS[check["kind"]], check.get("params", {})))
+        for schema, doc in docs:
+            v = validators.setdefault(id(schema), Draft202012Validator(schema))
+            for variant in [doc, *_mutations(doc, rng, 12)]:
+                ok = case_mod._conforms(schema, variant)
+                assert ok == v.is_valid(variant), (toml, variant)
+                compared += 1
+                accepted += ok
+    assert compared > 1000 and 0.1 < accepted / compared < 0.9, (compared, accepted)
+
+
+def test_a_valid_case_is_checked_without_importing_jsonschema():
+    import subprocess
+    import sys
+
+    probe = ("import sys; from orchestrator.case import load_case; "
+             f"load_case({str(VALID / 'box3d')!r}); print('jsonschema' in sys.modules)")
+    r = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                       cwd=Path(__file__).resolve().parents[2], timeout=120)
+    assert r.returncode == 0 and r.stdout.split() == ["False"], r.stdout + r.stderr
+
 def test_every_check_kind_has_a_closed_params_schema():
     """[check] params are each kind's own table (orchestrator.checks.PARAMS): valid Draft 2020-12,
     closed (unknown keys refused), and every shipped case's params pass it."""
