@@ -59,9 +59,9 @@ def time_midpoint_step(n: int, comm=None) -> dict:
     spent = {"tangent": 0.0, "solve": 0.0}
     real_svk, real_spsolve = implicit_step._svk, implicit_step.spla.spsolve
 
-    def svk(*a):
+    def svk(*a, **k):
         t0 = time.perf_counter()
-        out = real_svk(*a)
+        out = real_svk(*a, **k)
         spent["tangent"] += time.perf_counter() - t0
         return out
 
