@@ -86,6 +86,7 @@ def test_uniform_flow_along_a_spanning_plate_stays_uniform(tmp_path, half_thickn
     assert np.abs(v[gas] - [u, 0.0]).max() < 1e-12 * u
 
 
+@pytest.mark.slow
 def test_ten_thousand_steps_at_the_uncoupled_step_with_slivers(tmp_path):
     """The multiplier method at the solvers' own explicit step (dt_scale 0.9 of the smaller of the
     gas's and the plate's limits, never reduced by the coupling) for 10^4 steps, with the plate's
@@ -128,6 +129,7 @@ def test_ten_thousand_steps_at_the_uncoupled_step_with_slivers(tmp_path):
     assert min(dts) > 0.5 * dts[0], (min(dts), dts[0])
 
 
+@pytest.mark.slow
 def test_ten_thousand_steps_of_a_light_body_in_water(tmp_path):
     """A light, soft block in water (cases/acoustic_transmission with rho 500, E 5e8: Z1/Z2 = 3, the
     water's rho c^2 = 2.2e9 Pa on a surface mass of density 500) struck by the 1 MPa pulse, which then
