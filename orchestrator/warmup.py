@@ -341,6 +341,17 @@ def _particle_coupling() -> None:
     particle_interface(Grid([0.0] * 3, [1.0] * 3, [4] * 3), x, np.full(len(x), 0.05 ** 3), 0.1)
 
 
+def _contact_search() -> None:
+    """The contact broad phase's binned kernel: the tiny contact cases stay below ALL_PAIRS_MAX box
+    pairs, where every pair is tested, but surfaces of shipped cases go beyond it."""
+    from solvers.contact.search import _binned_pairs, facet_boxes
+
+    x = np.array([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0]])
+    facets = np.array([[0, 1], [1, 2]])
+    boxes = facet_boxes(x, facets, 0.1)
+    _binned_pairs(boxes, boxes)
+
+
 def dispatchers() -> dict[str, object]:
     """Every numba function of the loaded solver modules, by qualified name."""
     from numba.core.dispatcher import Dispatcher
@@ -377,6 +388,7 @@ def _import_solvers() -> None:
     import solvers.particle_sums  # noqa: F401  (the SPH adapter's per-step sums)
     import solvers.contact.mortar_segments  # noqa: F401  (contact between Lagrangian bodies)
     import solvers.contact.friction  # noqa: F401  (its Coulomb friction)
+    import solvers.contact.search  # noqa: F401  (its broad phase)
 
 
 def warm(log=print) -> dict:
@@ -393,6 +405,7 @@ def warm(log=print) -> dict:
             (d / "case.toml").write_text(text)
             step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
         _particle_coupling()
+        _contact_search()
     report = {"cases": len(table), "kernels": len(dispatchers()),
               "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
               "seconds": round(time.perf_counter() - t0, 2)}
