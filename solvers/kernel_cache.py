@@ -11,11 +11,23 @@ and a checkout of an earlier version finds its own.
 The root is ``.numba-cache`` beside the packages when writable (an editable install), else the
 user's cache directory; a NUMBA_CACHE_DIR set by the user is taken as the root. The directory is
 set in the environment, so the ranks of a job (children of the launcher) use the same one.
+
+Numba's index of a function's entries (one per signature) is read, extended and written back
+without a lock: two processes saving different signatures of one function at the same time both
+took data file 1, and the index kept one's signature over the other's machine code. A kernel then
+ran another signature's code on its arrays: the suite's ALE tests segfaulted, or lost 2e-5 of their
+energy, on a cache that two pytest workers and their ranks had filled. Every save (and load) of an
+index and its data file is therefore done under a file lock (lock_cache_index, installed as numba's
+caching module is imported).
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import importlib.abc
+import importlib.util
 import os
+import sys
 from pathlib import Path
 
 PACKAGES = ("solvers", "orchestrator", "adapters")
@@ -44,6 +56,7 @@ def _writable(d: Path) -> bool:
 def configure() -> Path:
     """Set NUMBA_CACHE_DIR to <root>/<digest> (once per process tree) and return it."""
     if os.environ.get(ENV_ROOT) is not None and os.environ.get("NUMBA_CACHE_DIR"):
+        _lock_on_import()
         return Path(os.environ["NUMBA_CACHE_DIR"])
     base = Path(__file__).resolve().parent.parent
     root = os.environ.get("NUMBA_CACHE_DIR")
@@ -56,7 +69,74 @@ def configure() -> Path:
     d = root / source_digest(base)
     os.environ[ENV_ROOT] = str(root)
     os.environ["NUMBA_CACHE_DIR"] = str(d)
+    _lock_on_import()
     return d
+
+
+def lock_cache_index(caching) -> None:
+    """Make numba's IndexDataCacheFile (module ``caching``: numba.core.caching) save, load and flush
+    under an flock of ``<index>.lock``: exclusive to save (read the index, pick a data file, write
+    both), shared to load (never an index whose data file is not written yet)."""
+    import fcntl
+
+    cls = caching.IndexDataCacheFile
+    if getattr(cls, "_immerse_locked", False):
+        return
+    save, load, flush = cls.save, cls.load, cls.flush
+
+    @contextlib.contextmanager
+    def locked(self, kind):
+        try:
+            fd = os.open(self._index_path + ".lock", os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError:   # (no cache directory, or a read-only one: numba saves nothing there)
+            yield
+            return
+        try:
+            fcntl.flock(fd, kind)
+            yield
+        finally:
+            os.close(fd)   # (releases the lock)
+
+    def locked_save(self, key, data):
+        with locked(self, fcntl.LOCK_EX):
+            save(self, key, data)
+
+    def locked_load(self, key):
+        with locked(self, fcntl.LOCK_SH):
+            return load(self, key)
+
+    def locked_flush(self):
+        with locked(self, fcntl.LOCK_EX):
+            flush(self)
+
+    cls.save, cls.load, cls.flush = locked_save, locked_load, locked_flush
+    cls._immerse_locked = True
+
+
+class _LockWhenImported(importlib.abc.MetaPathFinder):
+    """Finds numba.core.caching like the rest of the path, and locks it once executed."""
+
+    def find_spec(self, name, path, target=None):
+        if name != "numba.core.caching":
+            return None
+        sys.meta_path.remove(self)
+        spec = importlib.util.find_spec(name)
+        if spec is not None and spec.loader is not None:
+            run = spec.loader.exec_module
+
+            def exec_module(module):
+                run(module)
+                lock_cache_index(module)
+
+            spec.loader.exec_module = exec_module
+        return spec
+
+
+def _lock_on_import() -> None:
+    if "numba.core.caching" in sys.modules:
+        lock_cache_index(sys.modules["numba.core.caching"])
+    elif not any(isinstance(f, _LockWhenImported) for f in sys.meta_path):
+        sys.meta_path.insert(0, _LockWhenImported())
 
 
 if __name__ == "__main__":  # the directory, for the Makefile's warm-up stamp
