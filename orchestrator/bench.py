@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
-import platform
-import subprocess
 import sys
 import time
 import tracemalloc
@@ -13,20 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-BENCHES = {}
-
-
-def bench(name):
-    def deco(fn):
-        BENCHES[name] = fn
-        return fn
-
-    return deco
-
-
-def machine() -> dict:
-    return {"host": platform.node(), "cpus": os.cpu_count(), "python": platform.python_version(),
-            "numpy": np.__version__, "processor": platform.processor() or platform.machine()}
+from orchestrator.bench_registry import BENCHES, bench, machine, run_worker  # noqa: E402,F401  (the benches' shared helpers)
 
 
 ELASTIC = {"model": "linear_elastic", "density": 7850.0, "youngs_modulus": 200e9, "poisson_ratio": 0.3}
@@ -116,16 +100,6 @@ def bench_lagrange(out: Path, quick: bool = False) -> Path:
     doc = {"results": results, "machine": machine()}
     out.write_text(json.dumps(doc, indent=2))
     return out
-
-
-def run_worker(module: str, ranks: int, *args) -> str:
-    """The last line `mpiexec -n ranks python -m module worker args...` prints (rank 0's result; one
-    thread a rank): a bench's timing on several ranks, in a job of its own."""
-    mpiexec = Path(sys.executable).parent / "mpiexec"
-    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
-    r = subprocess.run([str(mpiexec), "-n", str(ranks), sys.executable, "-m", module, "worker",
-                        *(str(a) for a in args)], capture_output=True, text=True, env=env, check=True)
-    return r.stdout.strip().splitlines()[-1]
 
 
 def _two_ranks(n: int, label: str) -> float:

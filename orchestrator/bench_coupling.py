@@ -34,7 +34,7 @@ from unittest import mock
 
 import numpy as np
 
-from orchestrator.bench import bench, machine
+from orchestrator.bench_registry import bench, machine
 
 
 # ---- timing helpers ------------------------------------------------------------------------------

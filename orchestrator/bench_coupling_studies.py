@@ -115,7 +115,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench import bench, machine
+from orchestrator.bench_registry import bench, machine
 
 CASES = Path(__file__).resolve().parents[1] / "cases"
 

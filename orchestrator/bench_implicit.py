@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench import bench, machine, run_worker
+from orchestrator.bench_registry import bench, machine, run_worker
 
 RUBBER = {"model": "linear_elastic", "density": 1000.0, "youngs_modulus": 1.0e6, "poisson_ratio": 0.3}
 

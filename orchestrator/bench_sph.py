@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench import bench, machine
+from orchestrator.bench_registry import bench, machine
 from orchestrator.schema_sph import DEFAULT_SUBSTEPS
 
 DAM = """[run]

@@ -126,22 +126,13 @@ def cmd_run(args) -> int:
     except (RestartError, outdir.OutDirError) as e:
         return _fail(str(e))
     if rc == 0:
+        from orchestrator.run_record import summary_line
+
         line, passed = summary_line(out)
         print(line)
         if not passed:
             return 1
     return rc
-
-
-def summary_line(out: Path) -> tuple[str, bool]:
-    """The line a finished run ends with, and whether its check (if any) passed."""
-    import json
-
-    s = json.loads((out / "summary.json").read_text())
-    line = f"{s['case']}: {s['steps']} steps in {s['wall_time_s']:.2f} s -> {out}"
-    if "check" in s:
-        line += f"; check {'passed' if s['check']['passed'] else 'FAILED'}"
-    return line, s.get("check", {}).get("passed", True)
 
 
 def _damaged(out: Path, what: str, e: Exception) -> int:

@@ -33,7 +33,7 @@ from solvers.ale.points import (axis_centres, box_points, fraction_samples, grid
 from solvers.expressions import BOOL, NUM, ExpressionError, compile_expression
 from solvers.lagrange.mesh import body_mesh, box_axes
 
-from .case import CaseError, format_key
+from .schema_rules import CaseError, format_key
 from .expression_bounds import Unproven, bounds
 from .schema_rules import expression_refusal
 

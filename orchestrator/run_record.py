@@ -132,3 +132,13 @@ def record_ended_run(case: dict, out: Path, status: str, message: str, started: 
         write_diagnostics(out, hist)
     write_summary(out, ended_summary(case, hist, status, message, time.time() - started, ranks))
     remove_spool(out)
+
+
+def summary_line(out: Path) -> tuple[str, bool]:
+    """The line a finished run ends with (``immerse run``, a Slurm run), and whether its check (if
+    any) passed."""
+    s = json.loads((out / "summary.json").read_text())
+    line = f"{s['case']}: {s['steps']} steps in {s['wall_time_s']:.2f} s -> {out}"
+    if "check" in s:
+        line += f"; check {'passed' if s['check']['passed'] else 'FAILED'}"
+    return line, s.get("check", {}).get("passed", True)

@@ -446,7 +446,7 @@ _CELL_TYPE = {2: "quad", 3: "hexahedron"}
 def _check_mesh_file(key: str, raw: str, path: Path, dim: int) -> tuple[dict, dict]:
     """Read and check a body's mesh file; its ``{"elements", "nodes"}`` counts and the ``{"lower",
     "upper"}`` corners of its nodes' box (for [coupling]'s check that the body lies in the grid)."""
-    from orchestrator.resources import machine_memory  # (resources imports orchestrator.case)
+    from orchestrator.resources import machine_memory
 
     memory = machine_memory()
     limit = memory // MESH_READ_FACTOR

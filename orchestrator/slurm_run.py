@@ -147,7 +147,7 @@ def follow(job: str, name: str, out: Path) -> int:
               f"readable in {out}", file=sys.stderr)
         return 128 + signum
     if state == "COMPLETED" or (state == "FAILED" and rc == 1 and _finished(out)):
-        from orchestrator.cli import summary_line
+        from orchestrator.run_record import summary_line
 
         line, passed = summary_line(out)
         print(line, flush=True)

@@ -391,26 +391,63 @@ def _import_solvers() -> None:
     import solvers.contact.search  # noqa: F401  (its broad phase)
 
 
-def warm(log=print) -> dict:
-    """Step every warm-up case; return counts and the wall time."""
+PARTS = ("ale", "bodies")
+"""The warm-up's parts, one process each where the machine has the cores: the ALE solver's cases
+then the coupled ones, and the bodies' (Lagrange, contact, SPH, the particle coupling). The coupled
+cases come last, so that the kernels they share with both are mostly in the cache by then; numba's
+cache index is locked (solvers/kernel_cache.py), so an entry both compile is saved safely. Measured
+from an empty cache on 2 cores: 283 s in one process, 227 s with the coupled cases in the bodies'
+part, 207 s as here (the bodies' part 140 s)."""
+
+
+def _part_of(name: str) -> str:
+    return "ale" if name.startswith(("ale_", "coupled")) else "bodies"
+
+
+def _warm_part(part: str | None) -> dict:
+    """Step the warm-up cases of one part (None: all); counts of this process."""
     from orchestrator.case import load_case
 
     t0 = time.perf_counter()
     _import_solvers()
-    table = cases()
-    with tempfile.TemporaryDirectory(prefix="immerse-warmup-") as tmp:
-        for name, text in table.items():
-            d = Path(tmp) / name
-            d.mkdir()
-            (d / "case.toml").write_text(text)
-            step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
+    table = {k: v for k, v in cases().items() if part is None or _part_of(k) == part}
+    if part in (None, "bodies"):
         _particle_coupling()
         _contact_search()
-    report = {"cases": len(table), "kernels": len(dispatchers()),
-              "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
-              "seconds": round(time.perf_counter() - t0, 2)}
+    with tempfile.TemporaryDirectory(prefix="immerse-warmup-") as tmp:
+        for name in sorted(table, key=lambda k: k.startswith("coupled")):
+            d = Path(tmp) / name
+            d.mkdir()
+            (d / "case.toml").write_text(table[name])
+            step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
+    return {"cases": len(table), "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
+            "seconds": round(time.perf_counter() - t0, 2)}
+
+
+def warm(log=print, jobs: int | None = None) -> dict:
+    """Step every warm-up case, the parts in parallel processes when ``jobs`` (default: the cores
+    this process may use) allows; return the summed counts and the wall time (measured: 283 s in one
+    process on 2 cores, 190 specialisations)."""
+    import os
+    import subprocess
+
+    t0 = time.perf_counter()
+    jobs = len(os.sched_getaffinity(0)) if jobs is None else jobs
+    if jobs < 2:
+        parts = [_warm_part(None)]
+    else:
+        child = subprocess.Popen([sys.executable, "-m", "orchestrator.warmup", "--part", PARTS[1]],
+                                 stdout=subprocess.PIPE, text=True)
+        parts = [_warm_part(PARTS[0])]
+        out = child.communicate()[0]
+        if child.returncode != 0:
+            raise RuntimeError(f"the warm-up of the {PARTS[1]} cases failed (exit code {child.returncode})")
+        parts.append(json.loads(out.strip().splitlines()[-1]))
+    report = {k: sum(p[k] for p in parts) for k in ("cases", "compiled", "loaded_from_cache")}
+    report["seconds"] = round(time.perf_counter() - t0, 2)
     log(f"numba kernels warm: {report['cases']} tiny cases, {report['compiled']} specialisations "
-        f"compiled, {report['loaded_from_cache']} loaded from the cache, {report['seconds']} s")
+        f"compiled, {report['loaded_from_cache']} loaded from the cache, {report['seconds']} s "
+        f"({len(parts)} process{'es' if len(parts) > 1 else ''})")
     return report
 
 
@@ -428,8 +465,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m orchestrator.warmup", description=__doc__.split("\n")[0])
     ap.add_argument("--check", nargs="+", metavar="CASE_DIR",
                     help="step these cases and print the kernels compiled instead of loaded (JSON)")
+    ap.add_argument("--part", choices=PARTS, help="warm one part only and print its counts (JSON)")
     args = ap.parse_args(argv)
-    if args.check:
+    if args.part:
+        print(json.dumps(_warm_part(args.part)))
+    elif args.check:
         print(json.dumps(check(args.check)))
     else:
         warm()

@@ -29,7 +29,6 @@ constraint must be met by the other side; see ``_solve_masses``).
 """
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,7 +36,7 @@ import numpy as np
 from orchestrator.coupling import variants
 from orchestrator.coupling.geometry import clip_surface, coverage
 from orchestrator.coupling.grid import Grid
-from orchestrator.coupling.operator_rows import (correction_means, impulse_sums, on_grid_boundary, oscillation,
+from orchestrator.coupling.operator_rows import (correction_means, facing_the_grid, impulse_sums, oscillation,
                                                  row_means, surface_load)
 from orchestrator.coupling.operators import Operators, restrict
 from orchestrator.coupling.orphan_particles import find_orphans, may_tie, tie
@@ -52,25 +51,6 @@ class StepRecord:
     iterations: int = 0
     residual: float = 0.0
     dissipation: float = 0.0
-
-
-def facing_the_grid(grid: Grid, pieces):
-    """The pieces that face gas: a body face lying on the grid's boundary and facing out of it (a
-    plate's base on the floor, an end on a periodic or open face) borders no gas -- it counts for the
-    fractions, but a multiplier there would tie the gas nodes at its edge to the body."""
-    on, count = on_grid_boundary(np.ascontiguousarray(pieces.centroid), np.ascontiguousarray(pieces.normal),
-                                 grid.lower, grid.upper, grid.h)
-    if count == 0:
-        return pieces
-    keep = np.flatnonzero(~on)
-    qkeep = np.isin(pieces.qpiece, keep)
-    remap = np.full(pieces.zone.size, -1, np.int64)
-    remap[keep] = np.arange(keep.size)
-    return dataclasses.replace(
-        pieces, zone=pieces.zone[keep], body=pieces.body[keep], facet=pieces.facet[keep],
-        area=pieces.area[keep], normal=pieces.normal[keep], centroid=pieces.centroid[keep],
-        qp=pieces.qp[qkeep], qw=pieces.qw[qkeep], qpiece=remap[pieces.qpiece[qkeep]],
-        qf=pieces.qf[qkeep], qb=pieces.qb[qkeep])
 
 
 def background_modulus(ale: dict) -> float:

@@ -2,6 +2,8 @@
 so that validating a case, which imports the coupling variants' schemas, imports no numba)."""
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 from numba import njit
 
@@ -448,3 +450,22 @@ def oscillation(lam, pairs, normal):
             s += d * d
         diffs[t] = np.sqrt(s)
     return (pairwise_sum(diffs, 0, m) / m) / scale
+
+
+def facing_the_grid(grid, pieces):
+    """The pieces that face gas: a body face lying on the grid's boundary and facing out of it (a
+    plate's base on the floor, an end on a periodic or open face) borders no gas -- it counts for the
+    fractions, but a multiplier there would tie the gas nodes at its edge to the body."""
+    on, count = on_grid_boundary(np.ascontiguousarray(pieces.centroid), np.ascontiguousarray(pieces.normal),
+                                 grid.lower, grid.upper, grid.h)
+    if count == 0:
+        return pieces
+    keep = np.flatnonzero(~on)
+    qkeep = np.isin(pieces.qpiece, keep)
+    remap = np.full(pieces.zone.size, -1, np.int64)
+    remap[keep] = np.arange(keep.size)
+    return dataclasses.replace(
+        pieces, zone=pieces.zone[keep], body=pieces.body[keep], facet=pieces.facet[keep],
+        area=pieces.area[keep], normal=pieces.normal[keep], centroid=pieces.centroid[keep],
+        qp=pieces.qp[qkeep], qw=pieces.qw[qkeep], qpiece=remap[pieces.qpiece[qkeep]],
+        qf=pieces.qf[qkeep], qb=pieces.qb[qkeep])

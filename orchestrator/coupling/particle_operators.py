@@ -123,7 +123,7 @@ def reference_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: 
     """``particle_interface`` array by array (boundary images, colour, marching, clip_surface,
     facing_the_grid, Operators.build, Z @ S): what the kernels must reproduce, and the readable form
     of what they do."""
-    from orchestrator.coupling.embedded import facing_the_grid
+    from orchestrator.coupling.operator_rows import facing_the_grid
 
     xg, vg = boundary_images(grid, x, volume, h)
     c = colour_at_nodes(grid.lower, grid.h, grid.cells, xg, vg, h)
@@ -223,7 +223,7 @@ def _interface_kernel(x, vol, h, norm, xs, tri, cells, planes, lower, upper, zon
     zone, pbody, facet, area, normal, centroid, qp, qw, qpiece, qf, qb = G._sorted_pieces(
         pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal, e_facet, e_part, body, cells, planes, nv, key_limit)
     cov = G._coverage_kernel(zone, pbody, normal, centroid, area, cells, planes, cov_snap, 1)
-    # the pieces facing gas (embedded.facing_the_grid): those on the grid's boundary planes dropped
+    # the pieces facing gas (operator_rows.facing_the_grid): those on the grid's boundary planes dropped
     on, count = on_grid_boundary(centroid, normal, lower, upper, zone_h)
     if count == 0:
         izone, iarea, inormal, ifacet = zone, area, normal, facet
@@ -519,7 +519,7 @@ def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: f
     pieces = G.Pieces(zone=zone, body=pbody, facet=facet, area=area, normal=normal, centroid=centroid, qp=qp, qw=qw,
                       qpiece=qpiece, qf=qf, qb=qb)
     if count:
-        from orchestrator.coupling.embedded import facing_the_grid
+        from orchestrator.coupling.operator_rows import facing_the_grid
 
         inner = functools.partial(facing_the_grid, grid, pieces)   # (built only if asked for)
     else:

@@ -738,7 +738,7 @@ class Blocked:
             msg = (f"ALE zone {B.zone_ijk(z)} became fully blocked while holding {s.M[z]:.6g} kg of "
                    f"material at step {s.step}, t={s.time:.6g} s")
             if not hasattr(s, "_fail"):
-                from solvers.ale.solver import SolverError
+                from solvers.ale.errors import SolverError
                 raise SolverError(msg)
             s._fail(msg)  # one rank: raises; parallel: raised on every rank by the _sync below
         _sync(s)

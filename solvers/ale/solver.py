@@ -59,6 +59,7 @@ import h5py
 import numpy as np
 
 from solvers.expressions import compile_expression
+from solvers.ale.errors import SolverError  # noqa: F401  (raised here; its own module, below blocked.py too)
 from solvers.ale import eos as _eos
 from solvers.ale import hydro, remap
 from solvers.ale.boundary import Boundaries
@@ -97,10 +98,6 @@ def _bad_state_cause(rho: float, e: float, c: float) -> str:
         return ("invalid thermodynamic state: negative internal energy (the zone's kinetic energy exceeds "
                 "its total: a near-vacuum expansion, or a step beyond the stable limit)")
     return "invalid thermodynamic state: sound speed not real (c^2 <= 0: the EOS beyond its range)"
-
-
-class SolverError(RuntimeError):
-    """A physical failure (tangled zone, invalid EOS state) naming the zone, step, time and state."""
 
 
 class AleSolver:
