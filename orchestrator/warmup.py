@@ -10,7 +10,8 @@ same source tree (the editable install of `make venv`) on the same machine, and 
 never leaves a caller running its old machine code.
 
 `python -m orchestrator.warmup` (run by the Makefile after installing, and again whenever a solver
-source changes) steps tiny cases through the solver classes in this one process (no MPI job): 2-D
+source changes) steps tiny cases through the solver classes (no MPI job; in two processes where
+there are two cores, PARTS): 2-D
 and 3-D, every material model and EOS, one and several materials per zone and void, obstacles and
 moving blocked fractions, inflow/outflow/periodic/piston faces, both artificial viscosity kinds,
 both ALE modes, energy sources, and writes their output and diagnostics.
