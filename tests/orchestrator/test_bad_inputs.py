@@ -290,7 +290,7 @@ def _sph_line(line: str) -> str:
 
 
 SPH_FORBIDDEN = [  # the list: shell, python, include, write_*, dump, log, fix print (the rest of the
-    # allow-list's refusals: tests/orchestrator/test_lammps_lines.py)
+    # allow-list's refusals: tests/adapters/test_lammps_lines.py)
     ("shell touch pwned", "command 'shell'"),
     ("python f here from os import system", "command 'python'"),
     ("include other.in", "command 'include'"),

@@ -22,6 +22,9 @@ file, or take the time loop from the coupler.  A line is accepted when
 Everything else (``shell``, ``python``, ``include``, ``write_*``, ``dump``, ``log``, ``fix print``,
 ``print``, ``plugin``, ``run``, ``timestep``, ``read_*``, ``jump``, ``label``, ...) is refused with
 the reason.
+
+Here, below both of its users (the [sph] table's schema, orchestrator/schema_sph.py, and the SPH
+adapter, adapters/sph.py): the adapters import nothing from the orchestrator above them.
 """
 from __future__ import annotations
 
@@ -183,3 +186,10 @@ def check_line(line: str, extent: float | None = None, h: float | None = None) -
         if words[2] not in VARIABLE_STYLES:
             raise LammpsLineError(f"variable style {words[2]!r} is not allowed; allowed: "
                                   + ", ".join(sorted(VARIABLE_STYLES)))
+
+
+def line_scales(sph: dict) -> tuple[float, float]:
+    """(the domain's largest extent, the smoothing length) in m of a normalised [sph] table: what
+    bounds the distances of a ``lammps_commands`` line."""
+    d = sph["domain"]
+    return (max(hi - lo for lo, hi in zip(d["lower"], d["upper"])), float(sph["smoothing_length"]))

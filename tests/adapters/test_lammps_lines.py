@@ -1,4 +1,4 @@
-"""The allow-list of LAMMPS lines a case may add (orchestrator/lammps_lines.py): every way to run a
+"""The allow-list of LAMMPS lines a case may add (adapters/lammps_lines.py): every way to run a
 command, load code, read or write a file or take the time loop is refused with its reason; the
 lines the SPH cases need pass.  (Through the command line, with exit 2 and nothing launched:
 tests/orchestrator/test_bad_inputs.py.)"""
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from orchestrator.lammps_lines import LammpsLineError, check_line
+from adapters.lammps_lines import LammpsLineError, check_line
 
 FORBIDDEN = [
     # (line, fragment of the reason)
