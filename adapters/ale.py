@@ -65,16 +65,16 @@ class AleAdapter(SolverAdapter):
         return self.solver.diagnostics()
 
     def write(self, index: int, step: int, time: float) -> None:
-        from orchestrator import output
+        from adapters import step_files
 
         data = self.solver.output()
         if self.comm.rank != 0:
             return
         points, cells, point_data, cell_data = data
         if not self._mesh_written:
-            output.write_mesh(self.out_dir, self.role, cells, "hexahedron" if cells.shape[1] == 8 else "quad")
+            step_files.write_mesh(self.out_dir, self.role, cells, "hexahedron" if cells.shape[1] == 8 else "quad")
             self._mesh_written = True
-        output.write_step(self.out_dir, self.role, index, step, time, np.asarray(points),
+        step_files.write_step(self.out_dir, self.role, index, step, time, np.asarray(points),
                           point_data=point_data, cell_data=cell_data)
 
     def checkpoint(self, path: Path) -> None:

@@ -21,13 +21,13 @@ class LagrangeAdapter(SolverAdapter):
     role = "lagrange"
 
     def setup(self) -> None:
-        from orchestrator import output
+        from adapters import step_files
         from solvers.lagrange.integrators import solver_class
 
         self.solver = solver_class(self.case["lagrange"].get("integrator", "explicit"))(self.comm, self.case)
         self._dt = None
         if self.comm.rank == 0:
-            output.write_mesh(self.out_dir, self.role, self.solver.global_cells, self.solver.cell_type)
+            step_files.write_mesh(self.out_dir, self.role, self.solver.global_cells, self.solver.cell_type)
 
     def stable_dt(self) -> float:
         return self.solver.stable_dt()
@@ -91,7 +91,7 @@ class LagrangeAdapter(SolverAdapter):
         return s.X[w], s.x[w], s.v[w]
 
     def write(self, index: int, step: int, time: float) -> None:
-        from orchestrator import output
+        from adapters import step_files
 
         s = self.solver
         x = s.gather_nodes(s.x)
@@ -101,11 +101,11 @@ class LagrangeAdapter(SolverAdapter):
         points = s.point_fields()  # (collective: the contact surface; every rank holds the same values)
         if self.comm.rank == 0:
             # scalars of the stress for ParaView users (no calculator needed); pressure = -trace/3
-            cells["von_mises_stress"] = output.von_mises(cells["stress"])
-            cells["pressure"] = output.pressure(cells["stress"])
+            cells["von_mises_stress"] = step_files.von_mises(cells["stress"])
+            cells["pressure"] = step_files.pressure(cells["stress"])
             # points are the deformed coordinates; displacement is for colouring (README: Warp By
             # Vector with it would deform twice)
-            output.write_step(
+            step_files.write_step(
                 self.out_dir, self.role, index, step, time, _pad3(x),
                 point_data={"velocity": _pad3(v), "displacement": _pad3(x - X), **points},
                 cell_data=cells,

@@ -136,9 +136,9 @@ class SphAdapter(SolverAdapter):
         self._external_work = 0.0  # work of the coupling impulses on the particles
         self.diagnostics()  # the initial energy, the reference of energy_balance_rel (a restart reads its own)
         if self.comm.rank == 0:
-            from orchestrator import output
+            from adapters import step_files
 
-            output.write_mesh(self.out_dir, self.role, np.arange(self.n, dtype=np.int64)[:, None], "vertex")
+            step_files.write_mesh(self.out_dir, self.role, np.arange(self.n, dtype=np.int64)[:, None], "vertex")
 
     def _create(self, s: dict, at: str = "x") -> None:
         """Particles by id from the arrays ``s`` (id order; every rank passes all, LAMMPS keeps those
@@ -453,7 +453,7 @@ class SphAdapter(SolverAdapter):
 
     # ---- output -----------------------------------------------------------------------------
     def write(self, index: int, step: int, time: float) -> None:
-        from orchestrator import output
+        from adapters import step_files
 
         x = self._gather("x", 3)
         v = self._gather("v", 3)
@@ -471,7 +471,7 @@ class SphAdapter(SolverAdapter):
         else:
             fields.update(pressure=-(stress[:, 0] + stress[:, 1] + stress[:, 2]) / 3.0, von_mises=stress[:, 6],
                           plastic_strain=plastic)
-        output.write_step(self.out_dir, self.role, index, step, time, x, point_data=fields)
+        step_files.write_step(self.out_dir, self.role, index, step, time, x, point_data=fields)
 
     # ---- checkpoint / restart ---------------------------------------------------------------
     def _state(self) -> dict:
