@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench_registry import BENCHES, bench, machine, run_worker  # noqa: E402,F401  (the benches' shared helpers)
+from orchestrator.bench_registry import BENCHES, bench, machine, run_worker  # noqa: F401  (the benches' shared helpers)
 
 
 ELASTIC = {"model": "linear_elastic", "density": 7850.0, "youngs_modulus": 200e9, "poisson_ratio": 0.3}

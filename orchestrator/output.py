@@ -97,13 +97,12 @@ from __future__ import annotations
 import bisect
 import contextlib
 import os
-import re
 import shutil
 import warnings
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable
 
 import h5py
 import numpy as np

@@ -42,7 +42,7 @@ from pathlib import Path
 
 from solvers.expressions import BOOL
 
-from adapters.lammps_lines import LammpsLineError, check_line, line_scales  # noqa: F401
+from adapters.lammps_lines import LammpsLineError, check_line, line_scales
 from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, vector
 from .schema_registry import register_table
 from .schema_rules import (CaseError, check_expression, check_faces, check_length, expression_refusal,

@@ -439,7 +439,12 @@ def warm(log=print, jobs: int | None = None) -> dict:
     else:
         child = subprocess.Popen([sys.executable, "-m", "orchestrator.warmup", "--part", PARTS[1]],
                                  stdout=subprocess.PIPE, text=True)
-        parts = [_warm_part(PARTS[0])]
+        try:
+            parts = [_warm_part(PARTS[0])]
+        except BaseException:   # (the other part must not go on compiling alone)
+            child.kill()
+            child.wait()
+            raise
         out = child.communicate()[0]
         if child.returncode != 0:
             raise RuntimeError(f"the warm-up of the {PARTS[1]} cases failed (exit code {child.returncode})")
