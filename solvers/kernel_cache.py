@@ -19,6 +19,17 @@ ran another signature's code on its arrays: the suite's ALE tests segfaulted, or
 energy, on a cache that two pytest workers and their ranks had filled. Every save (and load) of an
 index and its data file is therefore done under a file lock (lock_cache_index, installed as numba's
 caching module is imported).
+
+Numba names the machine code of every function it compiles by its qualified name, argument types and
+a per-process counter (FunctionIdentity's uid). Two processes that each compiled a kernel calling
+a different function of the same name (closures of one factory, numba's own generic helpers) gave
+the helpers the same symbol; a process that then loaded both kernels from the cache linked the
+second kernel to the first one's helper (LLVM merges the two weak definitions: numba issue 10486),
+and a kernel compiled there after loading the first was saved with the wrong helper in it. Seen: a
+coupled ALE step lost 2e-5 of its energy on a cache the suite had filled (orchestrator/coupling's
+operator_arrays, 35 kB larger than its fresh compile). The uids are therefore drawn at random
+(random_function_ids, installed as numba's bytecode module is imported): 63 bits, so two processes
+give two functions the same one with a chance of about n^2 / 2^64.
 """
 from __future__ import annotations
 
@@ -73,6 +84,17 @@ def configure() -> Path:
     return d
 
 
+def random_function_ids(bytecode) -> None:
+    """Make numba's FunctionIdentity (module ``bytecode``: numba.core.bytecode) take its uids at
+    random instead of counting from 1 in every process (the module docstring)."""
+    import secrets
+
+    cls = bytecode.FunctionIdentity
+    if not getattr(cls, "_immerse_random_ids", False):
+        cls._unique_ids = iter(lambda: secrets.randbits(63), None)
+        cls._immerse_random_ids = True
+
+
 def lock_cache_index(caching) -> None:
     """Make numba's IndexDataCacheFile (module ``caching``: numba.core.caching) save, load and flush
     under an flock of ``<index>.lock``: exclusive to save (read the index, pick a data file, write
@@ -113,30 +135,43 @@ def lock_cache_index(caching) -> None:
     cls._immerse_locked = True
 
 
-class _LockWhenImported(importlib.abc.MetaPathFinder):
-    """Finds numba.core.caching like the rest of the path, and locks it once executed."""
+PATCHES = {"numba.core.caching": lock_cache_index, "numba.core.bytecode": random_function_ids}
+"""What is changed in which numba module, as soon as it is imported."""
+
+
+class _PatchWhenImported(importlib.abc.MetaPathFinder):
+    """Finds the modules of PATCHES like the rest of the path, and patches each once executed."""
+
+    def __init__(self, names):
+        self.names = set(names)
 
     def find_spec(self, name, path, target=None):
-        if name != "numba.core.caching":
+        if name not in self.names:
             return None
-        sys.meta_path.remove(self)
+        self.names.discard(name)
+        if not self.names:
+            sys.meta_path.remove(self)
         spec = importlib.util.find_spec(name)
         if spec is not None and spec.loader is not None:
             run = spec.loader.exec_module
 
             def exec_module(module):
                 run(module)
-                lock_cache_index(module)
+                PATCHES[name](module)
 
             spec.loader.exec_module = exec_module
         return spec
 
 
 def _lock_on_import() -> None:
-    if "numba.core.caching" in sys.modules:
-        lock_cache_index(sys.modules["numba.core.caching"])
-    elif not any(isinstance(f, _LockWhenImported) for f in sys.meta_path):
-        sys.meta_path.insert(0, _LockWhenImported())
+    waiting = []
+    for name, patch in PATCHES.items():
+        if name in sys.modules:
+            patch(sys.modules[name])
+        else:
+            waiting.append(name)
+    if waiting and not any(isinstance(f, _PatchWhenImported) for f in sys.meta_path):
+        sys.meta_path.insert(0, _PatchWhenImported(waiting))
 
 
 if __name__ == "__main__":  # the directory, for the Makefile's warm-up stamp

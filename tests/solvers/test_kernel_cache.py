@@ -96,3 +96,68 @@ def test_concurrent_saves_of_one_function_keep_each_signature_with_its_own_code(
     pairs = _saved_pairs(tmp_path, "lock")
     wrong = [(want, got) for want, got in pairs if got != want]
     assert not wrong, f"{len(wrong)} of {len(pairs)} entries lost or swapped: {wrong[:5]}"
+
+
+# Two kernels that call two different functions of one name (closures of one factory): compiled in
+# two processes, then loaded together from the cache in a third.
+_CLOSURES = """
+import numpy as np
+from numba import njit
+
+
+def make(c):
+    @njit
+    def inner(x):  # (big enough not to be inlined into its caller)
+        a = np.empty(int(x) + 50)
+        for i in range(a.size):
+            a[i] = np.sin(i * c) + c
+        s = 0.0
+        for i in range(a.size):
+            s += a[i] * a[(i * 7) % a.size]
+        return s
+    return inner
+
+
+inner_1, inner_2 = make(1.0), make(2.0)
+
+
+@njit(cache=True)
+def f(x):
+    return inner_1(x) + inner_1(x + 1.0)
+
+
+@njit(cache=True)
+def g(x):
+    return inner_2(x) + inner_2(x + 1.0)
+"""
+_CALLER = """
+import sys
+if sys.argv[1] == "random":
+    import solvers  # noqa: F401  (installs the random uids before numba is imported)
+import closures
+print(*[getattr(closures, name)(1.0) for name in sys.argv[2]])
+"""
+
+
+def _cached_closures(tmp_path, ids: str) -> tuple[list[float], list[float]]:
+    """f(1), g(1) compiled in one process each, then (f, g) loaded together in a third."""
+    (tmp_path / "closures.py").write_text(_CLOSURES)
+    env = {k: v for k, v in os.environ.items() if k not in ("NUMBA_CACHE_DIR", "IMMERSE_NUMBA_CACHE_ROOT")}
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO), str(tmp_path)])
+    env["NUMBA_CACHE_DIR"] = str(tmp_path / "root")
+
+    def call(names):
+        r = subprocess.run([sys.executable, "-c", _CALLER, ids, names], env=env, capture_output=True, text=True,
+                           timeout=300, check=True)
+        return [float(v) for v in r.stdout.split()]
+
+    alone = call("f") + call("g")
+    return alone, call("fg")
+
+
+def test_kernels_compiled_in_two_processes_keep_their_own_callees_when_loaded_together(tmp_path):
+    """With numba's uids counted from 1 in each process (run _cached_closures(tmp_path, "counted")),
+    both helpers were named inner v2 and g loaded after f ran f's helper: (106.24, 106.24) against
+    (106.24, 412.43). With random uids each keeps its own."""
+    alone, together = _cached_closures(tmp_path, "random")
+    assert alone[0] != alone[1] and together == alone, (alone, together)
