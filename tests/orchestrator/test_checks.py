@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from orchestrator import checks, output
+from orchestrator.checks import fields
 from orchestrator.case import load_case
 from tests.conftest import CASES, immerse
 
@@ -179,9 +180,9 @@ def test_riemann_plateau_margin_keeps_the_fronts_out(tmp_path):
     for name, value in exact.items():
         assert abs(r["metrics"][name]["value"] / value - 1) < 1e-12, (name, r["metrics"][name])
     # the same profile read without a margin: the front zones count (what the margin prevents)
-    prof = checks._zone_stations(out, "ale", 1, 0)
+    prof = fields.zone_stations(out, "ale", 1, 0)
     w = ex.waves(case["run"]["end_time"], 0.5)
-    no_margin = checks._plateau(prof["x"], prof["rho"], w["left_rarefaction_tail"], w["contact"], 0.0)
+    no_margin = fields.plateau(prof["x"], prof["rho"], w["left_rarefaction_tail"], w["contact"], 0.0)
     assert abs(no_margin / ex.rho_star_l - 1) > 2e-3
 
 
@@ -541,7 +542,7 @@ def test_bounce_episodes(monkeypatch, tmp_path, kw, expect):
     """The episodes (runs of steps with active rows), the energy after each against before (gravity's
     potential counted), and the changes of the active count within one; the penetration measures are
     no_penetration's (tested there; replaced here)."""
-    monkeypatch.setattr(checks, "no_penetration", lambda *a: {})
+    monkeypatch.setattr("orchestrator.checks.contact.no_penetration", lambda *a: {})
     vals = checks.CHECKS["bounce"](None, tmp_path, bouncing_history(**kw), {})
     assert (vals["episodes"], vals["state_changes_max"]) == (expect[0], expect[2])
     assert vals["energy_rebound_rel"] == pytest.approx(expect[1], abs=1e-15)

@@ -1,0 +1,70 @@
+"""The check registry: each kind registers its function, its ``[check] params`` schema and an
+optional cross-field rule (register_check); run_check computes a case's metrics and compares each with
+its reference and tolerance. Tolerances are relative (|value - reference| / |reference|); a reference
+of exactly 0 makes the tolerance absolute (conservation residuals).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from orchestrator.schema_parts import table
+
+
+CHECKS: dict[str, Callable] = {}
+
+
+PARAMS: dict[str, dict] = {}
+"""Each kind's ``[check] params`` schema (a table: unknown keys, types and ranges are refused when the
+case is checked, before anything runs -- not by a KeyError after the run)."""
+
+
+AXIS = {"type": "string", "enum": ["x", "y", "z"]}
+
+
+STATE3 = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3,
+          "x-allowed": "must be [density, velocity, pressure] (3 numbers)"}
+
+
+WINDOW = {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2,
+          "x-allowed": "must be [lower, upper] (2 numbers, m)"}
+
+
+RULES: dict[str, Callable] = {}
+"""Each kind's cross-field rule on its params (optional): rule(case, params) returns None or
+(param name, what is allowed), checked when the case is loaded."""
+
+
+def register_check(name: str, params: dict | None = None, rule: Callable | None = None):
+    """Register check ``name``; ``params``: the properties of its ``[check] params`` table (with
+    ``required``: a ``schema_parts.table``), None for a kind that takes none; ``rule``: RULES'."""
+    def deco(fn):
+        CHECKS[name] = fn
+        PARAMS[name] = params if params is not None else table({})
+        if rule is not None:
+            RULES[name] = rule
+        return fn
+
+    return deco
+
+
+def compare(value: float, reference: float, tolerance: float) -> dict:
+    err = abs(value - reference) / abs(reference) if reference != 0 else abs(value)
+    return {"value": float(value), "reference": float(reference), "rel_error": float(err),
+            "tolerance": float(tolerance), "passed": bool(err <= tolerance)}
+
+
+def run_check(case: dict, out: Path, history: dict[str, np.ndarray]) -> dict:
+    spec = case["check"]
+    values = CHECKS[spec["kind"]](case, Path(out), history, spec.get("params", {}))
+    metrics = {}
+    for name, ref in spec.get("metrics", {}).items():
+        if name not in values:
+            raise KeyError(f"check.metrics.{name}: check kind {spec['kind']!r} computes "
+                           f"only {', '.join(sorted(values))}")
+        metrics[name] = compare(values[name], ref["reference"], ref["tolerance"])
+    extra = {k: float(v) for k, v in values.items() if k not in metrics}
+    return {"kind": spec["kind"], "passed": all(m["passed"] for m in metrics.values()),
+            "metrics": metrics, "reported": extra}
