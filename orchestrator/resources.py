@@ -31,7 +31,7 @@ from solvers.ale.points import DEFAULT_FRACTION_SAMPLES, several_materials
 from .schema_rules import CaseError, format_bytes, format_key
 
 # ---- measured costs (bytes) ---------------------------------------------------------------------
-# `immerse bench memory` (orchestrator/bench.py -> bench-memory.json) measures every one of these:
+# `immerse bench memory` (orchestrator/bench/memory.py -> bench-memory.json) measures every one of these:
 # tracemalloc peaks of the real solvers (set-up, steps, an output) as slopes between two sizes, so
 # fixed costs drop out.  Values of its run on the reference machine (2 cores, 24 GiB, Python 3.11).
 LAGRANGE_BYTES_PER_ELEMENT = {2: 514, 3: 896}

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench_registry import bench, machine
+from orchestrator.bench.registry import bench, machine
 
 
 def wavy_faces(n: int):

@@ -4,7 +4,7 @@ adapter, stepped by one `run N` without the driver), the driver with the SPH gro
 (`immerse run`, a coupler step per sph.substeps LAMMPS steps, and one per LAMMPS step), and their
 ratio (target >= 0.95; see ``ratio_driver_to_lammps`` below for how it is measured on a noisy machine).  The coupled
 embedded run's split (coupler + surface reconstruction against the step) is measured by the
-in-process coupler of orchestrator/bench_coupling.py for mesh bodies; for particles see the note
+in-process coupler of orchestrator/bench/coupling.py for mesh bodies; for particles see the note
 in the JSON."""
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench_registry import bench, machine
+from orchestrator.bench.registry import bench, machine
 from orchestrator.schema_sph import DEFAULT_SUBSTEPS
 
 DAM = """[run]

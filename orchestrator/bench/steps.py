@@ -1,5 +1,8 @@
-"""Benchmarks (`immerse bench NAME`): medians of repeated runs, written as JSON
-{"results": [{"name", "metric", "value", "unit", "params"}], "machine": {...}}. Not timed tests."""
+"""The solver step benches: the Lagrangian hex step (elastic and J2) and the Taylor bar's error
+against cost (`lagrange`, `taylor`), the ALE Lagrange step and remap on Sedov, Sod's mesh study and
+the advected ball (`ale`, `sod`, `advect`); a two-rank timing runs as a job of its own
+(`python -m orchestrator.bench.steps worker N LABEL`).
+"""
 from __future__ import annotations
 
 import json
@@ -10,10 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench_registry import BENCHES, bench, machine, run_worker  # noqa: F401  (the benches' shared helpers)
+from orchestrator.bench.registry import bench, machine, run_worker
 
 
 ELASTIC = {"model": "linear_elastic", "density": 7850.0, "youngs_modulus": 200e9, "poisson_ratio": 0.3}
+
+
 J2 = {"model": "johnson_cook", "density": 7830.0, "youngs_modulus": 206.9e9, "poisson_ratio": 0.3,
       "yield_stress": 806e6, "hardening_modulus": 614e6, "hardening_exponent": 0.168,
       "strain_rate_coefficient": 0.0089, "reference_strain_rate": 1.0, "thermal_exponent": 1.1,
@@ -103,7 +108,7 @@ def bench_lagrange(out: Path, quick: bool = False) -> Path:
 
 
 def _two_ranks(n: int, label: str) -> float:
-    return float(run_worker("orchestrator.bench", 2, n, label))
+    return float(run_worker("orchestrator.bench.steps", 2, n, label))
 
 
 def _worker(n: int, label: str) -> None:
@@ -131,7 +136,7 @@ def bench_taylor(out: Path, quick: bool = False) -> Path:
     from orchestrator.case import load_case, ranks_for
     from orchestrator.launch import run_job
 
-    src = Path(__file__).resolve().parents[1] / "cases" / "taylor_bar"
+    src = Path(__file__).resolve().parents[2] / "cases" / "taylor_bar"
     text = (src / "case.toml").read_text()
     meshes = [(4, 36), (6, 54)] if quick else [(4, 36), (6, 54), (8, 72), (10, 90)]
     results, rows = [], []
@@ -277,7 +282,7 @@ def bench_sod(out: Path, quick: bool = False) -> Path:
     from orchestrator.case import load_case, ranks_for
     from orchestrator.launch import run_job
 
-    src = Path(__file__).resolve().parents[1] / "cases" / "sod"
+    src = Path(__file__).resolve().parents[2] / "cases" / "sod"
     text = (src / "case.toml").read_text()
     sizes = [100, 200, 400] if quick else [100, 200, 400, 800, 1600]
     results, rows = [], []
@@ -311,7 +316,7 @@ def _mesh_study(case_name: str, old: str, grid, sizes, metrics) -> list:
     from orchestrator.case import load_case, ranks_for
     from orchestrator.launch import run_job
 
-    src = Path(__file__).resolve().parents[1] / "cases" / case_name
+    src = Path(__file__).resolve().parents[2] / "cases" / case_name
     text = (src / "case.toml").read_text()
     if old not in text:
         raise RuntimeError(f"cases/{case_name}/case.toml no longer has the grid line {old!r}")
@@ -406,300 +411,6 @@ def bench_advect(out: Path, quick: bool = False) -> Path:
     out.write_text(json.dumps(doc, indent=2))
     return out
 
-
-def _traced_peak(run) -> int:
-    tracemalloc.start()
-    try:
-        run()
-        return tracemalloc.get_traced_memory()[1]
-    finally:
-        tracemalloc.stop()
-
-
-def _slope(peak, small, large) -> tuple[float, int]:
-    """Bytes per unit between two sizes (fixed costs drop out): ``peak(size) -> (bytes, units)``."""
-    peak(small)  # first-call allocations (caches) out of the way
-    (b1, n1), (b2, n2) = peak(small), peak(large)
-    return (b2 - b1) / (n2 - n1), n2
-
-
-def _ale_memory_config(dim: int, n: int, materials: int, samples=None, obstacle=False) -> dict:
-    cfg = ball_config(n, materials > 1)
-    if dim == 2:
-        cfg.update(dimension=2, grid={"lower": [0.0] * 2, "upper": [1.0] * 2, "cells": [n] * 2},
-                   boundaries={f: "periodic" for f in ("x_lower", "x_upper", "y_lower", "y_upper")})
-        for r in cfg["regions"]:
-            r["velocity"] = [0.3, -0.2]
-            if "region" in r:
-                r["region"] = "(x - 0.5)**2 + (y - 0.5)**2 < 0.09"
-    if materials == 3:
-        cfg["materials"]["third"] = {"eos": "ideal_gas", "gamma": 1.4}
-        cfg["regions"].append(dict(cfg["regions"][1], material="third", region="x < 0.2"))
-    if samples:
-        cfg["fraction_samples"] = samples
-    if obstacle:
-        cfg["boundaries"] = {f: "wall" for f in cfg["boundaries"]}
-        cfg["obstacles"] = [{"region": "x > 0.9", "subsamples": 2}]
-    return cfg
-
-
-@bench("memory")
-def bench_memory(out: Path, quick: bool = False) -> Path:
-    """The memory costs orchestrator/resources.py estimates a case from (tracemalloc peaks of the real
-    solvers: set-up, two steps and an output; slopes between two sizes)."""
-    from mpi4py import MPI
-
-    from solvers.ale.solver import AleSolver
-    from solvers.lagrange.mesh import body_mesh, concatenate, read_mesh
-    from solvers.lagrange.partition import partition
-    from solvers.lagrange.solver import LagrangeSolver
-
-    results = []
-
-    def row(name, metric, value, params):
-        results.append({"name": name, "metric": metric, "value": round(float(value), 1), "unit": "B",
-                        "params": params})
-
-    def lagrange_peak(dim):
-        def peak(n):
-            case = lagrange_case(n, ELASTIC, 1.0)
-            if dim == 2:
-                case["run"]["dimension"] = 2
-                case["lagrange"]["bodies"][0].update(
-                    mesh={"box": {"lower": [0, 0], "upper": [0.01, 0.01], "cells": [n, n]}},
-                    initial_velocity=["-1*y/0.01", 0.0])
-            holder = {}
-
-            def run():
-                s = holder["s"] = LagrangeSolver(MPI.COMM_SELF, case)
-                s.predict(0.5 * s.stable_dt())
-                s.correct(None)
-            return _traced_peak(run), holder["s"].n_cells_global
-        return peak
-
-    sizes = {2: (40, 80) if quick else (150, 300), 3: (8, 16) if quick else (20, 40)}
-    for dim in (2, 3):
-        v, ne = _slope(lagrange_peak(dim), *sizes[dim])
-        row("lagrange", "memory_per_element", v, {"dimension": dim, "elements": ne, "ranks": 1})
-
-    def mesh_peak(spec, dim):
-        def peak(scale):
-            def run():
-                m, _ = concatenate([body_mesh(spec(scale), dim)])
-                partition(m.points.astype(np.float64), m.cells.astype(np.int64), 2, 0)
-            return _traced_peak(run), body_mesh(spec(scale), dim).num_cells
-        return peak
-    box = {2: lambda n: {"mesh": {"box": {"lower": [0, 0], "upper": [1, 1], "cells": [n, n]}}},
-           3: lambda n: {"mesh": {"box": {"lower": [0] * 3, "upper": [1] * 3, "cells": [n] * 3}}}}
-    for dim in (2, 3):
-        v, ne = _slope(mesh_peak(box[dim], dim), *sizes[dim])
-        row("lagrange_global_mesh_box", "memory_per_element_per_rank", v, {"dimension": dim, "elements": ne})
-    qc = lambda n: {"mesh": {"quarter_cylinder": {"radius": 1.0, "length": 3.0, "radial_cells": n, "axial_cells": 2 * n}}}
-    v, ne = _slope(mesh_peak(qc, 3), *((6, 12) if quick else (15, 30)))
-    row("lagrange_global_mesh_quarter_cylinder", "memory_per_element_per_rank", v, {"dimension": 3, "elements": ne})
-
-    import tempfile
-
-    import meshio
-
-    from solvers.lagrange.mesh import box_mesh
-    with tempfile.TemporaryDirectory() as tmp:
-        m = box_mesh([0, 0, 0], [1, 1, 1], [20 if quick else 50] * 3)
-        for fmt, kw, suffix in (("gmsh22", {"binary": False}, ".msh"), ("gmsh22", {"binary": True}, ".msh"),
-                                ("vtu", {"binary": True}, ".vtu")):
-            path = Path(tmp) / f"m_{kw['binary']}{suffix}"
-            meshio.write(str(path), meshio.Mesh(m.points, [("hexahedron", m.cells)]), file_format=fmt, **kw)
-            peak = _traced_peak(lambda: read_mesh(path, 3))
-            row(f"read_mesh_{fmt}_{'binary' if kw['binary'] else 'ascii'}", "memory_per_element", peak / m.num_cells,
-                {"elements": m.num_cells, "file_bytes": path.stat().st_size,
-                 "peak_over_file_size": round(peak / path.stat().st_size, 2)})
-
-    def ale_peak(dim, materials, samples=None, obstacle=False):
-        def peak(n):
-            cfg = (sedov_config(n, "eulerian") if (dim, materials, obstacle) == (3, 1, False)
-                   else _ale_memory_config(dim, n, materials, samples, obstacle))
-            holder = {}
-
-            def run():
-                s = holder["s"] = AleSolver(MPI.COMM_SELF, cfg)
-                for k in range(2):
-                    dt = 0.5 * s.stable_dt()
-                    s.predict(dt)
-                    s.correct(None, step=k + 1, time=dt)
-                    s.remap(None)
-                s.output()
-            return _traced_peak(run), holder["s"].block.nzones  # per zone of the padded block
-        return peak
-
-    asz = {2: (40, 80) if quick else (150, 300), 3: (8, 14) if quick else (24, 40)}
-    per_zone = {}
-    for dim in (2, 3):
-        for materials in (1, 2, 3):
-            v, nz = _slope(ale_peak(dim, materials, samples=1), *asz[dim])
-            per_zone[dim, materials] = v
-            row("ale", "memory_per_zone", v, {"dimension": dim, "materials": materials, "padded_zones": nz,
-                                              "fraction_samples": 1 if materials > 1 else None})
-        row("ale", "memory_per_zone_and_material", (per_zone[dim, 3] - per_zone[dim, 2]),
-            {"dimension": dim, "note": "several materials: 3 minus 2 materials"})
-        k = 4
-        v, nz = _slope(ale_peak(dim, 2, samples=k), *asz[dim])
-        real = nz / np.prod([c + 4 for c in [asz[dim][1]] * dim]) * asz[dim][1] ** dim
-        row("ale", "memory_per_fraction_sample", (v - per_zone[dim, 2]) * nz / real / k**dim,
-            {"dimension": dim, "fraction_samples": k})
-        v, nz = _slope(ale_peak(dim, 1, obstacle=True), *asz[dim])
-        row("ale", "memory_per_zone_obstacles", v - per_zone[dim, 1], {"dimension": dim, "subsamples": 2})
-
-def _bar_wave_fields(rng, nn: int, ne: int) -> tuple[dict, dict]:
-    """The fields the Lagrange adapter writes for one output step (random values)."""
-    point = {"velocity": rng.normal(size=(nn, 3)), "displacement": rng.normal(size=(nn, 3))}
-    stress = rng.normal(size=(ne, 6))
-    cell = {"stress": stress, "von_mises_stress": rng.random(ne), "pressure": rng.normal(size=ne),
-            "plastic_strain": rng.random(ne), "temperature": rng.random(ne), "density": rng.random(ne),
-            "bulk_viscosity": rng.random(ne)}
-    return point, cell
-
-
-def time_outputs(n_outputs: int, tmp: Path) -> dict:
-    """Write ``n_outputs`` steps of the 400-element bar wave as a run does (step file, then the
-    in-memory index appends); seconds per output of the step file and of the index."""
-    from orchestrator import output
-    from solvers.lagrange.mesh import box_mesh
-
-    mesh = box_mesh([0.0, 0.0, 0.0], [0.1, 0.0025, 0.0025], [400, 1, 1])
-    out = tmp / f"outputs_{n_outputs}"
-    tmp.mkdir(parents=True, exist_ok=True)
-    output.write_mesh(out, "lagrange", mesh.cells, mesh.cell_type)
-    index = output.OutputIndex(out)
-    rng = np.random.default_rng(0)
-    point, cell = _bar_wave_fields(rng, mesh.num_points, mesh.num_cells)
-    step_s, index_s = [], []
-    for i in range(n_outputs):
-        t0 = time.perf_counter()
-        output.write_step(out, "lagrange", i, 10 * i, 1e-7 * i, mesh.points, point, cell)
-        t1 = time.perf_counter()
-        index.append(i, ["lagrange"])
-        step_s.append(t1 - t0)
-        index_s.append(time.perf_counter() - t1)
-    # the appended index must equal the one rebuilt from every step file
-    appended = _index_contents(out)
-    output.OutputIndex(out)
-    if _index_contents(out) != appended:
-        raise RuntimeError(f"appended index of {n_outputs} outputs differs from the rebuilt one")
-    return {"step": np.array(step_s), "index": np.array(index_s)}
-
-
-def _index_contents(out: Path):
-    """What a reader gets from results.h5 and results.xdmf (the append room's padding aside)."""
-    import re
-
-    import h5py
-
-    from orchestrator import output
-
-    xdmf = re.sub(rb"<\?immerse-append +\?>", b"<?immerse-append ?>", (out / output.INDEX_XDMF).read_bytes())
-    items = []
-    with h5py.File(out / output.INDEX_H5, "r") as f:
-        def visit(name, link):
-            if isinstance(link, h5py.ExternalLink):
-                items.append((name, link.filename, link.path))
-            elif isinstance(link, h5py.HardLink) and isinstance(f[name], h5py.Dataset):
-                items.append((name, str(f[name].dtype), f[name][()].tolist()))
-        f.visititems_links(visit)
-        items += sorted((g, k, str(v)) for g in [""] + list(f) for k, v in f[g or "/"].attrs.items())
-    return xdmf, items
-
-
-def _bar_wave_run(n_outputs: int, tmp: Path) -> dict:
-    """cases/elastic_bar_wave with output_interval = end_time / n_outputs, through the launcher."""
-    from orchestrator.case import load_case, ranks_for
-    from orchestrator.launch import run_job
-
-    src = Path(__file__).resolve().parents[1] / "cases" / "elastic_bar_wave"
-    text = (src / "case.toml").read_text()
-    old = "output_interval = 1.0e-6"
-    if old not in text:
-        raise RuntimeError(f"cases/elastic_bar_wave/case.toml no longer has the line {old!r}")
-    d = tmp / f"bar_wave_{n_outputs}"
-    d.mkdir()
-    (d / "case.toml").write_text(text.replace(old, f"output_interval = {16.0e-6 / n_outputs!r}"))
-    case = load_case(d)
-    t0 = time.perf_counter()
-    rc = run_job(case, d / "out", ranks_for(case, {}))
-    wall = time.perf_counter() - t0
-    if rc != 0:
-        raise RuntimeError(f"elastic_bar_wave with {n_outputs} outputs failed (exit {rc})")
-    s = json.loads((d / "out" / "summary.json").read_text())
-    written = len(list((d / "out" / "steps").glob("lagrange_[0-9]*.h5")))
-    return {"launcher_wall_s": wall, "coupler_wall_s": s["wall_time_s"], "steps": s["steps"],
-            "output_steps": written}
-
-
-@bench("output")
-def bench_output(out: Path, quick: bool = False) -> Path:
-    """Cost of one output step against the number of outputs before it: the 400-element bar wave's
-    fields written 10, 100, 1000 times (step file + index append; metric: median of the last 10
-    outputs of the run, so the cost of an output with n-1 before it; the mean over the run includes
-    the rare full rewrites of results.xdmf); then cases/elastic_bar_wave run with 12, 60 and 240
-    outputs through the launcher (each output added should cost the same: its write)."""
-    import tempfile
-
-    counts = [10, 100] if quick else [10, 100, 1000]
-    runs = [12, 48] if quick else [12, 60, 240]
-    rounds = 1 if quick else 5  # the counts interleaved, so that the machine's load hits them alike
-    results = []
-    with tempfile.TemporaryDirectory() as tmp:
-        timings = {n: [] for n in counts}
-        for r in range(rounds):
-            for n in counts:
-                timings[n].append(time_outputs(n, Path(tmp) / f"round_{r}"))
-        first = None
-        for n in counts:
-            def per_round(stat, part):
-                return float(np.median([stat(part(t)) for t in timings[n]])) * 1e3
-            tail = max(10, n // 10)
-            last = lambda a: np.median(a[-tail:])  # noqa: E731
-            value = per_round(last, lambda t: t["step"] + t["index"])
-            first = first or value
-            tenth = max(1, n // 10)
-            drift = float(np.median([np.median(t["step"][-tenth:] + t["index"][-tenth:])
-                                     / np.median(t["step"][:tenth] + t["index"][:tenth]) for t in timings[n]]))
-            results.append({"name": "output_bar_wave_400", "metric": "time_per_output", "value": value, "unit": "ms",
-                            "params": {"outputs": n, "rounds": rounds,
-                                       "of": f"median over the rounds of the median of the last {tail} outputs of a "
-                                             "run of n (step file + index append)",
-                                       "step_file_ms": per_round(last, lambda t: t["step"]),
-                                       "index_append_ms": per_round(last, lambda t: t["index"]),
-                                       "last_tenth_over_first_tenth": drift,
-                                       "mean_per_output_ms": per_round(np.mean, lambda t: t["step"] + t["index"]),
-                                       "mean_index_append_ms": per_round(np.mean, lambda t: t["index"]),
-                                       "max_index_append_ms": per_round(np.max, lambda t: t["index"]),
-                                       "ratio_to_10_outputs": value / first}})
-        walls = [_bar_wave_run(n, Path(tmp)) for n in runs]
-    write_ms = results[-1]["value"]
-    for n, w in zip(runs, walls):
-        results.append({"name": "elastic_bar_wave", "metric": "wall_time", "value": w["coupler_wall_s"], "unit": "s",
-                        "params": {"output_interval": f"end_time/{n}", **w}})
-    # a constant cost per output: the wall time grows by the same amount for every output added
-    for lo, hi in zip(walls, walls[1:]):
-        extra = hi["output_steps"] - lo["output_steps"]
-        results.append({"name": "elastic_bar_wave", "metric": "wall_time_per_extra_output",
-                        "value": (hi["coupler_wall_s"] - lo["coupler_wall_s"]) / extra * 1e3, "unit": "ms",
-                        "params": {"outputs": [lo["output_steps"], hi["output_steps"]],
-                                   "write_time_per_output_ms": write_ms,
-                                   "note": "coupler wall time difference over the extra output steps; compare with "
-                                           "write_time_per_output_ms (step file + index alone, time_per_output at "
-                                           "the largest count); the rest is the adapter's gather and the command's "
-                                           "round trip"}})
-    doc = {"results": results, "machine": machine()}
-    out.write_text(json.dumps(doc, indent=2))
-    return out
-
-
-from orchestrator import bench_coupling  # noqa: E402,F401  (registers "coupling"; its own module)
-from orchestrator import bench_coupling_studies  # noqa: E402,F401  (plate_convergence, penalty_sweep)
-from orchestrator import bench_sph  # noqa: E402,F401  (registers "sph")
-from orchestrator import bench_contact  # noqa: E402,F401  (registers "contact")
-from orchestrator import bench_implicit  # noqa: E402,F401  (registers "implicit")
 
 if __name__ == "__main__" and sys.argv[1:2] == ["worker"]:
     _worker(int(sys.argv[2]), sys.argv[3])

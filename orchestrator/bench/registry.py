@@ -1,7 +1,7 @@
 """What every bench shares: the registry of benches by name (``immerse bench NAME``), the machine
 record written beside their results, and the helper that times a bench on several ranks in a job of
-its own. Below bench.py and every bench_*.py module (they import this, bench.py imports them to
-register them), so that the benches form no import circle."""
+its own. Below every bench module of the package (they import this, the package's __init__ imports
+them to register them), so that the benches form no import circle."""
 from __future__ import annotations
 
 import os

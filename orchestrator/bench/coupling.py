@@ -1,6 +1,6 @@
 """`immerse bench coupling`: the embedded-mesh coupling's stability and speed (DESIGN.md, "The
-constraint solve"), written as bench-coupling.json (bench.py's format: medians of repeated runs,
-params) and three charts next to it.
+constraint solve"), written as bench-coupling.json (the benches' format, orchestrator/bench/__init__.py:
+medians of repeated runs, params) and three charts next to it.
 
 1. Conditioning: cond(H) of the multiplier system over grid refinement for random straight cuts,
    stabilised and not (orchestrator/coupling/conditioning.py), 2-D h = 1/8..1/64 and 3-D
@@ -34,7 +34,7 @@ from unittest import mock
 
 import numpy as np
 
-from orchestrator.bench_registry import bench, machine
+from orchestrator.bench.registry import bench, machine
 
 
 # ---- timing helpers ------------------------------------------------------------------------------

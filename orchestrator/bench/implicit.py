@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench_registry import bench, machine, run_worker
+from orchestrator.bench.registry import bench, machine, run_worker
 
 RUBBER = {"model": "linear_elastic", "density": 1000.0, "youngs_modulus": 1.0e6, "poisson_ratio": 0.3}
 
@@ -96,7 +96,7 @@ def break_even(quick: bool) -> dict:
     from solvers.lagrange.implicit_dynamic import MidpointSolver
     from solvers.lagrange.solver import LagrangeSolver
 
-    cases = Path(__file__).resolve().parent.parent / "cases"
+    cases = Path(__file__).resolve().parents[2] / "cases"
     case = load_case(cases / "l_block_free_flight")
     steps = 10 if quick else 40
     mid = MidpointSolver(MPI.COMM_SELF, case)
@@ -148,7 +148,7 @@ def bench_implicit(out: Path, quick: bool = False) -> Path:
 def on_ranks(n: int) -> list[dict]:
     """The n x n block's step on 1 and 2 ranks, each in one mpiexec job (the same start-up), and the
     2-rank speed-up of the step and of its tangent."""
-    runs = {ranks: json.loads(run_worker("orchestrator.bench_implicit", ranks, n)) for ranks in (1, 2)}
+    runs = {ranks: json.loads(run_worker("orchestrator.bench.implicit", ranks, n)) for ranks in (1, 2)}
     one, two = runs[1]["params"], runs[2]["params"]
     return [runs[2], {"name": "midpoint_step", "metric": "speedup_2_ranks", "value": one["step_s"] / two["step_s"],
                       "unit": "x", "params": {"elements": one["elements"], "step_s": [one["step_s"], two["step_s"]],

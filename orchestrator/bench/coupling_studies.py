@@ -1,7 +1,7 @@
 """Accuracy studies of the embedded-mesh coupling (issue 8), run through the normal run path
 (orchestrator.launch.run_job, as `immerse run`) on modified copies of the cases' TOML; JSON in
-bench.py's format ({"results": [{"name", "metric", "value", "unit", "params"}], "machine"}) and
-charts written beside it.
+the benches' format (orchestrator/bench/__init__.py: {"results": [{"name", "metric", "value",
+"unit", "params"}], "machine"}) and charts written beside it.
 
 `immerse bench plate_convergence`
     cases/plate_in_shock_2d (to its end time, 4 ms) over meshes refined together by 2: zone width 20,
@@ -115,9 +115,9 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench_registry import bench, machine
+from orchestrator.bench.registry import bench, machine
 
-CASES = Path(__file__).resolve().parents[1] / "cases"
+CASES = Path(__file__).resolve().parents[2] / "cases"
 
 
 # ---- helpers -------------------------------------------------------------------------------------
