@@ -23,7 +23,7 @@ Everything else (``shell``, ``python``, ``include``, ``write_*``, ``dump``, ``lo
 ``print``, ``plugin``, ``run``, ``timestep``, ``read_*``, ``jump``, ``label``, ...) is refused with
 the reason.
 
-Here, below both of its users (the [sph] table's schema, orchestrator/schema_sph.py, and the SPH
+Here, below both of its users (the [sph] table's schema, orchestrator/schema/sph.py, and the SPH
 adapter, adapters/sph.py): the adapters import nothing from the orchestrator above them.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """The LAMMPS model of a case's ``[sph]`` table: the input commands (box, pair style, integration
 fixes, walls, gravity) and the particles (positions, types, masses, densities, energies), built from
-the normalised case (orchestrator/schema_sph.py).  Nothing here runs LAMMPS.
+the normalised case (orchestrator/schema/sph.py).  Nothing here runs LAMMPS.
 
 A LAMMPS atom type per distinct (material, particle mass, fixed) of the bodies, numbered from 1 in
 order of first appearance: atom_style sph keeps masses per type (a particle's mass is its body's

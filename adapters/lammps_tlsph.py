@@ -1,6 +1,6 @@
 """The LAMMPS model of a case's ``[sph]`` table whose materials are MACHDYN solids (``model =
 "tlsph"``: pair smd/tlsph, total-Lagrangian SPH, Ganzenmueller 2015): input commands and particles,
-built from the normalised case (orchestrator/schema_sph.py).  Nothing here runs LAMMPS.
+built from the normalised case (orchestrator/schema/sph.py).  Nothing here runs LAMMPS.
 
 What differs from the SPH package's fluids (adapters/lammps_model.py):
 

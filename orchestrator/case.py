@@ -7,9 +7,9 @@ whose message is ONE line ``"<dotted.key> = <value repr>: <what is allowed>"``.
 
 This module owns the pipeline and the core tables (``[run]``, ``[ranks]``, ``[check]``); every
 other top-level table is registered with its schema fragment, normaliser and checks by the code
-that owns it (:mod:`orchestrator.schema_registry`: ``[materials]``, ``[lagrange]`` and
-``[[boundaries]]`` in :mod:`orchestrator.schema_lagrange`, ``[ale]`` in
-:mod:`orchestrator.schema_ale`); the loops below never name them.
+that owns it (:mod:`orchestrator.schema.registry`: ``[materials]``, ``[lagrange]`` and
+``[[boundaries]]`` in :mod:`orchestrator.schema.lagrange`, ``[ale]`` in
+:mod:`orchestrator.schema.ale`); the loops below never name them.
 
 Validation happens in stages, the first failure wins:
 
@@ -18,11 +18,11 @@ Validation happens in stages, the first failure wins:
    most :data:`MAX_CASE_BYTES` (256 KiB; at most that much is ever read), UTF-8; TOML parsing
    (``tomllib``): a syntax error, or nesting beyond Python's recursion limit, is reported on the
    key ``case.toml``;
-2. the JSON schema of :mod:`orchestrator.case_schema` (types, ranges, required keys,
+2. the JSON schema of :mod:`orchestrator.schema.case` (types, ranges, required keys,
    enums, unknown keys); the best error (``jsonschema.exceptions.best_match``) is
    translated into a :class:`CaseError` on its dotted key path; then every float of the
    file must be finite (``nan``/``inf`` pass JSON Schema's range checks), unless its key is
-   listed in :data:`orchestrator.case_schema.NON_FINITE_KEYS`;
+   listed in :data:`orchestrator.schema.case.NON_FINITE_KEYS`;
 3. cross-field checks in Python: ``[run]`` (outputs against the end time), then each registered
    table's (vector lengths vs ``run.dimension``, material references, expressions (compiled;
    constant parts such as ``9**9**9`` folded and refused here), sanity of finite numbers
@@ -65,15 +65,15 @@ from typing import TYPE_CHECKING, Any
 
 from adapters import registry as _roles
 
-from . import schema_registry
-from .case_schema import (
+from .schema import registry as schema_registry
+from .schema.case import (
     CASE_SCHEMA,
     KNOWN_ROLES,
     NAME_TEXT,
     NON_FINITE_KEYS,
     RUN_DEFAULTS,
 )
-from .schema_rules import (  # noqa: F401  (re-exported: the names this module always offered)
+from .schema.rules import (  # noqa: F401  (re-exported: the names this module always offered)
     ALLOW_PATH_ENV,
     MISSING,
     CaseError,
@@ -83,10 +83,10 @@ from .schema_rules import (  # noqa: F401  (re-exported: the names this module a
     format_bytes,
     format_key,
 )
-from .schema_rules import file_kind as _file_kind
-from .schema_rules import fmt_num as _fmt_num
-from .schema_rules import stat_regular as _stat_regular
-from .schema_rules import to_float as _f
+from .schema.rules import file_kind as _file_kind
+from .schema.rules import fmt_num as _fmt_num
+from .schema.rules import stat_regular as _stat_regular
+from .schema.rules import to_float as _f
 
 if TYPE_CHECKING:
     from jsonschema.exceptions import ValidationError
@@ -293,7 +293,7 @@ def _unit(schema: Mapping) -> str:
 
 
 def _range_text(schema: Mapping, with_unit: bool = False) -> str:
-    """"must be > 0 (kg/m^3)"; the physical range a unit adds (schema_parts.UNIT_LIMITS) after the
+    """"must be > 0 (kg/m^3)"; the physical range a unit adds (schema/parts.py UNIT_LIMITS) after the
     key's own bounds: "must be > 0 (kg/m^3), at most 1e+06 (the physical range)"."""
     physical = schema.get("x-physical", ())
     parts, extra = [], []
@@ -580,7 +580,7 @@ def _key_matches(key: str, pattern: str) -> bool:
 
 def _normalise(data: dict, case_dir: Path) -> dict:
     """Fill defaults and convert numbers; assumes the schema validated ``data``.  The core tables
-    here, then every registered table's normaliser by order (schema_registry, hook 2)."""
+    here, then every registered table's normaliser by order (schema/registry.py, hook 2)."""
     d = copy.deepcopy(data)
     run_in = d["run"]
     dim = int(run_in["dimension"])
@@ -630,7 +630,7 @@ def _check(case: dict, data: dict, schema: bool = True) -> None:
     """Cross-field checks; fills ``case["ranks"]``.  ``data`` is the raw TOML (for
     reporting values exactly as written); ``schema``: also the check kind's params against their
     schema (False: a case the launcher has checked).  Order: [run], the registered tables' checks by order,
-    [ranks], [check], the registered tables' file checks (schema_registry, hooks 3 and 4)."""
+    [ranks], [check], the registered tables' file checks (schema/registry.py, hooks 3 and 4)."""
     run = case["run"]
 
     # [run]

@@ -33,9 +33,9 @@ from solvers.ale.points import (axis_centres, box_points, fraction_samples, grid
 from solvers.expressions import BOOL, NUM, ExpressionError, compile_expression
 from solvers.lagrange.mesh import body_mesh, box_axes
 
-from .schema_rules import CaseError, format_key
+from .schema.rules import CaseError, format_key
 from .expression_bounds import Unproven, bounds
-from .schema_rules import expression_refusal
+from .schema.rules import expression_refusal
 
 __all__ = ["check_expressions", "CHECK_BUDGET"]
 

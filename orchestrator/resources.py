@@ -28,7 +28,7 @@ from pathlib import Path
 from solvers.ale.parallel import MIN_ZONES, split_possible
 from solvers.ale.points import DEFAULT_FRACTION_SAMPLES, several_materials
 
-from .schema_rules import CaseError, format_bytes, format_key
+from .schema.rules import CaseError, format_bytes, format_key
 
 # ---- measured costs (bytes) ---------------------------------------------------------------------
 # `immerse bench memory` (orchestrator/bench/memory.py -> bench-memory.json) measures every one of these:

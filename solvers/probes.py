@@ -1,4 +1,4 @@
-"""Probes of node and particle sets (case ``[probes]``, orchestrator/schema_probes.py): one number
+"""Probes of node and particle sets (case ``[probes]``, orchestrator/schema/probes.py): one number
 per probe at every diagnostics step, appended to the solver's diagnostics as ``probe_<name>``.
 
 A figure read from the output steps (a peak, a zero crossing) depends on how often the run writes

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from orchestrator.bench.registry import bench, machine
-from orchestrator.schema_sph import DEFAULT_SUBSTEPS
+from orchestrator.schema.sph import DEFAULT_SUBSTEPS
 
 DAM = """[run]
 dimension = 2

@@ -35,7 +35,7 @@ import tempfile
 from pathlib import Path
 
 from orchestrator.outdir import _safe_rel, append_lines, linked_on_the_way, rels_inside
-from orchestrator.schema_rules import CaseError
+from orchestrator.schema.rules import CaseError
 
 MARKER = ".immerse-campaign.json"
 RECORD = ".immerse-campaign-written"
@@ -227,7 +227,7 @@ def _tree_size(base: Path, key: str = "case") -> int:
                 raise CaseError(key, p, "is a dangling link; allowed in a campaign's base case: "
                                 "regular files and directories") from None
             if not stat.S_ISREG(st.st_mode):
-                from orchestrator.schema_rules import file_kind
+                from orchestrator.schema.rules import file_kind
 
                 kind = file_kind(st.st_mode) if not stat.S_ISDIR(st.st_mode) else "a link to a directory"
                 raise CaseError(key, p, f"is {kind}; allowed in a campaign's base case: regular "

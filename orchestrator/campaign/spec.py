@@ -25,8 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from orchestrator.schema_parts import number
-from orchestrator.schema_rules import CaseError, MISSING, format_key
+from orchestrator.schema.parts import number
+from orchestrator.schema.rules import CaseError, MISSING, format_key
 
 CAMPAIGN_KEY = re.compile(r"^[A-Za-z_][A-Za-z0-9_-]*(\[\d+\]|\.[A-Za-z0-9_-]+)*$")
 _SEGMENT = re.compile(r"([^.\[\]]+)|\[(\d+)\]")
@@ -55,7 +55,7 @@ SCHEMA = {
     "properties": {
         "name": _NAME,
         "description": {"type": "string"},
-        "timeout": number("s", exclusiveMinimum=0),   # (<= 1e9 s: orchestrator/schema_parts.py)
+        "timeout": number("s", exclusiveMinimum=0),   # (<= 1e9 s: orchestrator/schema/parts.py)
         "axes": {"type": "object", "propertyNames": {"pattern": r"^[A-Za-z_][A-Za-z0-9_-]*$"},
                  "additionalProperties": _AXIS},
         "series": {

@@ -7,7 +7,7 @@ import numpy as np
 
 from orchestrator.checks.fields import body_meshes, last_step
 from orchestrator.checks.registry import AXIS, WINDOW, register_check
-from orchestrator.schema_parts import number, table
+from orchestrator.schema.parts import number, table
 
 
 @register_check("sliding", params=table(

@@ -7,7 +7,7 @@ import numpy as np
 
 from orchestrator.checks.fields import cell_centroids, crossings, last_step, zone_stations
 from orchestrator.checks.registry import AXIS, WINDOW, register_check
-from orchestrator.schema_parts import number, table, vector
+from orchestrator.schema.parts import number, table, vector
 
 
 @register_check("piston", params=table(

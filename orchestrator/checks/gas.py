@@ -7,13 +7,13 @@ import numpy as np
 
 from orchestrator.checks.fields import crossings, last_step, plateau, profile, zone_stations
 from orchestrator.checks.registry import AXIS, STATE3, register_check
-from orchestrator.schema_parts import number, table, vector
+from orchestrator.schema.parts import number, table, vector
 
 
 def _exact_eos():
     """An EOS table of the exact general-EOS Riemann solver: an [ale] material table without "void"
     or tait (barotropic: its shocks are not given by the energy condition)."""
-    from orchestrator.schema_ale import FLUID
+    from orchestrator.schema.ale import FLUID
 
     return {**FLUID, "properties": {**FLUID["properties"],
                                     "eos": {"type": "string",

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from orchestrator.checks.registry import register_check
-from orchestrator.schema_parts import number, table
+from orchestrator.schema.parts import number, table
 
 
 POINTS = {"type": "array", "minItems": 1, "items": {"type": "array", "items": {"type": "number"}, "minItems": 2,

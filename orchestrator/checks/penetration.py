@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from orchestrator.checks.registry import AXIS, WINDOW, register_check
-from orchestrator.schema_parts import number, table
+from orchestrator.schema.parts import number, table
 
 
 def _main_body(x: np.ndarray, link: float) -> np.ndarray:

@@ -10,7 +10,7 @@ from typing import Callable
 
 import numpy as np
 
-from orchestrator.schema_parts import table
+from orchestrator.schema.parts import table
 
 
 CHECKS: dict[str, Callable] = {}
@@ -39,7 +39,7 @@ RULES: dict[str, Callable] = {}
 
 def register_check(name: str, params: dict | None = None, rule: Callable | None = None):
     """Register check ``name``; ``params``: the properties of its ``[check] params`` table (with
-    ``required``: a ``schema_parts.table``), None for a kind that takes none; ``rule``: RULES'."""
+    ``required``: a ``schema.parts.table``), None for a kind that takes none; ``rule``: RULES'."""
     def deco(fn):
         CHECKS[name] = fn
         PARAMS[name] = params if params is not None else table({})

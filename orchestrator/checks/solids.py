@@ -7,7 +7,7 @@ import numpy as np
 
 from orchestrator.checks.fields import body_meshes, cell_centroids, last_step
 from orchestrator.checks.registry import AXIS, register_check
-from orchestrator.schema_parts import number, table
+from orchestrator.schema.parts import number, table
 
 
 @register_check("bar_wave", params=table(

@@ -93,7 +93,7 @@ def thinnest(points: np.ndarray, cells: np.ndarray, cell_type: str, lower, upper
 def check_thin_bodies(case: dict) -> None:
     """A coupled case's Lagrangian bodies against MIN_ZONES; CaseError naming the first one thinner
     that does not accept it."""
-    from orchestrator.schema_rules import CaseError
+    from orchestrator.schema.rules import CaseError
     from solvers.lagrange.mesh import MeshError, body_mesh
 
     if not case.get("coupling") or not case.get("lagrange"):

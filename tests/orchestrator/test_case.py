@@ -17,7 +17,7 @@ from orchestrator.case import (
     ranks_for,
     solvers_used,
 )
-from orchestrator.case_schema import CASE_SCHEMA, MODEL_KEYS
+from orchestrator.schema.case import CASE_SCHEMA, MODEL_KEYS
 from solvers.expressions import compile_expression
 
 HERE = Path(__file__).parent
@@ -496,7 +496,7 @@ def test_a_key_may_allow_non_finite_numbers(tmp_path, monkeypatch):
     ("checkpoint_interval = 1.0e-5", "checkpoint_interval = 1e-14", "run.checkpoint_interval",
      "2e+09 checkpoints"),
     # (an extent that overflows, upper - lower = 2e308, once refused by its difference: now each
-    # coordinate by the physical range of a length, schema_parts.UNIT_LIMITS)
+    # coordinate by the physical range of a length, schema/parts.py UNIT_LIMITS)
     ("lower = [0.0, 0.0, 0.0], upper = [0.004, 0.004, 0.02]", "lower = [-1e308, 0.0, 0.0], upper = [1e308, 0.004, 0.02]",
      "lagrange.bodies[0].mesh.box.lower[0]", "<= 1e+06 (m) (the physical range)"),
     ("lower = [0.0, 0.0, 0.0], upper = [0.004, 0.004, 0.02]", "lower = [0.0, 0.0, 0.0], upper = [1e-110, 1e-110, 1e-110]",

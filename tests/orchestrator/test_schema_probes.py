@@ -1,10 +1,10 @@
-"""The ``[probes]`` table (orchestrator/schema_probes.py): what it accepts, fills in and refuses."""
+"""The ``[probes]`` table (orchestrator/schema/probes.py): what it accepts, fills in and refuses."""
 from __future__ import annotations
 
 import pytest
 
 from orchestrator.case import load_case
-from orchestrator.schema_rules import CaseError
+from orchestrator.schema.rules import CaseError
 from tests.orchestrator.test_case import VALID, assert_one_line
 
 PROBE = '[probes]\ntip = { role = "lagrange", quantity = "displacement", component = "x", box = { lower = [0.09, 0.0], upper = [0.1, 0.02] } }\n'

@@ -1,4 +1,4 @@
-"""The registry of case.toml tables (orchestrator/schema_registry.py): the solvers' tables come from
+"""The registry of case.toml tables (orchestrator/schema/registry.py): the solvers' tables come from
 their fragment modules, load_case loops over them without naming any, a new table is one
 register_table call (schema, normaliser, checks) and runs at its documented place in the hook
 order, and validating a case imports no solver kernel."""
@@ -13,8 +13,8 @@ import textwrap
 
 import pytest
 
-from orchestrator import schema_registry as R
-from orchestrator.case_schema import CASE_SCHEMA
+from orchestrator.schema import registry as R
+from orchestrator.schema.case import CASE_SCHEMA
 from tests.conftest import REPO
 
 
@@ -58,8 +58,8 @@ def test_register_table_refuses(kwargs, message):
 PROBE = r'''
 import json, sys
 from pathlib import Path
-from orchestrator import schema_registry as R
-from orchestrator.schema_rules import CaseError, check_length
+from orchestrator.schema import registry as R
+from orchestrator.schema.rules import CaseError, check_length
 
 seen = []
 

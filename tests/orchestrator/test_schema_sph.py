@@ -1,11 +1,11 @@
-"""The [sph] table (orchestrator/schema_sph.py): each bad value is one CaseError naming its key and
+"""The [sph] table (orchestrator/schema/sph.py): each bad value is one CaseError naming its key and
 what is allowed (through the command line, with exit 2 and nothing launched: test_bad_inputs.py)."""
 from __future__ import annotations
 
 import pytest
 
 from orchestrator.case import load_case
-from orchestrator.schema_rules import CaseError
+from orchestrator.schema.rules import CaseError
 from tests.orchestrator.test_bad_inputs import SPH, edit
 
 SOLID = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',

@@ -288,8 +288,8 @@ def test_read_mesh_errors(tmp_path):
 def test_a_quarter_cylinder_with_a_base_is_the_one_at_the_origin_moved_there():
     """``quarter_cylinder.base`` (the centre of its bottom face; a rod placed in a background grid,
     cases/penetrator_tate_fe): the same cells, every point moved by base; without it, at the origin.
-    The coupled case's bounding box (schema_coupling._body_box) moves with it."""
-    from orchestrator.schema_coupling import _body_box
+    The coupled case's bounding box (schema/coupling.py _body_box) moves with it."""
+    from orchestrator.schema.coupling import _body_box
     from solvers.lagrange.mesh import body_mesh
 
     q = {"radius": 1e-3, "length": 0.01, "radial_cells": 4, "axial_cells": 5}

@@ -1,8 +1,8 @@
 """The top-level tables of case.toml beyond the core, each registered by the code that owns it.
 
 The core of a case file, ``[run]``, ``[ranks]`` and ``[check]``, belongs to
-:mod:`orchestrator.case_schema` and :mod:`orchestrator.case`.  Every other top-level table comes
-from a *fragment* module (one per solver role, e.g. :mod:`orchestrator.schema_ale`; the coupling's
+:mod:`orchestrator.schema.case` and :mod:`orchestrator.case`.  Every other top-level table comes
+from a *fragment* module (one per solver role, e.g. :mod:`orchestrator.schema.ale`; the coupling's
 next) listed in :data:`FRAGMENTS`, which registers each of its tables with one call::
 
     register_table("ale", schema=ALE, normalise=normalise, check=check, order=40)
@@ -18,7 +18,7 @@ Each stage runs over the registered tables in ascending ``order`` (ties are refu
 order never depends on import order); within ``load_case`` (:mod:`orchestrator.case`) the first
 failure wins:
 
-1. ``schema``: the table's JSON-schema fragment (:mod:`orchestrator.schema_parts`) is
+1. ``schema``: the table's JSON-schema fragment (:mod:`orchestrator.schema.parts`) is
    ``properties[name]`` of the case schema, placed after ``run`` and ``ranks`` and before
    ``check`` by ``order``; the order is also that of the ``unknown key; allowed: ...`` list of
    top-level keys.  Then every float must be finite (case.py).
@@ -31,14 +31,14 @@ failure wins:
    solver role at all.
 3. ``check(case, data)``: cross-field rules, for the tables present in the normalised case (every
    table normalised by then), after those of ``[run]``; ``data`` is the raw file (for reporting values as written).  Raise
-   :class:`orchestrator.schema_rules.CaseError` (helpers there).  Then ``[ranks]`` (the roles of
+   :class:`orchestrator.schema.rules.CaseError` (helpers there).  Then ``[ranks]`` (the roles of
    the tables now known) and the ``[check]`` kind.
 4. ``check_files(case, data)``: the slow part (reading data files such as meshes), last, once
    every table passed its checks.
 
-A fragment module imports only light modules (schema_parts, schema_rules, this one; never
-orchestrator.case or orchestrator.case_schema, which build the schema from the registry).  A new
-table, e.g. ``[coupling]``: a module ``orchestrator/schema_coupling.py`` ending in
+A fragment module imports only light modules (parts, rules, this one; never
+orchestrator.case or orchestrator.schema.case, which build the schema from the registry).  A new
+table, e.g. ``[coupling]``: a module ``orchestrator/schema/coupling.py`` ending in
 ``register_table("coupling", COUPLING, normalise, check, order=60)``, and its name in FRAGMENTS.
 """
 from __future__ import annotations
@@ -49,13 +49,13 @@ from typing import Any, Callable
 
 __all__ = ["FRAGMENTS", "CORE_TABLES", "Table", "register_table", "tables", "table"]
 
-FRAGMENTS = ("orchestrator.schema_lagrange", "orchestrator.schema_ale", "orchestrator.schema_sph",
-             "orchestrator.schema_coupling", "orchestrator.schema_contact", "orchestrator.schema_probes")
+FRAGMENTS = ("orchestrator.schema.lagrange", "orchestrator.schema.ale", "orchestrator.schema.sph",
+             "orchestrator.schema.coupling", "orchestrator.schema.contact", "orchestrator.schema.probes")
 """Modules that register tables, imported on first use.  A new table: a module with one
 ``register_table(...)`` call per table, named here."""
 
 CORE_TABLES = ("run", "ranks", "check")
-"""Tables of the core schema (orchestrator/case_schema.py): no fragment may register them."""
+"""Tables of the core schema (orchestrator/schema/case.py): no fragment may register them."""
 
 
 @dataclass(frozen=True)
@@ -83,7 +83,7 @@ def register_table(name: str, schema: dict, normalise: Callable[[Any, dict], Any
     place ``order`` among the registered tables.  Refuses a core table, a second registration of
     a name and an ``order`` already taken."""
     if name in CORE_TABLES:
-        raise ValueError(f"[{name}] is a core table of case.toml (orchestrator/case_schema.py)")
+        raise ValueError(f"[{name}] is a core table of case.toml (orchestrator/schema/case.py)")
     if name in _TABLES:
         raise ValueError(f"table [{name}] is already registered")
     taken = {t.order: t.name for t in _TABLES.values()}
@@ -102,7 +102,7 @@ def _load() -> None:
         return
     if _state == "loading":  # a half-registered set would give a schema without some tables
         raise RuntimeError("a fragment module asked for the tables while they are being registered "
-                           "(fragments must not import orchestrator.case_schema or orchestrator.case)")
+                           "(fragments must not import orchestrator.schema.case or orchestrator.case)")
     _state = "loading"
     try:
         for module in FRAGMENTS:

@@ -1,5 +1,5 @@
 """The ALE background's table of case.toml, ``[ale]`` (compressible flow on a fixed grid): schema
-fragment, normaliser and cross-field checks, registered in :mod:`orchestrator.schema_registry`.
+fragment, normaliser and cross-field checks, registered in :mod:`orchestrator.schema.registry`.
 
 Normalised layout (``case["ale"]``, present when the file has the table)::
 
@@ -16,9 +16,9 @@ from __future__ import annotations
 
 from solvers.expressions import BOOL
 
-from .schema_parts import BOX, NAME_PATTERN, integer, number, table, variants, vector
-from .schema_registry import register_table
-from .schema_rules import CaseError, check_expression, check_extent, check_faces, check_length, format_key, to_float
+from .parts import BOX, NAME_PATTERN, integer, number, table, variants, vector
+from .registry import register_table
+from .rules import CaseError, check_expression, check_extent, check_faces, check_length, format_key, to_float
 
 
 # ---- schema --------------------------------------------------------------------------------------

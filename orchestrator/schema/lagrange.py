@@ -1,6 +1,6 @@
 """The Lagrangian solver's tables of case.toml: ``[materials]``, ``[lagrange]`` (its bodies) and
 ``[[boundaries]]`` (their boundary conditions); schema fragments, normalisers and cross-field
-checks, registered in :mod:`orchestrator.schema_registry`.
+checks, registered in :mod:`orchestrator.schema.registry`.
 
 Normalised layout::
 
@@ -31,9 +31,9 @@ from solvers.expressions import BOOL, NUM
 from solvers.lagrange.integrators import INTEGRATORS
 from solvers.lagrange.mesh import body_mesh_size
 
-from .schema_parts import BOX, NAME_PATTERN, integer, name, number, table, variants, vector
-from .schema_registry import register_table
-from .schema_rules import (MISSING, CaseError, check_expression, check_extent, check_length,
+from .parts import BOX, NAME_PATTERN, integer, name, number, table, variants, vector
+from .registry import register_table
+from .rules import (MISSING, CaseError, check_expression, check_extent, check_length,
                            check_path_inside, expression_names, fmt_num, format_bytes, format_key,
                            num_or_expression, stat_regular, to_float)
 

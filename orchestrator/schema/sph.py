@@ -1,5 +1,5 @@
 """The SPH particle group's table of case.toml, ``[sph]`` (LAMMPS, SPH package): schema fragment,
-normaliser and cross-field checks, registered in :mod:`orchestrator.schema_registry`.
+normaliser and cross-field checks, registered in :mod:`orchestrator.schema.registry`.
 
 Normalised layout (``case["sph"]``, present when the file has the table)::
 
@@ -43,9 +43,9 @@ from pathlib import Path
 from solvers.expressions import BOOL
 
 from adapters.lammps_lines import LammpsLineError, check_line, line_scales
-from .schema_parts import NAME_PATTERN, integer, name, number, table, variants, vector
-from .schema_registry import register_table
-from .schema_rules import (CaseError, check_expression, check_faces, check_length, expression_refusal,
+from .parts import NAME_PATTERN, integer, name, number, table, variants, vector
+from .registry import register_table
+from .rules import (CaseError, check_expression, check_faces, check_length, expression_refusal,
                            format_key, to_float)
 
 MAX_PARTICLES = 20_000_000
@@ -266,7 +266,7 @@ def _read_body_file(body: dict, key: str, raw: str, case_dir, dim: int, max_atom
     spacing around them) for the domain and grid checks."""
     from solvers.particles import DataFileError, read_data_positions
 
-    from .schema_rules import check_path_inside, stat_regular
+    from .rules import check_path_inside, stat_regular
 
     path = body["data_file"]
     check_path_inside(key, raw, path, case_dir)

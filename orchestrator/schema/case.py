@@ -6,10 +6,10 @@ rules (vector lengths equal to ``run.dimension``, material references, mesh file
 expressions, ...) are checked in Python by :mod:`orchestrator.case`.
 
 This module holds the core tables, ``[run]``, ``[ranks]`` and ``[check]``; the other top-level
-tables are the solvers' fragments, registered in :mod:`orchestrator.schema_registry`
-(:mod:`orchestrator.schema_lagrange`, :mod:`orchestrator.schema_ale`) and placed between
+tables are the solvers' fragments, registered in :mod:`orchestrator.schema.registry`
+(:mod:`orchestrator.schema.lagrange`, :mod:`orchestrator.schema.ale`) and placed between
 ``ranks`` and ``check`` by their order.  The building blocks and the non-standard annotation
-keywords (``x-unit``, ``x-allowed``, ``x-when``) are in :mod:`orchestrator.schema_parts`.
+keywords (``x-unit``, ``x-allowed``, ``x-when``) are in :mod:`orchestrator.schema.parts`.
 """
 
 from __future__ import annotations
@@ -18,9 +18,9 @@ import copy
 
 from adapters.registry import roles as _registered_roles
 
-from . import schema_registry
-from .schema_lagrange import MODEL_KEYS  # noqa: F401  (re-exported: the keys of each material model)
-from .schema_parts import NAME_PATTERN, NAME_TEXT, SCHEMA_URI, integer, number, table
+from . import registry as schema_registry
+from .lagrange import MODEL_KEYS  # noqa: F401  (re-exported: the keys of each material model)
+from .parts import NAME_PATTERN, NAME_TEXT, SCHEMA_URI, integer, number, table
 
 __all__ = ["CASE_SCHEMA", "KNOWN_ROLES", "NAME_PATTERN", "NAME_TEXT", "NON_FINITE_KEYS", "RUN_DEFAULTS",
            "SCHEMA_URI", "case_schema"]

@@ -1,7 +1,7 @@
 """Building blocks of the case schema (JSON Schema, Draft 2020-12) that every table fragment uses.
 
-The core tables are assembled in :mod:`orchestrator.case_schema`, the solvers' tables in their
-fragment modules (:mod:`orchestrator.schema_registry`).  Non-standard annotation keywords (ignored
+The core tables are assembled in :mod:`orchestrator.schema.case`, the solvers' tables in their
+fragment modules (:mod:`orchestrator.schema.registry`).  Non-standard annotation keywords (ignored
 by the validator, used by :mod:`orchestrator.case` to word messages):
 
 ``x-unit``     unit shown after the allowed range, e.g. ``must be > 0 (kg/m^3)``;

@@ -21,10 +21,10 @@ from __future__ import annotations
 
 from solvers.contact.methods import METHODS
 
-from .schema_parts import number, table
-from .schema_parts import name as name_schema
-from .schema_registry import register_table
-from .schema_rules import CaseError, format_key
+from .parts import number, table
+from .parts import name as name_schema
+from .registry import register_table
+from .rules import CaseError, format_key
 
 CONTACT = table(
     {

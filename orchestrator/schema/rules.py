@@ -3,7 +3,7 @@ and the rules the table fragments share (vector lengths against ``run.dimension`
 box extents, data files: paths inside the case directory, regular files).
 
 Used by :mod:`orchestrator.case` (the core tables and the load pipeline) and by the fragment
-modules of the solvers' tables (:mod:`orchestrator.schema_registry`); light on purpose: no solver
+modules of the solvers' tables (:mod:`orchestrator.schema.registry`); light on purpose: no solver
 module is imported here.
 """
 

@@ -17,8 +17,8 @@ from __future__ import annotations
 
 from orchestrator.coupling import variants
 
-from .schema_registry import register_table
-from .schema_rules import MISSING, CaseError, format_key
+from .registry import register_table
+from .rules import MISSING, CaseError, format_key
 
 def _schema() -> dict:
     """The variants' branches (variants.schema()) under a closed table of all their keys: a key of

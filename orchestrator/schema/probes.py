@@ -19,9 +19,9 @@ runs; the box's vectors have the case's dimension, lower <= upper; a component t
 """
 from __future__ import annotations
 
-from .schema_parts import NAME_PATTERN, table, vector
-from .schema_registry import register_table
-from .schema_rules import CaseError, check_length, format_key
+from .parts import NAME_PATTERN, table, vector
+from .registry import register_table
+from .rules import CaseError, check_length, format_key
 
 ROLES = ("lagrange", "sph")
 """The solver roles whose points a probe can follow (the ALE background's zones: not yet)."""
