@@ -67,7 +67,7 @@ def _writable(d: Path) -> bool:
 def configure() -> Path:
     """Set NUMBA_CACHE_DIR to <root>/<digest> (once per process tree) and return it."""
     if os.environ.get(ENV_ROOT) is not None and os.environ.get("NUMBA_CACHE_DIR"):
-        _lock_on_import()
+        _patch_on_import()
         return Path(os.environ["NUMBA_CACHE_DIR"])
     base = Path(__file__).resolve().parent.parent
     root = os.environ.get("NUMBA_CACHE_DIR")
@@ -80,7 +80,7 @@ def configure() -> Path:
     d = root / source_digest(base)
     os.environ[ENV_ROOT] = str(root)
     os.environ["NUMBA_CACHE_DIR"] = str(d)
-    _lock_on_import()
+    _patch_on_import()
     return d
 
 
@@ -163,7 +163,7 @@ class _PatchWhenImported(importlib.abc.MetaPathFinder):
         return spec
 
 
-def _lock_on_import() -> None:
+def _patch_on_import() -> None:
     waiting = []
     for name, patch in PATCHES.items():
         if name in sys.modules:

@@ -110,12 +110,13 @@ def disc_qp_gauss_seidel(W, b: np.ndarray, radius: np.ndarray, tol: float = 1e-1
     k = len(b) // max(len(radius), 1)
     if len(radius) * k != len(b) or k not in (1, 2):
         raise ValueError(f"disc_qp_gauss_seidel: {len(b)} rows do not split into {len(radius)} blocks of 1 or 2")
+    b_max = float(np.abs(b).max(initial=0.0))
     if atol is None:
-        atol = tol * float(np.abs(b).max()) if len(b) else 0.0
+        atol = tol * b_max
     q = np.zeros(len(b)) if start is None else np.array(start, dtype=np.float64, copy=True)
     sweeps = _pgs(W.indptr.astype(np.int64), W.indices.astype(np.int64), W.data.astype(np.float64),
                   W.diagonal().astype(np.float64), b, k, radius, q, float(atol),
-                  max(float(atol), stall_tol * float(np.abs(b).max(initial=0.0))), int(stall_sweeps), max_sweeps)
+                  max(float(atol), stall_tol * b_max), int(stall_sweeps), max_sweeps)
     return q, sweeps
 
 
