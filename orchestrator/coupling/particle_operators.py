@@ -40,7 +40,10 @@ import numpy as np
 import scipy.sparse as sp
 from numba import njit
 
+from orchestrator.coupling import clipping as CL
+from orchestrator.coupling import coverage as CV
 from orchestrator.coupling import geometry as G
+from orchestrator.coupling import pieces as P
 from orchestrator.coupling.grid import SNAP_ULPS
 from orchestrator.coupling.operator_rows import on_grid_boundary, operator_arrays
 from orchestrator.coupling.operators import MIN_AREA_FRACTION, NORMAL_FALLBACK_RATIO, Operators
@@ -114,7 +117,7 @@ def boundary_images(grid, x: np.ndarray, volume: np.ndarray, h: float):
 
 
 def _no_surface(iso: float):
-    return G.GeometryError(f"the SPH particles form no surface on the background grid (their colour "
+    return P.GeometryError(f"the SPH particles form no surface on the background grid (their colour "
                            f"function stays below {iso:g} at every node: the body has come apart into "
                            "particles further apart than the smoothing length)")
 
@@ -135,7 +138,7 @@ def reference_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: 
     inner = facing_the_grid(grid, pieces)
     ops = Operators.build(grid, inner, facets, len(points))
     ops = dataclasses.replace(ops, Bf=particle_rows(ops, inner, x, volume, h))
-    return ParticleInterface(points, facets, pieces, inner, ops, G.coverage(grid, pieces, 1))
+    return ParticleInterface(points, facets, pieces, inner, ops, CV.coverage(grid, pieces, 1))
 
 
 # ------------------------------------------------------------------------------------ the kernels
@@ -150,7 +153,7 @@ def _constants(grid):
         zone_h=np.array(grid.h, dtype=np.float64), cells=np.array(grid.cells, dtype=np.int64),
         periodic=np.asarray(grid.periodic, dtype=np.uint8),
         cplanes=p3, cnodes=n3, mplanes=march_planes(lower, spacing, cells, True),
-        planes=np.array(G._planes(grid), dtype=np.float64),
+        planes=np.array(P._planes(grid), dtype=np.float64),
         snap_tol=SNAP_ULPS * np.finfo(np.float64).eps * np.maximum(np.abs(grid.lower), np.abs(grid.upper)),
         full_area=float(grid.zone_volume) ** ((grid.dim - 1) / grid.dim),
         width=float(grid.zone_volume) ** (1.0 / grid.dim))
@@ -214,15 +217,15 @@ def _interface_kernel(x, vol, h, norm, xs, tri, cells, planes, lower, upper, zon
             e_facet[nf + f] = f
             e_part[nf + f] = 1
     if dim == 2:
-        pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = G._clip_segments_2d(
+        pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = CL._clip_segments_2d(
             xs, elems, planes[0, : cells[0] + 1].copy(), planes[1, : cells[1] + 1].copy(), gauss_t)
     else:
-        pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = G._clip_kernel(xs, elems, planes, cells, gauss_t,
+        pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal = CL._clip_kernel(xs, elems, planes, cells, gauss_t,
                                                                        tri_bary, tri_w)
     body = np.zeros(nf, np.int64)
     zone, pbody, facet, area, normal, centroid, qp, qw, qpiece, qf, qb = G._sorted_pieces(
         pz, pe, pa, pc, pq0, pqn, qx, qw, ql, enormal, e_facet, e_part, body, cells, planes, nv, key_limit)
-    cov = G._coverage_kernel(zone, pbody, normal, centroid, area, cells, planes, cov_snap, 1)
+    cov = CV._coverage_kernel(zone, pbody, normal, centroid, area, cells, planes, cov_snap, 1)
     # the pieces facing gas (operator_rows.facing_the_grid): those on the grid's boundary planes dropped
     on, count = on_grid_boundary(centroid, normal, lower, upper, zone_h)
     if count == 0:
@@ -515,8 +518,8 @@ def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: f
     (facets, zone, pbody, facet, area, normal, centroid, qp, qw, qpiece, qf, qb, cov, on, count, ops, qrow, iqw,
      sptr, sidx, sval, lone, fptr, fcol, fval) = _interface_kernel(
         x, volume, h, norm, xs, tri, k["cells"], k["planes"], k["lower"], k["upper"], k["zone_h"], k["periodic"],
-        G._GAUSS2_T, G._TRI_BARY, G._TRI_W, G._SORT_KEY_LIMIT, G._SNAP, MIN_AREA_FRACTION, NORMAL_FALLBACK_RATIO)
-    pieces = G.Pieces(zone=zone, body=pbody, facet=facet, area=area, normal=normal, centroid=centroid, qp=qp, qw=qw,
+        CL._GAUSS2_T, CL._TRI_BARY, CL._TRI_W, G._SORT_KEY_LIMIT, P._SNAP, MIN_AREA_FRACTION, NORMAL_FALLBACK_RATIO)
+    pieces = P.Pieces(zone=zone, body=pbody, facet=facet, area=area, normal=normal, centroid=centroid, qp=qp, qw=qw,
                       qpiece=qpiece, qf=qf, qb=qb)
     if count:
         from orchestrator.coupling.operator_rows import facing_the_grid
@@ -526,8 +529,8 @@ def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: f
         inner = pieces
     czones, frac, start, length, rb, fid, fval_c, foff = cov
     faces = tuple((fid[foff[d]:foff[d + 1]], fval_c[foff[d]:foff[d + 1]]) for d in range(dim))
-    coverage = G.Coverage(czones, frac, start, length, rb, faces, G._capped_sums(frac),
-                          tuple(G._capped_sums(v) for _, v in faces))
+    coverage = CV.Coverage(czones, frac, start, length, rb, faces, CV._capped_sums(frac),
+                          tuple(CV._capped_sums(v) for _, v in faces))
     out = ParticleInterface(points, facets, pieces, inner, None, coverage)
     zones, area_e, avec, bw, normal_e, fallback, _, _, _, prow, bnodes, columns, pairs = ops
     if lone.size:
@@ -554,15 +557,17 @@ def particle_interface(grid, x: np.ndarray, volume: np.ndarray, h: float, iso: f
 
 
 def _flush_stale_cache() -> None:
-    """particle_surface.py's colour and marching kernels, geometry.py's clipping, sorting and coverage
-    and operator_rows.py's operator sums are compiled into these kernels (see solvers.numba_cache):
-    drop their cache when one of those files changed."""
+    """particle_surface.py's colour and marching kernels, the interface geometry's clipping, sorting and
+    coverage (clipping.py, geometry.py, coverage.py, pieces.py) and operator_rows.py's operator sums are
+    compiled into these kernels (see solvers.numba_cache): drop their cache when one of those files
+    changed."""
     from orchestrator.coupling import operator_rows as _rows
     from orchestrator.coupling import particle_surface as _surface
     from solvers.numba_cache import flush_stale_cache
 
     flush_stale_cache([_surface_kernel, _interface_kernel, _zone_span, _pairs, _shepard_at, _particle_rows],
-                      [G.__file__, _rows.__file__, _surface.__file__], "particle_operators.deps.sha256")
+                      [G.__file__, CL.__file__, CV.__file__, P.__file__, _rows.__file__, _surface.__file__],
+                      "particle_operators.deps.sha256")
 
 
 _flush_stale_cache()

@@ -12,9 +12,10 @@ import itertools
 import numpy as np
 import pytest
 
-from orchestrator.coupling.geometry import (GeometryError, Pieces, _TRI_BARY, _TRI_W, blocked_fractions, coverage,
-                                            clip_surface, closed_surface_from_cells, cube_sphere_surface,
-                                            face_coverage, geometry_cost)
+from orchestrator.coupling.clipping import _TRI_BARY, _TRI_W
+from orchestrator.coupling.geometry import (GeometryError, Pieces, blocked_fractions, clip_surface,
+                                            closed_surface_from_cells, coverage, cube_sphere_surface, face_coverage,
+                                            geometry_cost)
 from orchestrator.coupling.grid import Grid
 
 
@@ -647,7 +648,8 @@ def test_2d_segment_clipper_equals_the_generic_kernel():
     """clip_surface's 2-D kernel (_clip_segments_2d, scalars) gives the generic kernel's pieces and
     points bit for bit: random segments, segments on grid planes (both directions), along them,
     through nodes, degenerate ones, and one crossing many zones."""
-    from orchestrator.coupling import geometry as G
+    from orchestrator.coupling import clipping as CL
+    from orchestrator.coupling.pieces import _planes
 
     grid = Grid([0.0, -1.0], [1.0, 1.0], [9, 13])
     X0, X1 = grid.planes(0), grid.planes(1)
@@ -659,9 +661,9 @@ def test_2d_segment_clipper_equals_the_generic_kernel():
     n = x.shape[0]
     segs = np.concatenate([rng.integers(0, n, (60, 2)), np.arange(40, n).reshape(-1, 2),
                            np.arange(40, n).reshape(-1, 2)[:, ::-1]]).astype(np.int64)
-    planes = G._planes(grid)
-    generic = G._clip_kernel(x, segs, planes, grid.cells.astype(np.int64), G._GAUSS2_T, G._TRI_BARY, G._TRI_W)
-    special = G._clip_segments_2d(x, segs, X0, X1, G._GAUSS2_T)
+    planes = _planes(grid)
+    generic = CL._clip_kernel(x, segs, planes, grid.cells.astype(np.int64), CL._GAUSS2_T, CL._TRI_BARY, CL._TRI_W)
+    special = CL._clip_segments_2d(x, segs, X0, X1, CL._GAUSS2_T)
     assert generic[0].size > 150  # pieces
     for a, b in zip(generic, special):
         np.testing.assert_array_equal(a, b)
@@ -670,7 +672,7 @@ def test_2d_segment_clipper_equals_the_generic_kernel():
 def test_stable_order_and_by_id_equal_the_numpy_references():
     """_stable_order = np.argsort(kind="mergesort") (already sorted keys, keys sorted within rows, any
     keys); _by_id = np.unique with the values scattered by the inverse (sorted or not)."""
-    from orchestrator.coupling import geometry as G
+    from orchestrator.coupling import coverage as CV
 
     rng = np.random.default_rng(7)
     n_rows, n_pos = 11, 9
@@ -685,7 +687,7 @@ def test_stable_order_and_by_id_equal_the_numpy_references():
         elif trial % 3 == 1:   # sorted by position within (body, row) but rows interleaved
             o = np.lexsort((pos, row * 0 + rng.integers(0, 5, npc)))
             key, body = key[o], body[o]
-        np.testing.assert_array_equal(G._stable_order(key, body, n_rows, n_pos), np.argsort(key, kind="mergesort"))
+        np.testing.assert_array_equal(CV._stable_order(key, body, n_rows, n_pos), np.argsort(key, kind="mergesort"))
         ids = rng.integers(0, 50, npc)
         ids = np.sort(ids) if trial % 2 else ids
         bodies = rng.integers(0, 2, npc)
@@ -696,7 +698,7 @@ def test_stable_order_and_by_id_equal_the_numpy_references():
         u, inv = np.unique(ids, return_inverse=True)
         ref = np.zeros((u.size, 2))
         ref[inv, bodies] = vals
-        got_u, got = G._by_id(ids, bodies, vals, 2)
+        got_u, got = CV._by_id(ids, bodies, vals, 2)
         np.testing.assert_array_equal(got_u, u)
         np.testing.assert_array_equal(got, ref)
 
