@@ -247,7 +247,7 @@ class AleSolver:
         self.b_momentum = np.zeros(dim)
 
         # the lightest initial density of the case's regions: the scale of "nearly empty" (a zone
-        # with a trace of material, blocked.TRACE_ZONE), the same on every rank and after a restart
+        # with a trace of material, cut_zone_kernels.TRACE_ZONE), the same on every rank and after a restart
         self.rho_ref = min((float(r["density"]) for r in config["regions"] if float(r.get("density", 0.0)) > 0.0),
                            default=0.0)
         # blocked volume fractions: static obstacles of the case now, coupled bodies via remap()

@@ -656,12 +656,12 @@ def test_two_labels_of_one_gas_against_an_obstacle_give_the_one_gas_run():
 @pytest.mark.parametrize("mass, inverted", [(1e-8, False), (1e-4, True)])
 def test_a_trace_zone_whose_corners_cross_becomes_a_sliver(mass, inverted):
     """The Lagrangian open volume of a zone whose corners crossed within the step (here its +x face
-    swept 1.5 zone volumes inwards): a zone holding a trace (mass below blocked.TRACE_ZONE = 1e-6 of a
+    swept 1.5 zone volumes inwards): a zone holding a trace (mass below cut_zone_kernels.TRACE_ZONE = 1e-6 of a
     full zone at its density, 1 here) keeps a sliver of 1e-9 of its volume and no EOS shift, like a cut
     zone a body surface swept (its content goes with the remap); a zone with more is an inverted
     zone the solver reports (the index of the first).  A 3x3 patch of 2-D zones, the middle one
     (index 4) tested: before, the trace zone was reported too and stopped the 3-D penetrator."""
-    from solvers.ale.blocked import lagrangian_open_volumes
+    from solvers.ale.cut_zone_kernels import lagrangian_open_volumes
 
     n, zs = 9, np.array([3, 1, 0])
     ASV = np.zeros((2, n + 3))
@@ -684,7 +684,7 @@ def test_a_nearly_empty_zone_is_a_trace_against_the_cases_density(rho_ref, inver
     density M / V = 8.6e-50 too, so against its own density it is no trace and its crossed corners
     stop the run; against the case's lightest initial density (AleSolver.rho_ref, aluminium's 2700
     here) it is one and keeps a sliver."""
-    from solvers.ale.blocked import lagrangian_open_volumes
+    from solvers.ale.cut_zone_kernels import lagrangian_open_volumes
 
     n, zs = 9, np.array([3, 1, 0])
     ASV = np.zeros((2, n + 3))
