@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adapters import case_file
 from adapters import protocol as P
 from adapters.registry import coupling_side
 from solvers.probes import PointProbes
@@ -16,12 +17,12 @@ from solvers.probes import PointProbes
 
 def parse_args(argv=None):
     ap = argparse.ArgumentParser()
-    ap.add_argument("--case", required=True)
+    ap.add_argument("--case", required=True, help="the case file the launcher wrote (adapters/case_file.py)")
     ap.add_argument("--out", required=True)
     ap.add_argument("--roles", required=True, help="comma-separated: coupler first")
     ap.add_argument("--role", required=True)
     ap.add_argument("--restart", default=None)
-    ap.add_argument("--case-sha256", default=None, help="the case file's hash as the launcher checked it")
+    ap.add_argument("--case-sha256", required=True, help="the SHA-256 of that file's bytes")
     return ap.parse_args(argv)
 
 
@@ -73,9 +74,7 @@ def serve(adapter_cls, argv=None) -> None:
     rank = place.comm.rank
     P.install_fault_handler(out, args.role, rank)
     P.register_process(out, args.role, rank)
-    from orchestrator.case import load_case   # (after joining: every rank waits in MPI_Init for the last)
-
-    case = load_case(args.case, checked_sha256=args.case_sha256)
+    case = case_file.read(args.case, args.case_sha256)
     adapter = adapter_cls(place.comm, case, out)
     ic = place.inter[P.COUPLER]
     side = coupling_side(args.role) if case.get("coupling") else None

@@ -257,8 +257,8 @@ def _conforms(schema: Any, inst: Any) -> bool:
 def _best_schema_error(schema: Mapping | None, data: Any):
     """The most relevant of the first ``_MAX_SCHEMA_ERRORS`` errors of ``data`` against ``schema``
     (the case schema when None), or None.  jsonschema is imported here, where a schema is checked
-    (the CLI), not at import: the ranks load a case the launcher has checked
-    (``load_case(checked_sha256=...)``) and skip its 0.07-0.12 s; and only for data that
+    (the CLI), not at import (the job's processes read the case the launcher checked,
+    adapters/case_file.py, without this module); and only for data that
     :func:`_conforms` does not accept (a valid case is accepted without it: 0.1 s of every
     `immerse check` and `immerse run`).  (The schema itself is validated against the metaschema by
     the tests, not here: that took 0.3-0.6 s of every `immerse` command.)"""
@@ -454,15 +454,11 @@ def ranks_for(case: Mapping, overrides: Mapping[str, Any] | Iterable[str] | None
     return result
 
 
-def load_case(case_dir: str | os.PathLike, checked_sha256: str | None = None) -> dict:
+def load_case(case_dir: str | os.PathLike) -> dict:
     """Parse and validate ``<case_dir>/case.toml``; return the normalised case dict, with
     ``case["case_sha256"]``, the SHA-256 of the bytes it was read from.
 
     ``case_dir`` may also be the path of the ``case.toml`` file itself.
-    ``checked_sha256``: the hash of a case the launcher has already checked (its coupler and ranks
-    load it again, ``--case-sha256``): the same bytes skip the schema validation (the normalising
-    and the cross-field checks still run); other bytes mean the file changed since the launch was
-    checked, and are refused.
     Raises :class:`CaseError` (one-line message) for any problem.
     """
     given = Path(case_dir).expanduser()
@@ -476,18 +472,13 @@ def load_case(case_dir: str | os.PathLike, checked_sha256: str | None = None) ->
         toml_path = case_dir / CASE_FILE
     try:
         data, sha = _read_toml(toml_path)
-        if checked_sha256 is not None and sha != checked_sha256:
-            raise CaseError(CASE_FILE, str(toml_path), "changed since the run was checked and launched "
-                            "(a case file must stay as it is while its run starts)")
-        schema = checked_sha256 is None
         _check_finite(data)   # (first: an inf is "not finite", not "beyond the range")
-        if schema:
-            err = _best_schema_error(None, data)
-            if err is not None:
-                raise _schema_error_to_case_error(err)
+        err = _best_schema_error(None, data)
+        if err is not None:
+            raise _schema_error_to_case_error(err)
 
         case = _normalise(data, case_dir)
-        _check(case, data, schema)
+        _check(case, data)
     except RecursionError:  # a structure nested past Python's limit anywhere in the pipeline
         raise CaseError(CASE_FILE, str(toml_path), "nested too deeply (arrays or tables inside "
                         "each other beyond what can be read)") from None
@@ -626,10 +617,10 @@ def _normalise(data: dict, case_dir: Path) -> dict:
     return case
 
 
-def _check(case: dict, data: dict, schema: bool = True) -> None:
+def _check(case: dict, data: dict) -> None:
     """Cross-field checks; fills ``case["ranks"]``.  ``data`` is the raw TOML (for
-    reporting values exactly as written); ``schema``: also the check kind's params against their
-    schema (False: a case the launcher has checked).  Order: [run], the registered tables' checks by order,
+    reporting values exactly as written); the check kind's params against their schema too.  Order:
+    [run], the registered tables' checks by order,
     [ranks], [check], the registered tables' file checks (schema/registry.py, hooks 3 and 4)."""
     run = case["run"]
 
@@ -669,7 +660,7 @@ def _check(case: dict, data: dict, schema: bool = True) -> None:
             raise CaseError("check.kind", kind, "unknown check kind; registered: "
                             + ", ".join(sorted(CHECKS)))
         # the kind's params: unknown keys, types, ranges, what it needs (before anything runs)
-        err = _best_schema_error(PARAMS[kind], data["check"].get("params", {})) if schema else None
+        err = _best_schema_error(PARAMS[kind], data["check"].get("params", {}))
         if err is not None:
             raise _schema_error_to_case_error(err, ("check", "params"))
         from orchestrator.checks import RULES

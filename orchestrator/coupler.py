@@ -639,9 +639,9 @@ def main(argv=None) -> None:
     place = P.join(P.COUPLER, args.roles.split(","))
     P.install_fault_handler(out, P.COUPLER, 0)
     P.register_process(out, P.COUPLER, 0)
-    from orchestrator.case import load_case   # (after joining: the ranks wait in MPI_Init until then)
+    from adapters import case_file   # (after joining: the ranks wait in MPI_Init until then)
 
-    case = load_case(args.case, checked_sha256=args.case_sha256)
+    case = case_file.read(args.case, args.case_sha256)
     running.append(Coupler(place, case, out, args.restart))
     running[0].run()
     (P.run_dir(out) / "pids" / str(os.getpid())).unlink(missing_ok=True)

@@ -24,6 +24,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+from adapters import case_file
 from adapters import protocol as P
 from adapters import registry
 from orchestrator import outdir
@@ -36,9 +37,9 @@ def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | N
     from orchestrator.case import solvers_used
 
     roles = [P.COUPLER] + solvers_used(case)
-    common = ["--case", str(case["case_dir"]), "--out", str(out), "--roles", ",".join(roles)]
-    if case.get("case_sha256"):  # the bytes checked here: the processes skip the schema (case.load_case)
-        common += ["--case-sha256", case["case_sha256"]]
+    # the case checked here, as the processes read it (adapters/case_file.py: no TOML, no loader)
+    path, sha = case_file.write(case, P.run_dir(out))
+    common = ["--case", str(path), "--case-sha256", sha, "--out", str(out), "--roles", ",".join(roles)]
     if restart:
         common += ["--restart", str(restart)]
     py = sys.executable
