@@ -102,7 +102,7 @@ Measured (full runs, 2-core VM shared with other jobs, one simulation at a time,
     near-face pressure left 3.6 % -> 2.8 .. 3.9 %, right 0.53 % -> 0.75 .. 1.37 %.  Wall (stepping)
     over three sweeps: multiplier 5.6 .. 8.9 s, penalty 4.0 .. 12.1 s (the machine's load, not k).
 
-Nothing here asserts a time; tests/orchestrator/test_bench_coupling_studies.py checks the quick
+Nothing here asserts a time; tests/orchestrator/bench/test_coupling_studies.py checks the quick
 modes' structure and physics.
 """
 from __future__ import annotations
