@@ -432,6 +432,9 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         # also after mpiexec's own end: no process of the job may outlive it
         end_job(proc, out)
         relay.close()
+        # the case handed to the processes (build_command) is theirs alone: gone with them, so a
+        # finished run leaves OUT/.run/ as it always did (outdir.py's record of what a run wrote)
+        (P.run_dir(out) / case_file.NAME).unlink(missing_ok=True)
     rc = proc.returncode
     from orchestrator import output
 
