@@ -33,12 +33,14 @@ def venv_bin() -> Path:
     return Path(sys.executable).parent
 
 
-def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | None = None) -> list[str]:
+def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | None,
+                  handed: tuple[Path, str]) -> list[str]:
+    """The mpiexec command of the job; ``handed``: (path, SHA-256) of the case file the processes read
+    (case_file.write)."""
     from orchestrator.case import solvers_used
 
     roles = [P.COUPLER] + solvers_used(case)
-    # the case checked here, as the processes read it (adapters/case_file.py: no TOML, no loader)
-    path, sha = case_file.write(case, P.run_dir(out))
+    path, sha = handed
     common = ["--case", str(path), "--case-sha256", sha, "--out", str(out), "--roles", ",".join(roles)]
     if restart:
         common += ["--restart", str(restart)]
@@ -370,7 +372,11 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     """Launch the job into a prepared ``out``, watch it, and end all of it on a failure or when
     ``stop`` is set (a signal); every completed output step is indexed afterwards. Prints nothing."""
     stop = stop or StopRequest()
-    cmd = build_command(case, out, ranks, restart)
+    # the case checked here, as the processes read it (adapters/case_file.py: no TOML, no loader);
+    # theirs alone: removed when the job ends, so a finished run leaves OUT/.run/ as it always did
+    # (outdir.py's record of what a run wrote)
+    handed = case_file.write(case, P.run_dir(out))
+    cmd = build_command(case, out, ranks, restart, handed)
     env = dict(os.environ)
     env.setdefault("NUMBA_NUM_THREADS", "1")
     env.setdefault("OMP_NUM_THREADS", "1")
@@ -391,6 +397,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     with (out / "log.txt").open("a") as f:
         f.write(f"command: {' '.join(cmd)}\n")
     if stop.signum is not None:
+        handed[0].unlink(missing_ok=True)
         return JobResult(128 + stop.signum, f"interrupted by {signal.Signals(stop.signum).name} before "
                                             "the job started", stop.signum)
     proc = subprocess.Popen(cmd, env=env, start_new_session=True, preexec_fn=dies_with_parent(),
@@ -432,9 +439,7 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
         # also after mpiexec's own end: no process of the job may outlive it
         end_job(proc, out)
         relay.close()
-        # the case handed to the processes (build_command) is theirs alone: gone with them, so a
-        # finished run leaves OUT/.run/ as it always did (outdir.py's record of what a run wrote)
-        (P.run_dir(out) / case_file.NAME).unlink(missing_ok=True)
+        handed[0].unlink(missing_ok=True)
     rc = proc.returncode
     from orchestrator import output
 
