@@ -2,6 +2,7 @@
 exactly (paths as Paths), read without the case loader or jsonschema, and refused once changed."""
 from __future__ import annotations
 
+import hashlib
 import subprocess
 import sys
 from pathlib import Path
@@ -47,7 +48,5 @@ def test_a_changed_or_missing_file_is_refused_in_one_line(tmp_path):
     with pytest.raises(case_file.CaseFileError, match="cannot be read"):
         case_file.read(tmp_path / "none.json", sha)
     (tmp_path / "list.json").write_bytes(b"[]")
-    import hashlib
-
     with pytest.raises(case_file.CaseFileError, match="not a case"):
         case_file.read(tmp_path / "list.json", hashlib.sha256(b"[]").hexdigest())
