@@ -302,53 +302,53 @@ def _zone_span(v, h, X, n, x0, iw):
 
 
 @njit(cache=True)
-def _pairs(qp, rq0, rq1, box, zlo, zn, x, vol, h, norm, planes, cells, cap):
-    """``_shepard_at``'s scan: (number of pairs, point, particle, V_j W) of every particle j and
-    point q of a kept row closer than h, in particle order; only the first ``cap`` are stored."""
+def _row_particles(rows, box, zlo, zn, x, h, planes, cells):
+    """The particles that may lie within h of a point of each kept row, as CSR over the rows
+    (``rptr``, ``rj``), each row's in ascending particle order: every particle j is listed under the
+    rows of the zones whose slabs come within h of it (``_zone_span`` per axis, in the table of the
+    cut zones' bounding box)."""
     dim = cells.size
-    h2 = h * h
     iw = np.ones(3)
     for d in range(dim):
         iw[d] = 1.0 / ((planes[d, cells[d]] - planes[d, 0]) / cells[d])
-    pq = np.empty(cap, np.int64)
-    pj = np.empty(cap, np.int64)
-    pw = np.empty(cap)
-    npair = 0
+    # the zones within a radius a little above h: a point on a slab's face exactly h away (in exact
+    # arithmetic) may still pass the rounded distance test of _shepard_at
+    reach = h * (1.0 + 1e-9)
     lo = np.zeros(3, np.int64)
     hi = np.zeros(3, np.int64)
-    # the zones within a radius a little above h: a point on a slab's face exactly h away (in exact
-    # arithmetic) may still pass the rounded distance test below
-    reach = h * (1.0 + 1e-9)
-    for j in range(x.shape[0] if rq0.size > 0 else 0):
-        empty = False
-        for d in range(dim):
-            a, b = _zone_span(x[j, d], reach, planes[d], cells[d], planes[d, 0], iw[d])
-            a = max(a, zlo[d]) - zlo[d]
-            b = min(b, zlo[d] + zn[d] - 1) - zlo[d]
-            if a > b:
-                empty = True
-                break
-            lo[d] = a
-            hi[d] = b
-        if empty:
-            continue
-        for k in range(lo[2], hi[2] + 1):
-            for jj in range(lo[1], hi[1] + 1):
-                for i in range(lo[0], hi[0] + 1):
-                    r = box[(k * zn[1] + jj) * zn[0] + i]
-                    if r < 0:
-                        continue
-                    for q in range(rq0[r], rq1[r]):
-                        r2 = 0.0
-                        for d in range(dim):
-                            r2 += (qp[q, d] - x[j, d]) ** 2
-                        if r2 < h2:
-                            if npair < cap:
-                                pq[npair] = q
-                                pj[npair] = j
-                                pw[npair] = vol[j] * _lucy(r2, h, norm)
-                            npair += 1
-    return npair, pq, pj, pw
+    rptr = np.zeros(rows + 1, np.int64)
+    rj = np.empty(0, np.int64)
+    for fill in range(2):   # count, then list (the same scan)
+        if fill == 1:
+            for r in range(rows):
+                rptr[r + 1] += rptr[r]
+            rj = np.empty(rptr[rows], np.int64)
+            at = rptr[:-1].copy()
+        for j in range(x.shape[0] if rows > 0 else 0):
+            empty = False
+            for d in range(dim):
+                a, b = _zone_span(x[j, d], reach, planes[d], cells[d], planes[d, 0], iw[d])
+                a = max(a, zlo[d]) - zlo[d]
+                b = min(b, zlo[d] + zn[d] - 1) - zlo[d]
+                if a > b:
+                    empty = True
+                    break
+                lo[d] = a
+                hi[d] = b
+            if empty:
+                continue
+            for k in range(lo[2], hi[2] + 1):
+                for jj in range(lo[1], hi[1] + 1):
+                    for i in range(lo[0], hi[0] + 1):
+                        r = box[(k * zn[1] + jj) * zn[0] + i]
+                        if r < 0:
+                            continue
+                        if fill == 0:
+                            rptr[r + 1] += 1
+                        else:
+                            rj[at[r]] = j
+                            at[r] += 1
+    return rptr, rj
 
 
 @njit(cache=True)
@@ -357,13 +357,13 @@ def _shepard_at(qp, qrow, zones, x, vol, h, norm, planes, cells):
     the kept rows (``qrow >= 0``) as CSR over the points (columns ascending), and the points with no
     particle within h (``lone``).
 
-    The points are few (the surface's) and lie in the cut zones, the particles many: each particle
-    finds the zones whose slabs come within h of it (``_zone_span`` per axis: 1-2 zones per axis at
-    h = w/2) in a table of the cut zones' bounding box, and tests the points of those -- one pass
-    over the particles with no cell lists of all of them (``shepard_weights`` builds those: ~4
-    passes and a sort).  Pairs come out in particle order, so a stable counting sort by point leaves
-    each row's columns ascending and its normalisation sums them in that order, as
-    ``shepard_weights`` does."""
+    The points lie in the cut zones: each particle is listed under the kept rows whose zones' slabs
+    come within h of it (``_row_particles``: 1-2 zones per axis at h = w/2), and each point is tested
+    against its row's list only -- no cell lists of all the particles (``shepard_weights`` builds
+    those: ~4 passes and a sort).  A row's list is in particle order, so each point's columns come
+    out ascending and its normalisation sums them in that order, as ``shepard_weights`` does.
+    (Listing per row instead of scanning pairs per particle and sorting them by point: the same
+    weights bit for bit, in a third of the time of the 3-D penetrator's interface.)"""
     dim = cells.size
     nq = qp.shape[0]
     nz = zones.size
@@ -400,28 +400,39 @@ def _shepard_at(qp, qrow, zones, x, vol, h, norm, planes, cells):
             rest //= cells[d]
             bs *= zn[d]
         box[b] = r
-    # (a fixed capacity, twice the particles a kernel support holds, rerun with the exact one if it
-    # was short: an array reassigned inside the particle loop, to grow it, makes numba reload it at
-    # every access, ~2x slower)
-    support = np.pi * h * h if dim == 2 else 4.0 / 3.0 * np.pi * h ** 3
-    per = 2.0 * support / vol[0] + 16.0 if x.shape[0] > 0 and vol[0] > 0.0 else 64.0
-    npair, pq, pj, pw = _pairs(qp, rq0, rq1, box, zlo, zn, x, vol, h, norm, planes, cells,
-                               int(min(per, 4096.0)) * nq + 64)
-    if npair > pq.size:
-        npair, pq, pj, pw = _pairs(qp, rq0, rq1, box, zlo, zn, x, vol, h, norm, planes, cells, npair)
+    # every point of a kept row against the particles listed for its row, in particle order: each
+    # row's columns come out ascending and its normalisation sums them in that order, as
+    # ``shepard_weights`` does (counted first, then written in place: no pair list to sort)
+    rptr, rj = _row_particles(nz, box, zlo, zn, x, h, planes, cells)
+    h2 = h * h
     sptr = np.zeros(nq + 1, np.int64)
-    for t in range(npair):
-        sptr[pq[t] + 1] += 1
+    for r in range(nz):
+        for q in range(rq0[r], rq1[r]):
+            c = 0
+            for t in range(rptr[r], rptr[r + 1]):
+                j = rj[t]
+                r2 = 0.0
+                for d in range(dim):
+                    r2 += (qp[q, d] - x[j, d]) ** 2
+                if r2 < h2:
+                    c += 1
+            sptr[q + 1] = c
     for q in range(nq):
         sptr[q + 1] += sptr[q]
-    fill = sptr[:-1].copy()
-    sidx = np.empty(npair, np.int64)
-    sval = np.empty(npair)
-    for t in range(npair):
-        q = pq[t]
-        sidx[fill[q]] = pj[t]
-        sval[fill[q]] = pw[t]
-        fill[q] += 1
+    sidx = np.empty(sptr[nq], np.int64)
+    sval = np.empty(sptr[nq])
+    for r in range(nz):
+        for q in range(rq0[r], rq1[r]):
+            w = sptr[q]
+            for t in range(rptr[r], rptr[r + 1]):
+                j = rj[t]
+                r2 = 0.0
+                for d in range(dim):
+                    r2 += (qp[q, d] - x[j, d]) ** 2
+                if r2 < h2:
+                    sidx[w] = j
+                    sval[w] = vol[j] * _lucy(r2, h, norm)
+                    w += 1
     nlone = 0
     for q in range(nq):
         if qrow[q] >= 0 and sptr[q + 1] == sptr[q]:
@@ -565,7 +576,7 @@ def _flush_stale_cache() -> None:
     from orchestrator.coupling import particle_surface as _surface
     from solvers.numba_cache import flush_stale_cache
 
-    flush_stale_cache([_surface_kernel, _interface_kernel, _zone_span, _pairs, _shepard_at, _particle_rows],
+    flush_stale_cache([_surface_kernel, _interface_kernel, _zone_span, _row_particles, _shepard_at, _particle_rows],
                       [G.__file__, CL.__file__, CV.__file__, P.__file__, _rows.__file__, _surface.__file__],
                       "particle_operators.deps.sha256")
 
