@@ -135,3 +135,19 @@ def test_bench_implicit_quick(tmp_path):
     p = be["params"]
     assert be["value"] == pytest.approx(p["midpoint_step_s"] / p["explicit_step_s"])
     assert p["elements"] == 117 and 10 < p["dt_ratio"] < 40
+
+
+def test_bench_startup_quick(tmp_path):
+    """The start-up bench: the floor of a kernel-loading process and a two-step ALE job's process tree
+    (its CPU includes at least the ALE rank's floor; the first step comes before the launcher ends).
+    Times are reported, not asserted (`immerse bench startup`: 0.49 s floor, 1.19 s an ALE job, 3.68 s
+    a coupled one, 2026-12-03)."""
+    out = tmp_path / "bench-startup.json"
+    r = immerse("bench", "startup", "--quick", "--out", out, timeout=600)
+    assert r.returncode == 0, r.stderr
+    res = {x["name"]: x for x in json.loads(out.read_text())["results"]}
+    floor, job = res["numpy_scipy_numba_setup"], res["sod"]
+    assert floor["unit"] == "s" and 0.0 < floor["value"] < 60.0
+    assert job["metric"] == "job_cpu_time" and job["params"]["steps"] == 2
+    assert job["value"] > floor["value"], (job["value"], floor["value"])
+    assert 0.0 < job["params"]["first_step_s"] < job["params"]["launcher_wall_s"]
