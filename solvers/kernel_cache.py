@@ -38,6 +38,7 @@ import hashlib
 import importlib.abc
 import importlib.util
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -45,14 +46,31 @@ PACKAGES = ("solvers", "orchestrator", "adapters")
 ENV_ROOT = "IMMERSE_NUMBA_CACHE_ROOT"  # the root this module chose (the user's NUMBA_CACHE_DIR, if any)
 
 
+_IMPORTS_NUMBA = re.compile(rb"^[ \t]*(?:from[ \t]+numba[ .\t]|import[ \t]+numba\b)", re.MULTILINE)
+CACHE_MACHINERY = ("solvers/kernel_cache.py", "solvers/numba_cache.py")
+"""Sources that change what the cache holds without importing numba at their top (this file patches
+numba's caching and function ids; numba_cache.py drops stale entries)."""
+
+
+def is_kernel_source(rel: str, data: bytes) -> bool:
+    """A file whose change can change compiled machine code: one that imports numba (at any
+    indentation: kernels compiled in a function too), or the cache machinery. A file that only names
+    numba in its text (a docstring, a bench that times numba's set-up) is not one: editing it no
+    longer starts a fresh cache and a 3-minute warm-up. (Numba freezes the globals a kernel reads
+    into its machine code: a constant read that way lives in a kernel source; constants passed to a
+    kernel as arguments, e.g. operators.MIN_AREA_FRACTION, may live anywhere.)"""
+    return rel in CACHE_MACHINERY or _IMPORTS_NUMBA.search(data) is not None
+
+
 def source_digest(base: Path) -> str:
-    """sha256 of the paths and contents of every .py file of PACKAGES that mentions numba."""
+    """sha256 of the paths and contents of every kernel source (is_kernel_source) of PACKAGES."""
     h = hashlib.sha256()
     for pkg in PACKAGES:
         for path in sorted((base / pkg).rglob("*.py")):
             data = path.read_bytes()
-            if b"numba" in data:
-                h.update(path.relative_to(base).as_posix().encode() + b"\0" + data + b"\0")
+            rel = path.relative_to(base).as_posix()
+            if is_kernel_source(rel, data):
+                h.update(rel.encode() + b"\0" + data + b"\0")
     return h.hexdigest()[:16]
 
 

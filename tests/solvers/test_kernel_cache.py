@@ -32,6 +32,10 @@ def test_the_digest_follows_the_kernel_sources_only(tmp_path):
     assert d1 != d0  # the callee changed: its callers' entries are in a new directory
     os.utime(base / "solvers" / "hydro.py", (0, 0))
     assert source_digest(base) == d1  # a stamp alone does not matter
+    (base / "orchestrator" / "bench.py").write_text('"""times numba\'s set-up"""\nimport numpy\n')
+    assert source_digest(base) == d1  # numba named in a text only: not a kernel source
+    (base / "orchestrator" / "late.py").write_text("def f():\n    from numba import njit\n")
+    assert source_digest(base) != d1  # numba imported inside a function: a kernel source
 
 
 def test_every_process_of_the_tree_uses_the_directory_of_its_sources(tmp_path):
