@@ -301,6 +301,15 @@ def _zone_span(v, h, X, n, x0, iw):
     return lo, hi
 
 
+@njit(cache=True, inline="always")
+def _dist2(a, i, b, j, dim):
+    """|a_i - b_j|^2, summed over the axes in order (the one rounding the count and the weights share)."""
+    r2 = 0.0
+    for d in range(dim):
+        r2 += (a[i, d] - b[j, d]) ** 2
+    return r2
+
+
 @njit(cache=True)
 def _row_particles(rows, box, zlo, zn, x, h, planes, cells):
     """The particles that may lie within h of a point of each kept row, as CSR over the rows
@@ -410,11 +419,7 @@ def _shepard_at(qp, qrow, zones, x, vol, h, norm, planes, cells):
         for q in range(rq0[r], rq1[r]):
             c = 0
             for t in range(rptr[r], rptr[r + 1]):
-                j = rj[t]
-                r2 = 0.0
-                for d in range(dim):
-                    r2 += (qp[q, d] - x[j, d]) ** 2
-                if r2 < h2:
+                if _dist2(qp, q, x, rj[t], dim) < h2:
                     c += 1
             sptr[q + 1] = c
     for q in range(nq):
@@ -426,9 +431,7 @@ def _shepard_at(qp, qrow, zones, x, vol, h, norm, planes, cells):
             w = sptr[q]
             for t in range(rptr[r], rptr[r + 1]):
                 j = rj[t]
-                r2 = 0.0
-                for d in range(dim):
-                    r2 += (qp[q, d] - x[j, d]) ** 2
+                r2 = _dist2(qp, q, x, j, dim)
                 if r2 < h2:
                     sidx[w] = j
                     sval[w] = vol[j] * _lucy(r2, h, norm)
@@ -576,7 +579,7 @@ def _flush_stale_cache() -> None:
     from orchestrator.coupling import particle_surface as _surface
     from solvers.numba_cache import flush_stale_cache
 
-    flush_stale_cache([_surface_kernel, _interface_kernel, _zone_span, _row_particles, _shepard_at, _particle_rows],
+    flush_stale_cache([_surface_kernel, _interface_kernel, _zone_span, _dist2, _row_particles, _shepard_at, _particle_rows],
                       [G.__file__, CL.__file__, CV.__file__, P.__file__, _rows.__file__, _surface.__file__],
                       "particle_operators.deps.sha256")
 
