@@ -30,6 +30,13 @@ def machine() -> dict:
             "numpy": np.__version__, "processor": platform.processor() or platform.machine()}
 
 
+def cli_run(case_dir: Path, out: Path, **kw) -> subprocess.CompletedProcess:
+    """`immerse run CASE_DIR --out OUT --replace` in a process of its own, as a user starts it (the
+    launcher's start-up included); ``kw`` goes to subprocess.run (env, cwd)."""
+    return subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", str(case_dir), "--out", str(out),
+                           "--replace"], capture_output=True, text=True, **kw)
+
+
 def run_worker(module: str, ranks: int, *args) -> str:
     """The last line `mpiexec -n ranks python -m module worker args...` prints (rank 0's result; one
     thread a rank): a bench's timing on several ranks, in a job of its own."""

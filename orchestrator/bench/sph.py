@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import json
 import os
-import subprocess
-import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench.registry import bench, machine
+from orchestrator.bench.registry import bench, cli_run, machine
 from orchestrator.schema.sph import DEFAULT_SUBSTEPS
 
 DAM = """[run]
@@ -136,8 +134,7 @@ def driver(case_dir: Path, steps: int) -> tuple[float, float]:
     the start and the end, took 0.03 s of a 3 s loop), the SPH group's seconds inside LAMMPS's
     runs within it)."""
     out = case_dir / "out"
-    r = subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", str(case_dir), "--out", str(out), "--replace"],
-                       capture_output=True, text=True, env=dict(os.environ))
+    r = cli_run(case_dir, out, env=dict(os.environ))
     if r.returncode != 0:
         raise RuntimeError(r.stderr)
     s = json.loads((out / "summary.json").read_text())

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.bench.registry import bench, machine
+from orchestrator.bench.registry import bench, cli_run, machine
 
 REPO = Path(__file__).resolve().parents[2]
 KINDS = {"ale": "sod", "lagrange": "elastic_bar_wave", "coupled ale+lagrange": "acoustic_transmission",
@@ -65,8 +65,7 @@ def time_job(case: Path, out: Path) -> dict:
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
     cpu0, t0 = _children_cpu(), time.perf_counter()
-    r = subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", str(case), "--out", str(out), "--replace"],
-                       capture_output=True, text=True, env=env, cwd=REPO)
+    r = cli_run(case, out, env=env, cwd=REPO)
     wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
     summary = out / "summary.json"
     if not summary.is_file():
