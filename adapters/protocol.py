@@ -73,8 +73,35 @@ def register_process(out_dir: Path, role: str, rank: int) -> None:
     d = run_dir(out_dir) / "pids"
     d.mkdir(parents=True, exist_ok=True)
     tmp = d / f".{os.getpid()}.tmp"
-    tmp.write_text(f"{role} {rank}\n")
+    tmp.write_text(f"{role} {rank} {start_ticks(os.getpid())}\n")
     os.replace(tmp, d / str(os.getpid()))
+
+
+def start_ticks(pid: int) -> int | None:
+    """When process ``pid`` started (clock ticks since boot, /proc field 22), None if it is gone: with
+    the pid, the identity of a process (a pid alone may be reused once it has ended)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return int(f.read().rsplit(")", 1)[1].split()[19])
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def read_record(path: Path) -> tuple[str, int, int | None] | None:
+    """(role, rank, start ticks) of a process record (register_process), None once removed."""
+    try:
+        fields = Path(path).read_text().split()
+        return fields[0], int(fields[1]), (int(fields[2]) if len(fields) > 2 and fields[2].isdigit() else None)
+    except (OSError, IndexError, ValueError):
+        return None
+
+
+def is_recorded_process(path: Path) -> bool:
+    """Is the process a record names (by its pid, the record's file name) still the one that wrote it
+    (the same start time)? A process started from a warm server (orchestrator/prestart) has the
+    server's command line, so its start time, not its command line, says who it is."""
+    rec = read_record(path)
+    return rec is not None and rec[2] is not None and start_ticks(int(Path(path).name)) == rec[2]
 
 
 def write_stop_state(out_dir: Path, **state) -> None:
@@ -174,10 +201,10 @@ def gone_processes(out_dir: Path) -> list[str]:
         return gone
     for f in records:
         if f.name.isdigit() and not is_running(int(f.name)):
-            try:
-                role, rank = f.read_text().split()
-            except (OSError, ValueError):
+            rec = read_record(f)
+            if rec is None:
                 continue   # removed meanwhile: a clean exit
+            role, rank = rec[0], rec[1]
             gone.append(f"{role} rank {rank}")
     return gone
 

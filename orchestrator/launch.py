@@ -27,7 +27,7 @@ from pathlib import Path
 from adapters import case_file
 from adapters import protocol as P
 from adapters import registry
-from orchestrator import outdir
+from orchestrator import outdir, prestart
 
 def venv_bin() -> Path:
     return Path(sys.executable).parent
@@ -44,11 +44,10 @@ def build_command(case: dict, out: Path, ranks: dict[str, int], restart: str | N
     common = ["--case", str(path), "--case-sha256", sha, "--out", str(out), "--roles", ",".join(roles)]
     if restart:
         common += ["--restart", str(restart)]
-    py = sys.executable
     cmd = [str(venv_bin() / "mpiexec"), "-disable-auto-cleanup",
-           "-n", "1", py, "-m", "orchestrator.coupler", *common, "--role", P.COUPLER]
+           "-n", "1", *prestart.command("orchestrator.coupler", [*common, "--role", P.COUPLER])]
     for r in roles[1:]:
-        cmd += [":", "-n", str(ranks[r]), py, "-m", registry.module_of(r), *common, "--role", r]
+        cmd += [":", "-n", str(ranks[r]), *prestart.command(registry.module_of(r), [*common, "--role", r])]
     return cmd
 
 
@@ -131,11 +130,10 @@ class RankWatch:
             self.poller.register(fd, select.POLLIN)
 
     def _ended(self, record: Path) -> None:
-        try:
-            role, rank = record.read_text().split()
-        except (OSError, ValueError):
+        rec = P.read_record(record)
+        if rec is None:
             return  # removed: a clean exit
-        self.failed.append(f"{role} rank {rank}")
+        self.failed.append(f"{rec[0]} rank {rec[1]}")
 
     def wait(self, timeout_ms: int) -> list[str]:
         """Wait up to timeout_ms; return the ranks found failed so far (first failure first)."""
@@ -153,11 +151,9 @@ class RankWatch:
         """(pid, pidfd) of a live, recorded process of the job."""
         self._scan()
         for fd, (pid, record) in self.fds.items():
-            try:
-                if record.read_text().split() == [role, str(rank)]:
-                    return pid, fd
-            except OSError:
-                pass
+            rec = P.read_record(record)
+            if rec is not None and rec[:2] == (role, rank):
+                return pid, fd
         return None
 
     def close(self) -> None:
@@ -210,14 +206,9 @@ def descendants(pid: int) -> set[int]:
     return found
 
 
-def _runs_job(pid: int, out: Path) -> bool:
-    """Is ``pid`` a process of the job writing to ``out`` (its command line says --out out)?"""
-    try:
-        argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-    except OSError:
-        return False
-    want = os.fsencode(str(out))
-    return any(a == b"--out" and b == want for a, b in zip(argv, argv[1:]))
+def _runs_job(record: Path) -> bool:
+    """Is the process of a pid record of the job still the one that wrote it (not a reused pid)?"""
+    return P.is_recorded_process(record)
 
 
 def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
@@ -229,7 +220,7 @@ def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
     pids = descendants(proc.pid) if proc.returncode is None else set()
     d = P.run_dir(out) / "pids"
     if d.is_dir():
-        pids |= {int(f.name) for f in d.iterdir() if f.name.isdigit() and _runs_job(int(f.name), out)}
+        pids |= {int(f.name) for f in d.iterdir() if f.name.isdigit() and _runs_job(f)}
     fds = {}
     for pid in pids:
         try:

@@ -27,13 +27,79 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
-def immerse(*args, timeout=600, **kw) -> subprocess.CompletedProcess:
-    """Run the `immerse` CLI of this venv in a subprocess (as a user would)."""
+def immerse_env() -> dict:
+    """The environment of an `immerse` subprocess: this one, with the repository first on the path."""
     env = dict(os.environ)
     env.pop("IMMERSE_TTY", None)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *map(str, args)], cwd=kw.pop("cwd", REPO),
-                          capture_output=True, text=True, timeout=timeout, env=env, **kw)
+    return env
+
+
+def immerse(*args, timeout=600, **kw) -> subprocess.CompletedProcess:
+    """Run the `immerse` CLI of this venv in a subprocess (as a user would; started from the worker's
+    warm process server when it runs: `prestart_server`)."""
+    from orchestrator import prestart
+
+    return subprocess.run(prestart.command("orchestrator.cli", list(map(str, args))), cwd=kw.pop("cwd", REPO),
+                          capture_output=True, text=True, timeout=timeout, env=immerse_env(), **kw)
+
+
+# ---- the warm process server (orchestrator/prestart) -----------------------------------------------
+# Every job of the suite starts 3-5 Python processes and every refused input one: ~1,000 processes
+# that each spend most of a second importing numpy, scipy, h5py, numba and loading the solver kernels.
+# Each pytest worker starts one server that does that once; `immerse()` and the launcher's mpiexec
+# command then start their processes through its stub (the same code runs: the server refuses any
+# request whose sources or import-time environment differ, and the stub then runs the plain
+# command). IMMERSE_PRESTART=0 (or any value set before the suite starts) leaves it off; tests that
+# look at a process's own command line or environment in /proc turn it off for their job (`plain`).
+_SERVER: subprocess.Popen | None = None
+
+
+def _start_prestart_server() -> None:
+    global _SERVER
+    from orchestrator import prestart
+
+    if prestart.ENV in os.environ or int(os.environ.get("PMI_SIZE", "1")) > 1:
+        return
+    import tempfile
+
+    from orchestrator.launch import dies_with_parent
+
+    d = Path(tempfile.mkdtemp(prefix="immerse-prestart-"))
+    path = d / "socket"
+    _SERVER = subprocess.Popen([sys.executable, "-m", "orchestrator.prestart.server", str(path)], cwd=REPO,
+                               env=immerse_env(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                               start_new_session=True, preexec_fn=dies_with_parent(signal.SIGTERM))
+    # set now, answered once the server has loaded (a few seconds): until the socket exists the stub
+    # runs the plain command
+    os.environ[prestart.ENV] = str(path)
+
+
+def _stop_prestart_server() -> None:
+    if _SERVER is not None and _SERVER.poll() is None:
+        _SERVER.terminate()
+        try:
+            _SERVER.wait(10)
+        except subprocess.TimeoutExpired:
+            _SERVER.kill()
+
+
+@pytest.fixture
+def plain(monkeypatch):
+    """Start this test's processes without the warm server (it inspects them in /proc)."""
+    from orchestrator import prestart
+
+    monkeypatch.delenv(prestart.ENV, raising=False)
+
+
+@pytest.hookimpl(tryfirst=True)
+def pytest_sessionstart(session):
+    """Before xdist starts its workers: they inherit IMMERSE_PRESTART and share this one server."""
+    _start_prestart_server()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _stop_prestart_server()
 
 
 @pytest.fixture

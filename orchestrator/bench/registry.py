@@ -32,9 +32,13 @@ def machine() -> dict:
 
 def cli_run(case_dir: Path, out: Path, **kw) -> subprocess.CompletedProcess:
     """`immerse run CASE_DIR --out OUT --replace` in a process of its own, as a user starts it (the
-    launcher's start-up included); ``kw`` goes to subprocess.run (env, cwd)."""
+    launcher's start-up included, never from a warm process server: orchestrator/prestart); ``kw``
+    goes to subprocess.run (env, cwd)."""
+    from orchestrator.prestart import ENV
+
+    env = {k: v for k, v in kw.pop("env", os.environ).items() if k != ENV}
     return subprocess.run([sys.executable, "-m", "orchestrator.cli", "run", str(case_dir), "--out", str(out),
-                           "--replace"], capture_output=True, text=True, **kw)
+                           "--replace"], capture_output=True, text=True, env=env, **kw)
 
 
 def run_worker(module: str, ranks: int, *args) -> str:

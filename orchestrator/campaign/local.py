@@ -13,9 +13,10 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-import sys
 import time
 from collections import deque
+
+from orchestrator import prestart
 
 
 def run_weight(run, cores: int) -> int:
@@ -50,7 +51,7 @@ def run_local(pending: list, timeout: float | None, cores: int, on_done) -> None
                 if running and w > free:
                     break
                 queue.popleft()
-                cmd = [sys.executable, "-m", "orchestrator.campaign.task", str(d), "--engine", "local"]
+                cmd = prestart.command("orchestrator.campaign.task", [str(d), "--engine", "local"])
                 if timeout is not None:
                     cmd += ["--timeout", str(timeout)]
                 proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL,

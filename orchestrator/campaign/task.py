@@ -21,6 +21,8 @@ import sys
 import time
 from pathlib import Path
 
+from orchestrator import prestart
+
 STATUSES = {
     "passed": "ran to its end time; its check passed (or it has none)",
     "warned": "ran to its end time, but a detector warned of a known failure (an ill-conditioned "
@@ -90,7 +92,7 @@ def run_task(d: Path, timeout: float | None = None, engine: str = "local") -> in
     record(camp_out, d / "stdout.txt", d / "stderr.txt", d / "result.json")
     out = d / "out"
     _wait_for_previous(out)
-    cmd = [sys.executable, "-m", "orchestrator.cli", "run", str(d / meta["name"]), "--out", str(out), "--replace"]
+    cmd = prestart.command("orchestrator.cli", ["run", str(d / meta["name"]), "--out", str(out), "--replace"])
     started = time.monotonic()
     started_at = time.time()
     with open(d / "stdout.txt", "w") as so, open(d / "stderr.txt", "w+") as se:

@@ -35,7 +35,7 @@ def _pids(out):
     d = out / ".run" / "pids"
     found = {}
     for f in d.glob("[0-9]*"):
-        found[f.read_text().strip()] = int(f.name)
+        found[" ".join(f.read_text().split()[:2])] = int(f.name)  # "role rank" (then its start time)
     return found
 
 

@@ -41,7 +41,7 @@ def _records(out):
     found = {}
     for f in d.glob("[0-9]*") if d.is_dir() else ():
         try:
-            found[f.read_text().strip()] = int(f.name)
+            found[" ".join(f.read_text().split()[:2])] = int(f.name)  # "role rank" (then its start time)
         except (OSError, ValueError):
             pass   # (removed by a clean exit meanwhile)
     return found
