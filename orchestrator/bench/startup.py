@@ -15,6 +15,10 @@ tests (README, Tests). Measured here, as medians of repeated runs:
   (acoustic_transmission), SPH particles alone (sph_shock_tube).
 
 The job's CPU over the floor says how many floors a job pays and what our own start-up adds.
+
+Each kind runs again with its processes forked from a warm process server (orchestrator/prestart, as
+the test suite runs them): the same figures, the CPU being the stubs' plus what the server's log says
+each forked process used (with everything it reaped), and the ratios plain / warm.
 """
 from __future__ import annotations
 
@@ -31,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator import prestart
 from orchestrator.bench.registry import bench, cli_run, machine
 
 REPO = Path(__file__).resolve().parents[2]
@@ -60,13 +65,37 @@ def _two_step_case(name: str, tmp: Path) -> Path:
     return case
 
 
-def time_job(case: Path, out: Path) -> dict:
-    """One `immerse run` of ``case`` in a process of its own: wall and tree CPU seconds, first step."""
+def _env() -> dict:
     env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
+    env.pop(prestart.ENV, None)
+    return env
+
+
+def _logged_cpu(log: Path) -> float:
+    try:
+        return sum(json.loads(line)["cpu_s"] for line in log.read_text().splitlines() if line.strip())
+    except OSError:
+        return 0.0
+
+
+def time_job(case: Path, out: Path, server: Path | None = None) -> dict:
+    """One `immerse run` of ``case`` in a process of its own (through the warm ``server`` if given):
+    wall and CPU seconds of all its processes, first step."""
+    env = _env()
+    log = Path(f"{server}.log") if server else None
+    logged0 = _logged_cpu(log) if log else 0.0
     cpu0, t0 = _children_cpu(), time.perf_counter()
-    r = cli_run(case, out, env=env, cwd=REPO)
+    if server is None:
+        r = cli_run(case, out, env=env, cwd=REPO)
+    else:
+        env[prestart.ENV] = str(server)
+        r = subprocess.run(prestart.command("orchestrator.cli", ["run", str(case), "--out", str(out), "--replace"]),
+                           capture_output=True, text=True, env=env, cwd=REPO)
     wall, cpu = time.perf_counter() - t0, _children_cpu() - cpu0
+    if log:
+        time.sleep(0.05)  # the watchers log as their processes are reaped, just after the stubs end
+        cpu += _logged_cpu(log) - logged0
     summary = out / "summary.json"
     if not summary.is_file():
         raise RuntimeError(f"startup bench: {case.name} wrote no summary (exit {r.returncode}): {r.stderr.strip()[-300:]}")
@@ -83,6 +112,18 @@ def floor_cpu() -> float:
     return float(r.stdout.strip().splitlines()[-1])
 
 
+def start_server(tmp: Path) -> tuple[subprocess.Popen, Path]:
+    """A warm process server of the bench's own; returns once it answers."""
+    path = tmp / "prestart"
+    proc = subprocess.Popen([sys.executable, "-m", "orchestrator.prestart.server", str(path)], env=_env(), cwd=REPO,
+                            stdout=subprocess.PIPE, text=True, start_new_session=True)
+    line = proc.stdout.readline()
+    if not line or not json.loads(line).get("ready"):
+        proc.kill()
+        raise RuntimeError("startup bench: the warm process server did not start")
+    return proc, path
+
+
 @bench("startup")
 def bench_startup(out: Path, quick: bool = False) -> Path:
     """Medians over rounds (the kinds interleaved, so that the machine's load hits them alike)."""
@@ -90,24 +131,41 @@ def bench_startup(out: Path, quick: bool = False) -> Path:
     kinds = {k: v for k, v in KINDS.items() if not quick or k == "ale"}
     floors = []
     runs = {k: [] for k in kinds}
+    warm = {k: [] for k in kinds}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         cases = {k: _two_step_case(name, tmp) for k, name in kinds.items()}
-        for r in range(rounds):
-            floors.append(floor_cpu())
-            for k, case in cases.items():
-                runs[k].append(time_job(case, tmp / f"out_{case.name}_{r}"))
+        server, path = start_server(tmp)
+        try:
+            for r in range(rounds):
+                floors.append(floor_cpu())
+                for k, case in cases.items():
+                    runs[k].append(time_job(case, tmp / f"out_{case.name}_{r}"))
+                    warm[k].append(time_job(case, tmp / f"warm_{case.name}_{r}", path))
+        finally:
+            server.terminate()
+            server.wait(10)
     floor = float(np.median(floors))
     results = [{"name": "numpy_scipy_numba_setup", "metric": "cpu_time", "value": floor, "unit": "s",
                 "params": {"rounds": rounds, "of": "a fresh python: import numpy, numba; numba's registries set up "
                                                   "(with its BLAS check's import of scipy.linalg)"}}]
+    keys = ("wall_s", "cpu_s", "first_step_s", "steps_wall_s")
     for k, rs in runs.items():
-        med = {key: float(np.median([x[key] for x in rs])) for key in ("wall_s", "cpu_s", "first_step_s", "steps_wall_s")}
+        med = {key: float(np.median([x[key] for x in rs])) for key in keys}
+        hot = {key: float(np.median([x[key] for x in warm[k]])) for key in keys}
         results.append({"name": KINDS[k], "metric": "job_cpu_time", "value": med["cpu_s"], "unit": "s",
                         "params": {"kind": k, "steps": STEPS, "rounds": rounds, "launcher_wall_s": med["wall_s"],
                                    "first_step_s": med["first_step_s"], "time_loop_wall_s": med["steps_wall_s"],
                                    "cpu_over_floor": med["cpu_s"] / floor,
                                    "of": "CPU of the launcher and every process it started (RUSAGE_CHILDREN), "
                                          f"median of {rounds}"}})
+        results.append({"name": f"{KINDS[k]}_warm", "metric": "job_cpu_time", "value": hot["cpu_s"], "unit": "s",
+                        "params": {"kind": k, "steps": STEPS, "rounds": rounds, "launcher_wall_s": hot["wall_s"],
+                                   "first_step_s": hot["first_step_s"], "time_loop_wall_s": hot["steps_wall_s"],
+                                   "cpu_plain_over_warm": med["cpu_s"] / hot["cpu_s"],
+                                   "wall_plain_over_warm": med["wall_s"] / hot["wall_s"],
+                                   "of": "the same job, its processes forked from a warm process server "
+                                         "(orchestrator/prestart): the stubs' CPU and the forked processes' "
+                                         f"(the server's log), median of {rounds}"}})
     out.write_text(json.dumps({"results": results, "machine": machine()}, indent=2))
     return out

@@ -2,6 +2,8 @@
 
     python -m orchestrator.prestart.server SOCKET
 
+Each process it ran is a line of SOCKET.log (JSON: module, pid, how it ended, CPU and wall seconds).
+
 Hook order, each step once:
   1. preload(): the third-party modules, the entry modules of a job (the CLI, the launcher, the
      coupler, every adapter) and every kernel source, with `mpi4py.MPI` refused (MPI_Init belongs to
@@ -348,8 +350,24 @@ def become(req: dict, fds: list[int]) -> None:
         _finish(code, by_signal)
 
 
-def watch(conn: socket.socket, held: Loaded) -> None:
-    """Hook 3, in a watcher forked for one request; never returns."""
+def _log(path: str | None, row: dict) -> None:
+    """One line a process: what ran warm, how it ended, its CPU (with everything it reaped) and wall
+    seconds. One write of an O_APPEND file: whole lines however many watchers write."""
+    if path is None:
+        return
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o600)
+        try:
+            os.write(fd, (json.dumps(row) + "\n").encode())
+        finally:
+            os.close(fd)
+    except OSError:
+        pass
+
+
+def watch(conn: socket.socket, held: Loaded, log: str | None = None) -> None:
+    """Hook 3, in a watcher forked for one request; never returns. Each process that ran is a line of
+    ``log`` (_log)."""
     signal.signal(signal.SIGCHLD, signal.SIG_DFL)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     try:
@@ -364,6 +382,7 @@ def watch(conn: socket.socket, held: Loaded) -> None:
             conn.sendall(b"N " + why.encode(errors="replace").replace(b"\n", b" ") + b"\n")
         finally:
             os._exit(0)
+    t0 = time.monotonic()
     pid = os.fork()
     if pid == 0:
         conn.close()
@@ -382,9 +401,12 @@ def watch(conn: socket.socket, held: Loaded) -> None:
     while True:
         for fd, _ in poller.poll():
             if fd == pidfd:
-                _, status = os.waitpid(pid, 0)
+                _, status, usage = os.wait4(pid, 0)
                 sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
                 msg = f"S {sig}\n" if sig is not None else f"X {os.waitstatus_to_exitcode(status)}\n"
+                _log(log, {"module": req["module"], "pid": pid, "end": msg.split()[0], "code": int(msg.split()[1]),
+                           "cpu_s": round(usage.ru_utime + usage.ru_stime, 4),
+                           "wall_s": round(time.monotonic() - t0, 4)})
                 if not stub_gone:
                     try:
                         conn.sendall(msg.encode())
@@ -432,7 +454,7 @@ def serve(path: str) -> None:
             if pid == 0:
                 try:
                     listener.close()
-                    watch(conn, held)
+                    watch(conn, held, f"{path}.log")
                 finally:
                     os._exit(0)
             conn.close()

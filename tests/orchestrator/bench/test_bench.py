@@ -151,3 +151,7 @@ def test_bench_startup_quick(tmp_path):
     assert job["metric"] == "job_cpu_time" and job["params"]["steps"] == 2
     assert job["value"] > floor["value"], (job["value"], floor["value"])
     assert 0.0 < job["params"]["first_step_s"] < job["params"]["launcher_wall_s"]
+    warm = res["sod_warm"]  # the same job forked from a warm process server (orchestrator/prestart)
+    assert warm["metric"] == "job_cpu_time" and warm["value"] > 0.0
+    assert 0.0 < warm["params"]["first_step_s"] < warm["params"]["launcher_wall_s"]
+    assert warm["params"]["cpu_plain_over_warm"] == pytest.approx(job["value"] / warm["value"])
