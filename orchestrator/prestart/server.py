@@ -340,12 +340,10 @@ def become(req: dict, fds: list[int]) -> None:
             code = 0
         except SystemExit as e:
             code = _exit_code(e.code)
-        except KeyboardInterrupt:
-            traceback.print_exc()
-            code, by_signal = 130, signal.SIGINT
-        except BaseException:  # noqa: BLE001 (reported as Python reports it)
-            traceback.print_exc()
-            code = 1
+        except BaseException as e:  # noqa: BLE001 (reported as Python reports it: through sys.excepthook,
+            # which a rank replaces with its failure report: adapters/protocol.install_fault_handler)
+            sys.excepthook(type(e), e, e.__traceback__)
+            code, by_signal = (130, signal.SIGINT) if isinstance(e, KeyboardInterrupt) else (1, None)
     finally:
         _finish(code, by_signal)
 

@@ -29,6 +29,9 @@ def main(argv: list[str]) -> None:
         sys.exit("a message for stderr")
     if what == "raise":
         raise RuntimeError("raised by the probe")
+    if what == "hooked-raise":  # as a rank's fault handler does (adapters/protocol.py)
+        sys.excepthook = lambda kind, value, tb: print(f"hooked: {kind.__name__}: {value}", file=sys.stderr)
+        raise RuntimeError("raised past a hook")
     if what == "interrupt":
         raise KeyboardInterrupt
     if what == "kill-self":

@@ -86,11 +86,13 @@ def test_the_forked_process_gets_what_the_plain_one_gets(socket_path, tmp_path):
     assert warm[2] == "to stderr\n" and warm[3] == b"through the extra descriptor\n"
 
 
-@pytest.mark.parametrize("what, code", [("exit-message", 1), ("raise", 1), ("interrupt", -signal.SIGINT),
+@pytest.mark.parametrize("what, code", [("exit-message", 1), ("raise", 1), ("hooked-raise", 1),
+                                        ("interrupt", -signal.SIGINT),
                                         ("kill-self", -signal.SIGTERM)])
 def test_it_ends_as_the_plain_process_ends(socket_path, what, code):
-    """SystemExit with a message, an uncaught error (traceback), KeyboardInterrupt (death by SIGINT, as
-    Python ends) and a death by signal give the stub the plain process's status and stderr."""
+    """SystemExit with a message, an uncaught error (traceback; through sys.excepthook, which a rank
+    replaces with its failure report), KeyboardInterrupt (death by SIGINT, as Python ends) and a death
+    by signal give the stub the plain process's status and stderr."""
     warm, plain = (subprocess.run(_command(path, [what]), env=_env(path), capture_output=True, text=True,
                                   timeout=60) for path in (socket_path, None))
     assert warm.returncode == plain.returncode == code
