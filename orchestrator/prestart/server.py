@@ -47,14 +47,19 @@ from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[2]
 PACKAGES = ("orchestrator", "adapters", "solvers")
+CUSTOMIZE = ("sitecustomize", "usercustomize")  # what site imports as Python starts
 THIRD_PARTY = ("numpy", "scipy.sparse", "scipy.sparse.linalg", "scipy.spatial", "h5py", "numba",
                "meshio", "jsonschema")
 ENTRY = ("orchestrator.cli", "orchestrator.launch", "orchestrator.coupler", "adapters.runtime")
-IMPORT_TIME_ENV = ("PYTHONPATH", "PYTHONHOME", "PYTHONOPTIMIZE", "PYTHONSAFEPATH", "PYTHONNOUSERSITE",
+IMPORT_TIME_ENV = ("PYTHONHOME", "PYTHONOPTIMIZE", "PYTHONSAFEPATH", "PYTHONNOUSERSITE",
+                   "PYTHONWARNINGS", "PYTHONDEVMODE", "PYTHONFAULTHANDLER", "PYTHONTRACEMALLOC",
+                   "PYTHONIOENCODING", "PYTHONUTF8", "PYTHONHASHSEED", "LANG", "LC_ALL", "LC_CTYPE",
                    "LD_LIBRARY_PATH", "LD_PRELOAD", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                    "MKL_NUM_THREADS", "MPLBACKEND")
-"""Environment read while the preloaded modules were imported (by Python, the BLAS, numba, our
-kernel cache): a request must carry the server's values (NUMBA_* too, below)."""
+IMPORT_TIME_PREFIXES = ("NUMBA_", "MPI4PY_")
+"""Environment read as Python starts or while the preloaded modules were imported (by Python, the
+BLAS, numba, mpi4py, our kernel cache): a request must carry the server's values (NUMBA_CACHE_DIR
+aside: checked against the directory the server's kernels came from)."""
 
 _START_ENV = dict(os.environ)  # before kernel_cache.configure() adds NUMBA_CACHE_DIR
 
@@ -167,15 +172,69 @@ class Loaded:
 
         self.stamps = source_stamps()
         self.digest = kernel_cache.source_digest(REPO)
-        self.packages = {p: getattr(sys.modules.get(p), "__file__", None) for p in PACKAGES}
+        # where each top-level module the server imported came from, and the path it searched
+        pythonpath = search_path(_START_ENV, os.getcwd())
+        self.rest = [p for p in sys.path[1:] if p not in pythonpath]
+        self.path = [os.getcwd(), *pythonpath, *self.rest]
+        # (frozen and built-in modules come before any path, and an extension may load a module of
+        # its own by file: only those a search of the path found count)
+        self.tops = {}
+        for n, m in list(sys.modules.items()):
+            spec = getattr(m, "__spec__", None)
+            if "." in n or n == "__main__" or spec is None or not spec.has_location or not spec.origin:
+                continue
+            where = os.path.dirname(spec.origin)
+            if spec.submodule_search_locations is not None:  # a package: its directory's parent
+                where = os.path.dirname(where)
+            if where in self.path and n not in CUSTOMIZE:
+                self.tops[n] = spec.origin
+        self.customize = {n: getattr(getattr(sys.modules.get(n), "__spec__", None), "origin", None)
+                          for n in CUSTOMIZE}
+
+
+def search_path(env: dict, cwd: str) -> list[str]:
+    """The PYTHONPATH entries of ``env`` as `python -m` in ``cwd`` searches them: absolute, an empty
+    entry being the directory, a repeated one once."""
+    out: list[str] = []
+    pp = env.get("PYTHONPATH")
+    for p in pp.split(os.pathsep) if pp else ():
+        p = os.path.abspath(os.path.join(cwd, p)) if p else cwd
+        if p not in out:
+            out.append(p)
+    return out
+
+
+def _found(path: list[str], names) -> dict[str, str | None]:
+    """Where a process searching ``path`` (for `-m`: its directory, PYTHONPATH, then the server's own
+    standard and site directories) finds each top-level module of ``names`` (None: nowhere). Asked of
+    the import system's own finders (the editable install's included) with sys.path set to ``path``
+    meanwhile."""
+    saved, cache = sys.path[:], dict(sys.path_importer_cache)
+    sys.path[:] = path
+    found = {}
+    try:
+        for name in names:
+            spec = None
+            for finder in sys.meta_path:
+                find = getattr(finder, "find_spec", None)
+                spec = find(name, None) if find else None
+                if spec is not None:
+                    break
+            found[name] = spec.origin if spec is not None else None
+        return found
+    finally:
+        sys.path[:] = saved
+        sys.path_importer_cache.clear()
+        sys.path_importer_cache.update(cache)
 
 
 def _import_time_keys(env: dict) -> set[str]:
-    return {k for k in env if k.startswith("NUMBA_") and k != "NUMBA_CACHE_DIR"} | set(IMPORT_TIME_ENV)
+    return {k for k in env if k.startswith(IMPORT_TIME_PREFIXES) and k != "NUMBA_CACHE_DIR"} | set(IMPORT_TIME_ENV)
 
 
 def refusal(req: dict, held: Loaded) -> str | None:
-    """Why the forked process would not run what `python -m MODULE` runs, or None."""
+    """Why the forked process would not run what `python -m MODULE` runs, or None; adds to ``req``
+    the module search path it will have and the sitecustomize it must run first."""
     from solvers import kernel_cache
 
     env = req["env"]
@@ -185,10 +244,15 @@ def refusal(req: dict, held: Loaded) -> str | None:
     for k in ("NUMBA_CACHE_DIR", kernel_cache.ENV_ROOT):
         if k in env and env[k] != os.environ.get(k):
             return f"environment {k} differs"
-    for p, origin in held.packages.items():  # `-m` puts the directory first on sys.path
-        spec = importlib.machinery.PathFinder.find_spec(p, [req["cwd"]])
-        if spec is not None and spec.origin != origin:
-            return f"{req['cwd']} holds another {p}"
+    path = [req["cwd"], *search_path(env, req["cwd"]), *held.rest]  # `-m` puts the directory first
+    req["path"] = path
+    if path != held.path:
+        found = _found(path, [*held.tops, *CUSTOMIZE])
+        for name, origin in [*held.tops.items(), *held.customize.items()]:
+            if found[name] != origin and not (name in CUSTOMIZE and origin is None):
+                return f"the directory and PYTHONPATH find another {name}"
+        # a sitecustomize the server did not run (e.g. a test's audit hook): run before MODULE
+        req["customize"] = {n: found[n] for n in CUSTOMIZE if found[n] and not held.customize[n]}
     for f, stamp in held.stamps.items():
         try:
             st = os.stat(f)
@@ -285,6 +349,21 @@ def _finish(code: int, by_signal: int | None = None) -> None:
     os._exit(code)
 
 
+def _run_customize(name: str, origin: str) -> None:
+    """Import ``name`` (sitecustomize, usercustomize) from ``origin`` as site does at start; its error
+    is reported as site reports it, and the process goes on."""
+    import importlib.util
+
+    try:
+        spec = importlib.util.spec_from_file_location(name, origin)
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[name] = mod
+        spec.loader.exec_module(mod)
+    except Exception as e:  # noqa: BLE001
+        sys.modules.pop(name, None)
+        print(f"Error in {name}; set PYTHONVERBOSE for traceback:\n{type(e).__name__}: {e}", file=sys.stderr)
+
+
 def become(req: dict, fds: list[int]) -> None:
     """Hook 3c, in the forked process: take the stub's place and run its module; never returns."""
     code, by_signal = 1, None
@@ -330,7 +409,10 @@ def become(req: dict, fds: list[int]) -> None:
         os.environ.update(req["env"])
         _streams(req["env"], targets)
         sys.argv = [req["module"], *req["args"]]
-        sys.path[0] = req["cwd"]
+        sys.path[:] = req.get("path") or [req["cwd"], *sys.path[1:]]
+        sys.path_importer_cache.clear()
+        for name, origin in req.get("customize", {}).items():
+            _run_customize(name, origin)
         import runpy
 
         # `-m` runs the module as __main__ only: a preloaded copy under its own name would be a second
@@ -374,6 +456,7 @@ def watch(conn: socket.socket, held: Loaded, log: str | None = None) -> None:
         os._exit(0)
     why = refusal(req, held)
     if why:
+        _log(log, {"module": req.get("module"), "refused": why})
         for fd in fds:
             os.close(fd)
         try:

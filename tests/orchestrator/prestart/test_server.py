@@ -100,6 +100,24 @@ def test_it_ends_as_the_plain_process_ends(socket_path, what, code):
     assert last(warm) == last(plain), (warm.stderr, plain.stderr)
 
 
+def test_a_sitecustomize_on_the_path_runs_before_the_module(socket_path, tmp_path):
+    """As `python -m` runs site's sitecustomize from PYTHONPATH first (the suite's audit hook that
+    sees every process a refused input would launch is one), so does the forked process."""
+    site = tmp_path / "site"
+    site.mkdir()
+    (site / "sitecustomize.py").write_text("import os\nos.environ['PROBE_VALUE'] = 'set by sitecustomize'\n")
+    outs = []
+    for path in (socket_path, None):
+        env = _env(path)
+        env["PYTHONPATH"] = f"{site}{os.pathsep}{env['PYTHONPATH']}"
+        p = subprocess.run(_command(path, ["report", "0"]), env=env, capture_output=True, text=True, timeout=60,
+                           input="")
+        assert p.returncode == 0, p.stderr
+        outs.append(json.loads(p.stdout))
+    assert outs[0]["warm"] is True and outs[1]["warm"] is False
+    assert outs[0]["probe_env"] == outs[1]["probe_env"] == "set by sitecustomize"
+
+
 def _started(socket_path, tmp_path):
     pidfile = tmp_path / "pid"
     stub = subprocess.Popen(_command(socket_path, ["wait", str(pidfile)]), env=_env(socket_path),
@@ -153,19 +171,37 @@ def test_the_server_refuses_what_it_did_not_load(tmp_path, monkeypatch):
     from solvers import kernel_cache
 
     held.digest = kernel_cache.source_digest(REPO)
-    held.packages = {"orchestrator": str(REPO / "orchestrator" / "__init__.py")}
-    monkeypatch.setattr(srv, "_START_ENV", {"PYTHONPATH": "a", "NUMBA_OPT": "3"})
-    req = {"env": {"PYTHONPATH": "a", "NUMBA_OPT": "3"}, "cwd": str(tmp_path)}
+    import json as json_module  # a top-level module of the standard library, imported by the server
+
+    held.tops = {"orchestrator": str(REPO / "orchestrator" / "__init__.py"), "json": json_module.__file__}
+    held.customize = {"sitecustomize": None, "usercustomize": None}
+    held.rest = [p for p in sys.path[1:] if p != str(REPO)]
+    held.path = [str(REPO), str(REPO), *held.rest]
+    monkeypatch.setattr(srv, "_START_ENV", {"NUMBA_OPT": "3"})
+    req = {"env": {"NUMBA_OPT": "3", "PYTHONPATH": str(REPO)}, "cwd": str(tmp_path)}
     assert srv.refusal(req, held) is None
-    assert srv.refusal({**req, "env": {"PYTHONPATH": "b", "NUMBA_OPT": "3"}}, held) == "environment PYTHONPATH differs"
-    assert srv.refusal({**req, "env": {"PYTHONPATH": "a"}}, held) == "environment NUMBA_OPT differs"
+    assert srv.refusal({**req, "env": {"PYTHONPATH": str(REPO)}}, held) == "environment NUMBA_OPT differs"
     assert srv.refusal({**req, "env": {**req["env"], "NUMBA_CACHE_DIR": "/elsewhere"}}, held) \
         == "environment NUMBA_CACHE_DIR differs"
+    # `python -m` looks in its directory first, then PYTHONPATH (an empty entry: the directory again)
     (tmp_path / "orchestrator").mkdir()
     (tmp_path / "orchestrator" / "__init__.py").write_text("")
-    assert srv.refusal(req, held) == f"{tmp_path} holds another orchestrator"
+    assert srv.refusal(req, held) == "the directory and PYTHONPATH find another orchestrator"
     (tmp_path / "orchestrator" / "__init__.py").unlink()
     (tmp_path / "orchestrator").rmdir()
+    elsewhere = tmp_path / "lib"
+    elsewhere.mkdir()
+    (elsewhere / "json.py").write_text("")
+    assert srv.refusal({**req, "env": {**req["env"], "PYTHONPATH": f"{REPO}:{elsewhere}"}}, held) \
+        == "the directory and PYTHONPATH find another json"
+    assert srv.refusal({**req, "env": {**req["env"], "PYTHONPATH": f"{REPO}::"}}, held) is None
+    # a sitecustomize the server has not run is run by the forked process before its module
+    (elsewhere / "json.py").unlink()
+    (elsewhere / "sitecustomize.py").write_text("")
+    asked = {**req, "env": {**req["env"], "PYTHONPATH": f"{elsewhere}:{REPO}"}}
+    assert srv.refusal(asked, held) is None
+    assert asked["customize"] == {"sitecustomize": str(elsewhere / "sitecustomize.py")}
+    assert asked["path"][:3] == [str(tmp_path), str(elsewhere), str(REPO)]
     src.write_text("x = 22\n")
     assert srv.refusal(req, held) == f"{src} changed"
 
