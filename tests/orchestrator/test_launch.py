@@ -17,6 +17,10 @@ import pytest
 from tests.conftest import REPO, immerse
 from tests.orchestrator.test_faults import _ale_case, _pids, _spinning_case, assert_ended_record
 
+# These tests look at the job's processes in /proc (below the launcher in the process table, their
+# environment blocks): their processes start as plain `python -m` ones, not from the warm server
+pytestmark = pytest.mark.usefixtures("plain")
+
 CASES = {
     # a block spinning for 10^8 steps on 2 Lagrangian ranks; outputs every 0.05 s
     "lagrange": (lambda t: _spinning_case(t, **{"max_steps = 10000": "max_steps = 100000000",
