@@ -73,10 +73,11 @@ def immerse(*args, timeout=600, **kw) -> subprocess.CompletedProcess:
 # command). IMMERSE_PRESTART=0 (or any value set before the suite starts) leaves it off; tests that
 # look at a process's own command line or environment in /proc turn it off for their job (`plain`).
 _SERVER: subprocess.Popen | None = None
+_SERVER_DIR: Path | None = None  # its socket and log (SOCKET.log: each process it ran or refused)
 
 
 def _start_prestart_server() -> None:
-    global _SERVER
+    global _SERVER, _SERVER_DIR
     from orchestrator import prestart
 
     if prestart.ENV in os.environ or int(os.environ.get("PMI_SIZE", "1")) > 1:
@@ -85,7 +86,7 @@ def _start_prestart_server() -> None:
 
     from orchestrator.launch import dies_with_parent
 
-    d = Path(tempfile.mkdtemp(prefix="immerse-prestart-"))
+    d = _SERVER_DIR = Path(tempfile.mkdtemp(prefix="immerse-prestart-"))
     path = d / "socket"
     _SERVER = subprocess.Popen([sys.executable, "-m", "orchestrator.prestart.server", str(path)], cwd=REPO,
                                env=immerse_env(), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
@@ -102,6 +103,10 @@ def _stop_prestart_server() -> None:
             _SERVER.wait(10)
         except subprocess.TimeoutExpired:
             _SERVER.kill()
+    if _SERVER_DIR is not None:
+        import shutil
+
+        shutil.rmtree(_SERVER_DIR, ignore_errors=True)
 
 
 @pytest.fixture
