@@ -37,12 +37,13 @@ COUPLING = "coupling"  # the coupler's own diagnostics in the history (coupled r
 def process_age_s() -> float | None:
     """Seconds since this process started (Linux /proc; None elsewhere): the coupler starts with the
     job, so at the end of step 1 this is the job's start-up (imports, solver set-up, kernels)."""
+    ticks = P.start_ticks(os.getpid())
+    if ticks is None:
+        return None
     try:
-        with open("/proc/self/stat") as fh:
-            start_ticks = int(fh.read().rsplit(")", 1)[1].split()[19])  # field 22: starttime
         with open("/proc/uptime") as fh:
             uptime = float(fh.read().split()[0])
-        return max(uptime - start_ticks / os.sysconf("SC_CLK_TCK"), 0.0)
+        return max(uptime - ticks / os.sysconf("SC_CLK_TCK"), 0.0)
     except (OSError, ValueError, IndexError):
         return None
 

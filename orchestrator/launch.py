@@ -206,11 +206,6 @@ def descendants(pid: int) -> set[int]:
     return found
 
 
-def _runs_job(record: Path) -> bool:
-    """Is the process of a pid record of the job still the one that wrote it (not a reused pid)?"""
-    return P.is_recorded_process(record)
-
-
 def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
     """End every process of the job: mpiexec, hydra's proxies, the coupler and every solver rank
     (those below mpiexec in the process table and those recorded in OUT/.run/pids, which also finds
@@ -220,7 +215,8 @@ def end_job(proc: subprocess.Popen, out: Path, grace: float = 3.0) -> None:
     pids = descendants(proc.pid) if proc.returncode is None else set()
     d = P.run_dir(out) / "pids"
     if d.is_dir():
-        pids |= {int(f.name) for f in d.iterdir() if f.name.isdigit() and _runs_job(f)}
+        # (only a process still the one that wrote its record: a pid may have been reused)
+        pids |= {int(f.name) for f in d.iterdir() if f.name.isdigit() and P.is_recorded_process(f)}
     fds = {}
     for pid in pids:
         try:

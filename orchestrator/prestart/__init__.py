@@ -17,11 +17,10 @@ compares a coupled job's summary both ways.
 """
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
-from orchestrator.prestart.stub import ENV
+from orchestrator.prestart.stub import ENV, server_path
 
 STUB = Path(__file__).resolve().with_name("stub.py")
 
@@ -30,7 +29,7 @@ def command(module: str, args: list[str], python: str | None = None) -> list[str
     """The command line of `python -m MODULE ARGS...`: through the stub when a server is named in the
     environment (IMMERSE_PRESTART), else the plain one."""
     py = python or sys.executable
-    if os.environ.get(ENV, "") not in ("", "0"):
+    if server_path() is not None:
         return [py, "-S", str(STUB), module, *args]
     return [py, "-m", module, *args]
 

@@ -31,7 +31,6 @@ import atexit
 import fcntl
 import importlib
 import importlib.abc
-import importlib.machinery
 import io
 import json
 import os

@@ -23,6 +23,12 @@ ENV = "IMMERSE_PRESTART"
 FORWARDED = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP, signal.SIGQUIT, signal.SIGUSR1, signal.SIGUSR2)
 
 
+def server_path() -> str | None:
+    """The server's socket IMMERSE_PRESTART names; None when it is unset, empty or 0 (off)."""
+    path = os.environ.get(ENV)
+    return None if path in (None, "", "0") else path
+
+
 def plain(module: str, args: list[str]) -> None:
     """Become `python -m MODULE ARGS...` (the same interpreter, with its site this time)."""
     os.execv(sys.executable, [sys.executable, "-m", module, *args])
@@ -69,8 +75,8 @@ def _line(sock: socket.socket, buf: bytearray) -> bytes | None:
 
 def main() -> None:
     module, args = sys.argv[1], sys.argv[2:]
-    path = os.environ.get(ENV)
-    if path in (None, "", "0"):
+    path = server_path()
+    if path is None:
         plain(module, args)
     fds = inherited_fds()
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
