@@ -393,42 +393,76 @@ def _import_solvers() -> None:
 
 
 PARTS = ("ale", "bodies")
-"""The warm-up's parts, one process each where the machine has the cores: the ALE solver's cases
-then the coupled ones, and the bodies' (Lagrange, contact, SPH, the particle coupling). The coupled
-cases come last, so that the kernels they share with both are mostly in the cache by then; numba's
-cache index is locked (solvers/kernel_cache.py), so an entry both compile is saved safely. Measured
-from an empty cache on 2 cores: 283 s in one process, 227 s with the coupled cases in the bodies'
-part, 207 s as here (the bodies' part 140 s)."""
+"""The warm-up's two processes (where the machine has the cores) and the order each takes the tasks
+in (_order): the ALE solver's cases then the coupled ones, and the bodies' tasks (the particle
+coupling, the contact search, the Lagrange, contact and SPH cases). Each task runs once, in the
+process that claims it first (_claim); a process done with its own tasks takes the other's from the
+far end of its list (the coupled cases first: the kernels they share with the ALE cases are mostly in
+the cache by then), so the two end together whatever the machine's compile speed. Numba's cache
+index is locked (solvers/kernel_cache.py), so an entry both compile is saved safely. Measured from an
+empty cache on 2 cores (2026-12-04, a loaded hour): fixed parts 239 s (the ALE part; the bodies'
+138 s), shared tasks: see warm()."""
+
+BODY_TASKS = ("particle_coupling", "contact_search")   # (not cases: kernels called directly)
 
 
 def _part_of(name: str) -> str:
     return "ale" if name.startswith(("ale_", "coupled")) else "bodies"
 
 
-def _warm_part(part: str | None) -> dict:
-    """Step the warm-up cases of one part (None: all); counts of this process."""
+def _order(part: str | None, names) -> list[str]:
+    """The tasks in the order ``part`` takes them (None: all, one process)."""
+    ale = sorted((n for n in names if n.startswith("ale_")))
+    coupled = sorted((n for n in names if n.startswith("coupled")))
+    bodies = list(BODY_TASKS) + sorted(n for n in names if _part_of(n) == "bodies")
+    if part == "bodies":
+        return bodies + coupled[::-1] + ale[::-1]
+    return ale + coupled + bodies
+
+
+def _claim(claims: Path | None, task: str) -> bool:
+    """True for the one process that claims ``task`` first (an exclusive create in ``claims``)."""
+    if claims is None:
+        return True
+    import os
+
+    try:
+        os.close(os.open(claims / task, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+        return True
+    except FileExistsError:
+        return False
+
+
+def _warm_part(part: str | None, claims: Path | None = None) -> dict:
+    """Step the warm-up tasks in ``part``'s order (None: all), those this process claims; its counts."""
     from orchestrator.case import load_case
 
     t0 = time.perf_counter()
     _import_solvers()
-    table = {k: v for k, v in cases().items() if part is None or _part_of(k) == part}
-    if part in (None, "bodies"):
-        _particle_coupling()
-        _contact_search()
+    table = cases()
+    ran = 0
     with tempfile.TemporaryDirectory(prefix="immerse-warmup-") as tmp:
-        for name in sorted(table, key=lambda k: k.startswith("coupled")):
-            d = Path(tmp) / name
-            d.mkdir()
-            (d / "case.toml").write_text(table[name])
-            step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
-    return {"cases": len(table), "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
+        for name in _order(part, table):
+            if not _claim(claims, name):
+                continue
+            if name == "particle_coupling":
+                _particle_coupling()
+            elif name == "contact_search":
+                _contact_search()
+            else:
+                d = Path(tmp) / name
+                d.mkdir()
+                (d / "case.toml").write_text(table[name])
+                step_case(load_case(d), blocked="obstacle" in name or "walls" in name)
+                ran += 1
+    return {"cases": ran, "compiled": sum(compiled().values()), "loaded_from_cache": loaded(),
             "seconds": round(time.perf_counter() - t0, 2)}
 
 
 def warm(log=print, jobs: int | None = None) -> dict:
-    """Step every warm-up case, the parts in parallel processes when ``jobs`` (default: the cores
-    this process may use) allows; return the summed counts and the wall time (measured: 283 s in one
-    process on 2 cores, 190 specialisations)."""
+    """Step every warm-up task, in two processes sharing the tasks (PARTS) when ``jobs`` (default: the
+    cores this process may use) allows; return the summed counts and the wall time (measured: 283 s in
+    one process on 2 cores, 190 specialisations)."""
     import os
     import subprocess
 
@@ -437,15 +471,20 @@ def warm(log=print, jobs: int | None = None) -> dict:
     if jobs < 2:
         parts = [_warm_part(None)]
     else:
-        child = subprocess.Popen([sys.executable, "-m", "orchestrator.warmup", "--part", PARTS[1]],
-                                 stdout=subprocess.PIPE, text=True)
+        claims = Path(tempfile.mkdtemp(prefix="immerse-warmup-claims-"))
+        child = subprocess.Popen([sys.executable, "-m", "orchestrator.warmup", "--part", PARTS[1],
+                                  "--claims", str(claims)], stdout=subprocess.PIPE, text=True)
         try:
-            parts = [_warm_part(PARTS[0])]
+            parts = [_warm_part(PARTS[0], claims)]
         except BaseException:   # (the other part must not go on compiling alone)
             child.kill()
             child.wait()
             raise
-        out = child.communicate()[0]
+        finally:
+            out = child.communicate()[0] if child.returncode is None else ""
+            import shutil
+
+            shutil.rmtree(claims, ignore_errors=True)
         if child.returncode != 0:
             raise RuntimeError(f"the warm-up of the {PARTS[1]} cases failed (exit code {child.returncode})")
         parts.append(json.loads(out.strip().splitlines()[-1]))
@@ -471,10 +510,11 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m orchestrator.warmup", description=__doc__.split("\n")[0])
     ap.add_argument("--check", nargs="+", metavar="CASE_DIR",
                     help="step these cases and print the kernels compiled instead of loaded (JSON)")
-    ap.add_argument("--part", choices=PARTS, help="warm one part only and print its counts (JSON)")
+    ap.add_argument("--part", choices=PARTS, help="warm in this part's order and print the counts (JSON)")
+    ap.add_argument("--claims", type=Path, help="with --part: the directory where the processes claim their tasks")
     args = ap.parse_args(argv)
     if args.part:
-        print(json.dumps(_warm_part(args.part)))
+        print(json.dumps(_warm_part(args.part, args.claims)))
     elif args.check:
         print(json.dumps(check(args.check)))
     else:
