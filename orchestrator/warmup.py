@@ -400,8 +400,9 @@ process that claims it first (_claim); a process done with its own tasks takes t
 far end of its list (the coupled cases first: the kernels they share with the ALE cases are mostly in
 the cache by then), so the two end together whatever the machine's compile speed. Numba's cache
 index is locked (solvers/kernel_cache.py), so an entry both compile is saved safely. Measured from an
-empty cache on 2 cores (2026-12-04, a loaded hour): fixed parts 239 s (the ALE part; the bodies'
-138 s), shared tasks: see warm()."""
+empty cache on 2 cores (2026-12-04, a slow hour): with fixed parts (each process its own list only)
+228 s, the ALE part the longer (239 s against the bodies' 138 s when timed alone); sharing the
+tasks 183 and 187 s, the same 203 specialisations (~20 compiled twice, by both processes at once)."""
 
 BODY_TASKS = ("particle_coupling", "contact_search")   # (not cases: kernels called directly)
 
