@@ -413,8 +413,8 @@ def _part_of(name: str) -> str:
 
 def _order(part: str | None, names) -> list[str]:
     """The tasks in the order ``part`` takes them (None: all, one process)."""
-    ale = sorted((n for n in names if n.startswith("ale_")))
-    coupled = sorted((n for n in names if n.startswith("coupled")))
+    ale = sorted(n for n in names if n.startswith("ale_"))
+    coupled = sorted(n for n in names if n.startswith("coupled"))
     bodies = list(BODY_TASKS) + sorted(n for n in names if _part_of(n) == "bodies")
     if part == "bodies":
         return bodies + coupled[::-1] + ale[::-1]
@@ -475,16 +475,16 @@ def warm(log=print, jobs: int | None = None) -> dict:
         claims = Path(tempfile.mkdtemp(prefix="immerse-warmup-claims-"))
         child = subprocess.Popen([sys.executable, "-m", "orchestrator.warmup", "--part", PARTS[1],
                                   "--claims", str(claims)], stdout=subprocess.PIPE, text=True)
+        import shutil
+
         try:
             parts = [_warm_part(PARTS[0], claims)]
+            out = child.communicate()[0]   # (it may still claim: the directory stays until it ends)
         except BaseException:   # (the other part must not go on compiling alone)
             child.kill()
             child.wait()
             raise
         finally:
-            out = child.communicate()[0] if child.returncode is None else ""
-            import shutil
-
             shutil.rmtree(claims, ignore_errors=True)
         if child.returncode != 0:
             raise RuntimeError(f"the warm-up of the {PARTS[1]} cases failed (exit code {child.returncode})")
