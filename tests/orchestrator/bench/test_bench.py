@@ -26,6 +26,19 @@ def test_bench_unknown_name():
     assert r.returncode == 2 and "bench NAME = 'nonsense'" in r.stderr
 
 
+def test_bench_out_that_is_not_a_file_path_is_refused_in_one_line(tmp_path):
+    """--out naming a directory, or a path under a file: one line naming --out, exit 2, nothing
+    written (it was an IsADirectoryError traceback after the whole bench had run)."""
+    afile = tmp_path / "afile"
+    afile.write_text("x")
+    for out in (tmp_path, afile / "b.json"):
+        before = sorted(tmp_path.rglob("*"))
+        r = immerse("bench", "coupling", "--quick", "--out", out, timeout=60)
+        assert r.returncode == 2 and r.stderr.startswith("immerse: bench --out = "), r.stderr
+        assert len(r.stderr.splitlines()) == 1, r.stderr
+        assert sorted(tmp_path.rglob("*")) == before
+
+
 @pytest.mark.slow
 def test_bench_advect_quick(tmp_path):
     """Two-material bench: the square's symmetric difference falls with the mesh, volumes are kept,
