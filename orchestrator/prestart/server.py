@@ -55,11 +55,12 @@ IMPORT_TIME_ENV = ("PYTHONHOME", "PYTHONOPTIMIZE", "PYTHONSAFEPATH", "PYTHONNOUS
                    "PYTHONWARNINGS", "PYTHONDEVMODE", "PYTHONFAULTHANDLER", "PYTHONTRACEMALLOC",
                    "PYTHONIOENCODING", "PYTHONUTF8", "PYTHONHASHSEED", "LANG", "LC_ALL", "LC_CTYPE",
                    "LD_PRELOAD", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS",
-                   "MKL_NUM_THREADS", "MPLBACKEND")
+                   "MKL_NUM_THREADS", "MPLBACKEND", "IMMERSE_WAIT_SPIN_S")
 IMPORT_TIME_PREFIXES = ("NUMBA_", "MPI4PY_")
 """Environment read as Python starts or while the preloaded modules were imported (by Python, the
-BLAS, numba, mpi4py, our kernel cache): a request must carry the server's values (NUMBA_CACHE_DIR
-aside: checked against the directory the server's kernels came from)."""
+BLAS, numba, mpi4py, our kernel cache, adapters.protocol's wait: SPIN_S): a request must carry the
+server's values (NUMBA_CACHE_DIR aside: checked against the directory the server's kernels came
+from)."""
 
 _START_ENV = dict(os.environ)  # before kernel_cache.configure() adds NUMBA_CACHE_DIR
 
@@ -468,7 +469,7 @@ def watch(conn: socket.socket, held: Loaded, log: str | None = None) -> None:
         os._exit(0)
     why = refusal(req, held)
     if why:
-        _log(log, {"module": req.get("module"), "refused": why})
+        _log(log, {"module": req.get("module"), "args": req.get("args"), "refused": why})
         for fd in fds:
             os.close(fd)
         try:

@@ -184,6 +184,9 @@ def test_the_server_refuses_what_it_did_not_load(tmp_path, monkeypatch):
         assert srv.refusal({**req, "env": {**req["env"], "LD_LIBRARY_PATH": other}}, held) \
             == "environment LD_LIBRARY_PATH differs"
     assert srv.refusal({**req, "env": {**req["env"], "NUMBA_OPT": "2"}}, held) == "environment NUMBA_OPT differs"
+    # (adapters.protocol reads its wait's spin as it is imported)
+    assert srv.refusal({**req, "env": {**req["env"], "IMMERSE_WAIT_SPIN_S": "0"}}, held) \
+        == "environment IMMERSE_WAIT_SPIN_S differs"
     assert srv.refusal({**req, "env": {**req["env"], "NUMBA_CACHE_DIR": "/elsewhere"}}, held) \
         == "environment NUMBA_CACHE_DIR differs"
     # `python -m` looks in its directory first, then PYTHONPATH (an empty entry: the directory again)
@@ -246,6 +249,38 @@ def test_a_coupled_job_gives_the_plain_jobs_results(socket_path, tmp_path):
             for n in names:
                 if isinstance(a[n], h5py.Dataset):
                     assert np.array_equal(a[n][()], b[n][()]), (f, n)
+
+
+def test_the_suites_jobs_start_warm(tmp_path):
+    """Every process of a coupled job that a test starts through tests.conftest.immerse (the CLI, the
+    coupler, the ALE and Lagrange ranks) is forked by the suite's warm server, none refused: a value
+    the launcher gives its ranks that the server was started without (OPENBLAS_NUM_THREADS, when the
+    suite ran as `pytest` rather than `make test`) had every solver rank start cold, each importing
+    and loading its kernels (tests/cases/test_coupled_cases.py 202 s against 75 s)."""
+    from tests.conftest import immerse
+
+    path = os.environ.get(prestart.ENV)
+    if not path or path == "0":
+        pytest.skip("the suite's warm process server is off (IMMERSE_PRESTART unset or 0)")
+    deadline = time.monotonic() + 120   # the server answers once it has loaded (seconds)
+    while not Path(path).exists():
+        assert time.monotonic() < deadline, f"the suite's server {path} never answered"
+        time.sleep(0.2)
+    out = tmp_path / "out"
+    r = immerse("run", CASES / "embedded_piston_sod", "--out", out)
+    assert r.returncode == 0, r.stdout + r.stderr
+
+    def rows():   # this job's processes (the server is shared by the suite's workers)
+        lines = Path(f"{path}.log").read_text().splitlines()
+        return [x for x in map(json.loads, lines) if str(out) in " ".join(x.get("args") or [])]
+
+    deadline = time.monotonic() + 10   # (the CLI's row is written as it ends, after immerse returns)
+    while len(rows()) < 4 and time.monotonic() < deadline:
+        time.sleep(0.1)
+    mine = rows()
+    assert not [x for x in mine if "refused" in x], mine
+    assert sorted(x["module"] for x in mine) == ["adapters.ale", "adapters.lagrange", "orchestrator.cli",
+                                                 "orchestrator.coupler"], mine
 
 
 def _command_cli(socket_path):
