@@ -70,6 +70,7 @@ TAIT = 2
 JWL = 3
 
 MIE_GRUNEISEN = 4
+VOID = -1  # the code of a material with eos = "void" (volume, no mass, energy or pressure: mixed.py)
 
 EOS_CODES = {"ideal_gas": IDEAL_GAS, "stiffened_gas": STIFFENED_GAS, "tait": TAIT, "jwl": JWL,
              "mie_gruneisen": MIE_GRUNEISEN}
