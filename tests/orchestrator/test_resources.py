@@ -154,7 +154,7 @@ def test_memory_refusal_is_instant_and_names_the_largest_part(tmp_path):
     t0 = time.perf_counter()
     with pytest.raises(CaseError) as ei:
         R.check_resources(case, ranks_for(case), machine())
-    assert time.perf_counter() - t0 < 0.1   # microseconds measured: nothing is allocated
+    assert time.perf_counter() - t0 < 2.0   # microseconds measured: nothing is allocated (10^15 zones would be)
     e = ei.value
     assert e.key == "ale.grid.cells" and e.value == [10**5] * 3
     grid = R.format_bytes((10**5 + 4) ** 3 * R.ALE_BYTES_PER_ZONE[3])   # 639 PiB
