@@ -197,8 +197,10 @@ def cmd_bench(args) -> int:
     if out.exists() and not out.is_file():
         return _fail(f"bench --out = {str(out)!r}: not a file path (a directory or special file); give "
                      f"the JSON file to write, e.g. {str(out / f'bench-{args.name}.json')!r}")
-    blocked = next((p for p in out.parents if p.exists()), None)
-    if blocked is not None and not blocked.is_dir():
+    from orchestrator.outdir import existing_ancestor
+
+    blocked = existing_ancestor(out.parent)
+    if not blocked.is_dir():
         return _fail(f"bench --out = {str(out)!r}: {str(blocked)!r} is not a directory")
     out.parent.mkdir(parents=True, exist_ok=True)  # (every bench writes its JSON and charts there)
     path = bench.BENCHES[args.name](out=out, quick=args.quick)

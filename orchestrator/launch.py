@@ -350,6 +350,17 @@ def oversubscribed(case: dict, ranks: dict[str, int]) -> bool:
     return job_processes({r: ranks[r] for r in solvers_used(case)}) > machine_cores()
 
 
+THREAD_ENV = {"NUMBA_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+"""What every process of a job gets where the environment does not set it: one thread each (the
+job's parallelism is its ranks; a rank's BLAS or numba threads would take its neighbours' cores).
+The launcher's default, the Slurm scripts' exports and bench startup's environment."""
+
+
+def thread_exports() -> str:
+    """THREAD_ENV as a shell line of a batch script."""
+    return "export " + " ".join(f"{k}={v}" for k, v in THREAD_ENV.items())
+
+
 PREFETCH_AFTER_S = 0.5
 """When execute() imports what it needs after the job (the output index), the job running."""
 
@@ -365,9 +376,8 @@ def execute(case: dict, out: Path, ranks: dict[str, int], restart: str | None = 
     handed = case_file.write(case, P.run_dir(out))
     cmd = build_command(case, out, ranks, restart, handed)
     env = dict(os.environ)
-    env.setdefault("NUMBA_NUM_THREADS", "1")
-    env.setdefault("OMP_NUM_THREADS", "1")
-    env.setdefault("OPENBLAS_NUM_THREADS", "1")
+    for k, v in THREAD_ENV.items():
+        env.setdefault(k, v)
     if oversubscribed(case, ranks):
         # MPICH's ranks busy-poll while they wait (for the coupler, a halo, a reduction); with more
         # processes than cores the pollers take the waited-for rank's core.  Its heavy yield sleeps

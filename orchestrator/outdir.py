@@ -211,6 +211,15 @@ def _owned(rel: str, st: os.stat_result, record: set[str]) -> bool:
     return rel in record and stat.S_ISREG(st.st_mode)
 
 
+def existing_ancestor(path) -> Path:
+    """The nearest of ``path`` (made absolute) and its parents that exists, a link counted as existing
+    (a path under it cannot be created unless it is a directory)."""
+    anc = Path(path).absolute()
+    while not os.path.lexists(anc):
+        anc = anc.parent
+    return anc
+
+
 def _writable(p: Path) -> str | None:
     if not os.access(p, os.W_OK | os.X_OK):
         return "not writable (permission denied)"
@@ -253,9 +262,7 @@ def plan(out, case: dict, fingerprint: str, *, replace: bool = False, restart=No
         raise OutDirError(out, "is an existing file; expected a directory (new, empty, or an earlier "
                                "immerse output of this case)")
     if not out.exists():
-        anc = out.absolute()
-        while not os.path.lexists(anc):
-            anc = anc.parent
+        anc = existing_ancestor(out)
         if not anc.is_dir():
             raise OutDirError(out, f"cannot be created: {str(anc)!r} is not a directory")
         why = _writable(anc)

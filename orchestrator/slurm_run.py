@@ -28,6 +28,8 @@ from orchestrator.slurm_commands import FINAL_STATES, POLL_S, SlurmError, comman
 
 def batch_script(case: dict, inner: list[str], procs: int, nodes: int | None, overcommit: bool,
                  output: Path) -> str:
+    from orchestrator.launch import thread_exports
+
     lines = ["#!/bin/bash",
              f"#SBATCH --job-name={shlex.quote('immerse-' + case['name'])}",
              f"#SBATCH --ntasks={procs}",
@@ -38,7 +40,7 @@ def batch_script(case: dict, inner: list[str], procs: int, nodes: int | None, ov
     if overcommit:  # more processes than the nodes have CPUs: the coupler is light, ranks share
         lines.append("#SBATCH --overcommit")
     lines += ["set -eu",
-              "export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1",
+              thread_exports(),
               "exec " + " ".join(shlex.quote(a) for a in inner)]
     return "\n".join(lines) + "\n"
 

@@ -17,8 +17,9 @@ import pytest
 REPO = Path(__file__).resolve().parents[1]
 CASES = REPO / "cases"
 
-# what the launcher gives a job's processes when they are not set (orchestrator/launch.py: one thread
-# per rank; an oversubscribed job's waits sleep at once), set for the whole suite as `make test` does:
+# what the launcher gives a job's processes when they are not set (orchestrator/launch.py's THREAD_ENV,
+# written out here: set before anything imports numpy; an oversubscribed job's waits sleep at once),
+# set for the whole suite as `make test` does:
 # the warm process server (below) compares these as read at import, and refused every solver rank
 # of a `pytest` run without OPENBLAS_NUM_THREADS (test_coupled_cases.py 202 s against 75 s warm)
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")

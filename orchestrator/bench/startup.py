@@ -66,7 +66,9 @@ def _two_step_case(name: str, tmp: Path) -> Path:
 
 
 def _env() -> dict:
-    env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1")
+    from orchestrator.launch import THREAD_ENV
+
+    env = dict(os.environ, **THREAD_ENV)
     env["PYTHONPATH"] = str(REPO) + os.pathsep + env.get("PYTHONPATH", "")
     env.pop(prestart.ENV, None)
     return env

@@ -38,6 +38,8 @@ from orchestrator.slurm_commands import (  # noqa: F401  (SlurmError: what run_s
 )
 
 def script_text(name: str, out: Path, runs_file: Path, n: int, cpus: int, timeout: float | None) -> str:
+    from orchestrator.launch import thread_exports
+
     q = shlex.quote
     lines = ["#!/bin/bash",
              f"#SBATCH --job-name={q('immerse-' + name)}",
@@ -51,7 +53,7 @@ def script_text(name: str, out: Path, runs_file: Path, n: int, cpus: int, timeou
         lines.append(f"#SBATCH --time={max(1, math.ceil(timeout / 60) + 1)}")
         args = f" --timeout {timeout!r}"
     lines += ["set -eu",
-              "export NUMBA_NUM_THREADS=1 OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1",
+              thread_exports(),
               "# the run's mpiexec starts its ranks here, in this task's allocation on this node",
               "export HYDRA_BOOTSTRAP=fork",
               f"run_dir=$(sed -n \"$((SLURM_ARRAY_TASK_ID + 1))p\" {q(str(runs_file))})",
