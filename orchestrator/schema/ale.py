@@ -4,7 +4,9 @@ fragment, normaliser and cross-field checks, registered in :mod:`orchestrator.sc
 Normalised layout (``case["ale"]``, present when the file has the table)::
 
     {dimension, mode, grid: {lower, upper, cells}, boundaries: {face: "wall" | "outflow" |
-     "periodic" | {"inflow": {density, pressure, velocity}} | {"piston": {velocity}}} (every face
+     "far_field" | "zero_gradient" | "periodic" | {"inflow" | "far_field": {density, pressure,
+     velocity[, relax, beta]}} | {"outflow": {[pressure, relax, beta]}} | {"piston": {velocity}} |
+     {"piston": {velocity (vector), density, pressure}}} (every face
      of the dimension, "wall" unless given), materials: {name: {eos, ...}}, regions: [{material,
      [region], [density, pressure | specific_internal_energy], velocity}], energy_sources: [{energy,
      at}], obstacles: [{region, subsamples}], [fraction_samples], [hourglass], [viscosity]}
@@ -65,15 +67,28 @@ FLUID = {
     "required": ["eos"],
     "allOf": variants("eos", EOS_KEYS, EOS_REQUIRED),
 }
-INFLOW = table(
-    {"inflow": table({"density": number("kg/m^3", exclusiveMinimum=0), "velocity": vector("m/s"),
-                      "pressure": number("Pa")}, required=("density", "velocity", "pressure"))},
-    required=("inflow",),
-)
-PISTON = table({"piston": table({"velocity": number("m/s")}, required=("velocity",))}, required=("piston",))
-ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "periodic"]}, INFLOW, PISTON],
-            "x-allowed": "must be \"wall\", \"outflow\", \"periodic\", { inflow = { density, velocity, pressure } }"
-                         " or { piston = { velocity } }"}
+# characteristic faces (solvers/ale/open_faces.py): relax = Poinsot-Lele's sigma, beta = the
+# transverse (Engquist-Majda) coefficient
+_TUNING = {"relax": number("dimensionless", minimum=0), "beta": number("dimensionless", minimum=0, maximum=1)}
+_STATE = {"density": number("kg/m^3", exclusiveMinimum=0), "velocity": vector("m/s"), "pressure": number("Pa")}
+INFLOW = table({"inflow": table({**_STATE, **_TUNING}, required=("density", "velocity", "pressure"))},
+               required=("inflow",))
+FAR_FIELD = table({"far_field": table({**_STATE, **_TUNING}, required=("density", "velocity", "pressure"))},
+                  required=("far_field",))
+OUTFLOW = table({"outflow": table({"pressure": number("Pa"), **_TUNING})}, required=("outflow",))
+# a moving wall (Lagrangian mode: the normal speed) or a face held at a velocity pushing in gas of a
+# given state (the face nodes at that velocity, its ghost zones at that state)
+PISTON = table({"piston": {"oneOf": [
+    table({"velocity": number("m/s")}, required=("velocity",)),
+    table({"velocity": vector("m/s"), "density": number("kg/m^3", exclusiveMinimum=0), "pressure": number("Pa")},
+          required=("velocity", "density", "pressure"))]}}, required=("piston",))
+ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "far_field", "zero_gradient", "periodic"]},
+                      INFLOW, FAR_FIELD, OUTFLOW, PISTON],
+            "x-allowed": "must be \"wall\", \"outflow\", \"far_field\", \"zero_gradient\", \"periodic\", "
+                         "{ inflow = { density, velocity, pressure[, relax, beta] } }, { far_field = { density, "
+                         "velocity, pressure[, relax, beta] } }, { outflow = { [pressure, relax, beta] } }, "
+                         "{ piston = { velocity } } (a moving wall, Lagrangian mode) or { piston = { velocity = "
+                         "[...], density, pressure } } (a face held at a velocity)"}
 ALE_FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
 ALE_REGION = {
     "type": "object",
@@ -152,13 +167,10 @@ def _normalise(a: dict, dim: int) -> dict:
     faces = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")[: 2 * dim]
     for f in faces:
         face = a.get("boundaries", {}).get(f, "wall")
-        if isinstance(face, dict) and "piston" in face:
-            face = {"piston": {"velocity": to_float(face["piston"]["velocity"])}}
-        elif isinstance(face, dict):
-            inflow = face["inflow"]
-            face = {"inflow": {"density": to_float(inflow["density"]),
-                               "pressure": to_float(inflow["pressure"]),
-                               "velocity": [to_float(v) for v in inflow["velocity"]]}}
+        if isinstance(face, dict):
+            (kind, body), = face.items()
+            face = {kind: {k: ([to_float(x) for x in v] if isinstance(v, list) else to_float(v))
+                           for k, v in body.items()}}
         out["boundaries"][f] = face
     for r in a["regions"]:
         reg = {k: (v if k in ("material", "region") else to_float(v))
@@ -183,13 +195,17 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
     for a in "xyz"[:dim]:
         for f in (f"{a}_lower", f"{a}_upper"):
             face = ale["boundaries"][f]
-            if isinstance(face, dict) and "piston" in face:
-                if ale["mode"] != "lagrangian":
-                    raise CaseError(format_key(["ale", "boundaries", f, "piston"]), raw_faces[f]["piston"],
-                                    "piston faces need ale.mode = \"lagrangian\" (the face nodes move with the piston)")
-            elif isinstance(face, dict):
-                check_length(format_key(["ale", "boundaries", f, "inflow", "velocity"]),
-                             raw_faces[f]["inflow"]["velocity"], dim)
+            if not isinstance(face, dict):
+                continue
+            (kind, body), = face.items()
+            moving_wall = kind == "piston" and not isinstance(body["velocity"], list)
+            if moving_wall and ale["mode"] != "lagrangian":
+                raise CaseError(format_key(["ale", "boundaries", f, "piston"]), raw_faces[f]["piston"],
+                                "a piston with a scalar velocity is a moving wall and needs ale.mode = "
+                                "\"lagrangian\" (the face nodes move with it); in Eulerian mode give "
+                                "{ velocity = [...], density, pressure } (a face held at a velocity)")
+            if "velocity" in body and not moving_wall:
+                check_length(format_key(["ale", "boundaries", f, kind, "velocity"]), raw_faces[f][kind]["velocity"], dim)
     for i, (reg, r) in enumerate(zip(ale["regions"], raw["regions"])):
         base = ["ale", "regions", i]
         if reg["material"] not in ale["materials"]:
@@ -235,9 +251,11 @@ def _check_mixed(ale: dict, raw: dict) -> None:
     if ale["mode"] != "eulerian":
         raise CaseError("ale.mode", raw.get("mode"), f"{what} in ale.regions need mode = \"eulerian\"")
     for f, face in ale["boundaries"].items():
-        if isinstance(face, dict) and "inflow" in face:
+        if isinstance(face, dict) and ("inflow" in face or "far_field" in face or "piston" in face):
             raise CaseError(format_key(["ale", "boundaries", f]), raw["boundaries"][f],
-                            f"inflow faces are not supported yet with {what} in ale.regions")
+                            f"faces with a given state (inflow, far_field tables, held pistons) are not "
+                            f"supported yet with {what} in ale.regions (\"outflow\", \"far_field\" and "
+                            f"\"zero_gradient\" are)")
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:

@@ -545,6 +545,8 @@ class Blocked:
         if s.mm is not None:  # share the open volume's change over the materials (mixed.py)
             s.mm.lagrange_step(s)
             self._no_shift_in_swept_zones(s)
+        if s._char is not None:  # the exterior state the faces' motion makes: remap donors
+            s._char.donors()
         s._fill_remap_zones()
         # the Lagrangian state, from which the faces of a body's cut zones take their fluxes in
         # every sweep (cut_face_fluxes)
@@ -593,6 +595,8 @@ class Blocked:
                               B.zs, B.ns, dim)
             s.bc.fill_nodes_vector(s.v)
             s.bc.fill_zones([s.e], s._inflow_values("energy"))
+            if s._char is not None:
+                s._char.apply_donors(energy_only=True)
             self.hold = None
         set_positions(s.x, B.X)
         if b_new is not None:

@@ -31,9 +31,12 @@ inflow     prescribed state             prescribed velocity                open
 cut        neighbour's n'+1, n'         neighbour's n'+1, n'; n+2.. = 2..  image
 =========  ===========================  =================================  ======================
 
-(the upper side is the mirror image).  A piston face (``{piston = {velocity}}``, Lagrangian mode)
-is a wall whose nodes move at the prescribed normal speed (``piston``, positive into the domain;
-boundary.py).  *Zone kinds* decide which zones act on a real node:
+(the upper side is the mirror image).  Code ``outflow`` is every open face with zero-gradient maps:
+the case's ``"zero_gradient"`` and the characteristic faces (``inflow``, ``outflow``, ``far_field``:
+open_faces.py sets their ghost zones' pressure and donors).  Code ``inflow`` is a held-velocity
+face (``{piston = {velocity = [..], density, pressure}}``, Eulerian mode).  A piston face with a
+scalar velocity (``{piston = {velocity}}``, Lagrangian mode) is a wall whose nodes move at the
+prescribed normal speed (``piston``, positive into the domain; boundary.py).  *Zone kinds* decide which zones act on a real node:
 real and image zones always, open ghosts (outflow/inflow, they stand for the fluid beyond) too,
 ghosts beyond a wall never (a wall node has the half/quarter mass and force of its real zones).
 A rank cut (``cut``, parallel.py) is an image face too: its ghosts are the neighbour's zones and
@@ -50,7 +53,8 @@ from solvers.ale.points import axis_centres, spacing
 GHOST = 2
 
 WALL, OUTFLOW, PERIODIC, INFLOW, CUT = 0, 1, 2, 3, 4
-FACE_CODES = {"wall": WALL, "outflow": OUTFLOW, "periodic": PERIODIC}
+FACE_CODES = {"wall": WALL, "zero_gradient": OUTFLOW, "periodic": PERIODIC}
+CHARACTERISTIC = ("inflow", "outflow", "far_field")
 FACE_NAMES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
 
 # zone kinds
@@ -104,20 +108,35 @@ class Block:
 
         # faces: kind codes (dim, 2), inflow states and piston speeds (a piston is a wall whose
         # nodes move at the prescribed normal speed, positive into the domain)
+        # characteristic faces (inflow, outflow, far field: open_faces.py) are open faces with
+        # zero-gradient ghost maps whose pressure (and donors) open_faces.py sets; their specs in
+        # ``characteristic``.  ``inflow`` holds the states of held-velocity faces (``piston`` with a
+        # velocity vector, Eulerian mode: code INFLOW)
         self.face = np.zeros((3, 2), np.int64)
         self.inflow = {}
         self.piston = {}
+        self.characteristic = {}
         for d in range(dim):
             for s in range(2):
                 spec = faces[FACE_NAMES[2 * d + s]]
-                if isinstance(spec, dict) and "piston" in spec:
+                kind, body = (spec, {}) if isinstance(spec, str) else next(iter(spec.items()))
+                if kind == "piston" and np.ndim(body["velocity"]) == 0:
                     self.face[d, s] = WALL
-                    self.piston[(d, s)] = float(spec["piston"]["velocity"])
-                elif isinstance(spec, dict):
+                    self.piston[(d, s)] = float(body["velocity"])
+                elif kind == "piston":
                     self.face[d, s] = INFLOW
-                    self.inflow[(d, s)] = spec["inflow"]
+                    self.inflow[(d, s)] = body
+                elif kind in CHARACTERISTIC:
+                    self.face[d, s] = OUTFLOW
+                    c = {"kind": kind, **{k: v for k, v in body.items() if k not in ("density", "velocity", "pressure")}}
+                    if "density" in body:
+                        c["state"] = (float(body["density"]), [float(u) for u in body["velocity"]],
+                                      float(body["pressure"]))
+                    elif "pressure" in body:
+                        c["pressure"] = float(body["pressure"])
+                    self.characteristic[(d, s)] = c
                 else:
-                    self.face[d, s] = FACE_CODES[spec]
+                    self.face[d, s] = FACE_CODES[kind]
             if (self.face[d, 0] == PERIODIC) != (self.face[d, 1] == PERIODIC):
                 raise GridError(f"periodic must be set on both {FACE_NAMES[2 * d]} and {FACE_NAMES[2 * d + 1]}")
         # periodic axes of the whole grid (a rank cut may replace the face code on this block)
@@ -129,6 +148,7 @@ class Block:
                         self.face[d, s] = CUT
                         self.inflow.pop((d, s), None)
                         self.piston.pop((d, s), None)
+                        self.characteristic.pop((d, s), None)
 
         # Eulerian (reference) node coordinates of the padded block, ghosts included
         self.X = np.zeros((self.nnodes, dim))

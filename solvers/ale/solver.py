@@ -59,6 +59,7 @@ from solvers.ale.errors import SolverError  # noqa: F401  (raised here; its own 
 from solvers.ale import eos as _eos
 from solvers.ale import hydro, remap
 from solvers.ale.boundary import Boundaries
+from solvers.ale.open_faces import CharacteristicFaces
 from solvers.ale.grid import (FACE_NAMES, GHOST, INFLOW, OUTFLOW, PERIODIC, WALL, Z_OPEN, Block)
 from solvers.ale.parallel import Decomposition, Halo
 from solvers.ale.points import several_materials
@@ -206,6 +207,11 @@ class AleSolver(SolverState):
                 raise ValueError(f"inflow state on {('x', 'y', 'z')[d]}_{('lower', 'upper')[s]} is not a valid "
                                  f"state of material {self.material!r}")
             self._inflow_state[(d, s)] = (rho_in, e_in, p_in, c_in)
+
+        # characteristic faces (inflow, outflow, far field): their ghost pressure, dashpot and donors
+        # (with several materials per zone the open faces keep their zero-gradient ghosts: the
+        # exterior of a mixed or void face zone is not characterised yet)
+        self._char = CharacteristicFaces(self, B.characteristic) if B.characteristic and self.mm is None else None
 
         self._acc = np.zeros(4)
         # owned nodes touching open-boundary ghost zones (balances of the open faces)
@@ -481,6 +487,8 @@ class AleSolver(SolverState):
         self.bc.constrain(self.v, self.v_old, self.m, self._acc)
         if self._blk is not None:  # immersed walls of the obstacles and their pressure reaction
             self._blk.constrain(self, record)
+        if self._char is not None and record:  # the implicit part of the open faces' dashpot
+            self._char.constrain(self.v, self.v_old, self.m, self.block.owned, self.dt_avg, self._acc)
         if record:
             self.b_momentum += self._acc[: self.dim]
             self.b_energy += self._acc[3]
@@ -579,6 +587,8 @@ class AleSolver(SolverState):
                 dt_min = dt_cut
                 self._limiter = (dt_min, at, "cut zone")
         self._fill_zone_state()
+        if self._char is not None:  # the exterior's pressure on the characteristic faces
+            self._char.ghost_pressure()
         self._check_cavitation()
         B = self.block
         if self.has_images:  # periodic images carry their image's corner forces exactly
@@ -596,6 +606,8 @@ class AleSolver(SolverState):
         if bn.size:
             m_before = self.m[bn].copy()
         self._gather(self.fc, B.zact, self.M, self.f, self.m, self.nr[0], self.nr[1], B.zs, B.ns)
+        if self._char is not None:
+            self._char.add_normal_force(self.f)
         self.bc.fill_nodes_scalar(self.m)
         if bn.size and not self._initialising:
             # refilled open ghost zones change the mass of the boundary nodes' dual cells
@@ -691,6 +703,8 @@ class AleSolver(SolverState):
         for nodes, imp, interface in applied:  # (their work on the final mean velocity: see _node_impulse)
             self._impulse_balance(nodes, imp, interface)
         self.bc.fill_nodes_vector(self.v)
+        if self._char is not None:  # the faces' transverse terms and relaxation over the step
+            self._char.advance(self.dt)  # (after the fill: the velocities of the face zones at cuts)
         if not np.all(np.isfinite(self.v)):
             n = int(np.flatnonzero(~np.all(np.isfinite(self.v), axis=1))[0])
             self._fail(f"non-finite velocity at ALE node {self._node_ijk(n)} at step {self.step}, "
@@ -701,6 +715,10 @@ class AleSolver(SolverState):
                                    B.zs, B.ns, Z_OPEN, self._gw)
             self.b_momentum += self.dt_avg * self._gw[: self.dim]
             self.b_energy += self.dt_avg * self._gw[3]
+        if self._char is not None:
+            imp, work = self._char.normal_force_terms(self.v, self.v_old, B.owned, self.dt_avg)
+            self.b_momentum += imp
+            self.b_energy += work
         hydro.move(self.x, self.v, self.dt)
         if self.mode == "lagrangian":
             self._dt_stable = self._forces(midstep=True, advect=False, eos=True, energy=True)
@@ -779,6 +797,8 @@ class AleSolver(SolverState):
         self._sync()
         if self.mm is not None:  # share the step's energy and volume change over the materials
             self.mm.lagrange_step(self)
+        if self._char is not None:  # the exterior state the faces' motion makes: remap donors
+            self._char.donors()
         self._fill_remap_zones()
         order = range(dim) if self.parity == 0 else range(dim - 1, -1, -1)
         for d in order:
@@ -794,6 +814,8 @@ class AleSolver(SolverState):
     def _fill_remap_zones(self) -> None:
         B = self.block
         self.bc.fill_zones([self.rho, self.e], self._inflow_values("remap"))
+        if self._char is not None:
+            self._char.apply_donors()
         self.bc.fill_zones([self.M, self.V])
         self._open_ghost_mass()
         if self.mm is not None:
@@ -846,6 +868,8 @@ class AleSolver(SolverState):
         self.bc.fill_nodes_vector(self.v)
         self.bc.fill_nodes_scalar(self.m)
         self.bc.fill_zones([self.e], self._inflow_values("energy"))
+        if self._char is not None:
+            self._char.apply_donors(energy_only=True)
 
     def _open_node_terms(self, d: int, m0: np.ndarray, v0: np.ndarray) -> None:
         """Exact balance terms of the nodal remap at open faces: momentum and kinetic energy through

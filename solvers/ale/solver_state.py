@@ -160,6 +160,8 @@ class SolverState:
         out = [(k, getattr(self, k)) for k in self.ARRAYS]
         if self.mm is not None:
             out += [(f"material_{k}", getattr(self.mm, k)) for k in self.mm.FIELDS + ("pm", "cm")]
+        if self._char is not None:  # the open faces' exterior states and corrections
+            out.append(("open_face_state", self._char.state_array()))
         if self._blk is not None:
             out.append(("blocked_fraction", self._blk.b))
             if self._blk.A_body is not None:  # (the small cut zones' merged state: blocked.py)
@@ -236,7 +238,9 @@ class SolverState:
             if not np.array_equal(h.attrs["cells"], self.block.cells):
                 raise ValueError(f"checkpoint {path} is for a grid of {list(h.attrs['cells'])} cells")
             for k, a in self._checkpoint_arrays():
-                if k not in ("blocked_fraction", "small_cut_state"):
+                if k == "open_face_state":
+                    self._char.set_state_array(window(h, k, a))
+                elif k not in ("blocked_fraction", "small_cut_state"):
                     window(h, k, a)
             # blocked fractions (static obstacles and coupler) of the checkpointed state, if any
             b = window(h, "blocked_fraction", np.zeros(B.nzones)) if "blocked_fraction" in h else None

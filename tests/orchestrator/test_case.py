@@ -186,7 +186,7 @@ BAD_CASES = [
     ("two_mesh_kinds", "lagrange.bodies[0].mesh", "exactly one of: box, quarter_cylinder, quarter_disk, ring, file"),
     ("no_bodies", "lagrange.bodies", "at least one body"),
     ("ale_periodic_one_side", "ale.boundaries.x_lower", "periodic must be set on both"),
-    ("ale_piston_eulerian", "ale.boundaries.x_lower.piston", "piston faces need ale.mode = \"lagrangian\""),
+    ("ale_piston_eulerian", "ale.boundaries.x_lower.piston", "is a moving wall and needs ale.mode = \"lagrangian\""),
     ("ale_undefined_material", "ale.regions[1].material", "undefined material"),
     ("ale_unknown_eos", "ale.materials.air.eos", "must be one of"),
     ("ale_gamma_one", "ale.materials.air.gamma", "must be > 1"),

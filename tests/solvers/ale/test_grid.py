@@ -7,7 +7,7 @@ from solvers.ale.grid import (GHOST, Z_IMAGE, Z_INACTIVE, Z_OPEN, Z_REAL, Block,
 from solvers.elements import hex_bvectors, quad_bvectors
 
 FACES3 = {"x_lower": "wall", "x_upper": "outflow", "y_lower": "periodic", "y_upper": "periodic",
-          "z_lower": {"inflow": {"density": 1.0, "velocity": [1.0, 2.0, 3.0], "pressure": 1.0}},
+          "z_lower": {"piston": {"density": 1.0, "velocity": [1.0, 2.0, 3.0], "pressure": 1.0}},
           "z_upper": "wall"}
 
 
@@ -36,7 +36,7 @@ def test_zone_kinds():
     assert k[1, 2, 2] == Z_INACTIVE          # beyond the x_lower wall
     assert k[5, 2, 2] == Z_OPEN              # beyond the outflow
     assert k[2, 1, 2] == Z_IMAGE             # periodic image
-    assert k[2, 2, 1] == Z_OPEN              # inflow ghost
+    assert k[2, 2, 1] == Z_OPEN              # held-velocity (piston) ghost
     assert k[5, 1, 2] == Z_OPEN and k[1, 1, 2] == Z_INACTIVE
     # the upper periodic node plane is real but not owned (it is the lower plane's image)
     own = B.owned.reshape(B.ndims)
