@@ -78,10 +78,11 @@ FAR_FIELD = table({"far_field": table({**_STATE, **_TUNING}, required=("density"
 OUTFLOW = table({"outflow": table({"pressure": number("Pa"), **_TUNING})}, required=("outflow",))
 # a moving wall (Lagrangian mode: the normal speed) or a face held at a velocity pushing in gas of a
 # given state (the face nodes at that velocity, its ghost zones at that state)
-PISTON = table({"piston": {"oneOf": [
-    table({"velocity": number("m/s")}, required=("velocity",)),
-    table({"velocity": vector("m/s"), "density": number("kg/m^3", exclusiveMinimum=0), "pressure": number("Pa")},
-          required=("velocity", "density", "pressure"))]}}, required=("piston",))
+PISTON = table({"piston": table(
+    {"velocity": {"oneOf": [number("m/s"), vector("m/s")],
+                  "x-allowed": "must be a number (a moving wall) or a vector (a held face) (m/s)"},
+     "density": number("kg/m^3", exclusiveMinimum=0), "pressure": number("Pa")},
+    required=("velocity",))}, required=("piston",))
 ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "far_field", "zero_gradient", "periodic"]},
                       INFLOW, FAR_FIELD, OUTFLOW, PISTON],
             "x-allowed": "must be \"wall\", \"outflow\", \"far_field\", \"zero_gradient\", \"periodic\", "
@@ -199,6 +200,11 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
                 continue
             (kind, body), = face.items()
             moving_wall = kind == "piston" and not isinstance(body["velocity"], list)
+            given = [k in body for k in ("density", "pressure")]
+            if kind == "piston" and not (all(given) if not moving_wall else not any(given)):
+                raise CaseError(format_key(["ale", "boundaries", f, "piston"]), raw_faces[f]["piston"],
+                                "must be { velocity = u } (a moving wall, Lagrangian mode) or { velocity = [...], "
+                                "density, pressure } (a face held at a velocity pushing in that state)")
             if moving_wall and ale["mode"] != "lagrangian":
                 raise CaseError(format_key(["ale", "boundaries", f, "piston"]), raw_faces[f]["piston"],
                                 "a piston with a scalar velocity is a moving wall and needs ale.mode = "

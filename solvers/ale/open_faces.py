@@ -391,7 +391,7 @@ class CharacteristicFaces:
 
     # checkpoint: the per-face-zone state in a zone-shaped array, each face zone's row at its
     # outer ghost zone (unique per face; written and read like every padded array of the solver)
-    STATE = ("rho_e", "e_e", "p_e", "c_e", "a_e", "delta")
+    STATE = ("rho_e", "e_e", "p_e", "c_e", "a_e", "delta", "zt", "pb")
 
     def state_array(self) -> np.ndarray:
         a = np.zeros((self.s.block.nzones, len(self.STATE) + self.dim + 1))
@@ -409,7 +409,7 @@ class CharacteristicFaces:
             getattr(self, k)[:] = a[self.g2, i]
         self.u_e[:] = a[self.g2, len(self.STATE): -1]
         self._derive()
-        self._ready = True
+        self._dashpot()  # (the pressures p are restored already: the arrays come first)
 
     def _eos_of(self, zin):
         """EOS (code, parameters) per face zone: the solver's, or with several materials the one
@@ -452,9 +452,13 @@ class CharacteristicFaces:
         # slope doubles.  (As the ghost pressure, 2 p_b - p_1 also doubled the tangential coupling of
         # the face nodes to the zones inside: unstable for waves at 60 degrees.)
         s.p[self.gz] = self.pb[self.gsrc]
-        self.fn = self.W @ (self.pb - s.p[self.zin])
-        self.cn = 2.0 * (self.W @ self.zt)
+        self._dashpot()
         s.q[self.gz] = 0.0
+
+    def _dashpot(self) -> None:
+        """The face nodes' normal force and dashpot coefficient from the face zones' p_b and Z."""
+        self.fn = self.W @ (self.pb - self.s.p[self.zin])
+        self.cn = 2.0 * (self.W @ self.zt)
 
     def add_normal_force(self, f) -> None:
         """The normal remainder of the ghost's extrapolated pressure (ghost_pressure) on the face

@@ -393,6 +393,16 @@ BAD_INPUTS = [
             "regions = [ { material = \"gas\", density = 1.0, pressure = 1e-6 } ]",
             "regions = [ { material = \"gas\", region = \"x < 3 + 1e-9 / ((x - 1.4005)**2 + (y - 0.3005)**2 + "
             "(z - 1.7005000000000001)**2)\", density = 1.0, pressure = 1e-6 } ]"), args=("--nodes", "2000")),
+    # characteristic ALE faces (solvers/ale/open_faces.py) and held pistons
+    Bad("outflow_relax_negative", "ale.boundaries.x_upper.outflow.relax = -1.0", "must be >= 0",
+        edit(PANEL, 'x_upper = "outflow"', "x_upper = { outflow = { relax = -1.0 } }")),
+    Bad("far_field_without_velocity", "ale.boundaries.x_upper.far_field.velocity", "required key missing",
+        edit(PANEL, 'x_upper = "outflow"', "x_upper = { far_field = { density = 1.2, pressure = 1.0e5 } }")),
+    Bad("inflow_beta_above_one", "ale.boundaries.x_upper.inflow.beta = 2.0", "<= 1",
+        edit(PANEL, 'x_upper = "outflow"',
+             "x_upper = { inflow = { density = 1.2, velocity = [1.0, 0.0], pressure = 1.0e5, beta = 2.0 } }")),
+    Bad("held_piston_without_state", "ale.boundaries.x_upper.piston", "density, pressure } (a face held",
+        edit(PANEL, 'x_upper = "outflow"', "x_upper = { piston = { velocity = [1.0, 0.0] } }")),
     Bad("huge_integer_literal", "boundaries[0].region", "too large",
         edit(BAR, 'region = "x < 1e-9"', f'region = "x < {"9" * 400}"')),
     Bad("expression_nested_60_deep", "lagrange.bodies[0].initial_velocity[0]", "nested too deeply",
