@@ -190,21 +190,23 @@ def _chart_error_vs_cost(rows, path: Path) -> None:
     plt.close(fig)
 
 
-def sedov_config(n: int, mode: str) -> dict:
-    """3-D Sedov octant on n^3 zones (the benchmark problem of LULESH as well)."""
+def sedov_config(n: int, mode: str, upper: str = "wall") -> dict:
+    """3-D Sedov octant on n^3 zones (the benchmark problem of LULESH as well); ``upper``: the kind
+    of the three upper faces (the lower ones are the octant's symmetry walls)."""
+    faces = {f"{a}_{s}": ("wall" if s == "lower" else upper) for a in "xyz" for s in ("lower", "upper")}
     return {"dimension": 3, "mode": mode,
             "grid": {"lower": [0.0] * 3, "upper": [1.2] * 3, "cells": [n] * 3},
-            "boundaries": {f: "wall" for f in ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")},
+            "boundaries": faces,
             "materials": {"gas": {"eos": "ideal_gas", "gamma": 1.4}},
             "regions": [{"material": "gas", "density": 1.0, "pressure": 1e-6, "velocity": [0.0] * 3}],
             "energy_sources": [{"energy": 0.106384, "at": [0.0, 0.0, 0.0]}]}
 
 
-def time_ale(comm, n: int, mode: str, steps: int, repeats: int) -> float:
+def time_ale(comm, n: int, mode: str, steps: int, repeats: int, upper: str = "wall") -> float:
     """Median seconds per zone-cycle: Lagrange step alone (mode lagrangian) or Lagrange + remap."""
     from solvers.ale.solver import AleSolver
 
-    s = AleSolver(comm, sedov_config(n, mode))
+    s = AleSolver(comm, sedov_config(n, mode, upper))
     t = 0.0
 
     def cycle(k):
@@ -264,6 +266,17 @@ def bench_ale(out: Path, quick: bool = False) -> Path:
                         "unit": "us", "params": {"zones": n**3, "ranks": 2}})
         results.append({"name": f"ale_sedov3d_{label}", "metric": "parallel_efficiency_2_ranks",
                         "value": one["value"] / (2 * two * 1e6), "unit": "", "params": {"zones": n**3}})
+    # open faces: the characteristic (non-reflecting) upper faces against zero-gradient ones and
+    # walls, Lagrange + remap, the same run (the issue's bound: at most 1.3x per zone-cycle)
+    steps = 5 if quick else max(5, int(4e6 / n**3))
+    open_cost = {}
+    for upper in ("wall", "zero_gradient", "outflow"):
+        open_cost[upper] = time_ale(MPI.COMM_SELF, n, "eulerian", steps, repeats=5, upper=upper) * 1e6
+        results.append({"name": f"ale_sedov3d_upper_{upper}", "metric": "time_per_zone_cycle",
+                        "value": open_cost[upper], "unit": "us", "params": {"zones": n**3, "ranks": 1, "steps": steps}})
+    for ref in ("wall", "zero_gradient"):
+        results.append({"name": f"ale_sedov3d_outflow_vs_{ref}", "metric": "cost_ratio",
+                        "value": open_cost["outflow"] / open_cost[ref], "unit": "", "params": {"zones": n**3}})
     results.append({"name": "ale_sedov3d", "metric": "memory_per_zone", "value": ale_memory_per_zone(sizes[-1]),
                     "unit": "B", "params": {"zones": sizes[-1] ** 3}})
     results.append({"name": "lulesh_2.0_reference", "metric": "time_per_zone_cycle", "value": 0.72, "unit": "us",
