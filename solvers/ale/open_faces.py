@@ -4,8 +4,8 @@ The fluid beyond an open face is an *exterior state* ``(rho_e, u_e, p_e, c_e)`` 
 the state a case gives (``inflow``, ``far_field`` tables), or the initial state of the zone next to
 the face (``"outflow"``, ``"far_field"`` strings: the face then holds the incoming characteristic
 it starts with and lets every wave leave).  The face's ghost zones use the zero-gradient maps of
-boundary.py for everything except what this module sets: their pressure (every step), and on
-inflow and far-field faces the density and energy the remap takes in (the donors).
+boundary.py for everything except what this module sets: their pressure (every step), and the
+density and energy the remap takes in (the donors).
 
 Face pressure (the exterior's wave curve)
 -----------------------------------------
@@ -72,10 +72,11 @@ plane wave's normal part always leaves.
 
 Remap donors
 ------------
-Inflow and far-field faces give their ghost zones, for the remap, the exterior state the face's
+Every characteristic face gives its ghost zones, for the remap, the exterior state the face's
 motion makes (``rho* = rho_e W / (W - du)``, ``e* = e_e + (p* + p_e)/2 (1/rho_e - 1/rho*)``, the
-jump conditions of (1)): gas entering carries the exterior's entropy.  Outflow faces keep the
-zero-gradient donors (gas flowing back in carries the state next to the face).  Ghost node
+jump conditions of (1)): gas entering carries the exterior's entropy, also gas flowing back in
+through an outflow face.  (Zero-gradient donors there, the state next to the face, let a shock
+leaving against the inflow reflect more: at Mach 3, 8 % of the jump against 2 %.)  Ghost node
 velocities stay zero-gradient copies of the face nodes.
 
 With several materials per zone (mixed.py) the open faces keep the zero-gradient ghosts of
@@ -337,7 +338,6 @@ class CharacteristicFaces:
         self.K = np.zeros(nk)
         self.beta = np.zeros(nk)
         self.target = np.full(nk, np.nan)      # outflow: the pressure the face relaxes to
-        self.donor = np.zeros(nk, bool)        # inflow, far field: remap donors from the exterior
         self.rho_d = np.zeros(nk)
         self.e_d = np.zeros(nk)
         self._ready = False
@@ -386,7 +386,6 @@ class CharacteristicFaces:
             self.beta[sel] = float(spec.get("beta", DEFAULT_BETA))
             if fc["kind"] == "outflow" and "pressure" in spec:
                 self.target[sel] = float(spec["pressure"])
-            self.donor[sel] = fc["kind"] != "outflow" and s.mm is None
         self._ready = True
 
     # checkpoint: the per-face-zone state in a zone-shaped array, each face zone's row at its
@@ -479,9 +478,7 @@ class CharacteristicFaces:
 
     def donors(self) -> None:
         """The exterior state the face's current motion makes (jump conditions of (1)) into the
-        ghost zones' rho and e on inflow and far-field faces (remap donors)."""
-        if not self.donor.any():
-            return
+        ghost zones' rho and e (remap donors)."""
         s = self.s
         u = np.mean(s.v[self.x_nodes, self.d_n[:, None]], axis=1) * self.so
         du = u - self.so * self.u_e[np.arange(self.nk), self.d_n]
@@ -497,8 +494,6 @@ class CharacteristicFaces:
 
     def apply_donors(self, energy_only: bool = False) -> None:
         s = self.s
-        sel = self.donor[self.gsrc]
-        gz, src = self.gz[sel], self.gsrc[sel]
         if not energy_only:
-            s.rho[gz] = self.rho_d[src]
-        s.e[gz] = self.e_d[src]
+            s.rho[self.gz] = self.rho_d[self.gsrc]
+        s.e[self.gz] = self.e_d[self.gsrc]
