@@ -93,7 +93,6 @@ from numba import njit
 from solvers.ale import eos as _eos
 from solvers.ale.grid import CUT, FACE_NAMES, PERIODIC, Block
 
-KINDS = ("inflow", "outflow", "far_field")
 DEFAULT_BETA = 0.64      # minimax reflection over 0-60 degrees (module docstring)
 DEFAULT_RELAX = 0.25     # Poinsot & Lele 1992's sigma
 
@@ -130,22 +129,44 @@ def wave_curve(du, rho_e, c_e, a):
     return rho_e * w * du, rho_e * (w + du * dw), w
 
 
+@njit(cache=True, inline="always")
+def _pushed(v, nodes, so, d, u_ed):
+    """du = (u_b - u_e) . n of a face zone: its face nodes' mean outward normal velocity u_b."""
+    nf = nodes.shape[0]
+    u = 0.0
+    for a in range(nf):
+        u += v[nodes[a], d]
+    return so * (u / nf - u_ed)
+
+
 @njit(cache=True)
-def face_pressure(v, x_nodes, so, d_n, tan, htan, rho_e, u_e, p_e, c_e, a_e, delta, zt, pb, ub):
-    """Per face zone k: its mean outward normal velocity ub[k] (v over its face nodes x_nodes[k]),
-    the face pressure pb[k] = p_e + (1)(du) + delta and the dashpot coefficient zt[k] (= dp_b/d(du))."""
-    nk, nf = x_nodes.shape
-    for k in range(nk):
+def face_pressure(v, x_nodes, so, d_n, rho_e, u_e, p_e, c_e, a_e, delta, zt, pb):
+    """Per face zone k: the face pressure pb[k] = p_e + (1)(du) + delta at its face nodes' velocity
+    and the dashpot coefficient zt[k] = dp_b/d(du)."""
+    for k in range(x_nodes.shape[0]):
         d = d_n[k]
-        u = 0.0
-        for a in range(nf):
-            u += v[x_nodes[k, a], d]
-        u = so[k] * u / nf
-        du = u - so[k] * u_e[k, d]
+        du = _pushed(v, x_nodes[k], so[k], d, u_e[k, d])
         dp, z, _ = wave_curve(du, rho_e[k], c_e[k], a_e[k])
         pb[k] = p_e[k] + dp + delta[k]
         zt[k] = z
-        ub[k] = u
+
+
+@njit(cache=True)
+def star_state(v, x_nodes, so, d_n, rho_e, u_e, p_e, e_e, c_e, a_e, delta, rho_d, e_d):
+    """The exterior state behind the wave the face's motion sends out (jump conditions of (1)):
+    rho* = rho_e W / (W - du), e* = e_e + (p* + p_e)/2 (1/rho_e - 1/rho*) (the remap donors)."""
+    for k in range(x_nodes.shape[0]):
+        d = d_n[k]
+        du = _pushed(v, x_nodes[k], so[k], d, u_e[k, d])
+        dp, _, w = wave_curve(du, rho_e[k], c_e[k], a_e[k])
+        pe = p_e[k] + delta[k]
+        if not w > 0.0:  # (void beyond the face)
+            rho_d[k] = rho_e[k]
+            e_d[k] = e_e[k]
+            continue
+        rho = rho_e[k] * w / max(w - du, 1e-12 * w)
+        rho_d[k] = rho
+        e_d[k] = e_e[k] + 0.5 * (pe + dp + pe) * (1.0 / rho_e[k] - 1.0 / rho)
 
 
 @njit(cache=True)
@@ -192,134 +213,94 @@ class CharacteristicFaces:
         self.s = solver
         dim = B.dim
         self.dim = dim
-        self.specs = specs
-        zv = np.arange(B.nzones).reshape(B.zdims)
-        nv = np.arange(B.nnodes).reshape(B.ndims)
-        rows = []          # per face zone: (face index, ghost 1, ghost 2, interior zone, nodes...)
+        zs, ns = B.zs, B.ns
         self.faces = []
-        flo, fhi = [], []
+        rows = []            # per face: (face index, ghost 1, ghost 2, zone inside, face nodes...)
+        gz, gsrc = [], []    # ghost zones of the face planes and the face zone each takes its pressure from
+        nodes, nd, nso, w_rows, w_cols, w_vals = [], [], [], [], [], []
+        base = 0             # the first face zone of the face
         for f, ((d, s), spec) in enumerate(sorted(specs.items())):
             n = int(B.n3[d])
-            g1, g2, zi = (1, 0, 2) if s == 0 else (n + 2, n + 3, n + 1)
-            nplane = 2 if s == 0 else n + 2
+            g1, g2, zi, nplane = (1, 0, 2, 2) if s == 0 else (n + 2, n + 3, n + 1, n + 2)
             tans = [t for t in range(dim) if t != d]
             # face zones: the real ones, and one layer more along a tangential axis whose side is
             # an image (periodic, rank cut): every rank then computes the same numbers for the
             # zones around its edge nodes as the rank (or the image) that owns them
-            lo = [int(B.zreal[0][t]) for t in range(3)]
-            hi = [int(B.zreal[1][t]) for t in range(3)]
+            lo = np.array([int(B.zreal[0][t]) for t in range(3)])
+            hi = np.array([int(B.zreal[1][t]) for t in range(3)])
             for t in tans:
-                if B.face[t, 0] in (PERIODIC, CUT):
-                    lo[t] -= 1
-                if B.face[t, 1] in (PERIODIC, CUT):
-                    hi[t] += 1
-            flo.append(lo)
-            fhi.append(hi)
-            ranges = [range(lo[t], hi[t]) if t != d else [0] for t in range(3)]
-            zs_face = []
-            for i in ranges[0]:
-                for j in ranges[1]:
-                    for k in ranges[2]:
-                        ijk = [i, j, k]
-                        ijk[d] = g1
-                        z1 = zv[tuple(ijk)]
-                        ijk[d] = g2
-                        z2 = zv[tuple(ijk)]
-                        ijk[d] = zi
-                        zin = zv[tuple(ijk)]
-                        base = [i, j, k]
-                        base[d] = nplane
-                        offs = [(0, 0), (1, 0)] if dim == 2 else [(0, 0), (1, 0), (1, 1), (0, 1)]
-                        nodes = []
-                        for o in offs:
-                            q = list(base)
-                            for t, ot in zip(tans, o):
-                                q[t] += ot
-                            nodes.append(nv[tuple(q)])
-                        zs_face.append((f, z1, z2, zin, *nodes))
-            rows.extend(zs_face)
-            L = float(B.cells[d] * B.h[d])
-            self.faces.append({"d": d, "s": s, "spec": spec, "kind": spec["kind"], "L": L,
-                               "tan": tans})
-        R = np.array(rows, np.int64).reshape(-1, 4 + 2 ** (dim - 1))
+                lo[t] -= B.face[t, 0] in (PERIODIC, CUT)
+                hi[t] += B.face[t, 1] in (PERIODIC, CUT)
+            lo[d], hi[d] = 0, 1
+            ijk = np.stack([a.ravel() for a in np.meshgrid(*[np.arange(a, b) for a, b in zip(lo, hi)],
+                                                            indexing="ij")], axis=1)   # (face zones, 3), C order
+            tz = ijk @ zs                             # the zone's flat index without its d part (ijk_d = 0)
+            offs = [(0,), (1,)] if dim == 2 else [(0, 0), (1, 0), (1, 1), (0, 1)]
+            tn = ijk @ ns + nplane * ns[d]
+            corner = [tn + sum(o_t * ns[t] for o_t, t in zip(o, tans)) for o in offs]
+            rows.append(np.column_stack([np.full(tz.size, f), tz + g1 * zs[d], tz + g2 * zs[d], tz + zi * zs[d]]
+                                        + corner))
+            shape = hi - lo
+
+            def source(q):  # face zone (global row) of the clamped tangential position q (m, 3)
+                c = np.clip(q, lo, hi - 1)
+                c[:, d] = 0
+                return base + np.ravel_multi_index((c - lo).T, shape)
+
+            # ghost zones over the padded tangential extent (corners, cuts), both planes
+            full = [np.arange(B.zdims[t]) if t in tans else np.array([0]) for t in range(3)]
+            q = np.stack([a.ravel() for a in np.meshgrid(*full, indexing="ij")], axis=1)
+            qz = q @ zs
+            for pl in (g1, g2):
+                gz.append(qz + pl * zs[d])
+                gsrc.append(source(q))
+            # face nodes and their dashpot weights: C_n = sum over the active ghost-plane-1 zones z
+            # around the node of Z(z's face zone) * area / 2^(dim-1)
+            fn = B.face_nodes(d, s)
+            qn = np.stack(np.unravel_index(fn, B.ndims), axis=1)
+            row0 = sum(a.size for a in nodes)
+            nodes.append(fn)
+            nd.append(np.full(fn.size, d))
+            nso.append(np.full(fn.size, 1.0 if s == 1 else -1.0))
+            area = float(np.prod([B.h[t] for t in tans]))
+            for o in ([(0,), (-1,)] if dim == 2 else [(0, 0), (-1, 0), (0, -1), (-1, -1)]):
+                z = qn.copy()
+                z[:, d] = g1
+                for o_t, t in zip(o, tans):
+                    z[:, t] += o_t
+                ok = np.all((z >= 0) & (z < np.array(B.zdims)), axis=1)
+                ok[ok] = B.zact[z[ok] @ zs] > 0.0
+                w_rows.append(row0 + np.flatnonzero(ok))
+                w_cols.append(source(z[ok]))
+                w_vals.append(np.full(int(ok.sum()), area / 2 ** (dim - 1)))
+            self.faces.append({"d": d, "s": s, "spec": spec, "kind": spec["kind"], "L": float(B.cells[d] * B.h[d])})
+            base += tz.size
+        R = np.concatenate(rows).astype(np.int64)
         self.face_of = R[:, 0].copy()
-        self.g1, self.g2, self.zin = R[:, 1].copy(), R[:, 2].copy(), R[:, 3].copy()
+        self.g2, self.zin = R[:, 2].copy(), R[:, 3].copy()
         self.x_nodes = np.ascontiguousarray(R[:, 4:])
         nk = R.shape[0]
         self.nk = nk
         fd = np.array([fc["d"] for fc in self.faces], np.int64)
         fs = np.array([fc["s"] for fc in self.faces], np.int64)
-        self.d_n = fd[self.face_of] if nk else np.zeros(0, np.int64)
-        self.so = np.where(fs[self.face_of] == 1, 1.0, -1.0) if nk else np.zeros(0)
+        self.d_n = fd[self.face_of]
+        self.so = np.where(fs[self.face_of] == 1, 1.0, -1.0)
         self.tan = np.zeros((nk, 2), np.int64)
         self.htan = np.ones((nk, 2))
-        area = np.ones(nk)
         for f, fc in enumerate(self.faces):
             sel = self.face_of == f
-            for a, t in enumerate(fc["tan"]):
+            for a, t in enumerate(t for t in range(dim) if t != fc["d"]):
                 self.tan[sel, a] = t
                 self.htan[sel, a] = B.h[t]
-                area[sel] *= B.h[t]
-        # ghost zones of each face over the padded tangential extent (corners, cuts) and the face
-        # zone whose pressure they take (the nearest, clamped to the real range)
-        src_rows = []
-        key = {}
-        for k in range(nk):
-            key[(int(self.face_of[k]), int(self.g1[k]))] = k
-        for f, fc in enumerate(self.faces):
-            d, s = fc["d"], fc["s"]
-            n = int(B.n3[d])
-            planes = (1, 0) if s == 0 else (n + 2, n + 3)
-            g1 = planes[0]
-            full = [range(int(B.zdims[t])) if (t != d and t < dim) else [0] for t in range(3)]
-            for i in full[0]:
-                for j in full[1]:
-                    for k3 in full[2]:
-                        ijk = [i, j, k3]
-                        cl = [min(max(ijk[t], flo[f][t]), fhi[f][t] - 1) if t != d else g1 for t in range(3)]
-                        ksrc = key[(f, int(zv[tuple(cl)]))]
-                        for pl in planes:
-                            ijk[d] = pl
-                            src_rows.append((int(zv[tuple(ijk)]), ksrc))
-        S = np.array(src_rows, np.int64).reshape(-1, 2)
-        self.gz, self.gsrc = np.ascontiguousarray(S[:, 0]), np.ascontiguousarray(S[:, 1])
-        # face nodes and their dashpot weights: C_n = sum over the active ghost-plane-1 zones z
-        # around the node of Z(z's source face zone) * area / 2^(dim-1)
-        nodes, nd, nso, w_rows, w_cols, w_vals = [], [], [], [], [], []
-        g1_src = {}
-        for gz, ks in zip(self.gz, self.gsrc):
-            g1_src[int(gz)] = int(ks)
-        for f, fc in enumerate(self.faces):
-            d, s = fc["d"], fc["s"]
-            fn = B.face_nodes(d, s)
-            n = int(B.n3[d])
-            g1 = 1 if s == 0 else n + 2
-            ijk_n = np.stack(np.unravel_index(fn, B.ndims), axis=1)
-            for node, q in zip(fn, ijk_n):
-                row = len(nodes)
-                nodes.append(int(node))
-                nd.append(d)
-                nso.append(1.0 if s == 1 else -1.0)
-                offs = [(0,), (-1,)] if dim == 2 else [(0, 0), (-1, 0), (0, -1), (-1, -1)]
-                for o in offs:
-                    z = list(q)
-                    z[d] = g1
-                    for t, ot in zip(fc["tan"], o):
-                        z[t] += ot
-                    if any(z[t] < 0 or z[t] >= B.zdims[t] for t in range(3)):
-                        continue
-                    zz = int(zv[tuple(z)])
-                    if B.zact[zz] <= 0.0 or zz not in g1_src:
-                        continue
-                    ks = g1_src[zz]
-                    w_rows.append(row)
-                    w_cols.append(ks)
-                    w_vals.append(area[ks] / 2 ** (dim - 1))
+        self.gz = np.ascontiguousarray(np.concatenate(gz), dtype=np.int64)
+        self.gsrc = np.ascontiguousarray(np.concatenate(gsrc), dtype=np.int64)
+        nodes, nd, nso = (np.concatenate(a) for a in (nodes, nd, nso))
+        w_rows, w_cols, w_vals = (np.concatenate(a) for a in (w_rows, w_cols, w_vals))
         from scipy.sparse import csr_matrix
 
-        self.nodes = np.array(nodes, np.int64)
-        self.nodes_d = np.array(nd, np.int64)
-        self.nodes_so = np.array(nso, np.float64)
+        self.nodes = nodes.astype(np.int64)
+        self.nodes_d = nd.astype(np.int64)
+        self.nodes_so = nso.astype(np.float64)
         self.fn = np.zeros(len(nodes))
         self.W = csr_matrix((w_vals, (w_rows, w_cols)), shape=(len(nodes), nk))
         self.cn = np.zeros(len(nodes))
@@ -333,7 +314,6 @@ class CharacteristicFaces:
         self.delta = np.zeros(nk)
         self.zt = np.zeros(nk)
         self.pb = np.zeros(nk)
-        self.ub = np.zeros(nk)
         self.divt = np.zeros(nk)
         self.K = np.zeros(nk)
         self.beta = np.zeros(nk)
@@ -440,8 +420,8 @@ class CharacteristicFaces:
         s = self.s
         if not self._ready:
             self.start()
-        face_pressure(s.v, self.x_nodes, self.so, self.d_n, self.tan, self.htan, self.rho_e, self.u_e,
-                      self.p_e, self.c_e, self.a_e, self.delta, self.zt, self.pb, self.ub)
+        face_pressure(s.v, self.x_nodes, self.so, self.d_n, self.rho_e, self.u_e, self.p_e, self.c_e, self.a_e,
+                      self.delta, self.zt, self.pb)
         # the face node's dual cell reaches half a zone beyond the face, where the ghost zone's
         # centre lies: in the normal direction the ghost acts as the linear extrapolation through
         # the face pressure, 2 p_b - p_1 (p_1: the zone inside), so that the node sees the face's
@@ -477,19 +457,10 @@ class CharacteristicFaces:
         damp(v, v_old, m, owned, self.nodes, self.nodes_d, self.cn, dt_avg, acc)
 
     def donors(self) -> None:
-        """The exterior state the face's current motion makes (jump conditions of (1)) into the
-        ghost zones' rho and e (remap donors)."""
-        s = self.s
-        u = np.mean(s.v[self.x_nodes, self.d_n[:, None]], axis=1) * self.so
-        du = u - self.so * self.u_e[np.arange(self.nk), self.d_n]
-        a = self.a_e
-        w = a * du + np.sqrt(a * a * du * du + self.c_e ** 2)
-        pe = self.p_e + self.delta
-        ps = pe + self.rho_e * w * du
-        rho = self.rho_e * w / np.maximum(w - du, 1e-12 * w)
-        e = self.e_e + 0.5 * (ps + pe) * (1.0 / self.rho_e - 1.0 / rho)
-        self.rho_d[:] = rho
-        self.e_d[:] = e
+        """The exterior state the face's current motion makes into the ghost zones' rho and e
+        (remap donors; star_state)."""
+        star_state(self.s.v, self.x_nodes, self.so, self.d_n, self.rho_e, self.u_e, self.p_e, self.e_e,
+                   self.c_e, self.a_e, self.delta, self.rho_d, self.e_d)
         self.apply_donors()
 
     def apply_donors(self, energy_only: bool = False) -> None:
