@@ -36,7 +36,8 @@ the case's ``"zero_gradient"`` and the characteristic faces (``inflow``, ``outfl
 open_faces.py sets their ghost zones' pressure and donors).  Code ``inflow`` is a held-velocity
 face (``{piston = {velocity = [..], density, pressure}}``, Eulerian mode).  A piston face with a
 scalar velocity (``{piston = {velocity}}``, Lagrangian mode) is a wall whose nodes move at the
-prescribed normal speed (``piston``, positive into the domain; boundary.py).  *Zone kinds* decide which zones act on a real node:
+prescribed normal speed (``piston``, positive into the domain; boundary.py).  *Zone kinds* decide
+which zones act on a real node:
 real and image zones always, open ghosts (outflow/inflow, they stand for the fluid beyond) too,
 ghosts beyond a wall never (a wall node has the half/quarter mass and force of its real zones).
 A rank cut (``cut``, parallel.py) is an image face too: its ghosts are the neighbour's zones and

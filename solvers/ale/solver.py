@@ -5,7 +5,8 @@ step n -> n+1, dt = dt^{n+1/2}, dt_avg = (dt_prev + dt)/2, dt/2 on the first ste
 
     predict(dt):  v* = v^{n-1/2} + dt_avg f^n / m
     correct():    v += impulse / m; boundary conditions (walls: normal velocity 0, pistons: the
-                  piston speed, inflow nodes: the inflow velocity; the reaction impulse and its
+                  piston speed, held faces: their velocity, characteristic open faces: the
+                  implicit part of their dashpot, open_faces.py; the reaction impulse and its
                   work enter the balances); ghost nodes;
                   x^{n+1} = x^n + dt v^{n+1/2}; compatible internal-energy update
                   M (e^+ - e^-) = -dt_avg sum_c f_c^n . vbar_c;
