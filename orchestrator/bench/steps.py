@@ -39,6 +39,20 @@ def lagrange_case(n: int, material: dict, velocity: float) -> dict:
     }
 
 
+def lagrange_case_2d(n: int, material: dict, velocity: float, control: str) -> dict:
+    """A square of n^2 plane-strain quads in a bending-like shear flow (its hourglass modes loaded),
+    with the given hourglass control."""
+    return {
+        "name": "bench", "case_dir": ".",
+        "run": {"dimension": 2, "end_time": 1.0},
+        "materials": {"m": dict(material)},
+        "lagrange": {"bodies": [{"name": "square", "material": "m", "hourglass_control": control,
+                                 "mesh": {"box": {"lower": [0, 0], "upper": [0.01] * 2, "cells": [n] * 2}},
+                                 "initial_velocity": [f"{velocity}*x*y/1e-4", 0.0]}]},
+        "boundaries": [],
+    }
+
+
 def time_lagrange(comm, case: dict, steps: int, repeats: int) -> tuple[float, int]:
     """Median seconds per element-cycle (whole solver step: forces, update, BCs, sums)."""
     from solvers.lagrange.solver import LagrangeSolver
@@ -92,6 +106,18 @@ def bench_lagrange(out: Path, quick: bool = False) -> Path:
         mem = memory_per_element(lagrange_case(sizes[-1], mat, vel))
         results.append({"name": f"lagrange_hex8_{label}", "metric": "memory_per_element",
                         "value": mem, "unit": "B", "params": {"elements": sizes[-1] ** 3}})
+    # 2-D quads: the assumed-strain hourglass stiffness against the viscous control, one run (the
+    # issue's bound: at most 1.3x per element-cycle)
+    n2 = 100 if quick else 316
+    steps = 5 if quick else max(5, int(2e6 / n2**2))
+    quad = {}
+    for control in ("viscous", "assumed_strain"):
+        sec, ne = time_lagrange(MPI.COMM_SELF, lagrange_case_2d(n2, ELASTIC, 1.0, control), steps, repeats=5)
+        quad[control] = sec * 1e6
+        results.append({"name": f"lagrange_quad4_{control}", "metric": "time_per_element_cycle", "value": sec * 1e6,
+                        "unit": "us", "params": {"elements": ne, "ranks": 1, "steps": steps, "repeats": 5}})
+    results.append({"name": "lagrange_quad4_assumed_strain_vs_viscous", "metric": "cost_ratio",
+                    "value": quad["assumed_strain"] / quad["viscous"], "unit": "", "params": {"elements": n2**2}})
     # 2-rank speed-up at the largest size, measured in one run of mpiexec -n 2 against 1 rank
     for label, mat, vel in (("elastic", ELASTIC, 1.0),):
         n = sizes[-1]

@@ -160,6 +160,11 @@ BODY = table(
         # a body coupled to the background thinner than 1.5 of its zones is refused unless this is
         # true (orchestrator/coupling/thickness.py: gas on both its sides in one zone leaks through)
         "accept_thin": {"type": "boolean"},
+        # hourglass control of the one-point elements: the viscous Flanagan-Belytschko force (which
+        # adds no bending stiffness: a body 2 elements thick bends 4/3 too softly) or the
+        # assumed-strain stiffness of Belytschko & Bindeman (exact bending of rectangular quads,
+        # no volumetric locking; 2-D for now)
+        "hourglass_control": {"type": "string", "enum": ["viscous", "assumed_strain"]},
     },
     required=("name", "material", "mesh"),
 )
@@ -297,6 +302,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             "erosion": ({"strain": to_float(b["erosion"]["strain"]),
                          "time_step": to_float(b["erosion"].get("time_step", 0.0))} if "erosion" in b else None),
             "accept_thin": bool(b.get("accept_thin", False)),
+            "hourglass_control": b.get("hourglass_control", "viscous"),
         })
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
     if "gravity" in raw:
@@ -329,6 +335,11 @@ def check_lagrange(case: dict, data: dict) -> None:
                         "at least one body is required ([[lagrange.bodies]]), or a background [ale]")
     if not case["materials"]:
         raise CaseError("materials", MISSING, "required key missing: the bodies' materials, e.g. [materials.steel]")
+    for i, b in enumerate(bodies):
+        if b["hourglass_control"] == "assumed_strain" and dim != 2:
+            raise CaseError(format_key(["lagrange", "bodies", i, "hourglass_control"]), b["hourglass_control"],
+                            "needs dimension 2 for now (the hexahedron's assumed-strain stiffness is not built "
+                            "yet); allowed in 3-D: viscous")
     integrator = case["lagrange"].get("integrator", "explicit")
     static = not INTEGRATORS[integrator].dynamic
     if static and case.get("coupling"):

@@ -349,9 +349,26 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     return dt_min, -1, n_eroded, dt_at
 
 
+@njit(cache=True, inline="always")
+def _quad_gamma(xe, b, vol, out):
+    """Flanagan-Belytschko hourglass vector of a quad into out[:, 0]: gamma = h - (h . x) b / A (h the
+    +-1 pattern), orthogonal to every linear field."""
+    ivol = 1.0 / vol
+    hx = 0.0
+    hy = 0.0
+    for i in range(4):
+        hx += QUAD_HG[i] * xe[i, 0]
+        hy += QUAD_HG[i] * xe[i, 1]
+    hx *= ivol
+    hy *= ivol
+    for i in range(4):
+        out[i, 0] = QUAD_HG[i] - (hx * b[i, 0] + hy * b[i, 1])
+
+
 @njit(cache=True)
 def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt):
+                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt,
+                 hg_stiff, hgq):
     ne = conn.shape[0]
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
@@ -499,23 +516,59 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             fe[i, 0] = -(p0 * bx + s3 * by)
             fe[i, 1] = -(s3 * bx + p1 * by)
 
-        if hg_coef > 0.0:
-            ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
-            ivol = 1.0 / vol
-            hx = 0.0
-            hy = 0.0
+        if hg_stiff[e]:
+            # assumed-strain hourglass stiffness (Belytschko & Bindeman 1991, ASQBI): in the element's
+            # co-rotational frame (e1 along the mean xi edge, e2 normal to it) the hourglass modes
+            # g_k = gamma . v_k carry the stiffness of the bending strain the bilinear field holds,
+            # with the transverse stress relaxed (E' = 2 mu (1 + nu / (1 - nu)) in plane strain: no
+            # volumetric locking): K_1 = E' b / (12 a), K_2 = E' a / (12 b) (half widths a, b); the
+            # hourglass stresses Q_k accumulate K_k g_k dt in that frame (objective), their work
+            # goes to the element's internal energy
+            e10 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
+            e11 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
+            lx = math.sqrt(e10 * e10 + e11 * e11)
+            e10 /= lx
+            e11 /= lx
+            ly = abs(-e11 * ((xe[3, 0] - xe[0, 0]) + (xe[2, 0] - xe[1, 0]))
+                     + e10 * ((xe[3, 1] - xe[0, 1]) + (xe[2, 1] - xe[1, 1])))
+            if code == NEO_HOOKEAN:
+                kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
+            else:
+                kb = mat_par[mid, P_K]
+            ep = 4.0 * G * (3.0 * kb + G) / (3.0 * kb + 4.0 * G)
+            # (gamma = h, the +-1 pattern, on a rectangle: g = 4 c for the mode u = c xi eta, whose
+            # bending energy is 2/3 E' (b / a) c^2 per unit thickness)
+            k1 = ep * ly / (12.0 * lx)
+            k2 = ep * lx / (12.0 * ly)
+            _quad_gamma(xe, b, vol, xm)
+            g1 = 0.0
+            g2 = 0.0
             for i in range(4):
-                hx += QUAD_HG[i] * xe[i, 0]
-                hy += QUAD_HG[i] * xe[i, 1]
-            hx *= ivol
-            hy *= ivol
+                g1 += xm[i, 0] * (ve[i, 0] * e10 + ve[i, 1] * e11)
+                g2 += xm[i, 0] * (-ve[i, 0] * e11 + ve[i, 1] * e10)
+            q1 = hgq[e, 0]
+            q2 = hgq[e, 1]
+            if dt > 0.0:
+                q1n = q1 + dt * k1 * g1
+                q2n = q2 + dt * k2 * g2
+                w = 0.5 * dt * ((q1 + q1n) * g1 + (q2 + q2n) * g2)
+                e_int[e] += w
+                hgq[e, 2] += w
+                q1 = q1n
+                q2 = q2n
+                hgq[e, 0] = q1
+                hgq[e, 1] = q2
+            for i in range(4):
+                fe[i, 0] -= xm[i, 0] * (q1 * e10 - q2 * e11)
+                fe[i, 1] -= xm[i, 0] * (q1 * e11 + q2 * e10)
+        elif hg_coef > 0.0:
+            ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
+            _quad_gamma(xe, b, vol, xm)
             gx = 0.0
             gy = 0.0
             for i in range(4):
-                gam = QUAD_HG[i] - (hx * b[i, 0] + hy * b[i, 1])
-                xm[i, 0] = gam
-                gx += gam * ve[i, 0]
-                gy += gam * ve[i, 1]
+                gx += xm[i, 0] * ve[i, 0]
+                gy += xm[i, 0] * ve[i, 1]
             gx *= ah
             gy *= ah
             for i in range(4):
@@ -537,7 +590,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
 @njit(cache=True)
 def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
                        eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut,
-                       alive, eps_eq, erode_at, erode_dt):
+                       alive, eps_eq, erode_at, erode_dt, hg_stiff, hgq):
     """Stress update n-1 -> n, internal + hourglass forces at x^n, stable step.
 
     Parameters
@@ -561,6 +614,9 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     erosion on, an element that would invert (volume or J) erodes instead of stopping the run
     erode_dt : (ne,) the stable step below which the element erodes (LS-DYNA's TSMIN with ERODE = 1:
     a crushed element would stop the run by its step long before it inverts), 0 for none
+    hg_stiff : (ne,) uint8, 1 for an element with the assumed-strain hourglass stiffness (quads)
+    instead of the viscous control; hgq : (ne, 3) its hourglass stresses Q_1, Q_2 (co-rotational
+    frame) and the hourglass work so far (also in e_int), updated in place
 
     Returns ``(dt_min, bad, eroded, dt_at)``: the smallest stable step of the live elements, the first
     element with non-positive volume (at x^n or at the mid-step configuration), non-positive
@@ -574,7 +630,7 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
                            erode_dt)
     return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                         temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
-                        erode_dt)
+                        erode_dt, hg_stiff, hgq)
 
 
 @njit(cache=True)
@@ -585,14 +641,16 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
     dt_min, bad, _, _ = element_forces_cut(
         x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p, temp, e_int, q_out,
         hg_coef, q_lin, q_quad, f, np.full(ne, -1, np.int64), np.zeros((0, conn.shape[1], x.shape[1])),
-        np.ones(ne, np.uint8), np.zeros(ne), np.full(ne, np.inf), np.zeros(ne))
+        np.ones(ne, np.uint8), np.zeros(ne), np.full(ne, np.inf), np.zeros(ne), np.zeros(ne, np.uint8),
+        np.zeros((ne, 3)))
     return dt_min, bad
 
 
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _erode, _forces_hex, _forces_quad, element_forces_cut, element_forces],
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _forces_hex, _forces_quad, element_forces_cut,
+                       element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
 
 

@@ -148,6 +148,13 @@ class LagrangeSolver:
             t0 = b.get("initial_temperature", m.get("room_temperature", 293.15))
             self.temp[my_body == b_index] = t0
         self.e_int = np.zeros(ne)
+        # hourglass control per body (bodies[i].hourglass_control): the viscous Flanagan-Belytschko
+        # force, or the assumed-strain stiffness (kernels.py) with its hourglass stresses and work
+        stiff = np.array([b.get("hourglass_control", "viscous") == "assumed_strain" for b in bodies])
+        if stiff.any() and dim == 3:
+            raise ValueError("hourglass_control = 'assumed_strain' needs dimension 2 (the hexahedron's is not built yet)")
+        self.hg_stiff = stiff[my_body].astype(np.uint8)
+        self.hgq = np.zeros((ne, 3))
         self.q = np.zeros(ne)
         # element erosion (bodies[i].erosion.strain): the effective strain at which an element of the
         # body erodes (inf: never); alive 0 once eroded.  The surface is rebuilt from the live
@@ -251,7 +258,7 @@ class LagrangeSolver:
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
             self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
-            self.alive, self.eps_eq, self.erode_at, self.erode_dt,
+            self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq,
         )
         if bad >= 0:
             gid = int(self.part.cells[bad])
@@ -692,6 +699,8 @@ class LagrangeSolver:
         if self.WATCHES_HIGH_MODES:   # the energy the scheme made from nothing, over that put in
             created = ke + e_int - self.ke0 - self.se0 - d["external_work"]
             d["created_energy_share"] = created / max(self.ke0 + self.se0 + self.supplied_gross, 1e-300)
+        if self.hg_stiff.any():  # the assumed-strain hourglass stiffness's work (in the stress-power energy)
+            d["hourglass_energy"] = float(self._allsum(self.hgq[:, 2].sum()))
         if self.has_gravity:
             d["gravity_work"] = self.w_gravity
         if self.loads is not None:
@@ -759,7 +768,7 @@ class LagrangeSolver:
 
     # ---- checkpoint / restart (global arrays, so any rank count can read; same count is bitwise) --
     STATE_NODES = ("x", "v", "f")
-    STATE_CELLS = ("sig", "eps_p", "temp", "e_int", "q")
+    STATE_CELLS = ("sig", "eps_p", "temp", "e_int", "q", "hgq")
     STATE_SCALARS = ("dt_prev", "first_step", "step", "time", "w_int", "w_ext", "_dt_stable", "ke0",
                      "se0", "supplied_gross")
     STATE_VECTORS = ("impulse", "ang_impulse", "p0", "l0", "impulse_gross")

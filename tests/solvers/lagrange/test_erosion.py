@@ -136,7 +136,8 @@ def test_the_kernel_erodes_on_strain_and_on_inversion_and_skips_the_dead():
         out = kernels.element_forces_cut(
             x.copy(), v, dt, conn, np.zeros(1, np.int64), codes, par, gradN0, vol0, np.array([1000.0]),
             np.zeros((1, 6)), np.zeros(1), np.zeros(1), np.zeros(1), np.zeros(1), 0.1, 0.06, 1.5, f,
-            np.full(1, -1, np.int64), np.zeros((0, 4, 2)), alive, eps, np.full(1, limit), np.full(1, erode_dt))
+            np.full(1, -1, np.int64), np.zeros((0, 4, 2)), alive, eps, np.full(1, limit), np.full(1, erode_dt),
+            np.zeros(1, np.uint8), np.zeros((1, 3)))
         return out, alive[0], eps[0], f
 
     x_now = X + 0.5 * dt * v   # so that the mid-step configuration x - dt/2 v is the unit square
