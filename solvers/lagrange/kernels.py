@@ -23,6 +23,16 @@ Hourglass (FB viscous, LS-DYNA type 2/3 form): with the base vectors Gamma_a
 ``sum_I x_I gamma_aI = 0`` give exact conservation of linear and angular momentum
 and zero force for any velocity field linear in x (rigid motion).
 
+Hourglass (assumed-strain stiffness, quads of a body with hourglass_control = "assumed_strain";
+Belytschko & Bindeman 1991): in the element's co-rotational frame (e1 along the mean xi edge)
+``g_k = sum_I gamma_I v_I . e_k`` load hourglass stresses ``Q_k += dt K_k g_k`` with
+``K_1 = E' b / (12 a)``, ``K_2 = E' a / (12 b)`` (a, b the half widths along e1, e2) and
+``E' = 4 G (3K + G) / (3K + 4G)``: the energy of the bending strain the bilinear field holds, the
+transverse stress relaxed, so that a rectangle bends exactly and nu -> 1/2 does not lock;
+``f_I = -gamma_I (Q_1 e1 + Q_2 e2)``, the work ``(Q^{n-1} + Q^n)/2 . g dt`` into the internal energy.
+A body one or two elements thick then bends as Euler-Bernoulli (the viscous form adds no
+stiffness: the constant-strain part alone holds 1 - 1/n^2 of the bending with n elements).
+
 Artificial bulk viscosity (LS-DYNA form): for ``div v < 0``
 ``q = rho l (q_quad l (div v)^2 - q_lin c div v)``.
 
