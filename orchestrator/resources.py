@@ -34,9 +34,10 @@ from .schema.rules import CaseError, format_bytes, format_key
 # `immerse bench memory` (orchestrator/bench/memory.py -> bench-memory.json) measures every one of these:
 # tracemalloc peaks of the real solvers (set-up, steps, an output) as slopes between two sizes, so
 # fixed costs drop out.  Values of its run on the reference machine (2 cores, 24 GiB, Python 3.11).
-LAGRANGE_BYTES_PER_ELEMENT = {2: 514, 3: 896}
-"""Lagrangian solver on one rank, per element (box meshes: quads 150^2 -> 300^2: 514.0, hexahedra
-20^3 -> 40^3: 896.1; linear elastic and Johnson-Cook within 1 B)."""
+LAGRANGE_BYTES_PER_ELEMENT = {2: 660, 3: 1126}
+"""Lagrangian solver on one rank, per element (box meshes: quads 150^2 -> 300^2: 660.1, hexahedra
+20^3 -> 40^3: 1125.7, re-measured 2026-12-05; 514.0 and 896.1 when first measured, the solver has
+gained arrays since); linear elastic and Johnson-Cook within 1 B)."""
 LAGRANGE_MESH_BYTES_PER_ELEMENT = {"box": {2: 254, 3: 428}, "built": {2: 940, 3: 940},
                                    "file": {2: 1084, 3: 1084}}
 """Held by EVERY Lagrangian rank (each builds the global mesh and its partition), per element:
@@ -44,6 +45,9 @@ box meshes (253.5, 427.8); quarter cylinders (939.6: the generator's orientation
 disks and rings are charged that figure, not measured); mesh files
 (read_mesh of 50^3 hexahedra: Gmsh 2.2 ASCII 1068.0, binary 1059.5, VTU 1083.5; 2-D files are
 charged the 3-D figure)."""
+LAGRANGE_HOURGLASS_STIFFNESS_BYTES_PER_ELEMENT = {2: 16, 3: 96}
+"""Added per element of a body with hourglass_control = "assumed_strain" (its hourglass stresses: 2
+a quad, 12 a hexahedron; measured 676.1 - 660.1 and 1221.7 - 1125.7 B, 2026-12-05)."""
 ALE_BYTES_PER_ZONE = {2: 483, 3: 719}
 """ALE solver, one material, per zone of the padded block (2 ghost layers a side), Eulerian, remap
 arrays included (150^2 -> 300^2: 482.9; 24^3 -> 40^3: 718.6)."""
@@ -232,8 +236,9 @@ def _lagrange_memory(case: dict, nranks: int) -> list[tuple[str, object, str, in
     parts = []
     for i, b in enumerate(case["lagrange"]["bodies"]):
         mesh = LAGRANGE_MESH_BYTES_PER_ELEMENT[_mesh_kind(b)][dim]
+        hg = LAGRANGE_HOURGLASS_STIFFNESS_BYTES_PER_ELEMENT[dim] if b.get("hourglass_control") == "assumed_strain" else 0
         parts.append((_mesh_key(i, b), _mesh_value(b), f"lagrange body {b['name']!r}",
-                      b["size"]["elements"] * (per_rank_base + nranks * mesh)))
+                      b["size"]["elements"] * (per_rank_base + hg + nranks * mesh)))
     return parts
 
 

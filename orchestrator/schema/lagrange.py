@@ -162,8 +162,8 @@ BODY = table(
         "accept_thin": {"type": "boolean"},
         # hourglass control of the one-point elements: the viscous Flanagan-Belytschko force (which
         # adds no bending stiffness: a body 2 elements thick bends 4/3 too softly) or the
-        # assumed-strain stiffness of Belytschko & Bindeman (exact bending of rectangular quads,
-        # no volumetric locking; 2-D for now)
+        # assumed-strain stiffness of Belytschko & Bindeman (exact bending of rectangular quads and
+        # hexahedra, no shear or volumetric locking)
         "hourglass_control": {"type": "string", "enum": ["viscous", "assumed_strain"]},
     },
     required=("name", "material", "mesh"),
@@ -335,11 +335,6 @@ def check_lagrange(case: dict, data: dict) -> None:
                         "at least one body is required ([[lagrange.bodies]]), or a background [ale]")
     if not case["materials"]:
         raise CaseError("materials", MISSING, "required key missing: the bodies' materials, e.g. [materials.steel]")
-    for i, b in enumerate(bodies):
-        if b["hourglass_control"] == "assumed_strain" and dim != 2:
-            raise CaseError(format_key(["lagrange", "bodies", i, "hourglass_control"]), b["hourglass_control"],
-                            "needs dimension 2 for now (the hexahedron's assumed-strain stiffness is not built "
-                            "yet); allowed in 3-D: viscous")
     integrator = case["lagrange"].get("integrator", "explicit")
     static = not INTEGRATORS[integrator].dynamic
     if static and case.get("coupling"):

@@ -23,8 +23,9 @@ Hourglass (FB viscous, LS-DYNA type 2/3 form): with the base vectors Gamma_a
 ``sum_I x_I gamma_aI = 0`` give exact conservation of linear and angular momentum
 and zero force for any velocity field linear in x (rigid motion).
 
-Hourglass (assumed-strain stiffness, quads of a body with hourglass_control = "assumed_strain";
-Belytschko & Bindeman 1991): in the element's co-rotational frame (e1 along the mean xi edge)
+Hourglass (assumed-strain stiffness, elements of a body with hourglass_control = "assumed_strain";
+Belytschko & Bindeman 1991 for the quad, 1993 for the hexahedron, whose form is in
+_hex_assumed_strain: the strains linear in one coordinate, in plane stress normal to it). Quads: in the element's co-rotational frame (e1 along the mean xi edge)
 ``g_k = sum_I gamma_I v_I . e_k`` load hourglass stresses ``Q_k += dt K_k g_k`` with
 ``K_1 = E' b / (12 a)``, ``K_2 = E' a / (12 b)`` (a, b the half widths along e1, e2) and
 ``E' = 4 G (3K + G) / (3K + 4G)``: the energy of the bending strain the bilinear field holds, the
@@ -40,7 +41,9 @@ Stable step: ``dt_e = l / (Q + sqrt(Q^2 + c^2))`` with
 ``Q = q_lin c + q_quad l |div v|`` for ``div v < 0`` and ``Q = 0`` otherwise
 (LS-DYNA); c = dilatational wave speed at the current density (elastic moduli
 for Johnson-Cook, current tangent for neo-Hookean) and ``l = V / max face area``
-(hex, LS-DYNA) or ``l = A / max diagonal`` (quad, the conservative LS-DYNA shell
+(hex, LS-DYNA's), shortened to the element's eigenvalue bound where its stretch modes carry lambda
+along every axis (``l c / sqrt(c^2 + lambda / rho (l^2 8 sum_I |b_I|^2 / V^2 / 4 - 1))``: h / sqrt(3) for
+an incompressible cube, LS-DYNA's l for a flat one), or ``l = A / max diagonal`` (quad, the conservative LS-DYNA shell
 option: for a square l = h/sqrt(2), the element eigenvalue bound 2/omega_max of
 the one-point quad in the incompressible limit).
 
@@ -59,7 +62,7 @@ import numpy as np
 from numba import njit
 
 from solvers import elements as _elements
-from solvers.elements import HEX_HG, QUAD_HG, hex_bvectors, quad_bvectors
+from solvers.elements import HEX_HG, HEX_XI, QUAD_HG, hex_bvectors, quad_bvectors
 from solvers.numba_cache import flush_stale_cache
 
 from . import materials as _materials
@@ -118,10 +121,139 @@ def _erode(e, alive, q_out, cut_row, fe_cut):
         fe_cut[r, :, :] = 0.0
     return 1
 
+@njit(cache=True, inline="always")
+def _return_factor(s0, s1, s2, s3, s4, s5, G, dgp):
+    """The radial return's factor q / q_trial = q / (q + 3 G dgp) of a step that yielded (J2: the
+    returned deviator is the trial one times it)."""
+    p = (s0 + s1 + s2) / 3.0
+    q = math.sqrt(1.5 * ((s0 - p) ** 2 + (s1 - p) ** 2 + (s2 - p) ** 2 + 2.0 * (s3 * s3 + s4 * s4 + s5 * s5)))
+    return q / (q + 3.0 * G * dgp)
+
+
+# the in-plane index pairs (i, j) of the hexahedron's three bending blocks s = 0, 1, 2 (the strains
+# linear in xi_s that lie in the plane normal to e_s)
+_BLOCK_I = (1, 2, 0)
+_BLOCK_J = (2, 0, 1)
+
+
+@njit(cache=True, inline="always")
+def _hex_assumed_strain(xe, ve, b, vol, dt, G, kb, kap, hgq_e, fe, gam, j, ev, ia, g, q):
+    """The assumed-strain hourglass stiffness of the one-point hexahedron (after Belytschko &
+    Bindeman 1993), its forces added to fe; returns the step's hourglass work.
+
+    Frame: e_k from the element's centre Jacobian columns j_k = sum_I xi_kI x_I / 8 (Gram-Schmidt
+    from e_1), half widths a_k = j_k . e_k. Hourglass rates g_ka = sum_I gamma_aI v_I . e_k for the
+    patterns eta zeta, zeta xi, xi eta, xi eta zeta (gamma orthogonal to every linear field).
+    On a box the mode u_k = c h_a has g_ka = 8 c, and the patterns a = 0..2 give strains linear in
+    one coordinate each: the block s holds the strains linear in xi_s in the plane normal to e_s,
+        eps_ii = g_ij / (8 a_i),  eps_jj = g_ji / (8 a_j),  gamma_ij = g_ii / (8 a_j) + g_jj / (8 a_i)
+    ((i, j) the other two indices), loaded in plane stress (sigma_ss = 0, the transverse shears of
+    the block dropped): a bending mode carries no parasitic shear (no shear locking) and no
+    volumetric stiffness (E / (1 - nu^2) -> 4 G as nu -> 1/2: no volumetric locking); a plate strip
+    one element thick bends with E / (1 - nu^2), a narrow beam, its transverse mode free, with E.
+    The twist of a plate (the three modes g_kk together) carries its in-plane shear; each alone its
+    transverse shears. The pattern xi eta zeta loads its normal strain eps_kk = g_k3 xi_i xi_j / (8 a_k)
+    with E (weight V / 9). The hourglass stresses (hgq_e[0:9] the blocks' sigma_ii, sigma_jj, tau_ij,
+    hgq_e[9:12] the xi eta zeta ones) accumulate in the co-rotational frame (objective); the
+    generalised forces Q_ka = d(energy)/d(g_ka), f_I = -sum Q_ka gamma_aI e_k; the work
+    (Q^{n-1} + Q^n)/2 . g dt goes to hgq_e[12] and the element's internal energy. In a step that
+    yields (Johnson-Cook) the hourglass stresses take the radial return's factor kap = q / q_trial of
+    the element's stress: the bending stress across the element is held to the flow stress as the
+    mean one is, so a plastic hinge forms where the material yields (an elastic stiffness alone
+    would hold the hinge's bending elastically)."""
+    # co-rotational frame (j, ev, ia, g, q: the caller's scratch arrays)
+    j[:, :] = 0.0
+    for i in range(8):
+        for k in range(3):
+            for d in range(3):
+                j[k, d] += 0.125 * HEX_XI[i, k] * xe[i, d]
+    n0 = math.sqrt(j[0, 0] ** 2 + j[0, 1] ** 2 + j[0, 2] ** 2)
+    for d in range(3):
+        ev[0, d] = j[0, d] / n0
+    p = j[1, 0] * ev[0, 0] + j[1, 1] * ev[0, 1] + j[1, 2] * ev[0, 2]
+    for d in range(3):
+        ev[1, d] = j[1, d] - p * ev[0, d]
+    n1 = math.sqrt(ev[1, 0] ** 2 + ev[1, 1] ** 2 + ev[1, 2] ** 2)
+    for d in range(3):
+        ev[1, d] /= n1
+    ev[2, 0] = ev[0, 1] * ev[1, 2] - ev[0, 2] * ev[1, 1]
+    ev[2, 1] = ev[0, 2] * ev[1, 0] - ev[0, 0] * ev[1, 2]
+    ev[2, 2] = ev[0, 0] * ev[1, 1] - ev[0, 1] * ev[1, 0]
+    for k in range(3):   # ia_k = 1 / (8 a_k)
+        a = abs(j[k, 0] * ev[k, 0] + j[k, 1] * ev[k, 1] + j[k, 2] * ev[k, 2])
+        ia[k] = 0.125 / a
+    # hourglass vectors and rates
+    ivol = 1.0 / vol
+    g[:, :] = 0.0
+    for m in range(4):
+        hx = 0.0
+        hy = 0.0
+        hz = 0.0
+        for i in range(8):
+            hx += HEX_HG[m, i] * xe[i, 0]
+            hy += HEX_HG[m, i] * xe[i, 1]
+            hz += HEX_HG[m, i] * xe[i, 2]
+        hx *= ivol
+        hy *= ivol
+        hz *= ivol
+        for i in range(8):
+            gm = HEX_HG[m, i] - (hx * b[i, 0] + hy * b[i, 1] + hz * b[i, 2])
+            gam[m, i] = gm
+            for k in range(3):
+                g[k, m] += gm * (ve[i, 0] * ev[k, 0] + ve[i, 1] * ev[k, 1] + ve[i, 2] * ev[k, 2])
+    # moduli: Young's, Poisson's and the plane-stress modulus E / (1 - nu^2) = 4 G (3K + G) / (3K + 4G)
+    ey = 9.0 * kb * G / (3.0 * kb + G)
+    nu = (3.0 * kb - 2.0 * G) / (2.0 * (3.0 * kb + G))
+    eps = 4.0 * G * (3.0 * kb + G) / (3.0 * kb + 4.0 * G)
+    w3 = vol / 3.0   # integral of xi_s^2 over the box
+    w9 = vol / 9.0   # integral of (xi_i xi_j)^2
+    q[:, :] = 0.0
+    work = 0.0
+    for s in range(3):
+        i = _BLOCK_I[s]
+        jj = _BLOCK_J[s]
+        e_ii = g[i, jj] * ia[i]
+        e_jj = g[jj, i] * ia[jj]
+        g_ij = g[i, i] * ia[jj] + g[jj, jj] * ia[i]
+        o0 = hgq_e[3 * s]
+        o1 = hgq_e[3 * s + 1]
+        o2 = hgq_e[3 * s + 2]
+        s0 = kap * (o0 + dt * eps * (e_ii + nu * e_jj))
+        s1 = kap * (o1 + dt * eps * (e_jj + nu * e_ii))
+        s2 = kap * (o2 + dt * G * g_ij)
+        work += 0.5 * dt * w3 * ((o0 + s0) * e_ii + (o1 + s1) * e_jj + (o2 + s2) * g_ij)
+        hgq_e[3 * s] = s0
+        hgq_e[3 * s + 1] = s1
+        hgq_e[3 * s + 2] = s2
+        q[i, jj] += w3 * s0 * ia[i]
+        q[jj, i] += w3 * s1 * ia[jj]
+        q[i, i] += w3 * s2 * ia[jj]
+        q[jj, jj] += w3 * s2 * ia[i]
+    for k in range(3):
+        e_kk = g[k, 3] * ia[k]
+        o = hgq_e[9 + k]
+        sn = kap * (o + dt * ey * e_kk)
+        work += 0.5 * dt * w9 * (o + sn) * e_kk
+        hgq_e[9 + k] = sn
+        q[k, 3] = w9 * sn * ia[k]
+    hgq_e[12] += work
+    # f_I = -sum_ka Q_ka gamma_aI e_k
+    for m in range(4):
+        qx = q[0, m] * ev[0, 0] + q[1, m] * ev[1, 0] + q[2, m] * ev[2, 0]
+        qy = q[0, m] * ev[0, 1] + q[1, m] * ev[1, 1] + q[2, m] * ev[2, 1]
+        qz = q[0, m] * ev[0, 2] + q[1, m] * ev[1, 2] + q[2, m] * ev[2, 2]
+        for i in range(8):
+            gm = gam[m, i]
+            fe[i, 0] -= gm * qx
+            fe[i, 1] -= gm * qy
+            fe[i, 2] -= gm * qz
+    return work
+
 
 @njit(cache=True)
 def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
-                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt):
+                temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt,
+                hg_stiff, hgq):
     ne = conn.shape[0]
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -129,6 +261,12 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     b = np.empty((8, 3))
     bm = np.empty((8, 3))
     fe = np.empty((8, 3))
+    hgam = np.empty((4, 8))
+    hj = np.empty((3, 3))
+    hev = np.empty((3, 3))
+    hia = np.empty(3)
+    hgr = np.empty((3, 4))
+    hq = np.empty((3, 4))
     dt_min = np.inf
     dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
@@ -220,6 +358,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
         o5 = sig[e, 5]
         s0, s1, s2, s3, s4, s5 = o0, o1, o2, o3, o4, o5
         G = mat_par[mid, P_G]
+        kap = 1.0   # the radial return's factor this step (1: elastic), applied to hourglass stresses
         if code == NEO_HOOKEAN:
             f00 = 0.0
             f01 = 0.0
@@ -263,6 +402,8 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                         dt, eps_p[e], temp[e], rho, mat_par[mid])
                     eps_p[e] += dgp
                     temp[e] += dT
+                    if dgp > 0.0:
+                        kap = _return_factor(s0, s1, s2, s3, s4, s5, G, dgp)
                 else:
                     s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
                                                               wxy, wyz, wzx, dt)
@@ -291,7 +432,21 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             qq = q_lin * c - q_quad * lc * divv
             q = rho * lc * qq * (-divv)
         q_out[e] = q
-        dte = lc / (qq + math.sqrt(qq * qq + csq))
+        # the element's highest frequency (lumped mass rho V / 8): on a box of half widths a_k the
+        # stretch modes v_I = (alpha xi_I, beta eta_I, gamma zeta_I) give
+        # omega^2 = max eig D (lambda 1 1^T + 2 mu I) D / rho, D = diag(1 / a_k), bounded by
+        # (2 mu / a_min^2 + lambda sum_k 1 / a_k^2) / rho = (8 mu / lc^2 + lambda 8 sum_I |b_I|^2 / V^2) / rho
+        # (a cube: (3 lambda + 2 mu) / (rho a^2), LS-DYNA's lc / c alone takes (lambda + 2 mu): a free
+        # cube or a column one element across rings at omega dt = 2.7 (nu = 0.3) to 3.5 (nu -> 1/2) and
+        # diverges; in a bulky mesh the neighbours' phases keep it near lc / c). The effective length
+        # lc_eff = 2 c / omega goes into LS-DYNA's formula with the bulk viscosity.
+        sb = 0.0
+        for i in range(8):
+            sb += b[i, 0] * b[i, 0] + b[i, 1] * b[i, 1] + b[i, 2] * b[i, 2]
+        ilc2 = 4.0 / (lc * lc)
+        lam_r = max(csq - 2.0 * G / rho, 0.0)   # lambda / rho (the tangent's for neo-Hookean)
+        lce = lc * math.sqrt(csq / (csq + lam_r * max(8.0 * sb / (vol * vol) - ilc2, 0.0) / ilc2))
+        dte = lce / (qq + math.sqrt(qq * qq + csq))
         if dte < erode_dt[e]:  # crushed below the body's smallest allowed step: erodes (its work booked)
             n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
             continue
@@ -311,8 +466,17 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             fe[i, 1] = -(s3 * bx + p1 * by + s4 * bz)
             fe[i, 2] = -(s5 * bx + s4 * by + p2 * bz)
 
+        if hg_stiff[e]:
+            # assumed-strain hourglass stiffness (the bending the trilinear field holds; see
+            # _hex_assumed_strain), its work into the element's internal energy
+            if code == NEO_HOOKEAN:
+                kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
+            else:
+                kb = mat_par[mid, P_K]
+            w = _hex_assumed_strain(xe, ve, b, vol, dt, G, kb, kap, hgq[e], fe, hgam, hj, hev, hia, hgr, hq)
+            e_int[e] += w
         # Flanagan-Belytschko viscous hourglass control
-        if hg_coef > 0.0:
+        elif hg_coef > 0.0:
             ah = hg_coef * rho * c * vol ** (2.0 / 3.0) * 0.25
             ivol = 1.0 / vol
             for a in range(4):
@@ -452,6 +616,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
         o5 = sig[e, 5]
         s0, s1, s2, s3, s4, s5 = o0, o1, o2, o3, o4, o5
         G = mat_par[mid, P_G]
+        kap = 1.0   # the radial return's factor this step (1: elastic), applied to hourglass stresses
         if code == NEO_HOOKEAN:
             f00 = 0.0
             f01 = 0.0
@@ -484,6 +649,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                         dt, eps_p[e], temp[e], rho, mat_par[mid])
                     eps_p[e] += dgp
                     temp[e] += dT
+                    if dgp > 0.0:
+                        kap = _return_factor(s0, s1, s2, s3, s4, s5, G, dgp)
                 else:
                     s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
                                                               wxy, 0.0, 0.0, dt)
@@ -559,8 +726,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             q1 = hgq[e, 0]
             q2 = hgq[e, 1]
             if dt > 0.0:
-                q1n = q1 + dt * k1 * g1
-                q2n = q2 + dt * k2 * g2
+                q1n = kap * (q1 + dt * k1 * g1)
+                q2n = kap * (q2 + dt * k2 * g2)
                 w = 0.5 * dt * ((q1 + q1n) * g1 + (q2 + q2n) * g2)
                 e_int[e] += w
                 hgq[e, 2] += w
@@ -637,7 +804,7 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     if x.shape[1] == 3:
         return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                            temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
-                           erode_dt)
+                           erode_dt, hg_stiff, hgq)
     return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                         temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
                         erode_dt, hg_stiff, hgq)
@@ -659,7 +826,7 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _forces_hex, _forces_quad, element_forces_cut,
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _return_factor, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
 

@@ -151,10 +151,10 @@ class LagrangeSolver:
         # hourglass control per body (bodies[i].hourglass_control): the viscous Flanagan-Belytschko
         # force, or the assumed-strain stiffness (kernels.py) with its hourglass stresses and work
         stiff = np.array([b.get("hourglass_control", "viscous") == "assumed_strain" for b in bodies])
-        if stiff.any() and dim == 3:
-            raise ValueError("hourglass_control = 'assumed_strain' needs dimension 2 (the hexahedron's is not built yet)")
         self.hg_stiff = stiff[my_body].astype(np.uint8)
-        self.hgq = np.zeros((ne, 3))
+        # its hourglass stresses and work: quads Q_1, Q_2, work; hexahedra the three bending blocks'
+        # (sigma_ii, sigma_jj, tau_ij), the xi eta zeta patterns' three, work
+        self.hgq = np.zeros((ne, (3 if dim == 2 else 13) if stiff.any() else 1))  # (1: the work column only)
         self.q = np.zeros(ne)
         # element erosion (bodies[i].erosion.strain): the effective strain at which an element of the
         # body erodes (inf: never); alive 0 once eroded.  The surface is rebuilt from the live
@@ -700,7 +700,7 @@ class LagrangeSolver:
             created = ke + e_int - self.ke0 - self.se0 - d["external_work"]
             d["created_energy_share"] = created / max(self.ke0 + self.se0 + self.supplied_gross, 1e-300)
         if self.hg_stiff.any():  # the assumed-strain hourglass stiffness's work (in the stress-power energy)
-            d["hourglass_energy"] = float(self._allsum(self.hgq[:, 2].sum()))
+            d["hourglass_energy"] = float(self._allsum(self.hgq[:, -1].sum()))
         if self.has_gravity:
             d["gravity_work"] = self.w_gravity
         if self.loads is not None:

@@ -100,10 +100,12 @@ def test_spinning_block_conserves_momenta_10k_steps():
 
 def test_inverted_element_is_named():
     """A corner node thrown into its element at 100 times the wave speed inverts it within a few
-    stable steps: the solver stops naming the element, the step and the time."""
+    stable steps (no bulk viscosity or hourglass damping to slow it: with them, the node can bounce
+    back and a neighbour fail first): the solver stops naming the element, the step and the time."""
     soft = {"model": "linear_elastic", "density": 1000.0, "youngs_modulus": 1e7, "poisson_ratio": 0.3}
     case = make_case(3, {"box": {"lower": [0.0] * 3, "upper": [0.01] * 3, "cells": [2, 2, 2]}}, soft,
-                     velocity=["where((x > 0.0099) and (y > 0.0099) and (z > 0.0099), -1e4, 0)", 0.0, 0.0])
+                     velocity=["where((x > 0.0099) and (y > 0.0099) and (z > 0.0099), -1e4, 0)", 0.0, 0.0],
+                     bulk_viscosity_linear=0.0, bulk_viscosity_quadratic=0.0, hourglass=0.0)
     s = LagrangeSolver(MPI.COMM_SELF, case)
     with pytest.raises(SolverError, match=r"element 7 at step [1-9], t=[0-9.e-]+ s"):
         t = 0.0
