@@ -25,12 +25,15 @@ and zero force for any velocity field linear in x (rigid motion).
 
 Hourglass (assumed-strain stiffness, elements of a body with hourglass_control = "assumed_strain";
 Belytschko & Bindeman 1991 for the quad, 1993 for the hexahedron, whose form is in
-_hex_assumed_strain: the strains linear in one coordinate, in plane stress normal to it). Quads: in the element's co-rotational frame (e1 along the mean xi edge)
-``g_k = sum_I gamma_I v_I . e_k`` load hourglass stresses ``Q_k += dt K_k g_k`` with
-``K_1 = E' b / (12 a)``, ``K_2 = E' a / (12 b)`` (a, b the half widths along e1, e2) and
+_hex_assumed_strain: the strains linear in one coordinate, in plane stress normal to it). A
+potential of the hourglass deformation H = sum_I gamma0_I x_I (gamma0 the FB vector of the
+reference: H vanishes on every affine map of the reference) in the element's co-rotational frame.
+Quads: e1 along the mean xi edge, ``h_k = e_k . H`` loads ``Q_k = K_k h_k`` with
+``K_1 = E' b / (12 a)``, ``K_2 = E' a / (12 b)`` (a, b the reference half widths along e1, e2) and
 ``E' = 4 G (3K + G) / (3K + 4G)``: the energy of the bending strain the bilinear field holds, the
 transverse stress relaxed, so that a rectangle bends exactly and nu -> 1/2 does not lock;
-``f_I = -gamma_I (Q_1 e1 + Q_2 e2)``, the work ``(Q^{n-1} + Q^n)/2 . g dt`` into the internal energy.
+``f_I = -gamma0_I (Q_1 e1 + Q_2 e2)`` plus the frame's share, the exact gradient of 1/2 Q . h:
+conservative and torque free (an incremental form pumped energy into a spinning block).
 A body one or two elements thick then bends as Euler-Bernoulli (the viscous form adds no
 stiffness: the constant-strain part alone holds 1 - 1/n^2 of the bending with n elements).
 
@@ -130,6 +133,9 @@ def _return_factor(s0, s1, s2, s3, s4, s5, G, dgp):
     return q / (q + 3.0 * G * dgp)
 
 
+# the quad's mean xi edge m = sum_I s_I x_I = (x1 - x0) + (x2 - x3)
+_QUAD_EDGE = (-1.0, 1.0, 1.0, -1.0)
+
 # the in-plane index pairs (i, j) of the hexahedron's three bending blocks s = 0, 1, 2 (the strains
 # linear in xi_s that lie in the plane normal to e_s)
 _BLOCK_I = (1, 2, 0)
@@ -137,31 +143,10 @@ _BLOCK_J = (2, 0, 1)
 
 
 @njit(cache=True, inline="always")
-def _hex_assumed_strain(xe, ve, b, vol, dt, G, kb, kap, hgq_e, fe, gam, j, ev, ia, g, q):
-    """The assumed-strain hourglass stiffness of the one-point hexahedron (after Belytschko &
-    Bindeman 1993), its forces added to fe; returns the step's hourglass work.
-
-    Frame: e_k from the element's centre Jacobian columns j_k = sum_I xi_kI x_I / 8 (Gram-Schmidt
-    from e_1), half widths a_k = j_k . e_k. Hourglass rates g_ka = sum_I gamma_aI v_I . e_k for the
-    patterns eta zeta, zeta xi, xi eta, xi eta zeta (gamma orthogonal to every linear field).
-    On a box the mode u_k = c h_a has g_ka = 8 c, and the patterns a = 0..2 give strains linear in
-    one coordinate each: the block s holds the strains linear in xi_s in the plane normal to e_s,
-        eps_ii = g_ij / (8 a_i),  eps_jj = g_ji / (8 a_j),  gamma_ij = g_ii / (8 a_j) + g_jj / (8 a_i)
-    ((i, j) the other two indices), loaded in plane stress (sigma_ss = 0, the transverse shears of
-    the block dropped): a bending mode carries no parasitic shear (no shear locking) and no
-    volumetric stiffness (E / (1 - nu^2) -> 4 G as nu -> 1/2: no volumetric locking); a plate strip
-    one element thick bends with E / (1 - nu^2), a narrow beam, its transverse mode free, with E.
-    The twist of a plate (the three modes g_kk together) carries its in-plane shear; each alone its
-    transverse shears. The pattern xi eta zeta loads its normal strain eps_kk = g_k3 xi_i xi_j / (8 a_k)
-    with E (weight V / 9). The hourglass stresses (hgq_e[0:9] the blocks' sigma_ii, sigma_jj, tau_ij,
-    hgq_e[9:12] the xi eta zeta ones) accumulate in the co-rotational frame (objective); the
-    generalised forces Q_ka = d(energy)/d(g_ka), f_I = -sum Q_ka gamma_aI e_k; the work
-    (Q^{n-1} + Q^n)/2 . g dt goes to hgq_e[12] and the element's internal energy. In a step that
-    yields (Johnson-Cook) the hourglass stresses take the radial return's factor kap = q / q_trial of
-    the element's stress: the bending stress across the element is held to the flow stress as the
-    mean one is, so a plastic hinge forms where the material yields (an elastic stiffness alone
-    would hold the hinge's bending elastically)."""
-    # co-rotational frame (j, ev, ia, g, q: the caller's scratch arrays)
+def _hex_frame(xe, j, ev):
+    """The hexahedron's co-rotational frame: the centre Jacobian columns j_k = sum_I xi_kI x_I / 8
+    into j, the orthonormal e_k (Gram-Schmidt from e_1) into ev; returns (n0, n1, p) = (|j_0|,
+    |j_1 - p e_1|, j_1 . e_1), which the frame's derivative needs."""
     j[:, :] = 0.0
     for i in range(8):
         for k in range(3):
@@ -179,74 +164,170 @@ def _hex_assumed_strain(xe, ve, b, vol, dt, G, kb, kap, hgq_e, fe, gam, j, ev, i
     ev[2, 0] = ev[0, 1] * ev[1, 2] - ev[0, 2] * ev[1, 1]
     ev[2, 1] = ev[0, 2] * ev[1, 0] - ev[0, 0] * ev[1, 2]
     ev[2, 2] = ev[0, 0] * ev[1, 1] - ev[0, 1] * ev[1, 0]
-    for k in range(3):   # ia_k = 1 / (8 a_k)
-        a = abs(j[k, 0] * ev[k, 0] + j[k, 1] * ev[k, 1] + j[k, 2] * ev[k, 2])
-        ia[k] = 0.125 / a
-    # hourglass vectors and rates
-    ivol = 1.0 / vol
-    g[:, :] = 0.0
-    for m in range(4):
-        hx = 0.0
-        hy = 0.0
-        hz = 0.0
-        for i in range(8):
-            hx += HEX_HG[m, i] * xe[i, 0]
-            hy += HEX_HG[m, i] * xe[i, 1]
-            hz += HEX_HG[m, i] * xe[i, 2]
-        hx *= ivol
-        hy *= ivol
-        hz *= ivol
-        for i in range(8):
-            gm = HEX_HG[m, i] - (hx * b[i, 0] + hy * b[i, 1] + hz * b[i, 2])
-            gam[m, i] = gm
+    return n0, n1, p
+
+
+@njit(cache=True)
+def assumed_strain_reference(x, conn, hgq):
+    """The reference part of the assumed-strain hourglass state, from the reference coordinates x:
+    hexahedra hgq[e, 0:12] = sum_I h_aI X_I (a = 0..3, the patterns eta zeta, zeta xi, xi eta,
+    xi eta zeta) and hgq[e, 12:15] the half widths a_k; quads hgq[e, 0:2] = sum_I h_I X_I and
+    hgq[e, 2:4] the mean edge lengths (4 a, 4 b along and across the mean xi edge)."""
+    nen = conn.shape[1]
+    xe = np.empty((nen, x.shape[1]))
+    j = np.empty((3, 3))
+    ev = np.empty((3, 3))
+    for e in range(conn.shape[0]):
+        for i in range(nen):
+            for d in range(x.shape[1]):
+                xe[i, d] = x[conn[e, i], d]
+        if nen == 8:
+            for a in range(4):
+                for d in range(3):
+                    t = 0.0
+                    for i in range(8):
+                        t += HEX_HG[a, i] * xe[i, d]
+                    hgq[e, 3 * a + d] = t
+            _hex_frame(xe, j, ev)
             for k in range(3):
-                g[k, m] += gm * (ve[i, 0] * ev[k, 0] + ve[i, 1] * ev[k, 1] + ve[i, 2] * ev[k, 2])
+                hgq[e, 12 + k] = abs(j[k, 0] * ev[k, 0] + j[k, 1] * ev[k, 1] + j[k, 2] * ev[k, 2])
+        else:
+            for d in range(2):
+                t = 0.0
+                for i in range(4):
+                    t += QUAD_HG[i] * xe[i, d]
+                hgq[e, d] = t
+            m0 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
+            m1 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
+            lm = math.sqrt(m0 * m0 + m1 * m1)
+            hgq[e, 2] = lm
+            hgq[e, 3] = abs(-m1 / lm * ((xe[3, 0] - xe[0, 0]) + (xe[2, 0] - xe[1, 0]))
+                            + m0 / lm * ((xe[3, 1] - xe[0, 1]) + (xe[2, 1] - xe[1, 1])))
+
+
+@njit(cache=True, inline="always")
+def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, fm):
+    """The assumed-strain hourglass stiffness of the one-point hexahedron (after Belytschko &
+    Bindeman 1993), a potential: its forces added to fe; returns the step's hourglass work.
+
+    Hourglass deformation (total, from the reference): H_a = sum_I gamma0_aI x_I with the reference
+    hourglass vectors gamma0_aI = h_aI - (sum_J h_aJ X_J) . gradN0_I, which vanish on every affine
+    map of the reference (patch test), so H_a = sum_I h_aI x_I - F hX0_a (F the uniform-gradient
+    deformation gradient). Its components in the co-rotational frame (_hex_frame), less the plastic
+    offset hp, h_ka = e_k . H_a - hp_ka. On a box (half widths a_k, fixed at the reference) the mode
+    u_k = c h_a has h_ka = 8 c, and the patterns a = 0..2 give strains linear in one coordinate each:
+    the block s holds the strains linear in xi_s in the plane normal to e_s,
+        eps_ii = h_ij / (8 a_i),  eps_jj = h_ji / (8 a_j),  gamma_ij = h_ii / (8 a_j) + h_jj / (8 a_i)
+    ((i, j) the other two indices), loaded in plane stress (sigma_ss = 0, the transverse shears of
+    the block dropped): a bending mode carries no parasitic shear (no shear locking) and no
+    volumetric stiffness (E / (1 - nu^2) -> 4 G as nu -> 1/2: no volumetric locking); a plate strip
+    one element thick bends with E / (1 - nu^2), a narrow beam, its transverse mode free, with E.
+    The twist of a plate (the three modes h_kk together) carries its in-plane shear; each alone its
+    transverse shears. The pattern xi eta zeta loads its normal strain eps_kk = h_k3 xi_i xi_j / (8 a_k)
+    with E (weight V0 / 9). Energy E_h = 1/2 sum sigma : eps (weights V0 / 3, V0 / 9), Q_ka = dE_h /
+    dh_ka; the forces are its exact gradient, f_I = -sum_ka Q_ka gamma0_aI e_k minus the frame's
+    share (the frame turns with j_0, j_1: dE_h/dphi = T = sum_ka Q_ka e_k x H_a), so the stiffness
+    is conservative and torque free: a spinning body neither gains energy nor turns its momenta
+    (an incremental form, Q += K g dt in the turning frame, pumped energy into a spinning block).
+    A step that yields (Johnson-Cook) scales h - hp by the radial return's factor kap = q / q_trial
+    of the element's stress (the offset hp takes the rest): the bending across the element is held
+    to the flow stress as the mean stress is, so a plastic hinge forms (an elastic stiffness alone
+    would hold the hinge elastically). The work of a step (E_h before the return less E_h of the
+    step before) goes to hs[28] and the element's internal energy; hs: [0:12] hX0, [12:15] a_k,
+    [15:27] hp (k * 4 + a), [27] E_h, [28] the work so far."""
+    n0, n1, p = _hex_frame(xe, j, ev)
+    for d in range(3):
+        for c in range(3):
+            t = 0.0
+            for i in range(8):
+                t += xe[i, d] * gn[i, c]
+            fm[d, c] = t
+    for a in range(4):
+        for d in range(3):
+            t = 0.0
+            for i in range(8):
+                t += HEX_HG[a, i] * xe[i, d]
+            hm[a, d] = t - (fm[d, 0] * hs[3 * a] + fm[d, 1] * hs[3 * a + 1] + fm[d, 2] * hs[3 * a + 2])
+    for k in range(3):
+        for a in range(4):
+            hf[k, a] = (ev[k, 0] * hm[a, 0] + ev[k, 1] * hm[a, 1] + ev[k, 2] * hm[a, 2]) - hs[15 + 4 * k + a]
+    i0 = 0.125 / hs[12]
+    i1 = 0.125 / hs[13]
+    i2 = 0.125 / hs[14]
     # moduli: Young's, Poisson's and the plane-stress modulus E / (1 - nu^2) = 4 G (3K + G) / (3K + 4G)
     ey = 9.0 * kb * G / (3.0 * kb + G)
     nu = (3.0 * kb - 2.0 * G) / (2.0 * (3.0 * kb + G))
     eps = 4.0 * G * (3.0 * kb + G) / (3.0 * kb + 4.0 * G)
-    w3 = vol / 3.0   # integral of xi_s^2 over the box
-    w9 = vol / 9.0   # integral of (xi_i xi_j)^2
+    w3 = vol0 / 3.0   # integral of xi_s^2 over the box
+    w9 = vol0 / 9.0   # integral of (xi_i xi_j)^2
     q[:, :] = 0.0
-    work = 0.0
+    energy = 0.0
     for s in range(3):
         i = _BLOCK_I[s]
         jj = _BLOCK_J[s]
-        e_ii = g[i, jj] * ia[i]
-        e_jj = g[jj, i] * ia[jj]
-        g_ij = g[i, i] * ia[jj] + g[jj, jj] * ia[i]
-        o0 = hgq_e[3 * s]
-        o1 = hgq_e[3 * s + 1]
-        o2 = hgq_e[3 * s + 2]
-        s0 = kap * (o0 + dt * eps * (e_ii + nu * e_jj))
-        s1 = kap * (o1 + dt * eps * (e_jj + nu * e_ii))
-        s2 = kap * (o2 + dt * G * g_ij)
-        work += 0.5 * dt * w3 * ((o0 + s0) * e_ii + (o1 + s1) * e_jj + (o2 + s2) * g_ij)
-        hgq_e[3 * s] = s0
-        hgq_e[3 * s + 1] = s1
-        hgq_e[3 * s + 2] = s2
-        q[i, jj] += w3 * s0 * ia[i]
-        q[jj, i] += w3 * s1 * ia[jj]
-        q[i, i] += w3 * s2 * ia[jj]
-        q[jj, jj] += w3 * s2 * ia[i]
+        ii_ = i0 if i == 0 else (i1 if i == 1 else i2)
+        ij_ = i0 if jj == 0 else (i1 if jj == 1 else i2)
+        e_ii = hf[i, jj] * ii_
+        e_jj = hf[jj, i] * ij_
+        g_ij = hf[i, i] * ij_ + hf[jj, jj] * ii_
+        s0 = eps * (e_ii + nu * e_jj)
+        s1 = eps * (e_jj + nu * e_ii)
+        s2 = G * g_ij
+        energy += 0.5 * w3 * (s0 * e_ii + s1 * e_jj + s2 * g_ij)
+        q[i, jj] += w3 * s0 * ii_
+        q[jj, i] += w3 * s1 * ij_
+        q[i, i] += w3 * s2 * ij_
+        q[jj, jj] += w3 * s2 * ii_
     for k in range(3):
-        e_kk = g[k, 3] * ia[k]
-        o = hgq_e[9 + k]
-        sn = kap * (o + dt * ey * e_kk)
-        work += 0.5 * dt * w9 * (o + sn) * e_kk
-        hgq_e[9 + k] = sn
-        q[k, 3] = w9 * sn * ia[k]
-    hgq_e[12] += work
-    # f_I = -sum_ka Q_ka gamma_aI e_k
-    for m in range(4):
-        qx = q[0, m] * ev[0, 0] + q[1, m] * ev[1, 0] + q[2, m] * ev[2, 0]
-        qy = q[0, m] * ev[0, 1] + q[1, m] * ev[1, 1] + q[2, m] * ev[2, 1]
-        qz = q[0, m] * ev[0, 2] + q[1, m] * ev[1, 2] + q[2, m] * ev[2, 2]
+        ik = i0 if k == 0 else (i1 if k == 1 else i2)
+        e_kk = hf[k, 3] * ik
+        sn = ey * e_kk
+        energy += 0.5 * w9 * sn * e_kk
+        q[k, 3] = w9 * sn * ik
+    work = 0.0
+    if dt > 0.0:
+        work = energy - hs[27]
+        if kap < 1.0:
+            for k in range(3):
+                for a in range(4):
+                    hs[15 + 4 * k + a] += (1.0 - kap) * hf[k, a]
+                    q[k, a] *= kap
+            energy *= kap * kap
+        hs[27] = energy
+        hs[28] += work
+    # the frame's share: T = sum_ka Q_ka e_k x H_a; dE/dj_0 = c0, dE/dj_1 = c1
+    t0 = 0.0
+    t1 = 0.0
+    t2 = 0.0
+    for k in range(3):
+        for a in range(4):
+            qa = q[k, a]
+            t0 += qa * (ev[k, 1] * hm[a, 2] - ev[k, 2] * hm[a, 1])
+            t1 += qa * (ev[k, 2] * hm[a, 0] - ev[k, 0] * hm[a, 2])
+            t2 += qa * (ev[k, 0] * hm[a, 1] - ev[k, 1] * hm[a, 0])
+    T1 = t0 * ev[0, 0] + t1 * ev[0, 1] + t2 * ev[0, 2]
+    T2 = t0 * ev[1, 0] + t1 * ev[1, 1] + t2 * ev[1, 2]
+    T3 = t0 * ev[2, 0] + t1 * ev[2, 1] + t2 * ev[2, 2]
+    for d in range(3):
+        j[0, d] = (T3 * ev[1, d] - T2 * ev[2, d] - T1 * p * ev[2, d] / n1) / n0   # c0 (j reused)
+        j[1, d] = T1 * ev[2, d] / n1                                              # c1
+    for a in range(4):
+        px = q[0, a] * ev[0, 0] + q[1, a] * ev[1, 0] + q[2, a] * ev[2, 0]
+        py = q[0, a] * ev[0, 1] + q[1, a] * ev[1, 1] + q[2, a] * ev[2, 1]
+        pz = q[0, a] * ev[0, 2] + q[1, a] * ev[1, 2] + q[2, a] * ev[2, 2]
+        hx = hs[3 * a]
+        hy = hs[3 * a + 1]
+        hz = hs[3 * a + 2]
         for i in range(8):
-            gm = gam[m, i]
-            fe[i, 0] -= gm * qx
-            fe[i, 1] -= gm * qy
-            fe[i, 2] -= gm * qz
+            gm = HEX_HG[a, i] - (hx * gn[i, 0] + hy * gn[i, 1] + hz * gn[i, 2])
+            fe[i, 0] -= gm * px
+            fe[i, 1] -= gm * py
+            fe[i, 2] -= gm * pz
+    for i in range(8):
+        x0 = 0.125 * HEX_XI[i, 0]
+        x1 = 0.125 * HEX_XI[i, 1]
+        for d in range(3):
+            fe[i, d] -= x0 * j[0, d] + x1 * j[1, d]
     return work
 
 
@@ -261,12 +342,12 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     b = np.empty((8, 3))
     bm = np.empty((8, 3))
     fe = np.empty((8, 3))
-    hgam = np.empty((4, 8))
     hj = np.empty((3, 3))
     hev = np.empty((3, 3))
-    hia = np.empty(3)
+    hhm = np.empty((4, 3))
     hgr = np.empty((3, 4))
     hq = np.empty((3, 4))
+    hfm = np.empty((3, 3))
     dt_min = np.inf
     dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
@@ -473,7 +554,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
             else:
                 kb = mat_par[mid, P_K]
-            w = _hex_assumed_strain(xe, ve, b, vol, dt, G, kb, kap, hgq[e], fe, hgam, hj, hev, hia, hgr, hq)
+            w = _hex_assumed_strain(xe, gradN0[e], dt, G, kb, kap, vol0[e], hgq[e], fe, hj, hev, hhm, hgr, hq, hfm)
             e_int[e] += w
         # Flanagan-Belytschko viscous hourglass control
         elif hg_coef > 0.0:
@@ -694,50 +775,73 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             fe[i, 1] = -(s3 * bx + p1 * by)
 
         if hg_stiff[e]:
-            # assumed-strain hourglass stiffness (Belytschko & Bindeman 1991, ASQBI): in the element's
-            # co-rotational frame (e1 along the mean xi edge, e2 normal to it) the hourglass modes
-            # g_k = gamma . v_k carry the stiffness of the bending strain the bilinear field holds,
-            # with the transverse stress relaxed (E' = 2 mu (1 + nu / (1 - nu)) in plane strain: no
-            # volumetric locking): K_1 = E' b / (12 a), K_2 = E' a / (12 b) (half widths a, b); the
-            # hourglass stresses Q_k accumulate K_k g_k dt in that frame (objective), their work
-            # goes to the element's internal energy
-            e10 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
-            e11 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
-            lx = math.sqrt(e10 * e10 + e11 * e11)
-            e10 /= lx
-            e11 /= lx
-            ly = abs(-e11 * ((xe[3, 0] - xe[0, 0]) + (xe[2, 0] - xe[1, 0]))
-                     + e10 * ((xe[3, 1] - xe[0, 1]) + (xe[2, 1] - xe[1, 1])))
+            # assumed-strain hourglass stiffness (Belytschko & Bindeman 1991, ASQBI), a potential as the
+            # hexahedron's (_hex_assumed_strain): the hourglass deformation H = sum_I gamma0_I x_I =
+            # sum_I h_I x_I - F hX0 (zero on every affine map of the reference), its components in the
+            # co-rotational frame (e1 along the mean xi edge m, e2 normal to it) less the plastic
+            # offset, h_k = e_k . H - hp_k, carry the stiffness of the bending strain the bilinear
+            # field holds with the transverse stress relaxed (E' = 2 mu (1 + nu / (1 - nu)) in plane
+            # strain: no volumetric locking): K_1 = E' b / (12 a), K_2 = E' a / (12 b) (reference half
+            # widths a, b), Q_k = K_k h_k, E_h = 1/2 Q . h; forces the exact gradient (the frame's
+            # share -T s_I e2 / |m|, T = sum_k Q_k (e_k x H)_z: torque free, conservative); a step
+            # that yields scales h by the radial return's factor (hp takes the rest). hgq[e]: [0:2]
+            # hX0, [2:4] 4a, 4b, [4:6] hp, [6] E_h, [7] the work so far (also in e_int)
+            m0 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
+            m1 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
+            lm = math.sqrt(m0 * m0 + m1 * m1)
+            e10 = m0 / lm
+            e11 = m1 / lm
             if code == NEO_HOOKEAN:
                 kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
             else:
                 kb = mat_par[mid, P_K]
             ep = 4.0 * G * (3.0 * kb + G) / (3.0 * kb + 4.0 * G)
-            # (gamma = h, the +-1 pattern, on a rectangle: g = 4 c for the mode u = c xi eta, whose
+            # (gamma = h, the +-1 pattern, on a rectangle: h = 4 c for the mode u = c xi eta, whose
             # bending energy is 2/3 E' (b / a) c^2 per unit thickness)
-            k1 = ep * ly / (12.0 * lx)
-            k2 = ep * lx / (12.0 * ly)
-            _quad_gamma(xe, b, vol, xm)
-            g1 = 0.0
-            g2 = 0.0
+            k1 = ep * hgq[e, 3] / (12.0 * hgq[e, 2])
+            k2 = ep * hgq[e, 2] / (12.0 * hgq[e, 3])
+            f00 = 0.0
+            f01 = 0.0
+            f10 = 0.0
+            f11 = 0.0
+            hx = 0.0
+            hy = 0.0
             for i in range(4):
-                g1 += xm[i, 0] * (ve[i, 0] * e10 + ve[i, 1] * e11)
-                g2 += xm[i, 0] * (-ve[i, 0] * e11 + ve[i, 1] * e10)
-            q1 = hgq[e, 0]
-            q2 = hgq[e, 1]
+                f00 += xe[i, 0] * gradN0[e, i, 0]
+                f01 += xe[i, 0] * gradN0[e, i, 1]
+                f10 += xe[i, 1] * gradN0[e, i, 0]
+                f11 += xe[i, 1] * gradN0[e, i, 1]
+                hx += QUAD_HG[i] * xe[i, 0]
+                hy += QUAD_HG[i] * xe[i, 1]
+            hx -= f00 * hgq[e, 0] + f01 * hgq[e, 1]
+            hy -= f10 * hgq[e, 0] + f11 * hgq[e, 1]
+            h1 = e10 * hx + e11 * hy - hgq[e, 4]
+            h2 = -e11 * hx + e10 * hy - hgq[e, 5]
+            q1 = k1 * h1
+            q2 = k2 * h2
+            en = 0.5 * (q1 * h1 + q2 * h2)
             if dt > 0.0:
-                q1n = kap * (q1 + dt * k1 * g1)
-                q2n = kap * (q2 + dt * k2 * g2)
-                w = 0.5 * dt * ((q1 + q1n) * g1 + (q2 + q2n) * g2)
+                w = en - hgq[e, 6]
+                if kap < 1.0:
+                    hgq[e, 4] += (1.0 - kap) * h1
+                    hgq[e, 5] += (1.0 - kap) * h2
+                    q1 *= kap
+                    q2 *= kap
+                    en *= kap * kap
+                hgq[e, 6] = en
+                hgq[e, 7] += w
                 e_int[e] += w
-                hgq[e, 2] += w
-                q1 = q1n
-                q2 = q2n
-                hgq[e, 0] = q1
-                hgq[e, 1] = q2
+            # T = Q_1 (e1 x H)_z + Q_2 (e2 x H)_z, e2 = (-e11, e10)
+            tz = q1 * (e10 * hy - e11 * hx) + q2 * (-e11 * hy - e10 * hx)
+            px = q1 * e10 - q2 * e11
+            py = q1 * e11 + q2 * e10
+            rx = -tz * (-e11) / lm
+            ry = -tz * e10 / lm
             for i in range(4):
-                fe[i, 0] -= xm[i, 0] * (q1 * e10 - q2 * e11)
-                fe[i, 1] -= xm[i, 0] * (q1 * e11 + q2 * e10)
+                gm = QUAD_HG[i] - (hgq[e, 0] * gradN0[e, i, 0] + hgq[e, 1] * gradN0[e, i, 1])
+                si = _QUAD_EDGE[i]
+                fe[i, 0] -= gm * px - si * rx
+                fe[i, 1] -= gm * py - si * ry
         elif hg_coef > 0.0:
             ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
             _quad_gamma(xe, b, vol, xm)
@@ -791,9 +895,10 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     erosion on, an element that would invert (volume or J) erodes instead of stopping the run
     erode_dt : (ne,) the stable step below which the element erodes (LS-DYNA's TSMIN with ERODE = 1:
     a crushed element would stop the run by its step long before it inverts), 0 for none
-    hg_stiff : (ne,) uint8, 1 for an element with the assumed-strain hourglass stiffness (quads)
-    instead of the viscous control; hgq : (ne, 3) its hourglass stresses Q_1, Q_2 (co-rotational
-    frame) and the hourglass work so far (also in e_int), updated in place
+    hg_stiff : (ne,) uint8, 1 for an element with the assumed-strain hourglass stiffness instead
+    of the viscous control; hgq : (ne, 8 | 29) its state (assumed_strain_reference fills the
+    reference part: sum_I h_I X_I and the widths; then the plastic offsets, the hourglass energy
+    and, last, the hourglass work so far, also in e_int), updated in place
 
     Returns ``(dt_min, bad, eroded, dt_at)``: the smallest stable step of the live elements, the first
     element with non-positive volume (at x^n or at the mid-step configuration), non-positive
@@ -826,7 +931,8 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _return_factor, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _return_factor, _hex_frame,
+                        assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
 

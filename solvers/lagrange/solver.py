@@ -152,9 +152,11 @@ class LagrangeSolver:
         # force, or the assumed-strain stiffness (kernels.py) with its hourglass stresses and work
         stiff = np.array([b.get("hourglass_control", "viscous") == "assumed_strain" for b in bodies])
         self.hg_stiff = stiff[my_body].astype(np.uint8)
-        # its hourglass stresses and work: quads Q_1, Q_2, work; hexahedra the three bending blocks'
-        # (sigma_ii, sigma_jj, tau_ij), the xi eta zeta patterns' three, work
-        self.hgq = np.zeros((ne, (3 if dim == 2 else 13) if stiff.any() else 1))  # (1: the work column only)
+        # its state: the reference hourglass sums and widths, the plastic offsets, the hourglass
+        # energy and the work so far (kernels.py: _hex_assumed_strain, _forces_quad)
+        self.hgq = np.zeros((ne, (8 if dim == 2 else 29) if stiff.any() else 1))  # (1: the work column only)
+        if stiff.any():  # the reference part: sum_I h_aI X_I and the element's widths (kernels.py)
+            kernels.assumed_strain_reference(self.X, self.conn, self.hgq)
         self.q = np.zeros(ne)
         # element erosion (bodies[i].erosion.strain): the effective strain at which an element of the
         # body erodes (inf: never); alive 0 once eroded.  The surface is rebuilt from the live
