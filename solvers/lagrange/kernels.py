@@ -143,15 +143,72 @@ _BLOCK_J = (2, 0, 1)
 
 
 @njit(cache=True, inline="always")
-def _hex_frame(xe, j, ev):
-    """The hexahedron's co-rotational frame: the centre Jacobian columns j_k = sum_I xi_kI x_I / 8
-    into j, the orthonormal e_k (Gram-Schmidt from e_1) into ev; returns (n0, n1, p) = (|j_0|,
-    |j_1 - p e_1|, j_1 . e_1), which the frame's derivative needs."""
-    j[:, :] = 0.0
-    for i in range(8):
-        for k in range(3):
-            for d in range(3):
-                j[k, d] += 0.125 * HEX_XI[i, k] * xe[i, d]
+def _hex_moments(xe, d, m):
+    """The eight moments sum_I p(xi_I) x_Id of coordinate d over the patterns p = 1, xi, eta, zeta,
+    eta zeta, zeta xi, xi eta, xi eta zeta into m[0:8] (VTK node order), by three butterfly stages
+    (24 additions instead of 56 multiply-adds)."""
+    s00 = xe[1, d] + xe[0, d]
+    d00 = xe[1, d] - xe[0, d]
+    s10 = xe[2, d] + xe[3, d]
+    d10 = xe[2, d] - xe[3, d]
+    s01 = xe[5, d] + xe[4, d]
+    d01 = xe[5, d] - xe[4, d]
+    s11 = xe[6, d] + xe[7, d]
+    d11 = xe[6, d] - xe[7, d]
+    ss0 = s10 + s00
+    sd0 = s10 - s00
+    ss1 = s11 + s01
+    sd1 = s11 - s01
+    ds0 = d10 + d00
+    dd0 = d10 - d00
+    ds1 = d11 + d01
+    dd1 = d11 - d01
+    m[0] = ss1 + ss0
+    m[1] = ds1 + ds0
+    m[2] = sd1 + sd0
+    m[3] = ss1 - ss0
+    m[4] = sd1 - sd0
+    m[5] = ds1 - ds0
+    m[6] = dd1 + dd0
+    m[7] = dd1 - dd0
+
+
+@njit(cache=True, inline="always")
+def _hex_spread(c, out, d):
+    """The inverse of _hex_moments: out[I, d] += sum_p c[p] p(xi_I) for the eight patterns."""
+    # zeta stage
+    ss1 = c[0] + c[3]
+    ss0 = c[0] - c[3]
+    sd1 = c[2] + c[4]
+    sd0 = c[2] - c[4]
+    ds1 = c[1] + c[5]
+    ds0 = c[1] - c[5]
+    dd1 = c[6] + c[7]
+    dd0 = c[6] - c[7]
+    # eta stage
+    s10 = ss0 + sd0
+    s00 = ss0 - sd0
+    s11 = ss1 + sd1
+    s01 = ss1 - sd1
+    d10 = ds0 + dd0
+    d00 = ds0 - dd0
+    d11 = ds1 + dd1
+    d01 = ds1 - dd1
+    # xi stage
+    out[1, d] += s00 + d00
+    out[0, d] += s00 - d00
+    out[2, d] += s10 + d10
+    out[3, d] += s10 - d10
+    out[5, d] += s01 + d01
+    out[4, d] += s01 - d01
+    out[6, d] += s11 + d11
+    out[7, d] += s11 - d11
+
+
+@njit(cache=True, inline="always")
+def _frame_of(j, ev):
+    """The orthonormal e_k from the centre Jacobian columns j_k (Gram-Schmidt from e_1) into ev;
+    returns (n0, n1, p) = (|j_0|, |j_1 - p e_1|, j_1 . e_1), which the frame's derivative needs."""
     n0 = math.sqrt(j[0, 0] ** 2 + j[0, 1] ** 2 + j[0, 2] ** 2)
     for d in range(3):
         ev[0, d] = j[0, d] / n0
@@ -165,6 +222,18 @@ def _hex_frame(xe, j, ev):
     ev[2, 1] = ev[0, 2] * ev[1, 0] - ev[0, 0] * ev[1, 2]
     ev[2, 2] = ev[0, 0] * ev[1, 1] - ev[0, 1] * ev[1, 0]
     return n0, n1, p
+
+
+@njit(cache=True, inline="always")
+def _hex_frame(xe, j, ev):
+    """The hexahedron's co-rotational frame: the centre Jacobian columns j_k = sum_I xi_kI x_I / 8
+    into j, the frame into ev (_frame_of)."""
+    j[:, :] = 0.0
+    for i in range(8):
+        for k in range(3):
+            for d in range(3):
+                j[k, d] += 0.125 * HEX_XI[i, k] * xe[i, d]
+    return _frame_of(j, ev)
 
 
 @njit(cache=True)
@@ -206,7 +275,7 @@ def assumed_strain_reference(x, conn, hgq):
 
 
 @njit(cache=True, inline="always")
-def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, fm):
+def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, fm, mo, cv):
     """The assumed-strain hourglass stiffness of the one-point hexahedron (after Belytschko &
     Bindeman 1993), a potential: its forces added to fe; returns the step's hourglass work.
 
@@ -235,7 +304,11 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     would hold the hinge elastically). The work of a step (E_h before the return less E_h of the
     step before) goes to hs[28] and the element's internal energy; hs: [0:12] hX0, [12:15] a_k,
     [15:27] hp (k * 4 + a), [27] E_h, [28] the work so far."""
-    n0, n1, p = _hex_frame(xe, j, ev)
+    for d in range(3):  # the moments of x: j_k = mo[:, 1 + k] / 8, sum_I h_aI x_I = mo[:, 4 + a]
+        _hex_moments(xe, d, mo[d])
+        for k in range(3):
+            j[k, d] = 0.125 * mo[d, 1 + k]
+    n0, n1, p = _frame_of(j, ev)
     for d in range(3):
         for c in range(3):
             t = 0.0
@@ -244,10 +317,7 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
             fm[d, c] = t
     for a in range(4):
         for d in range(3):
-            t = 0.0
-            for i in range(8):
-                t += HEX_HG[a, i] * xe[i, d]
-            hm[a, d] = t - (fm[d, 0] * hs[3 * a] + fm[d, 1] * hs[3 * a + 1] + fm[d, 2] * hs[3 * a + 2])
+            hm[a, d] = mo[d, 4 + a] - (fm[d, 0] * hs[3 * a] + fm[d, 1] * hs[3 * a + 1] + fm[d, 2] * hs[3 * a + 2])
     for k in range(3):
         for a in range(4):
             hf[k, a] = (ev[k, 0] * hm[a, 0] + ev[k, 1] * hm[a, 1] + ev[k, 2] * hm[a, 2]) - hs[15 + 4 * k + a]
@@ -308,26 +378,27 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     T1 = t0 * ev[0, 0] + t1 * ev[0, 1] + t2 * ev[0, 2]
     T2 = t0 * ev[1, 0] + t1 * ev[1, 1] + t2 * ev[1, 2]
     T3 = t0 * ev[2, 0] + t1 * ev[2, 1] + t2 * ev[2, 2]
+    # f_I = -sum_a h_aI P_a + (sum_a P_a hX0_a^T) gradN0_I - (xi_I c0 + eta_I c1) / 8, P_a = sum_k Q_ka e_k,
+    # c0 = dE/dj_0, c1 = dE/dj_1: the pattern sums spread back to the nodes (_hex_spread)
+    fm[:, :] = 0.0
     for d in range(3):
-        j[0, d] = (T3 * ev[1, d] - T2 * ev[2, d] - T1 * p * ev[2, d] / n1) / n0   # c0 (j reused)
-        j[1, d] = T1 * ev[2, d] / n1                                              # c1
-    for a in range(4):
-        px = q[0, a] * ev[0, 0] + q[1, a] * ev[1, 0] + q[2, a] * ev[2, 0]
-        py = q[0, a] * ev[0, 1] + q[1, a] * ev[1, 1] + q[2, a] * ev[2, 1]
-        pz = q[0, a] * ev[0, 2] + q[1, a] * ev[1, 2] + q[2, a] * ev[2, 2]
-        hx = hs[3 * a]
-        hy = hs[3 * a + 1]
-        hz = hs[3 * a + 2]
-        for i in range(8):
-            gm = HEX_HG[a, i] - (hx * gn[i, 0] + hy * gn[i, 1] + hz * gn[i, 2])
-            fe[i, 0] -= gm * px
-            fe[i, 1] -= gm * py
-            fe[i, 2] -= gm * pz
+        cv[0] = 0.0
+        cv[3] = 0.0
+        cv[1] = -0.125 * (T3 * ev[1, d] - T2 * ev[2, d] - T1 * p * ev[2, d] / n1) / n0
+        cv[2] = -0.125 * T1 * ev[2, d] / n1
+        for a in range(4):
+            pa = q[0, a] * ev[0, d] + q[1, a] * ev[1, d] + q[2, a] * ev[2, d]
+            cv[4 + a] = -pa
+            fm[d, 0] += pa * hs[3 * a]
+            fm[d, 1] += pa * hs[3 * a + 1]
+            fm[d, 2] += pa * hs[3 * a + 2]
+        _hex_spread(cv, fe, d)
     for i in range(8):
-        x0 = 0.125 * HEX_XI[i, 0]
-        x1 = 0.125 * HEX_XI[i, 1]
+        g0 = gn[i, 0]
+        g1 = gn[i, 1]
+        g2 = gn[i, 2]
         for d in range(3):
-            fe[i, d] -= x0 * j[0, d] + x1 * j[1, d]
+            fe[i, d] += fm[d, 0] * g0 + fm[d, 1] * g1 + fm[d, 2] * g2
     return work
 
 
@@ -348,6 +419,8 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     hgr = np.empty((3, 4))
     hq = np.empty((3, 4))
     hfm = np.empty((3, 3))
+    hmo = np.empty((3, 8))
+    hcv = np.empty(8)
     dt_min = np.inf
     dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
@@ -554,7 +627,8 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                 kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
             else:
                 kb = mat_par[mid, P_K]
-            w = _hex_assumed_strain(xe, gradN0[e], dt, G, kb, kap, vol0[e], hgq[e], fe, hj, hev, hhm, hgr, hq, hfm)
+            w = _hex_assumed_strain(xe, gradN0[e], dt, G, kb, kap, vol0[e], hgq[e], fe, hj, hev, hhm, hgr, hq, hfm, hmo,
+                                    hcv)
             e_int[e] += w
         # Flanagan-Belytschko viscous hourglass control
         elif hg_coef > 0.0:
@@ -931,7 +1005,8 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _return_factor, _hex_frame,
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _return_factor, _hex_moments, _hex_spread,
+                        _frame_of, _hex_frame,
                         assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
