@@ -52,6 +52,13 @@ the benches' format (orchestrator/bench/__init__.py: {"results": [{"name", "metr
     they stay inside the star states), k = 10, 1e3, 1e5.
 
 Measured (full runs, 2-core VM shared with other jobs, one simulation at a time, 2026-11-24):
+  plate_convergence and plate_convergence_3d, 2026-12-05, with the cases' open faces now
+    characteristic (non-reflecting) and the plates' bodies set to the assumed-strain hourglass
+    stiffness: 2-D tip at 4 ms 10.53, 9.80, 11.52, 12.57 mm; the finest three monotone,
+    ratio 1.64, order 0.71, Richardson 14.21 mm; the coarsest pair not (0.52); the background refined
+    alone +1.75 mm, the plate alone -0.06 mm (the gas's shear layer, as before).  3-D at 3 ms 2.858,
+    2.271, 2.127 mm: ratio 4.08, order 2.03, Richardson 2.080 mm (finest 2.2 % above); stepping
+    3.5, 20, 252 s.
   plate_convergence, again on 2026-11-26 after the zones a moving surface uncovers took their gas
     from a neighbour (~2 min): tip deflection at 4 ms 9.37, 9.44, 11.41, 12.54 mm; differences
     largest over time 1.02, 1.97, 1.13 mm; the finest three converge monotonically (ratio 1.75,
