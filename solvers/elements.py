@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["HEX_XI", "QUAD_XI", "HEX_FACES", "HEX_HG", "QUAD_HG", "hex_bvectors", "quad_bvectors",
-           "facet_area_vectors"]
+           "quad_gamma", "facet_area_vectors"]
 
 # Natural coordinates of the VTK nodes.
 HEX_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -165,6 +165,22 @@ def quad_bvectors(xe, b):
     area = 0.5 * (d1x * d2y - d1y * d2x)
     dm = max(d1x * d1x + d1y * d1y, d2x * d2x + d2y * d2y)
     return area, math.sqrt(dm)
+
+
+@njit(cache=True, inline="always")
+def quad_gamma(xe, b, area, gam):
+    """Flanagan-Belytschko hourglass vector of a quad into gam (4,): gamma = h - (h . x) b / A (h the
+    +-1 pattern QUAD_HG, b from quad_bvectors), orthogonal to every linear field."""
+    ia = 1.0 / area
+    hx = 0.0
+    hy = 0.0
+    for i in range(4):
+        hx += QUAD_HG[i] * xe[i, 0]
+        hy += QUAD_HG[i] * xe[i, 1]
+    hx *= ia
+    hy *= ia
+    for i in range(4):
+        gam[i] = QUAD_HG[i] - (hx * b[i, 0] + hy * b[i, 1])
 
 
 def facet_area_vectors(points: np.ndarray, facets: np.ndarray) -> np.ndarray:

@@ -86,7 +86,7 @@ from numba import njit
 
 from solvers.ale import eos as _eos
 from solvers import elements as _elements
-from solvers.elements import QUAD_HG, hex_bvectors, quad_bvectors
+from solvers.elements import hex_bvectors, quad_bvectors, quad_gamma
 
 # zone-pass flags
 ENERGY = 1     # compatible energy update from the stored corner forces (real zones only)
@@ -619,21 +619,12 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 fc[z, a, 1] = s * b[a, 1]
             if hg > 0.0:
                 ah = hg * r * cz * math.sqrt(vol) * 0.25
-                ivol = 1.0 / vol
-                hx = 0.0
-                hy = 0.0
-                for a in range(4):
-                    hx += QUAD_HG[a] * xe[a, 0]
-                    hy += QUAD_HG[a] * xe[a, 1]
-                hx *= ivol
-                hy *= ivol
+                quad_gamma(xe, b, vol, gam)
                 gx = 0.0
                 gy = 0.0
                 for a in range(4):
-                    ga = QUAD_HG[a] - (hx * b[a, 0] + hy * b[a, 1])
-                    gam[a] = ga
-                    gx += ga * ve[a, 0]
-                    gy += ga * ve[a, 1]
+                    gx += gam[a] * ve[a, 0]
+                    gy += gam[a] * ve[a, 1]
                 gx *= ah
                 gy *= ah
                 for a in range(4):

@@ -65,7 +65,7 @@ import numpy as np
 from numba import njit
 
 from solvers import elements as _elements
-from solvers.elements import HEX_HG, HEX_XI, QUAD_HG, hex_bvectors, quad_bvectors
+from solvers.elements import HEX_HG, QUAD_HG, hex_bvectors, quad_bvectors, quad_gamma
 from solvers.numba_cache import flush_stale_cache
 
 from . import materials as _materials
@@ -225,39 +225,39 @@ def _frame_of(j, ev):
 
 
 @njit(cache=True, inline="always")
-def _hex_frame(xe, j, ev):
-    """The hexahedron's co-rotational frame: the centre Jacobian columns j_k = sum_I xi_kI x_I / 8
-    into j, the frame into ev (_frame_of)."""
-    j[:, :] = 0.0
-    for i in range(8):
-        for k in range(3):
-            for d in range(3):
-                j[k, d] += 0.125 * HEX_XI[i, k] * xe[i, d]
-    return _frame_of(j, ev)
+def _quad_frame(xe):
+    """The quad's co-rotational frame: e1 along the mean xi edge m = (x1 - x0) + (x2 - x3), e2 normal
+    to it; returns (e1_x, e1_y, |m|)."""
+    m0 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
+    m1 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
+    lm = math.sqrt(m0 * m0 + m1 * m1)
+    return m0 / lm, m1 / lm, lm
 
 
 @njit(cache=True)
 def assumed_strain_reference(x, conn, hgq):
     """The reference part of the assumed-strain hourglass state, from the reference coordinates x:
     hexahedra hgq[e, 0:12] = sum_I h_aI X_I (a = 0..3, the patterns eta zeta, zeta xi, xi eta,
-    xi eta zeta) and hgq[e, 12:15] the half widths a_k; quads hgq[e, 0:2] = sum_I h_I X_I and
-    hgq[e, 2:4] the mean edge lengths (4 a, 4 b along and across the mean xi edge)."""
+    xi eta zeta) and hgq[e, 12:15] the half widths a_k = j_k . e_k; quads hgq[e, 0:2] = sum_I h_I X_I
+    and hgq[e, 2:4] the mean edge lengths (4 a, 4 b along and across the mean xi edge). The same
+    moments and frames as the kernels'."""
     nen = conn.shape[1]
     xe = np.empty((nen, x.shape[1]))
     j = np.empty((3, 3))
     ev = np.empty((3, 3))
+    mo = np.empty((3, 8))
     for e in range(conn.shape[0]):
         for i in range(nen):
             for d in range(x.shape[1]):
                 xe[i, d] = x[conn[e, i], d]
         if nen == 8:
-            for a in range(4):
-                for d in range(3):
-                    t = 0.0
-                    for i in range(8):
-                        t += HEX_HG[a, i] * xe[i, d]
-                    hgq[e, 3 * a + d] = t
-            _hex_frame(xe, j, ev)
+            for d in range(3):
+                _hex_moments(xe, d, mo[d])
+                for a in range(4):
+                    hgq[e, 3 * a + d] = mo[d, 4 + a]
+                for k in range(3):
+                    j[k, d] = 0.125 * mo[d, 1 + k]
+            _frame_of(j, ev)
             for k in range(3):
                 hgq[e, 12 + k] = abs(j[k, 0] * ev[k, 0] + j[k, 1] * ev[k, 1] + j[k, 2] * ev[k, 2])
         else:
@@ -266,12 +266,10 @@ def assumed_strain_reference(x, conn, hgq):
                 for i in range(4):
                     t += QUAD_HG[i] * xe[i, d]
                 hgq[e, d] = t
-            m0 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
-            m1 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
-            lm = math.sqrt(m0 * m0 + m1 * m1)
+            e10, e11, lm = _quad_frame(xe)
             hgq[e, 2] = lm
-            hgq[e, 3] = abs(-m1 / lm * ((xe[3, 0] - xe[0, 0]) + (xe[2, 0] - xe[1, 0]))
-                            + m0 / lm * ((xe[3, 1] - xe[0, 1]) + (xe[2, 1] - xe[1, 1])))
+            hgq[e, 3] = abs(-e11 * ((xe[3, 0] - xe[0, 0]) + (xe[2, 0] - xe[1, 0]))
+                            + e10 * ((xe[3, 1] - xe[0, 1]) + (xe[2, 1] - xe[1, 1])))
 
 
 @njit(cache=True, inline="always")
@@ -282,7 +280,7 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     Hourglass deformation (total, from the reference): H_a = sum_I gamma0_aI x_I with the reference
     hourglass vectors gamma0_aI = h_aI - (sum_J h_aJ X_J) . gradN0_I, which vanish on every affine
     map of the reference (patch test), so H_a = sum_I h_aI x_I - F hX0_a (F the uniform-gradient
-    deformation gradient). Its components in the co-rotational frame (_hex_frame), less the plastic
+    deformation gradient). Its components in the co-rotational frame (_frame_of), less the plastic
     offset hp, h_ka = e_k . H_a - hp_ka. On a box (half widths a_k, fixed at the reference) the mode
     u_k = c h_a has h_ka = 8 c, and the patterns a = 0..2 give strains linear in one coordinate each:
     the block s holds the strains linear in xi_s in the plane normal to e_s,
@@ -678,22 +676,6 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     return dt_min, -1, n_eroded, dt_at
 
 
-@njit(cache=True, inline="always")
-def _quad_gamma(xe, b, vol, out):
-    """Flanagan-Belytschko hourglass vector of a quad into out[:, 0]: gamma = h - (h . x) b / A (h the
-    +-1 pattern), orthogonal to every linear field."""
-    ivol = 1.0 / vol
-    hx = 0.0
-    hy = 0.0
-    for i in range(4):
-        hx += QUAD_HG[i] * xe[i, 0]
-        hy += QUAD_HG[i] * xe[i, 1]
-    hx *= ivol
-    hy *= ivol
-    for i in range(4):
-        out[i, 0] = QUAD_HG[i] - (hx * b[i, 0] + hy * b[i, 1])
-
-
 @njit(cache=True)
 def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                  temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt,
@@ -702,6 +684,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
     xm = np.empty((4, 2))
+    gq = np.empty(4)   # the viscous control's hourglass vector
     b = np.empty((4, 2))
     bm = np.empty((4, 2))
     fe = np.empty((4, 2))
@@ -860,11 +843,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             # share -T s_I e2 / |m|, T = sum_k Q_k (e_k x H)_z: torque free, conservative); a step
             # that yields scales h by the radial return's factor (hp takes the rest). hgq[e]: [0:2]
             # hX0, [2:4] 4a, 4b, [4:6] hp, [6] E_h, [7] the work so far (also in e_int)
-            m0 = (xe[1, 0] - xe[0, 0]) + (xe[2, 0] - xe[3, 0])
-            m1 = (xe[1, 1] - xe[0, 1]) + (xe[2, 1] - xe[3, 1])
-            lm = math.sqrt(m0 * m0 + m1 * m1)
-            e10 = m0 / lm
-            e11 = m1 / lm
+            e10, e11, lm = _quad_frame(xe)
             if code == NEO_HOOKEAN:
                 kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
             else:
@@ -918,17 +897,17 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                 fe[i, 1] -= gm * py - si * ry
         elif hg_coef > 0.0:
             ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
-            _quad_gamma(xe, b, vol, xm)
+            quad_gamma(xe, b, vol, gq)
             gx = 0.0
             gy = 0.0
             for i in range(4):
-                gx += xm[i, 0] * ve[i, 0]
-                gy += xm[i, 0] * ve[i, 1]
+                gx += gq[i] * ve[i, 0]
+                gy += gq[i] * ve[i, 1]
             gx *= ah
             gy *= ah
             for i in range(4):
-                fe[i, 0] -= xm[i, 0] * gx
-                fe[i, 1] -= xm[i, 0] * gy
+                fe[i, 0] -= gq[i] * gx
+                fe[i, 1] -= gq[i] * gy
 
         for i in range(4):
             nd = conn[e, i]
@@ -1005,8 +984,8 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _erode, _quad_gamma, _return_factor, _hex_moments, _hex_spread,
-                        _frame_of, _hex_frame,
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _return_factor, _hex_moments, _hex_spread,
+                        _frame_of, _quad_frame,
                         assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")

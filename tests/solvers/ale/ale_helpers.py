@@ -46,8 +46,9 @@ def periodic(dim):
     return {f: "periodic" for f in FACES[: 2 * dim]}
 
 
-def advance(s: AleSolver, t_end: float, scale: float = 0.5, t0: float = 0.0, step0: int = 0):
-    """The coupler's loop: dt = scale * stable step, clipped to land on t_end."""
+def advance(s: AleSolver, t_end: float, scale: float = 0.5, t0: float = 0.0, step0: int = 0, watch=None):
+    """The coupler's loop: dt = scale * stable step, clipped to land on t_end; watch(s, t) after
+    every step if given."""
     t, step = t0, step0
     while t < t_end - 1e-14 * max(1.0, abs(t_end)):
         dt = min(scale * s.stable_dt(), t_end - t)
@@ -56,6 +57,8 @@ def advance(s: AleSolver, t_end: float, scale: float = 0.5, t0: float = 0.0, ste
         s.predict(dt)
         s.correct(None, step, t)
         s.remap()
+        if watch is not None:
+            watch(s, t)
     return t, step
 
 

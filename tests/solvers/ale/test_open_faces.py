@@ -17,24 +17,10 @@ import pytest
 
 from solvers.ale.exact.reflected_shock import ReflectedShock
 from solvers.ale.solver import AleSolver
-from tests.solvers.ale.ale_helpers import line
+from tests.solvers.ale.ale_helpers import advance, line
 from tests.solvers.ale.wave_helpers import plane_packet, pulse, set_acoustic_state
 
 AIR = {"eos": "ideal_gas", "gamma": 1.4}
-
-
-def _loop(s, t_end, watch=None, scale=0.5):
-    t, step = 0.0, 0
-    while t < t_end - 1e-15 * t_end:
-        dt = min(scale * s.stable_dt(), t_end - t)
-        step += 1
-        t += dt
-        s.predict(dt)
-        s.correct(None, step, t)
-        s.remap()
-        if watch is not None:
-            watch(s, t)
-    return step
 
 
 def _balanced(s, tol=1e-12, impulse_scale=None):
@@ -86,7 +72,7 @@ def test_reflected_shock_leaves_through_the_face(face):
     def watch(s, t):
         if t > t_from:
             worst[0] = max(worst[0], abs(line(s, s.p, 0)[-1, 0] / rs.p5 - 1.0))
-    _loop(s, t_hit + 3.0 * (t_exit - t_hit), watch)
+    advance(s, t_hit + 3.0 * (t_exit - t_hit), watch=watch)
     assert worst[0] < 0.004, worst[0]
     _balanced(s)
 
@@ -128,7 +114,7 @@ def _wave_run(dim, theta, face, material=AIR, rho0=1.2, p0=1e5, ny=32, nx=160, d
     s = AleSolver(None, cfg)
     set_acoustic_state(s, rho0, p0, c0, field)
     incident = np.abs(s.zone_field(s.p) - p0).max()
-    _loop(s, (0.5 * nx * h + extent) / (c0 * direction[0]))
+    advance(s, (0.5 * nx * h + extent) / (c0 * direction[0]))
     return float(np.abs(s.zone_field(s.p) - p0).max() / incident), s
 
 
@@ -218,7 +204,7 @@ def test_supersonic_inflow_holds_its_state():
 
     def watch(s, t):
         first.append(abs(line(s, s.p, 0)[0, 0] / 1e5 - 1.0))
-    _loop(s, 2.5e-3, watch)
+    advance(s, 2.5e-3, watch=watch)
     left = float(np.abs(s.zone_field(s.p) - 1e5).max() / 2e3)
     assert max(first) < 1e-9, max(first)
     assert left < 4e-3, left
