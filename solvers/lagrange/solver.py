@@ -149,8 +149,10 @@ class LagrangeSolver:
             self.temp[my_body == b_index] = t0
         self.e_int = np.zeros(ne)
         # hourglass control per body (bodies[i].hourglass_control): the viscous Flanagan-Belytschko
-        # force, or the assumed-strain stiffness (kernels.py) with its hourglass stresses and work
+        # force, or the assumed-strain stiffness (kernels.py); has_hg_stiffness is the same on every
+        # rank (the diagnostics' collective sum), hg_stiff this rank's elements
         stiff = np.array([b.get("hourglass_control", "viscous") == "assumed_strain" for b in bodies])
+        self.has_hg_stiffness = bool(stiff.any())
         self.hg_stiff = stiff[my_body].astype(np.uint8)
         # its state: the reference hourglass sums and widths, the plastic offsets, the hourglass
         # energy and the work so far (kernels.py: _hex_assumed_strain, _forces_quad)
@@ -701,7 +703,7 @@ class LagrangeSolver:
         if self.WATCHES_HIGH_MODES:   # the energy the scheme made from nothing, over that put in
             created = ke + e_int - self.ke0 - self.se0 - d["external_work"]
             d["created_energy_share"] = created / max(self.ke0 + self.se0 + self.supplied_gross, 1e-300)
-        if self.hg_stiff.any():  # the assumed-strain hourglass stiffness's work (in the stress-power energy)
+        if self.has_hg_stiffness:  # the assumed-strain hourglass stiffness's work (in the stress-power energy)
             d["hourglass_energy"] = float(self._allsum(self.hgq[:, -1].sum()))
         if self.has_gravity:
             d["gravity_work"] = self.w_gravity

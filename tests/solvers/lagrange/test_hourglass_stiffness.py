@@ -265,3 +265,21 @@ def test_restart_with_the_assumed_strain_stiffness_is_bitwise(tmp_path, dim):
     assert np.abs(a.hgq[:, off]).max() > 0.0 and a.eps_p.max() > 0.0
     for k in ("x", "v", "sig", "e_int", "hgq"):
         assert np.array_equal(getattr(a, k), getattr(b, k)), k
+
+
+@pytest.mark.mpi
+def test_diagnostics_with_the_stiffness_on_one_body_of_two():
+    """Two bodies, the stiffness on one, on N ranks: a rank without any such element still joins the
+    hourglass energy's sum (the flag is per case, not per rank; it was per rank and two ranks
+    aborted in the diagnostics)."""
+    steel = {"model": "linear_elastic", "density": RHO, "youngs_modulus": E, "poisson_ratio": 0.3}
+    case = make_case(3, {"box": {"lower": [0, 0, 0], "upper": [0.004] * 3, "cells": [2, 2, 2]}}, steel,
+                     velocity=[0.0, 0.0, -1.0])
+    other = dict(case["lagrange"]["bodies"][0], name="b2",
+                 mesh={"box": {"lower": [0, 0, 0.01], "upper": [0.004, 0.004, 0.014], "cells": [2, 2, 2]}})
+    case["lagrange"]["bodies"][0]["hourglass_control"] = "assumed_strain"
+    case["lagrange"]["bodies"].append(other)
+    s = LagrangeSolver(MPI.COMM_WORLD, case)
+    s.predict(1e-9)
+    s.correct(None, step=1, time=1e-9)
+    assert s.diagnostics()["hourglass_energy"] >= 0.0
