@@ -58,6 +58,15 @@ then reflects with ``R = (beta s^2 - (1 - cos))/((1 + cos) - beta s^2)`` (``s = 
 Trefethen & Halpern 1986 choose their absorbing conditions' coefficients) at most 2.0 % over
 0-60 degrees (+1.5 % at 30, +1.9 % at 45, -2.0 % at 60).
 
+(2) is an acoustic condition; two guards keep it to that in a flow. Its tangential divergence is
+clipped to the face zone's dilatation ``|div u|`` (an acoustic wave's is ``sin^2 theta`` of it, so
+the clip leaves sound alone; a vortex crossing the face has a tangential divergence but no
+dilatation). And the gas flowing through the face carries the correction out with it, at
+``|u_n| / h`` (``h`` the zone's width normal to the face; nil at rest). A Mach 1.2 shock diffracted
+by an obstacle in a 160 mm channel, the outflow face 107 mm behind it: its load against a channel
+four times as long, RMS error over 2 ms 2.0 kPa of a 122 kPa peak with both (without them 4.9 kPa
+and the face correction past 1e5 Pa; beta = 0: 2.8 kPa).
+
 Relaxation (Poinsot & Lele 1992, J. Comput. Phys. 101; Rudy & Strikwerda 1980)
 -----------------------------------------------------------------------------
 ``K = relax c_e (1 - M^2) / L`` (``L`` the grid's length normal to the face, ``M`` the exterior's
@@ -69,6 +78,21 @@ drift); larger values hold the target more firmly and reflect more of the slow (
 default is 0.25 (Poinsot & Lele's).  An ``"outflow"`` or ``"far_field"`` face without a given state
 relaxes its correction to the state it started with; the exterior state itself is held, so a
 plane wave's normal part always leaves.
+
+Subsonic inflow: the tangential velocity
+---------------------------------------
+Where the exterior flows in (its normal Mach number above 1e-3), the vorticity characteristic is
+incoming too and the face sets it: the face nodes hold the exterior's tangential velocity (a
+constraint as the dashpot's, its reaction and work booked the same way), the flow direction of a
+subsonic inflow (Poinsot & Lele's SI-1 sets u, v and T). So do the nodes of any open face that gas
+flows in through at the moment (inward normal velocity above 1e-3 of the exterior's sound speed:
+backflow through an outflow face, as a vortex crossing it draws in gas; OpenFOAM's inletOutlet
+switches the same way), with the exterior's tangential velocity (an outflow face's: the state it
+started with). (1) and (2) keep the acoustic part; (2) is
+then idle there (no tangential divergence). Left free (zero-gradient), the tangential velocity was
+underspecified, and with (2) it grew into a standing odd-even wave along the face: unstable in
+about 1 ms at Mach 0.29 and beta = 0.64, 7 ms at Mach 0.08 (with beta = 0 neutral). At rest and
+where gas leaves, the tangential velocity stays free and (2) works as above.
 
 Remap donors
 ------------
@@ -95,6 +119,7 @@ from solvers.ale.grid import CUT, FACE_NAMES, PERIODIC, Block
 
 DEFAULT_BETA = 0.64      # minimax reflection over 0-60 degrees (module docstring)
 DEFAULT_RELAX = 0.25     # Poinsot & Lele 1992's sigma
+INFLOW_MACH = 1e-3       # an exterior flowing in faster than this (normal Mach) makes a subsonic inflow
 
 
 def fundamental_half(code: int, par: np.ndarray, rho: float, e: float) -> float:
@@ -204,6 +229,28 @@ def damp(v, v_old, m, owned, nodes, d_n, cn, dt_avg, acc):
             acc[3] += r * 0.5 * (v_old[n, d] + vn)
 
 
+@njit(cache=True)
+def hold_tangential(v, v_old, m, owned, nodes, d_n, so, hold, ue, c_in, free, acc):
+    """Subsonic inflow: the face nodes of an exterior flowing in (hold) and those gas enters through
+    now (inward normal velocity above c_in) take the exterior's tangential velocity (module
+    docstring) in their free components (free[t, k]: not a wall's normal); the reaction
+    m (v_new - v*) of owned nodes into acc[0:dim], its work on (v_old + v_new)/2 into acc[3], as
+    damp's."""
+    dim = v.shape[1]
+    for t in range(nodes.shape[0]):
+        n = nodes[t]
+        if not m[n] > 0.0 or not (hold[t] or -so[t] * v[n, d_n[t]] > c_in[t]):
+            continue
+        for k in range(dim):
+            if k == d_n[t] or not free[t, k]:
+                continue
+            r = m[n] * (ue[t, k] - v[n, k])
+            v[n, k] = ue[t, k]
+            if owned[n]:
+                acc[k] += r
+                acc[3] += r * 0.5 * (v_old[n, k] + ue[t, k])
+
+
 class CharacteristicFaces:
     """The characteristic faces of a block (see the module docstring): their face zones, exterior
     states, corrections, and the pressure, dashpot and donor passes the solver calls."""
@@ -284,7 +331,11 @@ class CharacteristicFaces:
         fd = np.array([fc["d"] for fc in self.faces], np.int64)
         fs = np.array([fc["s"] for fc in self.faces], np.int64)
         self.d_n = fd[self.face_of]
+        self.hn = np.array([B.h[d] for d in self.d_n], np.float64)
         self.so = np.where(fs[self.face_of] == 1, 1.0, -1.0)
+        # the layer of nodes inside the face nodes (the face zones' other side)
+        self.x_inner = self.x_nodes - (np.where(fs[self.face_of] == 1, 1, -1)
+                                       * np.asarray(B.ns, np.int64)[self.d_n])[:, None]
         self.tan = np.zeros((nk, 2), np.int64)
         self.htan = np.ones((nk, 2))
         for f, fc in enumerate(self.faces):
@@ -366,6 +417,23 @@ class CharacteristicFaces:
             self.beta[sel] = float(spec.get("beta", DEFAULT_BETA))
             if fc["kind"] == "outflow" and "pressure" in spec:
                 self.target[sel] = float(spec["pressure"])
+        # subsonic inflow (the exterior flows in, faster than 1e-3 of its sound speed): the face
+        # nodes hold the exterior's tangential velocity (the mean over the node's face zones)
+        wsum = np.asarray(self.W.sum(axis=1)).ravel()
+        wn = np.where(wsum > 0.0, wsum, 1.0)
+        self.node_ue = np.ascontiguousarray(np.asarray(self.W @ self.u_e) / wn[:, None])
+        self.node_c_in = np.where(wsum > 0.0, INFLOW_MACH * np.asarray(self.W @ self.c_e).ravel() / wn, np.inf)
+        u_in = -self.nodes_so * self.node_ue[np.arange(self.nodes.size), self.nodes_d]
+        self.node_hold = (wsum > 0.0) & (u_in > self.node_c_in)
+        # (a face node on a wall keeps the wall's normal component, one on an edge of two open faces
+        # each face's normal component (its dashpot's): the reactions' work is booked at the final
+        # velocity of each component, so each component has one constraint)
+        bc = s.bc
+        taken = np.zeros((s.v.shape[0], self.dim), bool)
+        taken[bc.wall_nodes, bc.wall_comp] = True
+        taken[self.nodes, self.nodes_d] = True
+        self.node_free = np.ascontiguousarray(~taken[self.nodes])
+        self.zone_in = -self.so * self.u_e[np.arange(self.nk), self.d_n] > INFLOW_MACH * self.c_e
         self._ready = True
 
     # checkpoint: the per-face-zone state in a zone-shaped array, each face zone's row at its
@@ -408,10 +476,22 @@ class CharacteristicFaces:
         if dt <= 0.0 or not self._ready:
             return
         transverse_divergence(self.s.v, self.x_nodes, self.tan, self.htan, self.divt)
+        # the acoustic part: an acoustic wave's tangential divergence is sin^2(theta) of its
+        # dilatation, a vortex's has none (div u = 0): |div_t u_t| is clipped to the face zone's
+        # |div u| (face and inner layer of nodes)
+        v = self.s.v
+        un_f = v[self.x_nodes, self.d_n[:, None]].mean(axis=1)
+        un_i = v[self.x_inner, self.d_n[:, None]].mean(axis=1)
+        dil = np.abs(self.divt + self.so * (un_f - un_i) / self.hn)
+        self.divt = np.clip(self.divt, -dil, dil)
         rate = -self.beta * self.rho_e * self.c_e ** 2 * self.divt
+        # (none where gas enters through a face node: the tangential velocity is held there)
+        u_in = -self.so[:, None] * self.s.v[self.x_nodes, self.d_n[:, None]]
+        rate[self.zone_in | np.any(u_in > INFLOW_MACH * self.c_e[:, None], axis=1)] = 0.0
         has_t = np.isfinite(self.target)
         resid = np.where(has_t, self.pb - np.where(has_t, self.target, 0.0), self.delta)
-        self.delta += dt * (rate - self.K * resid)
+        # the gas flowing through the face carries the correction out at |u_n| / h (implicit)
+        self.delta = (self.delta + dt * (rate - self.K * resid)) / (1.0 + dt * np.abs(un_f) / self.hn)
 
     def ghost_pressure(self) -> None:
         """Face pressure (1) + delta into the ghost zones of the faces (both layers; corners and
@@ -455,6 +535,8 @@ class CharacteristicFaces:
 
     def constrain(self, v, v_old, m, owned, dt_avg, acc) -> None:
         damp(v, v_old, m, owned, self.nodes, self.nodes_d, self.cn, dt_avg, acc)
+        hold_tangential(v, v_old, m, owned, self.nodes, self.nodes_d, self.nodes_so, self.node_hold, self.node_ue,
+                        self.node_c_in, self.node_free, acc)
 
     def donors(self) -> None:
         """The exterior state the face's current motion makes into the ghost zones' rho and e
