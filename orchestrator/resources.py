@@ -45,9 +45,10 @@ box meshes (253.5, 427.8); quarter cylinders (939.6: the generator's orientation
 disks and rings are charged that figure, not measured); mesh files
 (read_mesh of 50^3 hexahedra: Gmsh 2.2 ASCII 1068.0, binary 1059.5, VTU 1083.5; 2-D files are
 charged the 3-D figure)."""
-LAGRANGE_HOURGLASS_STIFFNESS_BYTES_PER_ELEMENT = {2: 56, 3: 224}
-"""Added per element of a body with hourglass_control = "assumed_strain" (its state, 8 numbers a
-quad, 29 a hexahedron, against 1; measured 716.1 - 660.1 and 1349.7 - 1125.7 B, 2026-12-05)."""
+LAGRANGE_HOURGLASS_STIFFNESS_BYTES_PER_ELEMENT = {2: 72, 3: 320}
+"""Added per element of a body with hourglass_control = "assumed_strain" (its state, 10 numbers a
+quad, 41 a hexahedron, against 1: 9 and 40 doubles; with 8 and 29 the measured difference was
+exactly 7 and 28 doubles, 716.1 - 660.1 and 1349.7 - 1125.7 B, 2026-12-05)."""
 ALE_BYTES_PER_ZONE = {2: 483, 3: 719}
 """ALE solver, one material, per zone of the padded block (2 ghost layers a side), Eulerian, remap
 arrays included (150^2 -> 300^2: 482.9; 24^3 -> 40^3: 718.6)."""

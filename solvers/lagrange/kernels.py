@@ -77,8 +77,9 @@ from .materials import (JOHNSON_COOK, LINEAR_ELASTIC, NEO_HOOKEAN, P_G, P_K, P_L
 # leaves the hourglass modes undamped, and steps that vary from one to the next pump them (a struck
 # steel bar one hexahedron across, its steps a random walk through the step control: hourglass
 # energy 1e-9 -> 7e-6 J over 10^4 steps, then an inverted element at step 83,469; at constant steps
-# it stays at 1e-10). A tenth of the viscous control holds it at 1e-13 J and leaves a cantilever's
-# first peak within 0.01 % of the stiffness alone (LS-DYNA's stiffness forms carry a viscous part too).
+# it stays at 1e-10). A tenth of the viscous control's coefficient, as a damping of the hourglass
+# coordinates' rate in the co-rotational frame (torque free; the state keeps their values a step
+# before), holds it and leaves a cantilever's first peak within 0.01 % of the stiffness alone.
 AS_VISCOUS_SHARE = 0.1
 
 __all__ = ["element_forces", "reference_gradients", "LINEAR_ELASTIC", "NEO_HOOKEAN", "JOHNSON_COOK"]
@@ -318,8 +319,7 @@ def assumed_strain_reference(x, conn, hgq):
 
 
 @njit(cache=True, inline="always")
-def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, fm, mo, cv, sc, sf2, fw,
-                        ve, b, vol, ah, mv, hxr, gv):
+def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, fm, mo, cv, sc, sf2, fw, ah):
     """The assumed-strain hourglass stiffness of the one-point hexahedron (after Belytschko &
     Bindeman 1993), a potential: its forces added to fe; returns the step's hourglass work.
 
@@ -353,19 +353,17 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     factor where the centre flows as well dropped the hourglass stress at once and let the Taylor
     bar's foot spread: impact diameter +1.4 %, against +0.2 % this way.) The work of a step (E_h
     before the return less E_h of the step before) goes to hs[28] and the element's internal energy;
-    hs: [0:12] hX0, [12:15] a_k, [15:27] hp (k * 4 + a), [27] E_h, [28] the work so far; fw: (6, 6)
-    work.
-    With ah > 0 the viscous control's share (AS_VISCOUS_SHARE; Flanagan-Belytschko's
-    f_I = -ah sum_a gamma_aI g_a, gamma_aI = h_aI - (H_a . b_I) / V, g_a = sum_I gamma_aI v_I, in the
-    current configuration: orthogonal to every linear velocity field, so torque free) is added here,
-    its h part through the same butterfly spread (mv, hxr, gv: work)."""
+    hs: [0:12] hX0, [12:15] a_k, [15:27] hp (k * 4 + a), [27:39] the frame components of the step
+    before, [39] E_h, [40] the work so far; fw: (6, 6) work.
+    Damping (ah > 0, the viscous control's coefficient times AS_VISCOUS_SHARE): Q_ka += ah (r_ka -
+    r_ka') / dt, r_ka = e_k . (H_a - F hX0_a) the frame components now and r' a step before: the
+    hourglass rate in the co-rotational frame (a rigid rotation leaves r unchanged: no torque),
+    Flanagan-Belytschko's generalised force ah dH/dt at the price of 12 numbers per element, through
+    the same spread."""
     for d in range(3):  # the moments of x: j_k = mo[:, 1 + k] / 8, sum_I h_aI x_I = mo[:, 4 + a]
         _hex_moments(xe, d, mo[d])
         for k in range(3):
             j[k, d] = 0.125 * mo[d, 1 + k]
-    for a in range(4):   # (the raw hourglass moments H_a, for the viscous share)
-        for d in range(3):
-            hxr[a, d] = mo[d, 4 + a]
     n0, n1, p = _frame_of(j, ev)
     for d in range(3):
         for c in range(3):
@@ -417,8 +415,9 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
         energy += 0.5 * w9 * sn * e_kk
         q[k, 3] = w9 * sn * ik
     work = 0.0
+    kk = 1.0
     if dt > 0.0:
-        work = energy - hs[27]
+        work = energy - hs[39]
         kk = kap
         if sf2 < np.inf and kap == 1.0:
             # (the centre elastic) the element's stress in the frame (xx, yy, zz, xy, yz, zx), then the hourglass
@@ -448,15 +447,23 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
                     hs[15 + 4 * k + a] += (1.0 - kk) * hf[k, a]
                     q[k, a] *= kk
             energy *= kk * kk
-        hs[27] = energy
-        hs[28] += work
-    # the frame's share: T = sum_ka Q_ka e_k x H_a; dE/dj_0 = c0, dE/dj_1 = c1
+        hs[39] = energy
+        hs[40] += work
+    # damping (dt > 0): the frame components' rate over the step, r = hf + hp before the return = hp + kk hf
+    # after it; with the frame's share: T = sum_ka Q_ka e_k x H_a; dE/dj_0 = c0, dE/dj_1 = c1
+    ih = ah / dt if dt > 0.0 else 0.0
     t0 = 0.0
     t1 = 0.0
     t2 = 0.0
     for k in range(3):
         for a in range(4):
             qa = q[k, a]
+            if dt > 0.0:
+                i = 27 + 4 * k + a
+                r = hs[i - 12] + kk * hf[k, a]
+                qa += ih * (r - hs[i])
+                hs[i] = r
+                q[k, a] = qa
             t0 += qa * (ev[k, 1] * hm[a, 2] - ev[k, 2] * hm[a, 1])
             t1 += qa * (ev[k, 2] * hm[a, 0] - ev[k, 0] * hm[a, 2])
             t2 += qa * (ev[k, 0] * hm[a, 1] - ev[k, 1] * hm[a, 0])
@@ -465,28 +472,6 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     T3 = t0 * ev[2, 0] + t1 * ev[2, 1] + t2 * ev[2, 2]
     # f_I = -sum_a h_aI P_a + (sum_a P_a hX0_a^T) gradN0_I - (xi_I c0 + eta_I c1) / 8, P_a = sum_k Q_ka e_k,
     # c0 = dE/dj_0, c1 = dE/dj_1: the pattern sums spread back to the nodes (_hex_spread)
-    if ah > 0.0:
-        # the viscous share: g_a = sum_I h_aI v_I - H_a . (sum_I b_I v_I^T) / V, times ah, in mv[:, 4 + a]
-        iv = 1.0 / vol
-        for d in range(3):
-            _hex_moments(ve, d, mv[d])
-            for c in range(3):
-                t = 0.0
-                for i in range(8):
-                    t += b[i, c] * ve[i, d]
-                gv[c, d] = t
-        for a in range(4):
-            for d in range(3):
-                mv[d, 4 + a] = ah * (mv[d, 4 + a] - iv * (hxr[a, 0] * gv[0, d] + hxr[a, 1] * gv[1, d]
-                                                          + hxr[a, 2] * gv[2, d]))
-        # the b part: f_I += (1/V) M b_I, M = sum_a g_a H_a^T
-        for d in range(3):
-            for c in range(3):
-                gv[d, c] = iv * (mv[d, 4] * hxr[0, c] + mv[d, 5] * hxr[1, c] + mv[d, 6] * hxr[2, c]
-                                 + mv[d, 7] * hxr[3, c])
-        for i in range(8):
-            for d in range(3):
-                fe[i, d] += gv[d, 0] * b[i, 0] + gv[d, 1] * b[i, 1] + gv[d, 2] * b[i, 2]
     fm[:, :] = 0.0
     for d in range(3):
         cv[0] = 0.0
@@ -495,7 +480,7 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
         cv[2] = -0.125 * T1 * ev[2, d] / n1
         for a in range(4):
             pa = q[0, a] * ev[0, d] + q[1, a] * ev[1, d] + q[2, a] * ev[2, d]
-            cv[4 + a] = -pa - (mv[d, 4 + a] if ah > 0.0 else 0.0)
+            cv[4 + a] = -pa
             fm[d, 0] += pa * hs[3 * a]
             fm[d, 1] += pa * hs[3 * a + 1]
             fm[d, 2] += pa * hs[3 * a + 2]
@@ -530,9 +515,6 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     hcv = np.empty(8)
     hsc = np.empty(6)
     hfw = np.empty((6, 6))
-    hmv = np.empty((3, 8))
-    hxr = np.empty((4, 3))
-    hgv = np.empty((3, 3))
     dt_min = np.inf
     dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
@@ -751,7 +733,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
             hsc[5] = s5
             ah = hg_coef * rho * c * vol ** (2.0 / 3.0) * 0.25 * AS_VISCOUS_SHARE
             w = _hex_assumed_strain(xe, gradN0[e], dt, G, kb, kap, vol0[e], hgq[e], fe, hj, hev, hhm, hgr, hq, hfm, hmo,
-                                    hcv, hsc, sf2, hfw, ve, b, vol, ah, hmv, hxr, hgv)
+                                    hcv, hsc, sf2, hfw, ah)
             e_int[e] += w
         # Flanagan-Belytschko viscous hourglass control
         elif hg_coef > 0.0:
@@ -973,7 +955,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             # widths a, b), Q_k = K_k h_k, E_h = 1/2 Q . h; forces the exact gradient (the frame's
             # share -T s_I e2 / |m|, T = sum_k Q_k (e_k x H)_z: torque free, conservative); a step
             # that yields scales h by the radial return's factor (hp takes the rest). hgq[e]: [0:2]
-            # hX0, [2:4] 4a, 4b, [4:6] hp, [6] E_h, [7] the work so far (also in e_int)
+            # hX0, [2:4] 4a, 4b, [4:6] hp, [6:8] the frame components of the step before (damping), [8] E_h,
+            # [9] the work so far (also in e_int)
             e10, e11, lm = _quad_frame(xe)
             if code == NEO_HOOKEAN:
                 kb = mat_par[mid, P_LAM] + 2.0 / 3.0 * G
@@ -1005,7 +988,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             q2 = k2 * h2
             en = 0.5 * (q1 * h1 + q2 * h2)
             if dt > 0.0:
-                w = en - hgq[e, 6]
+                w = en - hgq[e, 8]
                 kk = kap
                 if sf2 < np.inf and kap == 1.0:
                     # the fibre check while the centre is elastic (as the hexahedron's): the element's
@@ -1035,9 +1018,18 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                     q1 *= kk
                     q2 *= kk
                     en *= kk * kk
-                hgq[e, 6] = en
-                hgq[e, 7] += w
+                hgq[e, 8] = en
+                hgq[e, 9] += w
                 e_int[e] += w
+                # damping (as the hexahedron's): the frame components' rate over the step
+                if hg_coef > 0.0:
+                    ih = hg_coef * rho * c * math.sqrt(vol) * 0.25 * AS_VISCOUS_SHARE / dt
+                    r1 = hgq[e, 4] + kk * h1
+                    r2 = hgq[e, 5] + kk * h2
+                    q1 += ih * (r1 - hgq[e, 6])
+                    q2 += ih * (r2 - hgq[e, 7])
+                    hgq[e, 6] = r1
+                    hgq[e, 7] = r2
             # T = Q_1 (e1 x H)_z + Q_2 (e2 x H)_z, e2 = (-e11, e10)
             tz = q1 * (e10 * hy - e11 * hx) + q2 * (-e11 * hy - e10 * hx)
             px = q1 * e10 - q2 * e11
@@ -1049,8 +1041,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                 si = _QUAD_EDGE[i]
                 fe[i, 0] -= gm * px - si * rx
                 fe[i, 1] -= gm * py - si * ry
-        if hg_coef > 0.0:  # (with the stiffness: its share AS_VISCOUS_SHARE)
-            ah = hg_coef * rho * c * math.sqrt(vol) * 0.25 * (AS_VISCOUS_SHARE if hg_stiff[e] else 1.0)
+        elif hg_coef > 0.0:
+            ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
             quad_gamma(xe, b, vol, gq)
             gx = 0.0
             gy = 0.0
@@ -1103,7 +1095,7 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     erode_dt : (ne,) the stable step below which the element erodes (LS-DYNA's TSMIN with ERODE = 1:
     a crushed element would stop the run by its step long before it inverts), 0 for none
     hg_stiff : (ne,) uint8, 1 for an element with the assumed-strain hourglass stiffness instead
-    of the viscous control; hgq : (ne, 8 | 29) its state (assumed_strain_reference fills the
+    of the viscous control; hgq : (ne, 10 | 41) its state (assumed_strain_reference fills the
     reference part: sum_I h_I X_I and the widths; then the plastic offsets, the hourglass energy
     and, last, the hourglass work so far, also in e_int), updated in place
 

@@ -156,7 +156,7 @@ class LagrangeSolver:
         self.hg_stiff = stiff[my_body].astype(np.uint8)
         # its state: the reference hourglass sums and widths, the plastic offsets, the hourglass
         # energy and the work so far (kernels.py: _hex_assumed_strain, _forces_quad)
-        self.hgq = np.zeros((ne, (8 if dim == 2 else 29) if stiff.any() else 1))  # (1: the work column only)
+        self.hgq = np.zeros((ne, (10 if dim == 2 else 41) if stiff.any() else 1))  # (1: the work column only)
         if stiff.any():  # the reference part: sum_I h_aI X_I and the element's widths (kernels.py)
             kernels.assumed_strain_reference(self.X, self.conn, self.hgq)
         self.q = np.zeros(ne)

@@ -146,7 +146,7 @@ def test_patch_a_linear_velocity_field_loads_no_hourglass_energy(dim):
     conn = np.arange(len(X), dtype=np.int64)[None, :]
 
     def run(velocity):
-        x, sig, hgq = X.copy(), np.zeros((1, 6)), np.zeros((1, 8 if dim == 2 else 29))
+        x, sig, hgq = X.copy(), np.zeros((1, 6)), np.zeros((1, 10 if dim == 2 else 41))
         assumed_strain_reference(X, conn, hgq)
         for _ in range(10):
             v = velocity(x)
@@ -182,7 +182,7 @@ def _omega_dt(dims, nu, stiff):
         v = np.zeros(n3)
         v[col] = 1.0
         v = v.reshape(-1, 3)
-        hgq = np.zeros((len(conn), 29))
+        hgq = np.zeros((len(conn), 41))
         assumed_strain_reference(X, conn, hgq)
         (dt_min, _, _, _), f, vol0 = _kernel_call(X + dt * v, v, dt, conn, code, par, stiff, hgq, X=X)
         K[:, col] = -f.ravel() / dt
@@ -298,7 +298,8 @@ def test_steps_that_vary_do_not_pump_the_hourglass_modes():
     (measured at most 1.05e-10 J, sampled every 500 steps, of the bar's 3e-6 J; bound 1e-9). The
     stiffness alone leaves the hourglass modes undamped and the varying steps pumped them: its work
     grew 1e-9 -> 7e-6 J over 10^4 steps, then an element inverted at step 83,469 (at constant steps
-    it stays at 1e-10 J); kernels.AS_VISCOUS_SHARE keeps a tenth of the viscous control with it."""
+    it stays at 1e-10 J); kernels.AS_VISCOUS_SHARE damps the hourglass coordinates' rate with a tenth of
+    the viscous control's coefficient."""
     from orchestrator.step_control import StepControl
     from tests.orchestrator.test_step_control import AMPLITUDE, PROPOSALS, STEEL0, V0
 
