@@ -352,7 +352,7 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     that mean stress sits at a quarter depth: a cantilever stood 1.5x its limit load). (The fibre
     factor where the centre flows as well dropped the hourglass stress at once and let the Taylor
     bar's foot spread: impact diameter +1.4 %, against +0.2 % this way.) The work of a step (E_h
-    before the return less E_h of the step before) goes to hs[28] and the element's internal energy;
+    before the return less E_h of the step before) goes to hs[40] and the element's internal energy;
     hs: [0:12] hX0, [12:15] a_k, [15:27] hp (k * 4 + a), [27:39] the frame components of the step
     before, [39] E_h, [40] the work so far; fw: (6, 6) work.
     Damping (ah > 0, the viscous control's coefficient times AS_VISCOUS_SHARE): Q_ka += ah (r_ka -
