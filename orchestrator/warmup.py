@@ -106,8 +106,9 @@ _MAT = {
 }
 
 
-def _lagrange(dim: int, mesh: str) -> str:
-    """Every material model in one run (one body each) and every boundary kind."""
+def _lagrange(dim: int, mesh: str, hourglass: str = "viscous") -> str:
+    """Every material model in one run (one body each) and every boundary kind; the bodies'
+    hourglass_control (the assumed-strain stiffness adds its reference kernel)."""
     run = (_RUN2 if dim == 2 else _RUN3).replace("end_time = 1.0", "end_time = 1.0e-3")
     text = run + "".join(f"[materials.{m}]\n{body}" for m, body in _MAT.items())
     vel = ", ".join(["0.0"] * (dim - 1) + ["-200.0"])
@@ -122,7 +123,7 @@ def _lagrange(dim: int, mesh: str) -> str:
             cells = [2] * (dim - 1) + [4]
             shape = f"{{ box = {{ lower = {lo}, upper = {hi}, cells = {cells} }} }}"
         text += (f'[[lagrange.bodies]]\nname = "b{i}"\nmaterial = "{m}"\nmesh = {shape}\n'
-                 f'initial_velocity = [{vel}]\n')
+                 f'initial_velocity = [{vel}]\nhourglass_control = "{hourglass}"\n')
     up = "xyz"[dim - 1]
     normal = [0.0] * dim
     normal[-1] = 1.0
@@ -139,6 +140,7 @@ def cases() -> dict[str, str]:
     out: dict[str, str] = {}
     for dim in (2, 3):
         out[f"lagrange_{dim}d"] = _lagrange(dim, "box")
+        out[f"lagrange_{dim}d_assumed_strain"] = _lagrange(dim, "box", "assumed_strain")
         for eos in _EOS:
             out[f"ale_{dim}d_{eos}_eulerian"] = _single(dim, eos, "eulerian", "scalar")
         for q in ("scalar", "monotonic"):
