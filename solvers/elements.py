@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 
 __all__ = ["HEX_XI", "QUAD_XI", "HEX_FACES", "HEX_HG", "QUAD_HG", "hex_bvectors", "quad_bvectors",
-           "quad_gamma", "facet_area_vectors"]
+           "quad_gamma", "quad_viscous_hourglass", "facet_area_vectors"]
 
 # Natural coordinates of the VTK nodes.
 HEX_XI = np.array([[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1],
@@ -181,6 +181,23 @@ def quad_gamma(xe, b, area, gam):
     hy *= ia
     for i in range(4):
         gam[i] = QUAD_HG[i] - (hx * b[i, 0] + hy * b[i, 1])
+
+
+@njit(cache=True, inline="always")
+def quad_viscous_hourglass(xe, ve, b, area, ah, gam, fc):
+    """Flanagan-Belytschko viscous hourglass control of a quad: fc (4, 2) -= gamma ah (gamma . v),
+    gamma from quad_gamma (into gam), ah the coefficient (kg/s)."""
+    quad_gamma(xe, b, area, gam)
+    gx = 0.0
+    gy = 0.0
+    for i in range(4):
+        gx += gam[i] * ve[i, 0]
+        gy += gam[i] * ve[i, 1]
+    gx *= ah
+    gy *= ah
+    for i in range(4):
+        fc[i, 0] -= gam[i] * gx
+        fc[i, 1] -= gam[i] * gy
 
 
 def facet_area_vectors(points: np.ndarray, facets: np.ndarray) -> np.ndarray:

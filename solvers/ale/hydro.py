@@ -86,7 +86,7 @@ from numba import njit
 
 from solvers.ale import eos as _eos
 from solvers import elements as _elements
-from solvers.elements import hex_bvectors, quad_bvectors, quad_gamma
+from solvers.elements import hex_bvectors, quad_bvectors, quad_viscous_hourglass
 
 # zone-pass flags
 ENERGY = 1     # compatible energy update from the stored corner forces (real zones only)
@@ -618,18 +618,7 @@ def zone_pass_2d(x, v, v_old, fc, M, e, V, rho, p, c, q, de_h, zlo, zhi, rlo, rh
                 fc[z, a, 0] = s * b[a, 0]
                 fc[z, a, 1] = s * b[a, 1]
             if hg > 0.0:
-                ah = hg * r * cz * math.sqrt(vol) * 0.25
-                quad_gamma(xe, b, vol, gam)
-                gx = 0.0
-                gy = 0.0
-                for a in range(4):
-                    gx += gam[a] * ve[a, 0]
-                    gy += gam[a] * ve[a, 1]
-                gx *= ah
-                gy *= ah
-                for a in range(4):
-                    fc[z, a, 0] -= gam[a] * gx
-                    fc[z, a, 1] -= gam[a] * gy
+                quad_viscous_hourglass(xe, ve, b, vol, hg * r * cz * math.sqrt(vol) * 0.25, gam, fc[z])
     return dt_min, -1, 0, dt_at
 
 

@@ -65,7 +65,7 @@ import numpy as np
 from numba import njit
 
 from solvers import elements as _elements
-from solvers.elements import HEX_HG, QUAD_HG, hex_bvectors, quad_bvectors, quad_gamma
+from solvers.elements import HEX_HG, QUAD_HG, hex_bvectors, quad_bvectors, quad_viscous_hourglass
 from solvers.numba_cache import flush_stale_cache
 
 from . import materials as _materials
@@ -1042,18 +1042,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                 fe[i, 0] -= gm * px - si * rx
                 fe[i, 1] -= gm * py - si * ry
         elif hg_coef > 0.0:
-            ah = hg_coef * rho * c * math.sqrt(vol) * 0.25
-            quad_gamma(xe, b, vol, gq)
-            gx = 0.0
-            gy = 0.0
-            for i in range(4):
-                gx += gq[i] * ve[i, 0]
-                gy += gq[i] * ve[i, 1]
-            gx *= ah
-            gy *= ah
-            for i in range(4):
-                fe[i, 0] -= gq[i] * gx
-                fe[i, 1] -= gq[i] * gy
+            quad_viscous_hourglass(xe, ve, b, vol, hg_coef * rho * c * math.sqrt(vol) * 0.25, gq, fe)
 
         for i in range(4):
             nd = conn[e, i]
