@@ -480,14 +480,14 @@ class CharacteristicFaces:
         # dilatation, a vortex's has none (div u = 0): |div_t u_t| is clipped to the face zone's
         # |div u| (face and inner layer of nodes)
         v = self.s.v
-        un_f = v[self.x_nodes, self.d_n[:, None]].mean(axis=1)
+        vn = v[self.x_nodes, self.d_n[:, None]]   # the face nodes' normal velocity, per face zone
+        un_f = vn.mean(axis=1)
         un_i = v[self.x_inner, self.d_n[:, None]].mean(axis=1)
         dil = np.abs(self.divt + self.so * (un_f - un_i) / self.hn)
-        self.divt = np.clip(self.divt, -dil, dil)
+        np.clip(self.divt, -dil, dil, out=self.divt)
         rate = -self.beta * self.rho_e * self.c_e ** 2 * self.divt
         # (none where gas enters through a face node: the tangential velocity is held there)
-        u_in = -self.so[:, None] * self.s.v[self.x_nodes, self.d_n[:, None]]
-        rate[self.zone_in | np.any(u_in > INFLOW_MACH * self.c_e[:, None], axis=1)] = 0.0
+        rate[self.zone_in | np.any(-self.so[:, None] * vn > INFLOW_MACH * self.c_e[:, None], axis=1)] = 0.0
         has_t = np.isfinite(self.target)
         resid = np.where(has_t, self.pb - np.where(has_t, self.target, 0.0), self.delta)
         # the gas flowing through the face carries the correction out at |u_n| / h (implicit)

@@ -142,6 +142,15 @@ def _return_factor(s0, s1, s2, s3, s4, s5, G, dgp):
     return q / (q + 3.0 * G * dgp)
 
 
+@njit(cache=True, inline="always")
+def _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p, temp, par):
+    """The fibre check's flow stress squared: the larger of the static Johnson-Cook flow stress at
+    the element's plastic strain and the von Mises stress of the returned state (which carries the
+    rate factor where the element yielded this step)."""
+    return max(jc_yield(eps_p, 0.0, temp, par) ** 2,
+               3.0 * (s3 * s3 + s4 * s4 + s5 * s5) + 0.5 * ((s0 - s1) ** 2 + (s1 - s2) ** 2 + (s2 - s0) ** 2))
+
+
 # the 2-point Gauss abscissa: the fibre check samples the hourglass stress where a 2 x 2 (x 2) rule would
 _GAUSS = 1.0 / math.sqrt(3.0)
 
@@ -653,9 +662,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                     temp[e] += dT
                     if dgp > 0.0:
                         kap = _return_factor(s0, s1, s2, s3, s4, s5, G, dgp)
-                    sf2 = max(jc_yield(eps_p[e], 0.0, temp[e], mat_par[mid]) ** 2,
-                              3.0 * (s3 * s3 + s4 * s4 + s5 * s5)
-                              + 0.5 * ((s0 - s1) ** 2 + (s1 - s2) ** 2 + (s2 - s0) ** 2))
+                    sf2 = _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p[e], temp[e], mat_par[mid])
                 else:
                     s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
                                                               wxy, wyz, wzx, dt)
@@ -899,9 +906,7 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                     temp[e] += dT
                     if dgp > 0.0:
                         kap = _return_factor(s0, s1, s2, s3, s4, s5, G, dgp)
-                    sf2 = max(jc_yield(eps_p[e], 0.0, temp[e], mat_par[mid]) ** 2,
-                              3.0 * (s3 * s3 + s4 * s4 + s5 * s5)
-                              + 0.5 * ((s0 - s1) ** 2 + (s1 - s2) ** 2 + (s2 - s0) ** 2))
+                    sf2 = _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p[e], temp[e], mat_par[mid])
                 else:
                     s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
                                                               wxy, 0.0, 0.0, dt)
@@ -1119,8 +1124,8 @@ def element_forces(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0,
 def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
-    flush_stale_cache([reference_gradients, _is_bad, _erode, _return_factor, _vm_dot, _fibre_factor, _in_frame,
-                       _hex_moments, _hex_spread, _frame_of, _quad_frame,
+    flush_stale_cache([reference_gradients, _is_bad, _erode, _return_factor, _flow_stress_sq, _vm_dot, _fibre_factor,
+                       _in_frame, _hex_moments, _hex_spread, _frame_of, _quad_frame,
                        assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
