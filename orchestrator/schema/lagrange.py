@@ -302,7 +302,7 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
             "erosion": ({"strain": to_float(b["erosion"]["strain"]),
                          "time_step": to_float(b["erosion"].get("time_step", 0.0))} if "erosion" in b else None),
             "accept_thin": bool(b.get("accept_thin", False)),
-            "hourglass_control": b.get("hourglass_control", "viscous"),
+            "hourglass_control": b.get("hourglass_control", "assumed_strain"),
         })
     lagrange = {k: to_float(raw.get(k, v)) for k, v in LAGRANGE_DEFAULTS.items()}
     if "gravity" in raw:

@@ -25,7 +25,9 @@ One step (solver.py calls these in this order)
    over-expanded to a negative EOS energy within two steps).  The zone's compatible energy change ``dE = M e_new -
    sum_k mass_k ener_k`` is shared in proportion to each material's work, ``w_k = (p_k + q) dV_k /
    sum_j (p_j + q) dV_j`` (by mass if the shares would have mixed signs), so the sum is exactly the
-   zone's change.
+   zone's change.  A thin material (below ``RHO_THIN`` of the zone's mean density) takes its mass
+   share instead, and a zone whose volume changes by more than half of itself within the step (a
+   coupled body's small cut zone) shares it all by mass, with no half-step shift.
 3. Remap, one sweep per direction, :func:`sweep_fluxes` + :func:`sweep_zones` (mixed_remap.py): each face's swept
    volume ``SV`` is split over the materials of its donor zone by the exact volume of the donor's
    piecewise-linear interface (Youngs' normals from the fraction field, the plane placed to hold the
@@ -62,6 +64,14 @@ from solvers.ale.mixed_remap import cumulative_fractions, sweep_fluxes, sweep_zo
 from solvers.ale.points import fraction_samples, subcell_offsets
 
 TRACE = 1e-6       # volume fraction below which a material is a trace: no EOS call, no say in c
+RHO_THIN = 1e-9
+"""A material less dense than this share of its zone's mean density (sum of masses over the zone's
+volume) is thin: it counts as a trace (no EOS call, the pressure of the rest) and takes no p dV work
+in the Lagrange split (its energy changes by its mass share).  Air in a water zone holds 1.2e-3 of
+it; a cavity a steel block's edge opened in water, filled by the air trace the compressibility split
+let expand (doubling per step), reached 3e-16 of it at 0.9 % of the zone's volume and took its
+volume's share of the zone's q work on no mass (e = 4e21 J/kg, then an invalid state).  The
+case-wide ``RHO_CUTOFF`` below acts only where the case has a void material."""
 RELAX_PASSES = 2
 RHO_CUTOFF = 1e-12
 """A zone whose material is less dense than this share of the case's lightest initial density
@@ -83,8 +93,16 @@ BAD_MATERIAL_STATE = 5
 
 
 @njit(cache=True)
-def _present(vol, mass, code, z, k, vz):
-    return code[k] != VOID and mass[z, k] > 0.0 and vol[z, k] > TRACE * vz
+def _present(vol, mass, code, z, k, vz, mz):
+    """Material k of zone z (volume vz, mass mz) has a state of its own: not void, not a trace by
+    volume (``TRACE``), not thin (``RHO_THIN``)."""
+    return (code[k] != VOID and mass[z, k] > 0.0 and vol[z, k] > TRACE * vz
+            and not _thin(vol, mass, z, k, vz, mz))
+
+
+@njit(cache=True)
+def _thin(vol, mass, z, k, vz, mz):
+    return mass[z, k] * vz < RHO_THIN * mz * vol[z, k]
 
 
 @njit(cache=True)
@@ -98,8 +116,10 @@ def zone_eos(vol, mass, ener, deh, pm, cm, code, par, M, V, rho, p, c, e, de_h, 
             for k in range(zlo[2], zhi[2]):
                 z = i * zs[0] + j * zs[1] + k * zs[2]
                 vz = 0.0
+                mz = 0.0
                 for m in range(nm):
                     vz += vol[z, m]
+                    mz += mass[z, m]
                 pa = 0.0
                 asum = 0.0
                 vvoid = 0.0
@@ -110,7 +130,7 @@ def zone_eos(vol, mass, ener, deh, pm, cm, code, par, M, V, rho, p, c, e, de_h, 
                 Ez = 0.0
                 Dz = 0.0
                 for m in range(nm):
-                    if _present(vol, mass, code, z, m, vz):
+                    if _present(vol, mass, code, z, m, vz, mz):
                         r = mass[z, m] / vol[z, m]
                         pk, ck, ok = _eos.state(code[m], par[m], r, ener[z, m] + deh[z, m])
                         if not ok:
@@ -137,7 +157,7 @@ def zone_eos(vol, mass, ener, deh, pm, cm, code, par, M, V, rho, p, c, e, de_h, 
                 peq = pa / asum if asum > 0.0 else 0.0
                 # traces carry the pressure of the rest (they neither push nor pull)
                 for m in range(nm):
-                    if code[m] != VOID and mass[z, m] > 0.0 and not vol[z, m] > TRACE * vz:
+                    if code[m] != VOID and mass[z, m] > 0.0 and not _present(vol, mass, code, z, m, vz, mz):
                         pm[z, m] = peq
                 M[z] = Mz
                 if Mz > 0.0:
@@ -197,6 +217,7 @@ def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs)
     V is the Lagrangian volume, e the updated zone energy).  See the module docstring."""
     nm = vol.shape[1]
     dvk = np.empty(nm)
+    thin = np.zeros(nm, dtype=np.bool_)
     for i in range(zlo[0], zhi[0]):
         for j in range(zlo[1], zhi[1]):
             for k in range(zlo[2], zhi[2]):
@@ -256,18 +277,36 @@ def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs)
                     for m in range(nm):
                         if code[m] != VOID:
                             dvk[m] = vol[z, m] * dmat / vmat
-                # energy: shared by p dV work (by mass if the shares would have mixed signs)
+                # energy: shared by p dV work (by mass if the shares would have mixed signs); a
+                # thin material (RHO_THIN) by its mass share, the rest by work
                 qz = q[z]
                 dE = M[z] * e[z]
                 den = 0.0
+                mthin = 0.0
                 for m in range(nm):
                     dE -= mass[z, m] * ener[z, m]
                     if code[m] != VOID and mass[z, m] > 0.0:
-                        den += (pm[z, m] + qz) * dvk[m]
-                use_work = den != 0.0
+                        if _thin(vol, mass, z, m, vold, M[z]):
+                            mthin += mass[z, m]
+                        else:
+                            den += (pm[z, m] + qz) * dvk[m]
+                worked = 1.0 - mthin / M[z]
+                # a zone whose volume changes by more than half of itself within the step (only a
+                # coupled body's small cut zone can: its open part grows or shrinks as the surface
+                # moves; blocked.py merges it after the remap) gets the single-material zone's
+                # treatment (cut_zone_kernels.lagrangian_open_volumes): no half-step EOS shift, and
+                # the energy change shared by mass.  The linear p dV of a zone whose volume triples
+                # takes more than a gas trace's energy (0.92 of it at gamma = 1.4): a steel block's
+                # edge sliding along a zone row into water drove the air in those cut zones to a
+                # negative EOS energy
+                big = abs(dv) > 0.5 * vold
+                use_work = den != 0.0 and not big
                 for m in range(nm):
-                    if code[m] != VOID and mass[z, m] > 0.0 and (pm[z, m] + qz) * dvk[m] * den < 0.0:
-                        use_work = False
+                    thin[m] = False
+                    if code[m] != VOID and mass[z, m] > 0.0:
+                        thin[m] = _thin(vol, mass, z, m, vold, M[z])
+                        if not thin[m] and (pm[z, m] + qz) * dvk[m] * den < 0.0:
+                            use_work = False
                 for m in range(nm):
                     if code[m] == VOID:
                         vol[z, m] += dvoid * vol[z, m] / vvoid if vvoid > 0.0 else 0.0
@@ -277,9 +316,12 @@ def lagrange_split(vol, mass, ener, deh, pm, cm, code, M, e, V, q, zlo, zhi, zs)
                     if not mass[z, m] > 0.0:
                         deh[z, m] = 0.0
                         continue
-                    w = (pm[z, m] + qz) * dvk[m] / den if use_work else mass[z, m] / M[z]
+                    if use_work and not thin[m]:
+                        w = worked * (pm[z, m] + qz) * dvk[m] / den
+                    else:
+                        w = mass[z, m] / M[z]
                     ener[z, m] += w * dE / mass[z, m]
-                    deh[z, m] = -(pm[z, m] + qz) * dvk[m] / (2.0 * mass[z, m])
+                    deh[z, m] = 0.0 if (big or thin[m]) else -(pm[z, m] + qz) * dvk[m] / (2.0 * mass[z, m])
 
 
 @njit(cache=True)
@@ -296,13 +338,15 @@ def relax(vol, mass, ener, deh, code, par, zlo, zhi, zs, passes):
                 z = i * zs[0] + j * zs[1] + k * zs[2]
                 for _ in range(passes):
                     vz = 0.0
+                    mz = 0.0
                     for m in range(nm):
                         vz += vol[z, m]
+                        mz += mass[z, m]
                     npres = 0
                     a = 0.0
                     b = 0.0
                     for m in range(nm):
-                        if _present(vol, mass, code, z, m, vz):
+                        if _present(vol, mass, code, z, m, vz, mz):
                             r = mass[z, m] / vol[z, m]
                             p_, c_, ok = _eos.state(code[m], par[m], r, ener[z, m] + deh[z, m])
                             if not ok:
@@ -705,7 +749,7 @@ class Materials:
 def _flush():
     from solvers.numba_cache import flush_stale_cache
 
-    flush_stale_cache([_present, zone_eos, lagrange_split, relax, density_at_pressure, equilibrium_volumes,
+    flush_stale_cache([_present, _thin, zone_eos, lagrange_split, relax, density_at_pressure, equilibrium_volumes,
                        fit_open_volumes, add_energy], [_eos.__file__], "mixed.deps.sha256")
 
 

@@ -151,7 +151,7 @@ class LagrangeSolver:
         # hourglass control per body (bodies[i].hourglass_control): the viscous Flanagan-Belytschko
         # force, or the assumed-strain stiffness (kernels.py); has_hg_stiffness is the same on every
         # rank (the diagnostics' collective sum), hg_stiff this rank's elements
-        stiff = np.array([b.get("hourglass_control", "viscous") == "assumed_strain" for b in bodies])
+        stiff = np.array([b.get("hourglass_control", "assumed_strain") == "assumed_strain" for b in bodies])
         self.has_hg_stiffness = bool(stiff.any())
         self.hg_stiff = stiff[my_body].astype(np.uint8)
         # its state: the reference hourglass sums and widths, the plastic offsets, the hourglass

@@ -135,30 +135,38 @@ def test_multiplier_stabilisation_keeps_cond_h_constant_and_the_multipliers_smoo
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_fe_vs_sph_bodies_both_converge_to_the_fine_fe_plate(tmp_path, run_immerse):
-    """The plate in a shock as FE quads (3 x 30, 6 x 60) and tlsph particles (dx 5, 2.5 mm): the tip
-    history against FE 24 x 240.  Measured: FE 8.8e-2, 5.0e-2; SPH 8.7e-2, 3.1e-2 at the case's cfl
-    0.15 (7.5e-2, 3.2e-2 at 0.25, where tlsph's viscosity rang; wall 1.8, 3.3, 6.0, 17.7 s).  Asserted: both errors fall with the resolution, both within 10 % at the second
-    level (cases/sph_vs_fe_plate as shipped: their own checks pass, and their tip histories agree
-    within 10 %), and the cost chart is drawn.  (The campaign's penetrator series: the next test.)"""
+    """The plate in a shock as FE quads (3 x 30, 6 x 60, 12 x 120) and tlsph particles (dx 5, 2.5
+    mm): the tip history against FE 24 x 240.  Measured: FE 3.15e-2, 3.52e-2, 1.03e-2 with the
+    default assumed-strain stiffness (the coarse plates bend right: what is left at the first two
+    levels is the coupling's error on the fixed 10 mm air grid, and it does not fall between them;
+    the viscous control's 8.8e-2, 5.0e-2 did; its 24 x 240 reference and the stiffness's differ by
+    6.3e-4); SPH 8.7e-2, 3.1e-2 at the case's cfl 0.15.  Asserted: the FE errors under 4 % at the
+    two coarse levels and falling by 3x to the third, the SPH error falling, both within 10 % at the
+    second level (cases/sph_vs_fe_plate as shipped: their own checks pass, and their tip histories
+    agree within 10 %), and the cost chart is drawn.  (The campaign's penetrator series: the next
+    test.)"""
     out = tmp_path / "out"
-    r = run_immerse("campaign", CAMPAIGNS / "fe_vs_sph_bodies", "--out", out,
-                    "--only", "series=FE quads,tlsph particles", "refinement=1,2")
-    assert r.returncode == 0, r.stdout + r.stderr
-    rows = {x["run"]: x for x in _rows(out)}
-    assert len(rows) == 4, list(rows)
+    rows = {}
+    for part, only in (("fe", ["series=FE quads", "refinement=1,2,4"]),
+                       ("sph", ["series=tlsph particles", "refinement=1,2"])):
+        r = run_immerse("campaign", CAMPAIGNS / "fe_vs_sph_bodies", "--out", out / part, "--only", *only)
+        assert r.returncode == 0, r.stdout + r.stderr
+        rows.update({x["run"]: dict(x, out=out / part) for x in _rows(out / part)})
+    assert len(rows) == 5, list(rows)
     e = {k: float(x["error"]) for k, x in rows.items()}
-    assert e["FE_quads-refinement2"] < e["FE_quads-refinement1"], e
+    assert max(e["FE_quads-refinement1"], e["FE_quads-refinement2"]) < 0.04, e
+    assert e["FE_quads-refinement4"] < e["FE_quads-refinement2"] / 3, e
     assert e["tlsph_particles-refinement2"] < e["tlsph_particles-refinement1"], e
     assert max(e["FE_quads-refinement2"], e["tlsph_particles-refinement2"]) < 0.1, e
-    assert (out / "figures" / "fe_vs_sph_bodies_cost.png").is_file()
+    assert all((out / part / "figures" / "fe_vs_sph_bodies_cost.png").is_file() for part in ("fe", "sph"))
     # level 2 is cases/sph_vs_fe_plate/{fe,sph} as shipped: their checks pass, and the two tip
     # histories agree within 10 % of the largest deflection (the issue's bound; measured 5.6e-2, 4.6e-2
-    # at cfl 0.25)
+    # at cfl 0.25 with the viscous control; 3.8e-2 with the assumed-strain stiffness at cfl 0.15)
     assert rows["FE_quads-refinement2"]["status"] == rows["tlsph_particles-refinement2"]["status"] == "passed"
     from tests.cases.test_sph_coupled import _tip_history
 
-    a = _tip_history(out / "runs" / "FE_quads-refinement2" / "out", "lagrange")
-    b = _tip_history(out / "runs" / "tlsph_particles-refinement2" / "out", "sph")
+    a = _tip_history(out / "fe" / "runs" / "FE_quads-refinement2" / "out", "lagrange")
+    b = _tip_history(out / "sph" / "runs" / "tlsph_particles-refinement2" / "out", "sph")
     assert len(a) == len(b) == 17 and np.abs(a - b).max() <= 0.1 * np.abs(a).max()
 
 
@@ -218,10 +226,10 @@ def test_time_integrators_where_each_fails(tmp_path, run_immerse):
     flight's energy to 1.5e-15 / 9.2e-15 and gives each of the rod's strikes back to 3.9e-13
     (measured); Newmark is stopped by name at both L-block steps (t = 3.4 s and 1.4 s, its energy off
     by 1.14 % / 1.22 %: the full campaign's 0.025 s step runs through, drifting 2.1e-4) and at the
-    rod's first strike (t = 0.034 s, 1.46 %); the explicit run at its own step loses 63 % of the
-    L-block's energy over the free flight (its viscous hourglass control and bulk viscosity at this
-    Poisson ratio, 0.495) and up to 22 % of the rod's in a strike (its contact stops the striking
-    nodes), measured."""
+    rod's first strike (t = 0.034 s, 1.46 %); the explicit run at its own step loses 26 % of the
+    L-block's energy over the free flight (its bulk viscosity at this Poisson ratio, 0.495, and the
+    hourglass damping; 63 % with the viscous hourglass control in place of the default stiffness)
+    and up to 22 % of the rod's in a strike (its contact stops the striking nodes), measured."""
     out = tmp_path / "out"
     r = run_immerse("campaign", CAMPAIGNS / "time_integrators", "--out", out, "--only", "dt=0.1,0.2", "dt_rod=0.001")
     assert r.returncode == 0, r.stdout + r.stderr   # (a run that fails is a result, not an error)
@@ -232,7 +240,7 @@ def test_time_integrators_where_each_fails(tmp_path, run_immerse):
         assert rows[f"midpoint-dt{dt}"]["status"] == "passed" and float(rows[f"midpoint-dt{dt}"]["error"]) < 1e-13
         m = rows[f"newmark-dt{dt}"]
         assert m["status"] == "failed" and "newmark does not keep the energy" in m["message"], m
-    assert float(rows["explicit"]["error"]) > 0.3, rows["explicit"]
+    assert float(rows["explicit"]["error"]) > 0.15, rows["explicit"]   # 0.256
     rod = rows["rod_midpoint-dt_rod0.001"]
     assert rod["status"] == "passed" and float(rod["error"]) < 1e-12, rod
     m = rows["rod_newmark-dt_rod0.001"]

@@ -72,8 +72,10 @@ def test_each_failure_is_detected_named_and_on_the_stability_map(tmp_path, run_i
       first names the Courant limit (run.dt_scale), the run's start warned of it;
     - Toro's 123 with the halves parting at 5 m/s (2u = 10 > 2c/(gamma-1) = 3.74: a vacuum opens):
       negative internal energy at the centre at step 3, named a near-vacuum expansion;
-    - the Taylor bar at 10 km/s: an element at the impact face inverts (element 170, step 179, 0.52 us;
-      at 5 km/s element 135 at step 19048, 7.2 us: 32 s of the test's 46);
+    - the Taylor bar at 10 km/s: an element at the impact face is crushed (element 170: with the
+      default assumed-strain stiffness, whose damping holds a flowing element's hourglass modes as the
+      viscous control does, it shrinks to 2.8e-11 of its volume and its stable step collapses at
+      step 649, 0.56 us; with the viscous control it inverted at step 179, 0.52 us);
     - the water column's piston pulled out at 50 m/s: the rarefaction would reach p0 - rho c u = -7e7
       Pa; with cavitation_pressure = 0 the water is named cavitating at the first zone below it.
     Every failed run's written steps are finite; the report's map and table show each message."""
@@ -89,8 +91,7 @@ def test_each_failure_is_detected_named_and_on_the_stability_map(tmp_path, run_i
                                  "at step 1,"]),
         "Toro_123_parting_speed": ("ale", ["SolverError: ALE zone (199, 0): invalid thermodynamic state: negative "
                                            "internal energy", "near-vacuum expansion", "at step 3,"]),
-        "Taylor_bar_impact_speed": ("lagrange", ["lagrange rank 0: SolverError: inverted or invalid element ",
-                                                 "body 'rod'"]),
+        "Taylor_bar_impact_speed": ("lagrange", ["time step collapsed", "element 170 of body 'rod'"]),
         "water_column_piston_speed": ("ale", ["SolverError: ALE zone (0, 0): material 'water' cavitates: its "
                                               "pressure -", "is below its cavitation_pressure 0 Pa"]),
     }
