@@ -71,9 +71,13 @@ FLUID = {
 # transverse (Engquist-Majda) coefficient
 _TUNING = {"relax": number("dimensionless", minimum=0), "beta": number("dimensionless", minimum=0, maximum=1)}
 _STATE = {"density": number("kg/m^3", exclusiveMinimum=0), "velocity": vector("m/s"), "pressure": number("Pa")}
-INFLOW = table({"inflow": table({**_STATE, **_TUNING}, required=("density", "velocity", "pressure"))},
+# (material: the exterior's, one of ale.materials; with several, default the one that fills most of
+# the face at the start)
+_MATERIAL = {"material": {"type": "string", "minLength": 1}}
+INFLOW = table({"inflow": table({**_STATE, **_TUNING, **_MATERIAL}, required=("density", "velocity", "pressure"))},
                required=("inflow",))
-FAR_FIELD = table({"far_field": table({**_STATE, **_TUNING}, required=("density", "velocity", "pressure"))},
+FAR_FIELD = table({"far_field": table({**_STATE, **_TUNING, **_MATERIAL},
+                                      required=("density", "velocity", "pressure"))},
                   required=("far_field",))
 OUTFLOW = table({"outflow": table({"pressure": number("Pa"), **_TUNING})}, required=("outflow",))
 # a moving wall (Lagrangian mode: the normal speed) or a face held at a velocity pushing in gas of a
@@ -86,8 +90,8 @@ PISTON = table({"piston": table(
 ALE_FACE = {"oneOf": [{"type": "string", "enum": ["wall", "outflow", "far_field", "zero_gradient", "periodic"]},
                       INFLOW, FAR_FIELD, OUTFLOW, PISTON],
             "x-allowed": "must be \"wall\", \"outflow\", \"far_field\", \"zero_gradient\", \"periodic\", "
-                         "{ inflow = { density, velocity, pressure[, relax, beta] } }, { far_field = { density, "
-                         "velocity, pressure[, relax, beta] } }, { outflow = { [pressure, relax, beta] } }, "
+                         "{ inflow = { density, velocity, pressure[, material, relax, beta] } }, { far_field = { "
+                         "density, velocity, pressure[, material, relax, beta] } }, { outflow = { [pressure, relax, beta] } }, "
                          "{ piston = { velocity } } (a moving wall, Lagrangian mode) or { piston = { velocity = "
                          "[...], density, pressure } } (a face held at a velocity)"}
 ALE_FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
@@ -170,8 +174,8 @@ def _normalise(a: dict, dim: int) -> dict:
         face = a.get("boundaries", {}).get(f, "wall")
         if isinstance(face, dict):
             (kind, body), = face.items()
-            face = {kind: {k: ([to_float(x) for x in v] if isinstance(v, list) else to_float(v))
-                           for k, v in body.items()}}
+            face = {kind: {k: (v if k == "material" else [to_float(x) for x in v] if isinstance(v, list)
+                               else to_float(v)) for k, v in body.items()}}
         out["boundaries"][f] = face
     for r in a["regions"]:
         reg = {k: (v if k in ("material", "region") else to_float(v))
@@ -212,6 +216,12 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
                                 "{ velocity = [...], density, pressure } (a face held at a velocity)")
             if "velocity" in body and not moving_wall:
                 check_length(format_key(["ale", "boundaries", f, kind, "velocity"]), raw_faces[f][kind]["velocity"], dim)
+            if "material" in body:
+                solid = [m for m, v in ale["materials"].items() if v["eos"] != "void"]
+                if body["material"] not in solid:
+                    raise CaseError(format_key(["ale", "boundaries", f, kind, "material"]), body["material"],
+                                    "must be one of the materials in [ale.materials] with an equation of "
+                                    "state: " + ", ".join(solid))
     for i, (reg, r) in enumerate(zip(ale["regions"], raw["regions"])):
         base = ["ale", "regions", i]
         if reg["material"] not in ale["materials"]:
@@ -230,6 +240,7 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
         if "region" in r:
             check_expression(format_key(base + ["region"]), r["region"], dim, BOOL)
     _check_mixed(ale, raw)
+    _check_states(ale, raw)
     lo, hi = ale["grid"]["lower"], ale["grid"]["upper"]
     for i, e in enumerate(raw.get("energy_sources", [])):
         check_length(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
@@ -242,6 +253,39 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
         if ale["mode"] != "eulerian":
             raise CaseError(format_key(["ale", "obstacles"]), raw["obstacles"],
                             "obstacles need ale.mode = \"eulerian\" (the remap keeps material out of them)")
+
+
+def _valid_state(key: str, value, material: str, props: dict, rho: float, p: float) -> None:
+    """A given state (density, pressure) must be a state of the material's EOS: checked here, so
+    that `immerse check` says so (the solvers would refuse it at their start)."""
+    from solvers.ale import eos as _eos
+
+    code, par = _eos.eos_params(props["eos"], props)
+    e = float(_eos.energy_from_pressure(code, par, float(rho), float(p)))
+    p2, c, ok = _eos.state(code, par, float(rho), e)
+    if not ok:
+        raise CaseError(key, value, f"must be a valid state of material {material!r} ({_eos.describe(code, par)}): "
+                        f"density {rho:g} kg/m^3 and pressure {p:g} Pa give e = {e:.6g} J/kg, p = {p2:.6g} Pa, "
+                        f"sound speed {c:.6g} m/s")
+
+
+def _check_states(ale: dict, raw: dict) -> None:
+    """The regions' and the faces' given states against their materials' equations of state."""
+    mats = ale["materials"]
+    for i, reg in enumerate(ale["regions"]):
+        props = mats.get(reg["material"], {})
+        if props.get("eos") not in (None, "void") and "density" in reg and "pressure" in reg:
+            _valid_state(format_key(["ale", "regions", i]), raw["regions"][i], reg["material"], props,
+                         reg["density"], reg["pressure"])
+    solid = [m for m, v in mats.items() if v["eos"] != "void"]
+    for f, face in ale["boundaries"].items():
+        if not isinstance(face, dict):
+            continue
+        (kind, body), = face.items()
+        name = body.get("material", solid[0] if len(solid) == 1 else None)
+        if "density" in body and "pressure" in body and name is not None:
+            _valid_state(format_key(["ale", "boundaries", f, kind]), raw["boundaries"][f][kind], name, mats[name],
+                         body["density"], body["pressure"])
 
 
 def _check_mixed(ale: dict, raw: dict) -> None:
@@ -257,11 +301,14 @@ def _check_mixed(ale: dict, raw: dict) -> None:
     if ale["mode"] != "eulerian":
         raise CaseError("ale.mode", raw.get("mode"), f"{what} in ale.regions need mode = \"eulerian\"")
     for f, face in ale["boundaries"].items():
-        if isinstance(face, dict) and ("inflow" in face or "far_field" in face or "piston" in face):
+        if isinstance(face, dict) and "piston" in face:
             raise CaseError(format_key(["ale", "boundaries", f]), raw["boundaries"][f],
-                            f"faces with a given state (inflow, far_field tables, held pistons) are not "
-                            f"supported yet with {what} in ale.regions (\"outflow\", \"far_field\" and "
-                            f"\"zero_gradient\" are)")
+                            f"held pistons are not supported yet with {what} in ale.regions (inflow, "
+                            f"outflow and far_field faces are)")
+        if isinstance(face, dict) and voids and ("inflow" in face or "far_field" in face):
+            raise CaseError(format_key(["ale", "boundaries", f]), raw["boundaries"][f],
+                            "faces with a given state (inflow, far_field tables) are not supported yet "
+                            "with a void material in ale.regions (its open faces are zero-gradient)")
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:

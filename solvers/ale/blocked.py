@@ -545,6 +545,7 @@ class Blocked:
         if s.mm is not None:  # share the open volume's change over the materials (mixed.py)
             s.mm.lagrange_step(s)
             self._no_shift_in_swept_zones(s)
+            s.mm.hold_shift()
         if s._char is not None:  # the exterior state the faces' motion makes: remap donors
             s._char.donors()
         s._fill_remap_zones()
@@ -599,6 +600,8 @@ class Blocked:
                 s._char.apply_donors(energy_only=True)
             self.hold = None
         set_positions(s.x, B.X)
+        if s.mm is not None:
+            s.mm.spread_shift()
         if b_new is not None:
             self._apply_new_fractions(s, b_new)
 

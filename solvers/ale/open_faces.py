@@ -103,9 +103,14 @@ through an outflow face.  (Zero-gradient donors there, the state next to the fac
 leaving against the inflow reflect more: at Mach 3, 8 % of the jump against 2 %.)  Ghost node
 velocities stay zero-gradient copies of the face nodes.
 
-With several materials per zone (mixed.py) the open faces keep the zero-gradient ghosts of
-boundary.py for now (a mixed or void face zone's exterior is not characterised yet; faces with a
-given state are refused by the case checks).
+With several materials per zone (mixed.py) each face zone's exterior is one material: a given
+state's (``material`` of the inflow or far-field table; default the material that fills most of the
+face), or, for a face without one, the material that fills most of the face zone at the start (its
+state there).  (1) and (2) use that material's equation of state, and the remap's donors are that
+material alone (the gas that enters is the exterior's; what leaves is the face zone's own, the
+upwind donor).  A face zone that holds only void at the start stays zero-gradient: no exterior,
+no dashpot, no donors.  (A case with a void material keeps zero-gradient faces for now, solver.py:
+the penetrators' outflow faces beside the void above their targets collapsed the step at 1 us.)
 """
 from __future__ import annotations
 
@@ -371,6 +376,10 @@ class CharacteristicFaces:
         self.target = np.full(nk, np.nan)      # outflow: the pressure the face relaxes to
         self.rho_d = np.zeros(nk)
         self.e_d = np.zeros(nk)
+        # several materials: the exterior's material per face zone (-1: one material, or a void face
+        # zone), and the face zones with an exterior (a void face zone has none: zero-gradient)
+        self.mat = np.full(nk, -1.0)
+        self.act = np.ones(nk)
         self._ready = False
 
     # ------------------------------------------------------------------------------------------
@@ -378,28 +387,48 @@ class CharacteristicFaces:
         """Exterior states from the case or the initial face zones (called once the initial state
         is in place)."""
         s = self.s
+        mm = s.mm
         for f, fc in enumerate(self.faces):
             sel = np.flatnonzero(self.face_of == f)
             spec = fc["spec"]
             zin = self.zin[sel]
+            if mm is not None:
+                self.mat[sel] = self._exterior_materials(spec, zin)
+                self.act[sel] = self.mat[sel] >= 0
             if spec.get("state") is not None:
                 rho, u, p = spec["state"]
-                e = float(_eos.energy_from_pressure(s.eos_code, s.eos_par, rho, p))
-                p2, c, ok = _eos.state(s.eos_code, s.eos_par, rho, e)
+                code, par = self._eos_of(sel)
+                name = s.material if mm is None else mm.names[int(self.mat[sel[0]])]
+                e = float(_eos.energy_from_pressure(code[0], par[0], rho, p))
+                p2, c, ok = _eos.state(code[0], par[0], rho, e)
                 if not ok:
                     raise ValueError(f"{fc['kind']} state on {FACE_NAMES[2 * fc['d'] + fc['s']]} "
                                      f"(density {rho}, pressure {p}) is not a valid state of material "
-                                     f"{s.material!r}")
+                                     f"{name!r}")
                 self.rho_e[sel], self.e_e[sel], self.p_e[sel], self.c_e[sel] = rho, e, p2, c
                 self.u_e[sel] = np.asarray(u, np.float64)
             else:
-                self.rho_e[sel] = s.rho[zin]
-                self.e_e[sel] = s.e[zin]
-                self.p_e[sel] = s.p[zin]
-                self.c_e[sel] = s.c[zin]
+                if mm is None:
+                    self.rho_e[sel] = s.rho[zin]
+                    self.e_e[sel] = s.e[zin]
+                    self.p_e[sel] = s.p[zin]
+                    self.c_e[sel] = s.c[zin]
+                else:   # the exterior material's own state in the face zone (from its EOS: the face
+                    # zones include images in the ghost layers, whose material states are not
+                    # evaluated; void zones: inert values)
+                    code, par = self._eos_of(sel)
+                    k = self.mat[sel].astype(np.int64)
+                    for i, z, kk, cd, pr in zip(sel, zin, k, code, par):
+                        if kk < 0:
+                            self.rho_e[i], self.e_e[i], self.p_e[i], self.c_e[i] = 1.0, 0.0, 0.0, 1.0
+                            continue
+                        r = mm.mass[z, kk] / mm.vol[z, kk]
+                        e = mm.ener[z, kk] + mm.deh[z, kk]
+                        p, c, _ = _eos.state(cd, pr, r, e)
+                        self.rho_e[i], self.e_e[i], self.p_e[i], self.c_e[i] = r, e, p, c
                 # the face nodes' mean velocity (the zone's is not stored)
                 self.u_e[sel] = s.v[self.x_nodes[sel]].mean(axis=1)
-            code, par = self._eos_of(zin)
+            code, par = self._eos_of(sel)
             self.a_e[sel] = [fundamental_half(cd, pr, r, e) for cd, pr, r, e in
                              zip(code, par, self.rho_e[sel], self.e_e[sel])]
         self._derive()
@@ -419,10 +448,14 @@ class CharacteristicFaces:
                 self.target[sel] = float(spec["pressure"])
         # subsonic inflow (the exterior flows in, faster than 1e-3 of its sound speed): the face
         # nodes hold the exterior's tangential velocity (the mean over the node's face zones)
-        wsum = np.asarray(self.W.sum(axis=1)).ravel()
+        # (over the face zones with an exterior: void ones have none)
+        from scipy.sparse import diags
+
+        Wa = self.W @ diags(self.act)
+        wsum = np.asarray(Wa.sum(axis=1)).ravel()
         wn = np.where(wsum > 0.0, wsum, 1.0)
-        self.node_ue = np.ascontiguousarray(np.asarray(self.W @ self.u_e) / wn[:, None])
-        self.node_c_in = np.where(wsum > 0.0, INFLOW_MACH * np.asarray(self.W @ self.c_e).ravel() / wn, np.inf)
+        self.node_ue = np.ascontiguousarray(np.asarray(Wa @ self.u_e) / wn[:, None])
+        self.node_c_in = np.where(wsum > 0.0, INFLOW_MACH * np.asarray(Wa @ self.c_e).ravel() / wn, np.inf)
         u_in = -self.nodes_so * self.node_ue[np.arange(self.nodes.size), self.nodes_d]
         self.node_hold = (wsum > 0.0) & (u_in > self.node_c_in)
         # (a face node on a wall keeps the wall's normal component, one on an edge of two open faces
@@ -433,12 +466,13 @@ class CharacteristicFaces:
         taken[bc.wall_nodes, bc.wall_comp] = True
         taken[self.nodes, self.nodes_d] = True
         self.node_free = np.ascontiguousarray(~taken[self.nodes])
-        self.zone_in = -self.so * self.u_e[np.arange(self.nk), self.d_n] > INFLOW_MACH * self.c_e
+        self.zone_in = (-self.so * self.u_e[np.arange(self.nk), self.d_n] > INFLOW_MACH * self.c_e) & (self.act > 0)
+        self.inert = np.flatnonzero(self.act == 0)   # (void face zones: zero-gradient)
         self._ready = True
 
     # checkpoint: the per-face-zone state in a zone-shaped array, each face zone's row at its
     # outer ghost zone (unique per face; written and read like every padded array of the solver)
-    STATE = ("rho_e", "e_e", "p_e", "c_e", "a_e", "delta", "zt", "pb")
+    STATE = ("rho_e", "e_e", "p_e", "c_e", "a_e", "delta", "zt", "pb", "mat", "act")
 
     def state_array(self) -> np.ndarray:
         a = np.zeros((self.s.block.nzones, len(self.STATE) + self.dim + 1))
@@ -458,17 +492,29 @@ class CharacteristicFaces:
         self._derive()
         self._dashpot()  # (the pressures p are restored already: the arrays come first)
 
-    def _eos_of(self, zin):
-        """EOS (code, parameters) per face zone: the solver's, or with several materials the one
-        that fills most of the zone."""
+    def _eos_of(self, sel):
+        """EOS (code, parameters) of the face zones sel: the solver's, or with several materials
+        their exterior material's (an ideal gas's for a void face zone: inert values, never used)."""
         s = self.s
         if s.mm is None:
-            return [s.eos_code] * zin.size, [s.eos_par] * zin.size
+            return [s.eos_code] * sel.size, [s.eos_par] * sel.size
         mm = s.mm
-        vol = mm.vol[zin]
-        vol = np.where(mm.code[None, :] >= 0, vol, -1.0)
-        k = np.argmax(vol, axis=1)
-        return [int(mm.code[i]) for i in k], [np.ascontiguousarray(mm.par[i], np.float64) for i in k]
+        k = self.mat[sel].astype(np.int64)
+        gas = (int(_eos.IDEAL_GAS), np.ascontiguousarray(_eos.eos_params("ideal_gas", {"gamma": 1.4})[1]))
+        return ([int(mm.code[i]) if i >= 0 else gas[0] for i in k],
+                [np.ascontiguousarray(mm.par[i], np.float64) if i >= 0 else gas[1] for i in k])
+
+    def _exterior_materials(self, spec, zin):
+        """The exterior's material per face zone (several materials; see the module docstring): a
+        given state's (``material``, or the one that fills most of the face), else the one that fills
+        most of each face zone, -1 where only void does."""
+        mm = self.s.mm
+        vol = np.where(mm.code[None, :] != _eos.VOID, mm.vol[zin], 0.0)
+        if spec.get("state") is not None:
+            if spec.get("material") is not None:
+                return np.full(zin.size, float(mm.names.index(spec["material"])))
+            return np.full(zin.size, float(np.argmax(vol.sum(axis=0))))
+        return np.where(vol.max(axis=1) > 0.0, np.argmax(vol, axis=1), -1).astype(np.float64)
 
     # ------------------------------------------------------------------------------------------
     def advance(self, dt: float) -> None:
@@ -492,6 +538,7 @@ class CharacteristicFaces:
         resid = np.where(has_t, self.pb - np.where(has_t, self.target, 0.0), self.delta)
         # the gas flowing through the face carries the correction out at |u_n| / h (implicit)
         self.delta = (self.delta + dt * (rate - self.K * resid)) / (1.0 + dt * np.abs(un_f) / self.hn)
+        self.delta[self.inert] = 0.0
 
     def ghost_pressure(self) -> None:
         """Face pressure (1) + delta into the ghost zones of the faces (both layers; corners and
@@ -502,6 +549,9 @@ class CharacteristicFaces:
             self.start()
         face_pressure(s.v, self.x_nodes, self.so, self.d_n, self.rho_e, self.u_e, self.p_e, self.c_e, self.a_e,
                       self.delta, self.zt, self.pb)
+        if self.inert.size:  # (void face zones: the zone's own pressure, no dashpot)
+            self.pb[self.inert] = s.p[self.zin[self.inert]]
+            self.zt[self.inert] = 0.0
         # the face node's dual cell reaches half a zone beyond the face, where the ghost zone's
         # centre lies: in the normal direction the ghost acts as the linear extrapolation through
         # the face pressure, 2 p_b - p_1 (p_1: the zone inside), so that the node sees the face's
@@ -547,6 +597,32 @@ class CharacteristicFaces:
 
     def apply_donors(self, energy_only: bool = False) -> None:
         s = self.s
+        if s.mm is None:
+            if not energy_only:
+                s.rho[self.gz] = self.rho_d[self.gsrc]
+            s.e[self.gz] = self.e_d[self.gsrc]
+            return
+        g, r = self._donor_ghosts()
         if not energy_only:
-            s.rho[self.gz] = self.rho_d[self.gsrc]
-        s.e[self.gz] = self.e_d[self.gsrc]
+            s.rho[g] = self.rho_d[r]
+        s.e[g] = self.e_d[r]
+        k = self.mat[r].astype(np.int64)
+        s.mm.ener[g, k] = self.e_d[r]
+
+    def _donor_ghosts(self):
+        """(ghost zones, their face zones) of the face zones with an exterior (several materials)."""
+        on = self.act[self.gsrc] > 0
+        return self.gz[on], self.gsrc[on]
+
+    def apply_material_donors(self) -> None:
+        """Several materials: the ghost zones of the face zones with an exterior hold that material
+        alone at the donor state (after the materials' zero-gradient fill, mixed.fill)."""
+        mm = self.s.mm
+        g, r = self._donor_ghosts()
+        k = self.mat[r].astype(np.int64)
+        vz = mm.vol[g].sum(axis=1)
+        for a in (mm.vol, mm.mass, mm.ener, mm.deh):
+            a[g] = 0.0
+        mm.vol[g, k] = vz
+        mm.mass[g, k] = self.rho_d[r] * vz
+        mm.ener[g, k] = self.e_d[r]

@@ -485,6 +485,25 @@ def test_a_material_thinner_than_its_zone_takes_no_work_and_no_state():
     assert mm.deh[z, 1] == 0.0 and mm.deh[z, 0] != 0.0
 
 
+def test_the_remap_dilutes_the_half_step_shift_of_a_material_that_gains_mass():
+    """The Lagrange split's half-step EOS shift deh_k is the work of what was in the zone, per unit
+    of its mass; a material the remap more than doubles in a zone keeps that work, spread over the
+    new mass (deh m0 / m); one that loses mass, or gains less, keeps its shift per unit mass.  (Kept per unit mass, an air
+    trace's shift of -5.8e6 J/kg met air brought in at 4.9e6 J/kg behind a steel block in water:
+    an invalid state.)"""
+    s = _two_zone_solver()
+    mm = s.mm
+    z = int(np.flatnonzero(s.block.real_zone)[1])
+    mm.deh[z] = [-3.0e3, -5.0e6]
+    m0 = mm.mass[z].copy()
+    mm.hold_shift()
+    mm.mass[z, 0] *= 1.5       # more water comes in
+    mm.mass[z, 1] *= 1.0e3     # air comes in
+    mm.spread_shift()
+    assert mm.deh[z, 0] == -3.0e3
+    assert mm.deh[z, 1] == pytest.approx(-5.0e6 * m0[1] / mm.mass[z, 1], rel=1e-15)
+
+
 def test_checkpoint_restart_bitwise(tmp_path):
     cfg = water_air_config(n=50)
     a = AleSolver(None, cfg)

@@ -79,9 +79,10 @@ def test_reflected_shock_leaves_through_the_face(face):
     _balanced(s)
 
 
-def _wave_run(dim, theta, face, material=AIR, rho0=1.2, p0=1e5, ny=32, nx=160, diagonal=False):
+def _wave_run(dim, theta, face, material=AIR, rho0=1.2, p0=1e5, ny=32, nx=160, diagonal=False, pocket=None):
     """A packet (theta > 0) or pulse (theta = 0) running into face x_upper (a wall at x_lower,
-    periodic across); returns (reflected / incident amplitude, solver) once the incident wave left."""
+    periodic across); returns (reflected / incident amplitude, solver) once the incident wave left.
+    ``pocket``: (material, density) of a second material in the first 8 zones at the wall (at p0)."""
     from solvers.ale import eos as _eos
 
     code, par = _eos.eos_params(material["eos"], {k: v for k, v in material.items() if k != "eos"})
@@ -110,7 +111,9 @@ def _wave_run(dim, theta, face, material=AIR, rho0=1.2, p0=1e5, ny=32, nx=160, d
              "z_lower": "periodic", "z_upper": "periodic"}
     cfg = {"dimension": dim, "mode": "eulerian",
            "grid": {"lower": [0.0] * dim, "upper": [c * h for c in cells], "cells": cells},
-           "materials": {"m": material}, "regions": [{"material": "m", "density": rho0, "pressure": p0}],
+           "materials": {"m": material, **({"pocket": pocket[0]} if pocket else {})},
+           "regions": [{"material": "m", "density": rho0, "pressure": p0}]
+           + ([{"material": "pocket", "region": f"x < {8 * h}", "density": pocket[1], "pressure": p0}] if pocket else []),
            "boundaries": {k: v for k, v in faces.items() if k[0] in "xyz"[:dim]},
            "viscosity": {"linear": 0.0, "quadratic": 0.0}}
     s = AleSolver(None, cfg)
@@ -142,6 +145,57 @@ def test_pulse_leaves_a_liquid_or_solid(material, rho0, p0):
     r, s = _wave_run(2, 0.0, "outflow", material=material, rho0=rho0, p0=p0)
     assert r < 0.003, r
     _balanced(s, impulse_scale=_impulse_scale(s, max(p0, 1e5)))
+
+
+WATER = {"eos": "stiffened_gas", "gamma": 4.4, "p_inf": 6e8}
+
+
+@pytest.mark.parametrize("face", ["outflow", "far_field",
+                                  {"inflow": {"density": 1000.0, "velocity": [0.0, 0.0], "pressure": 1e5,
+                                              "material": "m"}}])
+def test_pulse_leaves_water_with_air_in_the_scene(face):
+    """Several materials per zone (an air pocket at the wall, water elsewhere): each face zone's
+    exterior is the water it holds, so the pulse leaves as in water alone.  Measured 0.0735 % left
+    behind (each kind; water alone 0.0735 %); zero-gradient faces, all that a scene with several
+    materials had before, 100 %."""
+    r, s = _wave_run(2, 0.0, face, material=WATER, rho0=1000.0, pocket=(AIR, 1.2))
+    assert s.mm is not None and s.mm.vol[:, 1].sum() > 0.0
+    assert r < 0.003, r
+    _balanced(s, impulse_scale=_impulse_scale(s, 1e5))
+
+
+@pytest.mark.parametrize("face", ["inflow", "far_field", "outflow"])
+def test_reflected_shock_leaves_a_scene_of_air_and_water(face):
+    """The 1-D reflection above with water (stiffened gas) in the last 0.2 mm at the wall in place
+    of the wall alone (two materials: the face zones hold air, their exterior is air; the inflow
+    face names it): the reflected shock leaves through the face, and two zones from the water the
+    pressure stays at p_5 (the water, 3700 times the air's impedance, reflects it as a wall would,
+    0.03 % less) within 1 % until 3x the time the reflected shock needs to leave.  Measured 0.51 %
+    (each kind: the water's ringing after the strike; 0.09 % at that zone with the wall alone);
+    zero-gradient faces 76 %."""
+    rs = ReflectedShock((1.2, 1.01e5), 1.4, mach=1.21)
+    n, L = 100, 0.05
+    h = L / n
+    state = {"density": rs.rho2, "velocity": [rs.u2, 0.0], "pressure": rs.p2}
+    fx = face if face == "outflow" else {face: dict(state, **({"material": "gas"} if face == "inflow" else {}))}
+    cfg = {"dimension": 2, "mode": "eulerian", "grid": {"lower": [-L, 0.0], "upper": [0.0, h], "cells": [n, 1]},
+           "materials": {"gas": AIR, "water": WATER},
+           "regions": [{"material": "gas", **state},
+                       {"material": "gas", "region": "x > -0.01", "density": 1.2, "pressure": 1.01e5},
+                       {"material": "water", "region": "x > -0.0002", "density": 1000.0, "pressure": 1.01e5}],
+           "boundaries": {"x_lower": fx, "x_upper": "wall", "y_lower": "wall", "y_upper": "wall"}}
+    s = AleSolver(None, cfg)
+    t_hit = 0.0098 / rs.incident_speed
+    t_exit = t_hit + L / abs(rs.reflected_speed)
+    t_from = t_hit + 0.2 * (t_exit - t_hit)
+    worst = [0.0]
+
+    def watch(s, t):
+        if t > t_from:
+            worst[0] = max(worst[0], abs(line(s, s.p, 0)[-3, 0] / rs.p5 - 1.0))
+    advance(s, t_hit + 3.0 * (t_exit - t_hit), watch=watch)
+    assert worst[0] < 0.01, worst[0]
+    _balanced(s)
 
 
 @pytest.mark.parametrize("dim, theta, diagonal", [(2, 30.0, False), (2, 45.0, False), (3, 30.0, False),

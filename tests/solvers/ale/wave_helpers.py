@@ -19,9 +19,21 @@ def set_acoustic_state(s: AleSolver, rho0: float, p0: float, c0: float, field) -
     pz, _ = field(B.zone_centres()[real])
     rho = rho0 + pz / c0 ** 2
     e = np.empty(rho.size)
-    hydro.energy_from_pressure_array(s.eos_code, s.eos_par, rho, p0 + pz, e)
-    s.rho[real], s.e[real] = rho, e
-    s.M[real] = rho * s.V[real]
+    if s.mm is None:
+        hydro.energy_from_pressure_array(s.eos_code, s.eos_par, rho, p0 + pz, e)
+        s.rho[real], s.e[real] = rho, e
+        s.M[real] = rho * s.V[real]
+    else:   # several materials: the perturbation in the zones the first material fills alone
+        mm = s.mm
+        hydro.energy_from_pressure_array(int(mm.code[0]), mm.par[0], rho, p0 + pz, e)
+        z = np.flatnonzero(real)
+        pure = mm.vol[z, 0] == mm.vol[z].sum(axis=1)
+        z, rho, e = z[pure], rho[pure], e[pure]
+        mm.mass[z, 0] = rho * mm.vol[z, 0]
+        mm.ener[z, 0] = e
+        mm.deh[z] = 0.0
+        s.M[z] = mm.mass[z].sum(axis=1)
+        s.e[z] = e
     _, un = field(s.x)
     s.v[:] = un
     s.bc.fill_nodes_vector(s.v)
