@@ -195,6 +195,33 @@ def _fibre_factor(c, d, sf2, k):
 
 
 @njit(cache=True, inline="always")
+def _may_yield_3d(fw, sc, sf2):
+    """False when no Gauss point can pass the flow stress: vm(c + d) <= vm(c) + sqrt(3) |d| and
+    |d| <= (|D_0| + |D_1| + |D_2|) / sqrt(3) + |E| / 3 for the hourglass stress d at any of the eight
+    points (blocks D_s = fw[2 + s, 0:3] times xi_s, patterns E = fw[5, 0:3] times xi_i xi_j); vm is
+    frame invariant, so the element's stress sc is taken as it is.  The eight-point check costs
+    more than the rest of the stiffness: an elastic element far from yield skips it."""
+    b = 0.0
+    for r in range(2, 5):
+        b += math.sqrt(fw[r, 0] * fw[r, 0] + fw[r, 1] * fw[r, 1] + fw[r, 2] * fw[r, 2])
+    b = b * _GAUSS + math.sqrt(fw[5, 0] * fw[5, 0] + fw[5, 1] * fw[5, 1] + fw[5, 2] * fw[5, 2]) / 3.0
+    v = math.sqrt(min(_vm_dot(sc, sc), sf2)) + math.sqrt(3.0) * b
+    return v * v > sf2
+
+
+@njit(cache=True, inline="always")
+def _may_yield_2d(h1, h2, ep, a4, b4, kb, G, s0, s1, s2, s3, sf2):
+    """The quad's _may_yield_3d: |d| <= (|d_11| + |d_22|)(1 + |nu|) at the 2 x 2 points,
+    d_11 = E' h_1 / (4a) / sqrt(3), d_22 = E' h_2 / (4b) / sqrt(3); vm of the element's stress
+    (xx, yy, zz, xy)."""
+    nu = (3.0 * kb - 2.0 * G) / (2.0 * (3.0 * kb + G))
+    b = (abs(ep * h1 / a4) + abs(ep * h2 / b4)) * _GAUSS * (1.0 + abs(nu))
+    c2 = 0.5 * ((s0 - s1) ** 2 + (s1 - s2) ** 2 + (s2 - s0) ** 2) + 3.0 * s3 * s3
+    v = math.sqrt(min(c2, sf2)) + math.sqrt(3.0) * b
+    return v * v > sf2
+
+
+@njit(cache=True, inline="always")
 def _in_frame(ev, a, c, s):
     """e_a . S . e_c for the stress s (xx, yy, zz, xy, yz, zx) and the frame rows ev."""
     x = ev[c, 0]
@@ -444,7 +471,7 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     if dt > 0.0:
         work = energy - hs[39]
         kk = kap
-        if sf2 < np.inf and kap == 1.0:
+        if sf2 < np.inf and kap == 1.0 and _may_yield_3d(fw, sc, sf2):
             # (the centre elastic) the element's stress in the frame (xx, yy, zz, xy, yz, zx), then the hourglass
             # stress at each Gauss point: sum_s xi_s (block s) + sum_k xi_i xi_j (pattern k)
             for a in range(3):
@@ -477,34 +504,39 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
     # damping (dt > 0): the frame components' rate over the step, r = hf + hp before the return = hp + kk hf
     # after it; with the frame's share: T = sum_ka Q_ka e_k x H_a; dE/dj_0 = c0, dE/dj_1 = c1
     ih = ah * _damping_share(kk) / dt if dt > 0.0 else 0.0
+    if dt > 0.0:
+        for k in range(3):
+            for a in range(4):
+                i = 27 + 4 * k + a
+                r = hs[i - 12] + kk * hf[k, a]
+                q[k, a] += ih * (r - hs[i])
+                hs[i] = r
+    # P_a = sum_k Q_ka e_k (into fw[0:4, 0:3], free after the fibre check) and the torque
+    # t = sum_ka Q_ka e_k x H_a = sum_a P_a x H_a
     t0 = 0.0
     t1 = 0.0
     t2 = 0.0
-    for k in range(3):
-        for a in range(4):
-            qa = q[k, a]
-            if dt > 0.0:
-                i = 27 + 4 * k + a
-                r = hs[i - 12] + kk * hf[k, a]
-                qa += ih * (r - hs[i])
-                hs[i] = r
-                q[k, a] = qa
-            t0 += qa * (ev[k, 1] * hm[a, 2] - ev[k, 2] * hm[a, 1])
-            t1 += qa * (ev[k, 2] * hm[a, 0] - ev[k, 0] * hm[a, 2])
-            t2 += qa * (ev[k, 0] * hm[a, 1] - ev[k, 1] * hm[a, 0])
+    for a in range(4):
+        for d in range(3):
+            fw[a, d] = q[0, a] * ev[0, d] + q[1, a] * ev[1, d] + q[2, a] * ev[2, d]
+        t0 += fw[a, 1] * hm[a, 2] - fw[a, 2] * hm[a, 1]
+        t1 += fw[a, 2] * hm[a, 0] - fw[a, 0] * hm[a, 2]
+        t2 += fw[a, 0] * hm[a, 1] - fw[a, 1] * hm[a, 0]
     T1 = t0 * ev[0, 0] + t1 * ev[0, 1] + t2 * ev[0, 2]
     T2 = t0 * ev[1, 0] + t1 * ev[1, 1] + t2 * ev[1, 2]
     T3 = t0 * ev[2, 0] + t1 * ev[2, 1] + t2 * ev[2, 2]
-    # f_I = -sum_a h_aI P_a + (sum_a P_a hX0_a^T) gradN0_I - (xi_I c0 + eta_I c1) / 8, P_a = sum_k Q_ka e_k,
+    # f_I = -sum_a h_aI P_a + (sum_a P_a hX0_a^T) gradN0_I - (xi_I c0 + eta_I c1) / 8,
     # c0 = dE/dj_0, c1 = dE/dj_1: the pattern sums spread back to the nodes (_hex_spread)
+    r0 = 0.125 / n0
+    r1 = 1.0 / n1
     fm[:, :] = 0.0
     for d in range(3):
         cv[0] = 0.0
         cv[3] = 0.0
-        cv[1] = -0.125 * (T3 * ev[1, d] - T2 * ev[2, d] - T1 * p * ev[2, d] / n1) / n0
-        cv[2] = -0.125 * T1 * ev[2, d] / n1
+        cv[1] = -(T3 * ev[1, d] - T2 * ev[2, d] - T1 * p * ev[2, d] * r1) * r0
+        cv[2] = -0.125 * T1 * ev[2, d] * r1
         for a in range(4):
-            pa = q[0, a] * ev[0, d] + q[1, a] * ev[1, d] + q[2, a] * ev[2, d]
+            pa = fw[a, d]
             cv[4 + a] = -pa
             fm[d, 0] += pa * hs[3 * a]
             fm[d, 1] += pa * hs[3 * a + 1]
@@ -678,7 +710,8 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
                     temp[e] += dT
                     if dgp > 0.0:
                         kap = _return_factor(s0, s1, s2, s3, s4, s5, G, dgp)
-                    sf2 = _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p[e], temp[e], mat_par[mid])
+                    elif hg_stiff[e]:   # (only the stiffness's fibre check, with the centre elastic, uses it)
+                        sf2 = _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p[e], temp[e], mat_par[mid])
                 else:
                     s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
                                                               wxy, wyz, wzx, dt)
@@ -922,7 +955,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
                     temp[e] += dT
                     if dgp > 0.0:
                         kap = _return_factor(s0, s1, s2, s3, s4, s5, G, dgp)
-                    sf2 = _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p[e], temp[e], mat_par[mid])
+                    elif hg_stiff[e]:   # (only the stiffness's fibre check, with the centre elastic, uses it)
+                        sf2 = _flow_stress_sq(s0, s1, s2, s3, s4, s5, eps_p[e], temp[e], mat_par[mid])
                 else:
                     s0, s1, s2, s3, s4, s5 = jaumann_rotation(o0, o1, o2, o3, o4, o5,
                                                               wxy, 0.0, 0.0, dt)
@@ -1011,7 +1045,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
             if dt > 0.0:
                 w = en - hgq[e, 8]
                 kk = kap
-                if sf2 < np.inf and kap == 1.0:
+                if sf2 < np.inf and kap == 1.0 and _may_yield_2d(h1, h2, ep, hgq[e, 2], hgq[e, 3], kb, G, s0, s1,
+                                                                 s2, s3, sf2):
                     # the fibre check while the centre is elastic (as the hexahedron's): the element's
                     # stress in the frame plus the hourglass stress at the 2 x 2 Gauss points,
                     # d_11 = E' h_1 eta / (4a), d_22 = E' h_2 xi / (4b), d_33 = nu (d_11 + d_22) (plane
@@ -1141,7 +1176,8 @@ def _flush_stale_cache() -> None:
     """The constitutive functions of materials.py and the geometry of solvers/elements.py are
     compiled into these kernels (see solvers.numba_cache): drop the cache when either changed."""
     flush_stale_cache([reference_gradients, _is_bad, _erode, _return_factor, _damping_share, _flow_stress_sq, _vm_dot,
-                       _fibre_factor, _in_frame, _hex_moments, _hex_spread, _frame_of, _quad_frame,
+                       _fibre_factor, _may_yield_3d, _may_yield_2d, _in_frame, _hex_moments, _hex_spread, _frame_of,
+                       _quad_frame,
                        assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
