@@ -55,6 +55,7 @@ def _admit(args, case: dict, ranks: dict, overridden) -> int:
     the flags, then every expression evaluated on the case's own points, then the coupled bodies'
     thickness in zones; the memory estimate. Raises CaseError."""
     from adapters.protocol import SPIN_ENV, spin_s_from
+    from orchestrator.ale_states import check_states
     from orchestrator.case import CaseError
     from orchestrator.coupling.thickness import check_thin_bodies
     from orchestrator.expressions import check_expressions
@@ -70,6 +71,7 @@ def _admit(args, case: dict, ranks: dict, overridden) -> int:
     machine = this_machine(args.nodes, args.memory_per_node, args.oversubscribe, cluster=cluster)
     estimate = check_resources(case, ranks, machine, overridden)
     check_expressions(case)
+    check_states(case)
     check_thin_bodies(case)
     return estimate
 

@@ -240,7 +240,6 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
         if "region" in r:
             check_expression(format_key(base + ["region"]), r["region"], dim, BOOL)
     _check_mixed(ale, raw)
-    _check_states(ale, raw)
     lo, hi = ale["grid"]["lower"], ale["grid"]["upper"]
     for i, e in enumerate(raw.get("energy_sources", [])):
         check_length(format_key(["ale", "energy_sources", i, "at"]), e["at"], dim)
@@ -253,39 +252,6 @@ def _check(ale: dict, raw: dict, dim: int) -> None:
         if ale["mode"] != "eulerian":
             raise CaseError(format_key(["ale", "obstacles"]), raw["obstacles"],
                             "obstacles need ale.mode = \"eulerian\" (the remap keeps material out of them)")
-
-
-def _valid_state(key: str, value, material: str, props: dict, rho: float, p: float) -> None:
-    """A given state (density, pressure) must be a state of the material's EOS: checked here, so
-    that `immerse check` says so (the solvers would refuse it at their start)."""
-    from solvers.ale import eos as _eos
-
-    code, par = _eos.eos_params(props["eos"], props)
-    e = float(_eos.energy_from_pressure(code, par, float(rho), float(p)))
-    p2, c, ok = _eos.state(code, par, float(rho), e)
-    if not ok:
-        raise CaseError(key, value, f"must be a valid state of material {material!r} ({_eos.describe(code, par)}): "
-                        f"density {rho:g} kg/m^3 and pressure {p:g} Pa give e = {e:.6g} J/kg, p = {p2:.6g} Pa, "
-                        f"sound speed {c:.6g} m/s")
-
-
-def _check_states(ale: dict, raw: dict) -> None:
-    """The regions' and the faces' given states against their materials' equations of state."""
-    mats = ale["materials"]
-    for i, reg in enumerate(ale["regions"]):
-        props = mats.get(reg["material"], {})
-        if props.get("eos") not in (None, "void") and "density" in reg and "pressure" in reg:
-            _valid_state(format_key(["ale", "regions", i]), raw["regions"][i], reg["material"], props,
-                         reg["density"], reg["pressure"])
-    solid = [m for m, v in mats.items() if v["eos"] != "void"]
-    for f, face in ale["boundaries"].items():
-        if not isinstance(face, dict):
-            continue
-        (kind, body), = face.items()
-        name = body.get("material", solid[0] if len(solid) == 1 else None)
-        if "density" in body and "pressure" in body and name is not None:
-            _valid_state(format_key(["ale", "boundaries", f, kind]), raw["boundaries"][f][kind], name, mats[name],
-                         body["density"], body["pressure"])
 
 
 def _check_mixed(ale: dict, raw: dict) -> None:

@@ -109,8 +109,15 @@ face), or, for a face without one, the material that fills most of the face zone
 state there).  (1) and (2) use that material's equation of state, and the remap's donors are that
 material alone (the gas that enters is the exterior's; what leaves is the face zone's own, the
 upwind donor).  A face zone that holds only void at the start stays zero-gradient: no exterior,
-no dashpot, no donors.  (A case with a void material keeps zero-gradient faces for now, solver.py:
-the penetrators' outflow faces beside the void above their targets collapsed the step at 1 us.)
+no dashpot, no donors.
+
+The face pressure is not let below the exterior's pressure cutoff (a Mie-Grueneisen material that
+gives way in tension, ``pressure_cutoff``): the expansion branch of (1) pulls on the face zone as
+if the exterior could; where the cutoff holds it the dashpot is off.  (Unbounded, the outflow faces
+of a penetrator's target, aluminium at p = 0 with cutoff 0, pulled its corner edge apart: a zone
+inverted at 5.7 us; bounded, penetrator_tate_fe runs its first 6 us with energy closing to 5.7e-12.)
+A case with a void material keeps zero-gradient faces for now (solver.py): the penetrators with
+characteristic faces are to be re-measured (the fine SPH one is a 16-minute run) before they switch.
 """
 from __future__ import annotations
 
@@ -170,15 +177,19 @@ def _pushed(v, nodes, so, d, u_ed):
 
 
 @njit(cache=True)
-def face_pressure(v, x_nodes, so, d_n, rho_e, u_e, p_e, c_e, a_e, delta, zt, pb):
+def face_pressure(v, x_nodes, so, d_n, rho_e, u_e, p_e, c_e, a_e, delta, pmin, zt, pb):
     """Per face zone k: the face pressure pb[k] = p_e + (1)(du) + delta at its face nodes' velocity
-    and the dashpot coefficient zt[k] = dp_b/d(du)."""
+    and the dashpot coefficient zt[k] = dp_b/d(du); not below the exterior's pressure cutoff pmin[k]
+    (a material that gives way in tension pulls no harder: there the dashpot is off)."""
     for k in range(x_nodes.shape[0]):
         d = d_n[k]
         du = _pushed(v, x_nodes[k], so[k], d, u_e[k, d])
         dp, z, _ = wave_curve(du, rho_e[k], c_e[k], a_e[k])
         pb[k] = p_e[k] + dp + delta[k]
         zt[k] = z
+        if pb[k] < pmin[k]:
+            pb[k] = pmin[k]
+            zt[k] = 0.0
 
 
 @njit(cache=True)
@@ -379,6 +390,7 @@ class CharacteristicFaces:
         # several materials: the exterior's material per face zone (-1: one material, or a void face
         # zone), and the face zones with an exterior (a void face zone has none: zero-gradient)
         self.mat = np.full(nk, -1.0)
+        self.pmin = np.full(nk, -np.inf)   # the exterior's pressure cutoff (Mie-Grueneisen), -inf: none
         self.act = np.ones(nk)
         self._ready = False
 
@@ -429,6 +441,7 @@ class CharacteristicFaces:
                 # the face nodes' mean velocity (the zone's is not stored)
                 self.u_e[sel] = s.v[self.x_nodes[sel]].mean(axis=1)
             code, par = self._eos_of(sel)
+            self.pmin[sel] = [pr[_eos.MG_PC] if cd == _eos.MIE_GRUNEISEN else -np.inf for cd, pr in zip(code, par)]
             self.a_e[sel] = [fundamental_half(cd, pr, r, e) for cd, pr, r, e in
                              zip(code, par, self.rho_e[sel], self.e_e[sel])]
         self._derive()
@@ -472,7 +485,7 @@ class CharacteristicFaces:
 
     # checkpoint: the per-face-zone state in a zone-shaped array, each face zone's row at its
     # outer ghost zone (unique per face; written and read like every padded array of the solver)
-    STATE = ("rho_e", "e_e", "p_e", "c_e", "a_e", "delta", "zt", "pb", "mat", "act")
+    STATE = ("rho_e", "e_e", "p_e", "c_e", "a_e", "delta", "zt", "pb", "mat", "act", "pmin")
 
     def state_array(self) -> np.ndarray:
         a = np.zeros((self.s.block.nzones, len(self.STATE) + self.dim + 1))
@@ -548,7 +561,7 @@ class CharacteristicFaces:
         if not self._ready:
             self.start()
         face_pressure(s.v, self.x_nodes, self.so, self.d_n, self.rho_e, self.u_e, self.p_e, self.c_e, self.a_e,
-                      self.delta, self.zt, self.pb)
+                      self.delta, self.pmin, self.zt, self.pb)
         if self.inert.size:  # (void face zones: the zone's own pressure, no dashpot)
             self.pb[self.inert] = s.p[self.zin[self.inert]]
             self.zt[self.inert] = 0.0

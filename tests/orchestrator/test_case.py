@@ -198,8 +198,6 @@ BAD_CASES = [
     ("ale_mixed_piston", "ale.boundaries.x_lower", "not supported yet"),
     ("ale_inflow_unknown_material", "ale.boundaries.x_lower.inflow.material", "with an equation of state"),
     ("ale_void_inflow", "ale.boundaries.x_lower", "with a void material"),
-    ("ale_region_invalid_state", "ale.regions[1]", "must be a valid state of material 'air'"),
-    ("ale_inflow_invalid_state", "ale.boundaries.x_lower.inflow", "must be a valid state of material 'air'"),
     ("output_interval_too_long", "run.output_interval", "<= run.end_time"),
     ("dimension_four", "run.dimension", "one of: 2, 3"),
     ("symmetry_axis_z_2d", "boundaries[0].axis", "dimension mismatch"),

@@ -338,3 +338,22 @@ def test_a_shock_diffracted_by_an_obstacle_leaves_through_both_faces():
     assert 1.5e5 < inflow[0] and inflow[1] < 2.2e5, inflow
     assert corr[0] < 1e5, corr[0]
     _balanced(s)
+
+
+def test_a_face_pulls_no_harder_than_its_exterior_can_in_tension():
+    """The face pressure (1) on its expansion branch is not let below the exterior's pressure cutoff
+    (open_faces.face_pressure): aluminium at p_e = 0 with pressure_cutoff = 0 (the penetrators'
+    target), its face pulled inward at 10 m/s, holds 0 with no dashpot; without a cutoff the same
+    face pulls at p_e - rho c du (-1.4e8 Pa here).  (Unbounded, a penetrator's outflow faces pulled
+    its target's corner edge apart: a zone inverted at 5.7 us.)"""
+    from solvers.ale.open_faces import face_pressure
+
+    v = np.zeros((2, 2))
+    v[:, 0] = -10.0                                   # the face nodes of an x_upper face, moving in
+    args = (v, np.array([[0, 1]]), np.array([1.0]), np.array([0]), np.array([2700.0]), np.zeros((1, 2)),
+            np.array([0.0]), np.array([5350.0]), np.array([1.17]), np.array([0.0]))
+    zt, pb = np.zeros(1), np.zeros(1)
+    face_pressure(*args, np.array([0.0]), zt, pb)
+    assert pb[0] == 0.0 and zt[0] == 0.0
+    face_pressure(*args, np.array([-np.inf]), zt, pb)
+    assert pb[0] == pytest.approx(-2700.0 * 5350.0 * 10.0, rel=0.01) and zt[0] > 0.0
