@@ -481,6 +481,8 @@ class CharacteristicFaces:
         self.node_free = np.ascontiguousarray(~taken[self.nodes])
         self.zone_in = (-self.so * self.u_e[np.arange(self.nk), self.d_n] > INFLOW_MACH * self.c_e) & (self.act > 0)
         self.inert = np.flatnonzero(self.act == 0)   # (void face zones: zero-gradient)
+        on = self.act[self.gsrc] > 0                  # (the ghosts that take donors: _donor_ghosts)
+        self._dgz, self._dsrc = self.gz[on], self.gsrc[on]
         self._ready = True
 
     # checkpoint: the per-face-zone state in a zone-shaped array, each face zone's row at its
@@ -623,9 +625,9 @@ class CharacteristicFaces:
         s.mm.ener[g, k] = self.e_d[r]
 
     def _donor_ghosts(self):
-        """(ghost zones, their face zones) of the face zones with an exterior (several materials)."""
-        on = self.act[self.gsrc] > 0
-        return self.gz[on], self.gsrc[on]
+        """(ghost zones, their face zones) of the face zones with an exterior (several materials;
+        set by _derive)."""
+        return self._dgz, self._dsrc
 
     def apply_material_donors(self) -> None:
         """Several materials: the ghost zones of the face zones with an exterior hold that material
