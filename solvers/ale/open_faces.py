@@ -116,8 +116,15 @@ gives way in tension, ``pressure_cutoff``): the expansion branch of (1) pulls on
 if the exterior could; where the cutoff holds it the dashpot is off.  (Unbounded, the outflow faces
 of a penetrator's target, aluminium at p = 0 with cutoff 0, pulled its corner edge apart: a zone
 inverted at 5.7 us; bounded, penetrator_tate_fe runs its first 6 us with energy closing to 5.7e-12.)
-A case with a void material keeps zero-gradient faces for now (solver.py): the penetrators with
-characteristic faces are to be re-measured (the fine SPH one is a 16-minute run) before they switch.
+A case with a void material keeps zero-gradient faces (solver.py), a measured choice: on the Tate
+penetrators, whose targets are 6 rod radii wide, the far faces move the result by a few per cent
+either way.  SPH rod (cases/penetrator_tate, 32 us): depth at Tate's time 17.15 mm (+0.6 %) and
+penetration velocity 595.5 m/s (+3.7 %) with zero-gradient faces, 17.69 mm (+3.8 %) and 606.2 m/s
+(+5.6 %, over the case's 5 %) with characteristic ones, 16.97 mm with rigid walls; FE rod
+(cases/penetrator_tate_fe): 14.86 mm (-12.8 %), 546 m/s zero-gradient, 15.31 mm (-10.2 %), 556 m/s
+characteristic (energy 5.7e-12 either way).  The characteristic outflow holds the exterior at its
+given pressure (0 here), which lets the target flow out more freely than the zero-gradient face, and
+the SPH rod then overshoots Tate's limit.
 """
 from __future__ import annotations
 

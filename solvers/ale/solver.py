@@ -211,9 +211,8 @@ class AleSolver(SolverState):
 
         # characteristic faces (inflow, outflow, far field): their ghost pressure, dashpot and donors
         # (with several materials per zone, each face zone's exterior is one material: open_faces.py;
-        # with a void material the open faces stay zero-gradient for now: the penetrators, whose
-        # targets' faces pulled their corner edges apart before the face pressure was bounded by the
-        # exterior's pressure cutoff, are to be re-measured with them)
+        # with a void material the open faces stay zero-gradient: measured on the penetrators, the
+        # characteristic faces took the SPH rod past Tate's limit, open_faces.py's docstring)
         void = any(m.get("eos") == "void" for m in (config.get("materials") or {}).values())
         self._char = CharacteristicFaces(self, B.characteristic) if B.characteristic and not void else None
 
