@@ -9,7 +9,10 @@ Hook order, per coupled step n -> n+1 (driven by the coupler, see orchestrator.c
     stable_dt()        the solver's own explicit limit for the next step (collective, same on all ranks)
     diagnostics()      mass, momentum, energies (collective; meaningful on the group root)
 and when the coupler asks: write(index, step, time), checkpoint(path), step_limiter() (what sets the
-stable step: local_limiter() of every rank); close() after the last command.  A case with
+stable step: local_limiter() of every rank); close() after the last command.
+A foreground group that can_substep() may be told to take the coupled step in m substeps: snapshot(),
+then m x (predict, correct) twice, restore() between the passes (adapters/substeps.py,
+orchestrator/coupling/multirate.py).  A case with
 ``[probes]`` of the role: probe_points() after setup() and with every diagnostics() (solvers/probes.py).
 Every hook is collective over the solver group's communicator `self.comm`.
 """
@@ -78,6 +81,24 @@ class SolverAdapter(ABC):
         coupler's step control then keeps the step from following a jittering stable step
         (orchestrator/step_control.py). An implicit or quasi-static solver says False."""
         return True
+
+    def can_substep(self) -> bool:
+        """Whether the group can take a coupling step in substeps of its own stable step (multi-rate,
+        orchestrator/coupling/multirate.py): it then also gives snapshot() and restore()."""
+        return False
+
+    def substep_cost(self) -> float:
+        """What one substep costs, in background zone-steps (multi-rate's default weighs it against the
+        background's zones, orchestrator/coupling/multirate.py pays): e.g. the group's element count."""
+        return 1.0
+
+    def snapshot(self):
+        """The group's whole state at the start of a coupling step (in memory), for restore()."""
+        raise NotImplementedError(f"{self.role}: no substeps")
+
+    def restore(self, state) -> None:
+        """Take back the state snapshot() gave (the substeps' corrector pass starts from it)."""
+        raise NotImplementedError(f"{self.role}: no substeps")
 
     def close(self) -> None:
         """Release what the solver holds (e.g. a LAMMPS instance) while MPI is still up."""

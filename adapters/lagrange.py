@@ -26,6 +26,7 @@ class LagrangeAdapter(SolverAdapter):
 
         self.solver = solver_class(self.case["lagrange"].get("integrator", "explicit"))(self.comm, self.case)
         self._dt = None
+        self._step, self._time = 0, 0.0
         if self.comm.rank == 0:
             step_files.write_mesh(self.out_dir, self.role, self.solver.global_cells, self.solver.cell_type)
 
@@ -41,6 +42,25 @@ class LagrangeAdapter(SolverAdapter):
 
         it = INTEGRATORS[self.case["lagrange"].get("integrator", "explicit")]
         return it.dynamic and not it.implicit
+
+    def can_substep(self) -> bool:
+        """Substeps (multi-rate): the explicit central difference without contact (the contact's
+        multipliers are solved per step of the whole group; the implicit integrators take their own
+        steps)."""
+        from solvers.lagrange.integrators import substep_refusal
+
+        return substep_refusal(self.case) is None
+
+    def substep_cost(self) -> float:
+        """An element step costs about a zone step (bench lagrange / bench ale)."""
+        return float(self.solver.n_cells_global)
+
+    def snapshot(self):
+        return self.solver.snapshot(), (self._step, self._time)
+
+    def restore(self, state) -> None:
+        self.solver.restore(state[0])
+        self._step, self._time = state[1]
 
     def predict(self, dt: float, step: int, time: float) -> None:
         self._step, self._time = step, time

@@ -21,7 +21,8 @@ COUPLER = "coupler"
 # Commands the coupler broadcasts to a solver group: float64[CMD_LEN]
 CMD_STEP, CMD_WRITE, CMD_CHECKPOINT, CMD_STOP = 1.0, 2.0, 3.0, 4.0
 CMD_LIMITER = 5.0  # no step: the group root sends what sets its stable step (TAG_LIMITER), then replies
-CMD_LEN = 6  # [command, dt, step (after the step), time (after the step), output index, spare]
+CMD_LEN = 7  # [command, dt, step (after the step), time (after the step), output index, diagnostics flag,
+#              substeps (a foreground's, multi-rate: orchestrator/coupling/multirate.py; 1 otherwise)]
 
 # Reply of a group root to the coupler after every command: float64[REPLY_HEAD + n_diagnostics]
 REPLY_HEAD = 2  # [status (0 ok), stable dt for the next step]
@@ -264,7 +265,8 @@ def install_fault_handler(out_dir: Path, role: str, rank: int) -> None:
 # tags of the messages of a coupled run (README/DESIGN "the coupled step"), in the order they flow
 TAG_SURFACE = 10    # foreground -> coupler, at start-up: its surface (ids, facets, masses, x, v)
 TAG_GEOMETRY = 11   # coupler -> background: the bodies' geometry in the grid (start-up, every remap)
-TAG_VSTAR = 20      # foreground -> coupler, after predict: v* of the surface nodes
+TAG_PREDICT = 19    # coupler -> foreground in substeps, at the step's start: the predicted surface impulses
+TAG_VSTAR = 20      # foreground -> coupler, after predict: v* of the surface nodes (in substeps: their mean)
 TAG_INTERFACE = 21  # background -> coupler, after predict: v*, m of the nodes asked for, cut-zone forces
 TAG_IMPULSE = 22    # coupler -> foreground: surface impulses
 TAG_STATE = 23      # foreground -> coupler, after correct: x^{n+1}, v^{n+1/2} of the surface nodes, then a flag (1: a new surface follows, TAG_SURFACE)
@@ -374,4 +376,4 @@ def share(comm, buf) -> np.ndarray:
 
 
 def command(cmd: float, dt: float = 0.0, step: int = 0, time: float = 0.0, index: int = -1) -> np.ndarray:
-    return np.array([cmd, dt, step, time, index, 0.0], dtype=np.float64)
+    return np.array([cmd, dt, step, time, index, 0.0, 1.0], dtype=np.float64)

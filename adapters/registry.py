@@ -15,11 +15,28 @@ _MODULES: dict[str, tuple[str, str]] = {}
 _SIDES: dict[str, str] = {}
 
 
-def declare(role: str, module: str, case_table: str, coupling_side: str | None = None) -> None:
-    """Make a role known without importing its (heavy) module."""
+# role -> "module:function" that says why a case's group of that role cannot take its coupled steps
+# in substeps (multi-rate, orchestrator/coupling/multirate.py), None when it can; absent: it cannot
+_SUBSTEPS: dict[str, str] = {}
+
+
+def declare(role: str, module: str, case_table: str, coupling_side: str | None = None,
+            substeps: str | None = None) -> None:
+    """Make a role known without importing its (heavy) module; ``substeps``: "module:function"
+    (case -> reason or None) when its group can take substeps."""
     _MODULES[role] = (module, case_table)
     if coupling_side is not None:
         _SIDES[role] = coupling_side
+    if substeps is not None:
+        _SUBSTEPS[role] = substeps
+
+
+def substep_refusal(role: str, case: dict) -> str | None:
+    """Why the role's group of this case takes no substeps, or None when it can (multi-rate)."""
+    if role not in _SUBSTEPS:
+        return "its solver takes no substeps"
+    module, func = _SUBSTEPS[role].split(":")
+    return getattr(importlib.import_module(module), func)(case)
 
 
 def coupling_side(role: str) -> str | None:
@@ -52,6 +69,7 @@ def adapter_class(role: str) -> type:
 
 
 # The solvers this project ships. A new solver adds one line here and an adapter module.
-declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground")
+declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground",
+        substeps="solvers.lagrange.integrators:substep_refusal")
 declare("ale", "adapters.ale", "ale", coupling_side="background")
 declare("sph", "adapters.sph", "sph", coupling_side="foreground")  # LAMMPS particles

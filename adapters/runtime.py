@@ -67,6 +67,58 @@ def unpack_surface(buf: np.ndarray, dim: int) -> dict:
     return out
 
 
+def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: float, with_diagnostics: bool,
+                     answer) -> float:
+    """A foreground's coupled step in m substeps (orchestrator/coupling/multirate.py): the predictor
+    pass under the coupler's predicted force ramp (TAG_PREDICT: [rate, slope] per surface node), its
+    mean surface velocity to the coupler, then passes from the same start under the ramps the coupler
+    sends (TAG_IMPULSE, a last element 1) until it accepts one (a last element 0); then the accepted
+    pass's state: x^{n+1}, v^{n+1/2} (the last substep's), the substeps' mean velocity, the ramp's
+    work, the surface flag.  Returns the seconds of its own work (its waits for the coupler excluded)."""
+    from adapters.substeps import substeps
+
+    rank = comm.rank
+    t0 = _time.perf_counter()
+    snap = adapter.snapshot()
+    v0 = adapter.velocities()
+    shape, n = v0.shape, v0.size
+
+    def one(h, t_k, imp):
+        adapter.predict(h, step, t_k)
+        adapter.correct(imp)
+
+    work = _time.perf_counter() - t0
+    ramp = P.share(comm, P.recv(ic, 0, P.TAG_PREDICT) if rank == 0 else None)
+    first = True
+    while True:   # a pass under the ramp; the coupler answers with the next pass's, or accepts
+        t0 = _time.perf_counter()
+        if not first:
+            adapter.restore(snap)
+        first = False
+        v_mean, w, _ = substeps(one, adapter.velocities, m, dt, time, ramp[:n].reshape(shape),
+                                ramp[n: 2 * n].reshape(shape), v0)
+        if rank == 0:
+            P.send(ic, v_mean, 0, P.TAG_VSTAR)
+        work += _time.perf_counter() - t0
+        msg = P.share(comm, P.recv(ic, 0, P.TAG_IMPULSE) if rank == 0 else None)
+        if msg[-1] == 0.0:   # accepted: this pass is the step
+            break
+        ramp = msg[:-1]
+    t0 = _time.perf_counter()
+    renew = getattr(adapter, "renew_surface", None)
+    state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(), v_mean.ravel(), [w, 0.0]])
+    changed = bool(renew and renew())
+    state[-1] = float(changed)
+    if rank == 0:
+        P.send(ic, state, 0, P.TAG_STATE)
+    if changed:
+        buf = pack_surface(adapter)
+        if rank == 0:
+            P.send(ic, buf, 0, P.TAG_SURFACE)
+    answer(with_diagnostics)
+    return work + _time.perf_counter() - t0
+
+
 def serve(adapter_cls, argv=None) -> None:
     args = parse_args(argv)
     out = Path(args.out)
@@ -106,9 +158,10 @@ def serve(adapter_cls, argv=None) -> None:
                 reply[P.REPLY_HEAD:] = [diag[n] for n in names]
             ic.Send(reply, dest=0, tag=7)
 
-    if rank == 0:  # once, at start-up: the names of the diagnostics and whether the solver steps by
-        # central differences (pickled; not a hot path)
-        ic.send((names, adapter.central_difference()), dest=0, tag=6)
+    if rank == 0:  # once, at start-up: the names of the diagnostics, whether the solver steps by
+        # central differences and whether it can take a coupled step in substeps (pickled; not a hot path)
+        ic.send((names, adapter.central_difference(),
+                 adapter.substep_cost() if side == "foreground" and adapter.can_substep() else 0.0), dest=0, tag=6)
     answer(True)
     cmd = np.empty(P.CMD_LEN)
     work_s = 0.0  # this rank's time in the steps' own work (the waits for the coupler excluded)
@@ -116,7 +169,10 @@ def serve(adapter_cls, argv=None) -> None:
         P.wait(ic.Ibcast(cmd, root=0))  # not a spinning Bcast: the coupler may work a while (solve, output)
         c, dt, step, time, index = cmd[0], cmd[1], int(cmd[2]), cmd[3], int(cmd[4])
         t0 = _time.perf_counter()
-        if c == P.CMD_STEP and side == "foreground":
+        substeps = int(cmd[6])
+        if c == P.CMD_STEP and side == "foreground" and substeps > 1:
+            work_s += _substepped_step(adapter, comm, ic, dt, substeps, step, time, bool(cmd[5]), answer)
+        elif c == P.CMD_STEP and side == "foreground":
             adapter.predict(dt, step, time)
             v = adapter.interface()["v"]
             if rank == 0:

@@ -41,7 +41,8 @@ Normalised layout (all keys always present)::
 
     {"name": str, "case_dir": Path,
      "run": {dimension, end_time, dt_scale, output_interval, checkpoint_interval (None if
-             unset), max_steps, diagnostics_every, dt_min (None if unset)},
+             unset), max_steps, diagnostics_every, dt_min (None if unset), multirate (None if
+             unset: off until multirate.DEFAULT_ON, then on where a group can substep and it pays), max_substeps, group_dt_max {role: s}},
      "ranks": {role: int}  (1 for every used solver unless given),
      "check": None | {kind, params, metrics: {name: {reference, tolerance}}},
      ... and the registered tables: "materials", "boundaries" (always), "lagrange", "ale" (when
@@ -587,6 +588,9 @@ def _normalise(data: dict, case_dir: Path) -> dict:
         "diagnostics_every": int(run_in.get("diagnostics_every",
                                             RUN_DEFAULTS["diagnostics_every"])),
         "dt_min": None if run_in.get("dt_min") is None else _f(run_in["dt_min"]),
+        "multirate": run_in.get("multirate"),
+        "max_substeps": int(run_in.get("max_substeps", 64)),
+        "group_dt_max": {r: _f(v) for r, v in run_in.get("group_dt_max", {}).items()},
     }
 
     check = None
@@ -617,6 +621,17 @@ def _normalise(data: dict, case_dir: Path) -> dict:
     return case
 
 
+def _check_multirate(case: dict, data: dict) -> None:
+    """run.group_dt_max names roles the case uses (run.multirate's own rules are the coupling
+    table's: orchestrator/schema/coupling.py)."""
+    run = case["run"]
+    used = _roles.roles_used(case)
+    for r in run["group_dt_max"]:
+        if r not in used:
+            raise CaseError(f"run.group_dt_max.{r}", data["run"]["group_dt_max"][r],
+                            f"the case has no {r} group; its groups: {', '.join(used)}")
+
+
 def _check(case: dict, data: dict) -> None:
     """Cross-field checks; fills ``case["ranks"]``.  ``data`` is the raw TOML (for
     reporting values exactly as written); the check kind's params against their schema too.  Order:
@@ -645,6 +660,8 @@ def _check(case: dict, data: dict) -> None:
     for t in schema_registry.tables():
         if t.check is not None and t.name in case:
             t.check(case, data)
+
+    _check_multirate(case, data)
 
     # [ranks] (roles only for the solvers this case uses)
     case["ranks"] = ranks_for({**case, "ranks": data.get("ranks", {})})

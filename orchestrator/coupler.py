@@ -121,13 +121,22 @@ class Coupler:
         if case.get("coupling"):
             self._start_coupling()
         started = {r: P.recv_object(self.inter[r], 0, 6) for r in self.roles}
-        self.names = {r: names for r, (names, _) in started.items()}
+        self.names = {r: names for r, (names, *_) in started.items()}
+        # multi-rate (orchestrator/coupling/multirate.py): the foreground groups that take each coupled
+        # step in substeps of their own stable step; run.group_dt_max caps a group's stable step
+        self.group_dt_max = {r: float(v) for r, v in (run.get("group_dt_max") or {}).items()}
+        self.multirate = self._substepping(started)
+        if self.multirate:
+            from orchestrator.coupling.multirate import SubstepCounts
+
+            self.counts = SubstepCounts(self.multirate, int(run.get("max_substeps", 64)))
         self.reply = {r: np.zeros(P.REPLY_HEAD + len(self.names[r])) for r in self.roles}
         self.history_t: list[float] = []
         self.history_step: list[int] = []
         self.history: dict[str, list[np.ndarray]] = {r: [] for r in self.roles}
         if self.coupling is not None:  # the coupler's own diagnostics, recorded like a solver's
-            self.names[COUPLING] = self.coupling.diagnostic_names() + ["momentum_balance_rel", "interface_work"]
+            self.names[COUPLING] = (self.coupling.diagnostic_names() + ["momentum_balance_rel", "interface_work"]
+                                    + [f"substeps_{r}" for r in self.multirate])
             self.history[COUPLING] = []
         self.t = 0.0
         self.step = 0
@@ -141,7 +150,7 @@ class Coupler:
         self._note, self._note_at = "", None
         # a jittering stable step destabilises central differences, not an implicit step: the step
         # control filters the rises only when a group steps by central differences
-        self.clock = (StepControl(self.end_time) if any(cd for _, cd in started.values())
+        self.clock = (StepControl(self.end_time) if any(cd for _, cd, _ in started.values())
                       else StepControl(self.end_time, window=1, growth=np.inf))
         self._receive_all()
         self._record(spool=False)
@@ -152,6 +161,22 @@ class Coupler:
         self.spool = HistorySpool(out, {r: self.names[r] for r in self.history})
         for k in range(len(self.history_t)):
             self.spool.append(self.history_t[k], self.history_step[k], [self.history[r][k] for r in self.history])
+
+    def _substepping(self, started: dict) -> list[str]:
+        """The foreground roles that take their coupled steps in substeps: run.multirate (default
+        true), the multiplier method, and a group that can (its start-up message: can_substep)."""
+        from orchestrator.coupling.multirate import DEFAULT_ON, pays
+
+        choice = self.case["run"].get("multirate")
+        if (self.coupling is None or choice is False or (choice is None and not DEFAULT_ON)
+                or self.coupling.method.NAME != "multiplier"):
+            return []
+        zones = float(np.prod(self.case["ale"]["grid"]["cells"]))
+        return [r for r in self.fgs if started[r][2] and (choice is True or pays(zones, started[r][2]))]
+
+    def _stable(self) -> dict[str, float]:
+        """Each group's stable step from its last reply, capped by run.group_dt_max."""
+        return {r: min(self.reply[r][1], self.group_dt_max.get(r, np.inf)) for r in self.roles}
 
     # ---- the embedded-mesh coupling ----------------------------------------------------------------
     def _start_coupling(self) -> None:
@@ -173,14 +198,28 @@ class Coupler:
         self.coupling.load_kernels()   # (start-up: the first step would pay the kernels' cache loading)
         self.dt_prev = 0.0
 
-    def _coupled_step(self, dt: float) -> None:
-        """The coupler's part of a coupled step (orchestrator/coupling/embedded.py, hook order)."""
+    def _coupled_step(self, dt: float, subs: dict | None = None) -> None:
+        """The coupler's part of a coupled step (orchestrator/coupling/embedded.py, hook order);
+        ``subs``: the substeps of the substepping groups (multirate.py: they first run a predictor
+        pass under the impulses predicted here)."""
         c, fgs, bg = self.coupling, [self.inter[r] for r in self.fgs], self.inter[self.bg]
         dt_avg = 0.5 * dt if self.dt_prev == 0.0 else 0.5 * (self.dt_prev + dt)
+        subs = subs or {}
+        m = [int(subs.get(r, 1)) for r in self.fgs]
+        predicted, ramps = [None] * len(self.fgs), [None] * len(self.fgs)
+        if any(k > 1 for k in m):   # the substepping groups' predictor passes (multirate.py)
+            from orchestrator.coupling.multirate import Ramp
+
+            for i, (fg, k) in enumerate(zip(fgs, m)):
+                if k > 1:
+                    mem = c.members[i]
+                    ramps[i] = Ramp(k, dt, self.dt_prev, dt_avg, mem.force_prev)
+                    predicted[i] = ramps[i].predicted(mem.force_prev, mem.imp_f)
+                    P.send(fg, ramps[i].shape(predicted[i]), 0, P.TAG_PREDICT)
         vstars = [P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim) for fg in fgs]
         background = P.recv(bg, 0, P.TAG_INTERFACE)
         t0 = _time.perf_counter()
-        impulses = c.solve(dt, dt_avg, vstars, background)
+        impulses = c.solve(dt, dt_avg, vstars, background, m, predicted, [r.c if r else 1.0 for r in ramps])
         self.coupling_s["solve"] += _time.perf_counter() - t0
         if dt > self.FAR_BEYOND * c.stable_limit:
             raise RuntimeError(
@@ -188,8 +227,11 @@ class Coupler:
                 f"step {dt:.6g} s is more than {self.FAR_BEYOND:g} times its explicit stable-step limit "
                 f"{c.stable_limit:.6g} s (a stiffer spring needs a smaller step: lower its stiffness, or "
                 f"run.dt_scale)")
-        for fg, impulse in zip(fgs, impulses):
-            P.send(fg, impulse, 0, P.TAG_IMPULSE)
+        for k, fg, impulse in zip(m, fgs, impulses):
+            if k == 1:
+                P.send(fg, impulse, 0, P.TAG_IMPULSE)
+        if any(k > 1 for k in m):
+            self._substep_passes(dt, dt_avg, background, m, predicted, vstars, ramps)
         states = [P.recv(fg, 0, P.TAG_STATE) for fg in fgs]
         t0 = _time.perf_counter()
         # (each state ends with a flag: 1 when that group's surface changed, eroded elements)
@@ -222,6 +264,57 @@ class Coupler:
                 self.log(f"coupling {c.method.NAME}: its explicit stable-step limit is {c.stable_limit:.6g} s; "
                          f"step {self.step} used {dt:.6g} s" + (" (beyond it: unstable)" if dt > c.stable_limit else ""))
                 self._warned_limit = dt > c.stable_limit
+
+    def _substep_passes(self, dt, dt_avg, background, m, predicted, vstars, ramps) -> None:
+        """The passes of the substepping groups (orchestrator/coupling/multirate.py): after each, the
+        solve on its mean velocities; a pass is accepted when the solve would change that mean by at
+        most coupling.substep_tolerance of the step's velocity scale (never the predictor pass: its
+        impulses were not a solve's), else the next pass runs under the relaxed impulses."""
+        from orchestrator.coupling.multirate import MAX_PASSES, PASS_TOLERANCE, Relaxation, velocity_scale
+
+        c = self.coupling
+        cfg = self.case.get("coupling") or {}
+        tol = float(cfg.get("substep_tolerance", PASS_TOLERANCE))
+        most = int(cfg.get("substep_passes", MAX_PASSES))
+        pending = [i for i, k in enumerate(m) if k > 1]
+        cur = {i: predicted[i] for i in pending}      # the impulses of the pass each group ran last
+        saved = {i: None for i in pending}           # and the solve's impulses that go with them
+        relax = {i: Relaxation() for i in pending}
+        passes = {i: 1 for i in pending}
+        v_pass = {i: vstars[i] for i in pending}
+        t_solve = 0.0
+        while pending:
+            for i in list(pending):
+                mem, fg = c.members[i], self.inter[self.fgs[i]]
+                d = mem.mean_velocity_defect(cur[i])
+                res = float(np.max(np.abs(d))) if d.size else 0.0
+                scale = velocity_scale(v_pass[i], mem.imp_f, mem.free, mem.mass, mem.c)
+                if saved[i] is not None and (res <= tol * scale or passes[i] >= most):
+                    mem.take_impulses(saved[i])
+                    mem.accept_ramp(ramps[i], mem.imp_f)
+                    mem.substep_passes, mem.substep_residual = passes[i], res
+                    if res > tol * scale and not getattr(self, "_passes_said", False):
+                        self._passes_said = True
+                        self.log(f"warning: multirate: the {self.fgs[i]} group's substeps ({m[i]}) still miss the "
+                                 f"constraint by {res:.3g} m/s ({res / scale:.3g} of its velocity scale) after "
+                                 f"{passes[i]} passes at step {self.step}, t = {self.t:.6g} s (coupling.substep_passes "
+                                 f"= {most}, substep_tolerance = {tol:g}); the run goes on with it")
+                    P.send(fg, np.zeros(1), 0, P.TAG_IMPULSE)      # (last element 0: accepted)
+                    pending.remove(i)
+                    continue
+                omega = relax[i].next(d)
+                if saved[i] is not None:
+                    mem.relax(saved[i], omega)
+                saved[i] = mem.impulses()
+                cur[i] = mem.imp_f
+                passes[i] += 1
+                P.send(fg, np.concatenate([ramps[i].shape(cur[i]), [1.0]]), 0, P.TAG_IMPULSE)
+            for i in pending:
+                v_pass[i] = P.recv(self.inter[self.fgs[i]], 0, P.TAG_VSTAR).reshape(-1, c.dim)
+                t0 = _time.perf_counter()
+                c.solve_member(i, dt, dt_avg, v_pass[i], background, m[i], cur[i], ramps[i].c)
+                t_solve += _time.perf_counter() - t0
+        self.coupling_s["solve"] += t_solve
 
     COND_WARN = 100.0
     """cond(H) above which the multiplier system is named ill-conditioned: stabilised (beta 0.1-3) it
@@ -268,7 +361,7 @@ class Coupler:
         bal = np.linalg.norm(p_fluid + c.momentum_f) / scale
         work = bgrow[names.index("interface_energy")] + c.work_f
         self._check_coupling_energy(work)
-        return np.concatenate([row, [bal, work]])
+        return np.concatenate([row, [bal, work], [self.counts.m[r] for r in self.multirate]])
 
     FAR_BEYOND = 2.0
     """A step this many times a coupling method's own explicit stable-step limit blows up within a
@@ -311,12 +404,17 @@ class Coupler:
         if not os.environ.get("IMMERSE_TTY"):
             print(line, flush=True)
 
-    def _broadcast(self, cmd: np.ndarray) -> None:
+    def _broadcast(self, cmd: np.ndarray, substeps: dict | None = None) -> None:
+        """The command to every group; ``substeps``: a group's own count in the command's last slot."""
         from mpi4py import MPI
 
+        cmds = {r: cmd for r in self.roles}
+        for r, k in (substeps or {}).items():
+            cmds[r] = cmd.copy()
+            cmds[r][6] = float(k)
         # non-blocking on both sides (a blocking and a non-blocking broadcast do not match): the solver
         # ranks wait for the command without spinning a core (adapters.runtime.serve)
-        for req in [self.inter[r].Ibcast(cmd, root=MPI.ROOT) for r in self.roles]:
+        for req in [self.inter[r].Ibcast(cmds[r], root=MPI.ROOT) for r in self.roles]:
             P.wait(req)
 
     def _receive_all(self) -> None:
@@ -340,8 +438,11 @@ class Coupler:
         return got
 
     def step_limit_text(self) -> str:
-        """The group whose stable step is the smallest and what in it sets the step."""
-        role = min(self.roles, key=lambda r: self.reply[r][1])
+        """The group that sets the step and what in it: the one whose stable step is the smallest (in
+        multi-rate: of the groups that do not substep, or a substepping one at max_substeps)."""
+        st = self._stable()
+        key = {r: v * (self.counts.max_substeps if r in self.multirate else 1) for r, v in st.items()}
+        role = min(self.roles, key=lambda r: key[r])
         return describe_limiter(role, self.limiters()[role])
 
     def _progress_note(self) -> str:
@@ -351,7 +452,8 @@ class Coupler:
         if self._note_at is None or now - self._note_at >= LIMITER_NOTE_S:
             self._note = f"dt {self.clock.dt:.4g} s set by {self.step_limit_text()}"
             self._note_at = now
-        return "; ".join(n for n in (self._note, self._implicit_note()) if n)
+        subs = ", ".join(f"{r} in {self.counts.m[r]} substeps" for r in self.multirate) if self.multirate else ""
+        return "; ".join(n for n in (self._note, subs, self._implicit_note()) if n)
 
     def _watch_step(self, dt: float) -> None:
         """The step chosen for the next step (before the landing on the end): below run.dt_min it
@@ -458,6 +560,8 @@ class Coupler:
                 for k, a in self.coupling.state_arrays().items():
                     h.create_dataset(f"coupling/{k}", data=a)
             h.create_dataset("step_control", data=self.clock.state())
+            if self.multirate:
+                h.create_dataset("substep_counts", data=self.counts.state())
             h.create_dataset("early_steps", data=np.array(self.early, dtype=np.float64))
             h.attrs["fall_said"] = self._fall_said
             h.create_dataset("history/t", data=np.array(self.history_t))
@@ -487,6 +591,8 @@ class Coupler:
             self.dt_min = float(h.attrs["dt_min"])
             self.dt_max = float(h.attrs["dt_max"])
             self.clock.load(h["step_control"][...])
+            if self.multirate and "substep_counts" in h:
+                self.counts.load(h["substep_counts"][...])
             self.early = [float(v) for v in h["early_steps"][...]]
             self._fall_said = bool(h.attrs["fall_said"])
             self.history_t = list(h["history/t"][...])
@@ -516,15 +622,24 @@ class Coupler:
         prog = Progress(self.end_time, self.t, bool(os.environ.get("IMMERSE_TTY")), self.log)
         done = self.t >= self.end_time
         while not done and self.step < self.max_steps:
-            stable = min(self.reply[r][1] for r in self.roles)
+            groups = self._stable()
+            stable = min(groups.values())
             if not np.isfinite(stable) or stable <= 0.0:
                 raise RuntimeError(f"stable time step is {stable} at step {self.step}, t={self.t:.6g} s")
-            why = collapsed_step({r: self.reply[r][1] for r in self.roles}, self.dt_max)
+            why = collapsed_step(groups, self.dt_max)
             if why:
                 raise RuntimeError(f"time step collapsed at step {self.step}, t = {self.t:.6g} s: {why}; "
                                    f"set by {self.step_limit_text()}")
+            subs = None
+            if self.multirate:  # the coupling step: the other groups' step, or max_substeps substeps
+                proposed = min([self.dt_scale * v for r, v in groups.items() if r not in self.multirate]
+                               + [self.counts.bound({r: self.dt_scale * groups[r] for r in self.multirate})])
+            else:
+                proposed = self.dt_scale * stable
             # the step control (step_control.py): outputs and checkpoints never change a step
-            dt, t_new, done = self.clock.next(self.t, self.dt_scale * stable)
+            dt, t_new, done = self.clock.next(self.t, proposed)
+            if self.multirate:
+                subs = self.counts.update(self.clock.dt, {r: self.dt_scale * groups[r] for r in self.multirate})
             self._watch_step(self.clock.dt)
             self.step += 1
             output_due = reached(t_new, self.next_output_t) or done
@@ -532,9 +647,9 @@ class Coupler:
             # a record at every output and checkpoint step too: the history of a run that ends
             # early reaches its last written output (run_record.py)
             diag = output_due or checkpoint_due or self.step % self.diag_every == 0
-            self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag)]))
+            self._broadcast(np.array([P.CMD_STEP, dt, self.step, t_new, -1, float(diag), 1.0]), subs)
             if self.coupling is not None:
-                self._coupled_step(dt)
+                self._coupled_step(dt, subs)
             self._receive_all()
             self.t = t_new
             if not done:  # dt statistics of the steps the control chose (not the landing on the end)
@@ -601,6 +716,8 @@ class Coupler:
             "end_time": self.t,
             "dt": {"min": self.dt_min if np.isfinite(self.dt_min) else None, "max": self.dt_max},
             "implicit": self._implicit_summary(hist),
+            # multi-rate: each substepping group's substeps in all and per coupling step
+            **({"multirate": self.counts.summary(self.step)} if self.multirate else {}),
             "ranks": {r: self.inter[r].Get_remote_size() for r in self.roles},
             "conservation": conservation,
             **({"contact": contact} if (contact := contact_balances(hist, list(self.history))) else {}),

@@ -116,6 +116,14 @@ class EmbeddedCoupling:
             case["ale"], float(np.min(np.asarray(surface["mass"], dtype=np.float64) / self.volume))))
         self._take_nodes(surface)
         self.ops = None
+        # multi-rate (multirate.py): this step's substeps of the foreground, its passes of them and how
+        # far the accepted pass's mean velocity was from the constraint's (m/s)
+        self.substeps, self.c, self.substep_passes, self.substep_residual = 1, 1.0, 0, 0.0
+        # the body's last force per surface node (I / dt_avg: its ramp's start, multirate.Ramp), its
+        # last mean velocity over a step, and the impulse it got ahead of the background (in transit)
+        self.force_prev = None
+        self.transit = np.zeros(self.dim)
+        self.transit_work = 0.0
         self.last = StepRecord(np.zeros(self.dim), 0.0)
         # accumulated over the run (coupler diagnostics)
         self.momentum_f = np.zeros(self.dim)
@@ -131,6 +139,8 @@ class EmbeddedCoupling:
         self.m_solve = self.mass.copy()
         self.x = np.asarray(surface["x"], dtype=np.float64).reshape(-1, self.dim).copy()
         self.v = np.asarray(surface["v"], dtype=np.float64).reshape(-1, self.dim).copy()
+        self.v_mean = self.v            # (the last step's mean surface velocity: multirate.py)
+        self.force_prev = None          # (the body's last force per surface node: a new surface has none)
         self.ns = self.x.shape[0]
         self.load_f = np.zeros_like(self.x)
         self.imp_f = np.zeros_like(self.x)
@@ -213,10 +223,21 @@ class EmbeddedCoupling:
             pass
 
     # ---- the step ----------------------------------------------------------------------------------
-    def solve(self, dt: float, dt_avg: float, vstar_f: np.ndarray, background: np.ndarray) -> np.ndarray:
+    def solve(self, dt: float, dt_avg: float, vstar_f: np.ndarray, background: np.ndarray, substeps: int = 1,
+              predicted: np.ndarray | None = None, mobility: float = 1.0) -> np.ndarray:
         """Steps 1-2 of the module docstring: returns the foreground's surface impulses (ns, dim);
-        keeps the background's for :meth:`background_correction`."""
+        keeps the background's for :meth:`background_correction`.  A foreground in ``substeps`` > 1
+        substeps (multirate.py) gives as ``vstar_f`` a pass's mean velocities under the interface
+        impulses ``predicted``; their rigid answer to the impulses is ``mobility`` / m: the solve then
+        sees its masses M / mobility and the predictor vstar_f - mobility M^-1 predicted."""
         ops, dim = self.ops, self.dim
+        self.substeps = int(substeps)
+        self.c = float(mobility) if self.substeps > 1 else 1.0
+        mass = self.mass
+        if self.substeps > 1:
+            mass = self.mass / self.c
+            pred = np.zeros_like(vstar_f) if predicted is None else predicted
+            vstar_f = vstar_f - pred * self.free / mass[:, None]
         nn, nb, nc = self.nodes.size, ops.bnodes.size, ops.zones.size
         v_all = background[: nn * dim].reshape(nn, dim)
         m_all = background[nn * dim: nn * (dim + 1)]
@@ -229,8 +250,8 @@ class EmbeddedCoupling:
         # a particle body's are all its particles)
         load, v_f = surface_load(ops.Bf.indptr, ops.Bf.indices, ops.Bf.data, np.ascontiguousarray(R), ops.area,
                                  self.ns, float(dt_avg), np.ascontiguousarray(vstar_f, dtype=np.float64), self.free,
-                                 np.ascontiguousarray(self.mass))
-        self.m_solve = self._solve_masses(ops)
+                                 np.ascontiguousarray(mass))
+        self.m_solve = self._solve_masses(ops, mass)
         # the constraint where the gas is (variants.MIN_FILL); the load above over every cut zone
         self.void_zones = int(np.count_nonzero(fill < self.method.min_fill)) if fill.size else 0
         if self.void_zones:
@@ -262,6 +283,39 @@ class EmbeddedCoupling:
                                float(diag.get("interface_dissipation", 0.0)) + removed)
         return imp
 
+    # ---- multi-rate: the substeps' passes (multirate.py) -------------------------------------------------
+    def impulses(self) -> tuple:
+        """The impulses of the last solve (surface, background nodes, the step's record) for
+        :meth:`take_impulses` and :meth:`relax`."""
+        rec = self.last
+        return (self.imp_f, self.imp_b, StepRecord(rec.momentum_f.copy(), rec.work_f, rec.iterations, rec.residual,
+                                                   rec.dissipation))
+
+    def take_impulses(self, saved: tuple) -> None:
+        """Take back what :meth:`impulses` gave (the pass the coupler accepts)."""
+        self.imp_f, self.imp_b, self.last = saved
+
+    def relax(self, saved: tuple, omega: float) -> None:
+        """The impulses of a relaxed pass: saved + omega (the last solve's - saved), on the surface and
+        the background nodes alike (both linear in the multipliers, the load the same): what one
+        side gets the other gets opposite, as in a solve."""
+        f, b, rec = saved
+        self.imp_f = f + omega * (self.imp_f - f)
+        self.imp_b = b + omega * (self.imp_b - b)
+        self.last.momentum_f = rec.momentum_f + omega * (self.last.momentum_f - rec.momentum_f)
+        self.last.dissipation = rec.dissipation + omega * (self.last.dissipation - rec.dissipation)
+
+    def mean_velocity_defect(self, impulse: np.ndarray) -> np.ndarray:
+        """How far the last solve wants the substeps' mean velocity from the one of the pass run with
+        ``impulse``: c (its impulses - impulse) / m on the free components (m/s, per node)."""
+        return (self.imp_f - impulse) * self.free * (self.c / self.mass[:, None])
+
+    def accept_ramp(self, ramp, impulse: np.ndarray) -> None:
+        """The accepted pass's ramp (multirate.Ramp) for ``impulse``: the body's force for the next
+        ramp, and what it got beyond the background (momentum in transit)."""
+        self.transit = self.transit + (ramp.total(impulse) - impulse).sum(axis=0)
+        self.force_prev = impulse / ramp.dt_avg
+
     def _tie_orphans(self, v_f, imp_f, v_all, m_all):
         """The particles outside the reconstructed surface tied to the background's velocity after the
         constraint's impulses (orphan_particles.tie); returns the particles' impulses with theirs
@@ -279,7 +333,7 @@ class EmbeddedCoupling:
         self.imp_b += imp_nodes
         return imp_f, removed
 
-    def _solve_masses(self, ops) -> np.ndarray:
+    def _solve_masses(self, ops, mass: np.ndarray | None = None) -> np.ndarray:
         """The surface nodes' masses as the solve sees them, with the components a boundary condition
         prescribes taken out (the condition undoes any impulse on them): `tied` -- a node with any
         prescribed component is immovable (inf); `slip` -- the constraint acts along the cut zones'
@@ -287,33 +341,49 @@ class EmbeddedCoupling:
         B^f-weighted mean of n_ec^2 over its zones (exact for axis-aligned normals), inf when none
         of those components is free."""
         free = self.free
+        mass = self.mass if mass is None else mass
         if np.all(free > 0.0):
-            return self.mass
+            return mass
         if self.method.condition != "slip":
-            return np.where(np.all(free > 0.0, axis=1), self.mass, np.inf)
+            return np.where(np.all(free > 0.0, axis=1), mass, np.inf)
         Bf = ops.Bf.tocsc()
         wsum = np.asarray(Bf.sum(axis=0)).ravel()
         w = (Bf.T @ (ops.normal ** 2)) / np.where(wsum > 0.0, wsum, 1.0)[:, None]
-        inv = np.einsum("ij,ij->i", w, free) / self.mass
-        inv[wsum == 0.0] = 1.0 / self.mass[wsum == 0.0]
-        return np.divide(1.0, inv, out=np.full_like(inv, np.inf), where=inv > 1e-12 / self.mass)
+        inv = np.einsum("ij,ij->i", w, free) / mass
+        inv[wsum == 0.0] = 1.0 / mass[wsum == 0.0]
+        return np.divide(1.0, inv, out=np.full_like(inv, np.inf), where=inv > 1e-12 / mass)
 
     def take_state(self, buf: np.ndarray) -> np.ndarray:
         """The foreground's state after its correct (protocol TAG_STATE): x^{n+1}, v^{n+1/2} of its
-        surface nodes (particles: and their volumes); returns :meth:`background_correction`'s."""
+        surface nodes (particles: and their volumes; in substeps: after v^{n+1/2}, the substeps' mean
+        velocity and the mean of their time-centred ones, adapters/substeps.py); returns
+        :meth:`background_correction`'s."""
         n = self.ns * self.dim
         if self.particles:
             self.volume = np.asarray(buf[2 * n:], dtype=np.float64).copy()
+        if self.substeps > 1:
+            return self.background_correction(buf[:n], buf[n: 2 * n], buf[2 * n: 3 * n], float(buf[3 * n]))
         return self.background_correction(buf[:n], buf[n: 2 * n])
 
-    def background_correction(self, x_new: np.ndarray, v_new: np.ndarray) -> np.ndarray:
+    def background_correction(self, x_new: np.ndarray, v_new: np.ndarray, v_mean: np.ndarray | None = None,
+                              work_f: float | None = None) -> np.ndarray:
         """Step 3: [node impulses (nb, dim), v^{n+1/2}_e (nc, dim), mean velocity_e (nc, dim)] for
-        the background; advances the surface state and the diagnostics."""
+        the background; advances the surface state and the diagnostics.  A foreground in substeps
+        gives their mean velocity ``v_mean`` (the surface's displacement over the coupling step / dt:
+        its v^{n+1/2}_e; the mean velocity_e is then that of the last two steps' means, centred at
+        t^n as the background's is: multirate.py) and the work its ramp did, ``work_f``."""
         ops, Bf = self.ops, self.ops.Bf
         v_new = np.ascontiguousarray(np.asarray(v_new, dtype=np.float64).reshape(-1, self.dim))
+        v_old, v_half = self.v, v_new
+        if v_mean is not None:
+            v_old = self.v_mean
+            v_half = np.ascontiguousarray(np.asarray(v_mean, dtype=np.float64).reshape(-1, self.dim))
         # v^{n+1/2}_e, the mean (v^{n-1/2} + v^{n+1/2})_e / 2 and the impulses' work on it, one pass
-        v_half_e, v_bar_e, work = correction_means(Bf.indptr, Bf.indices, Bf.data, ops.area, self.v, v_new,
+        v_half_e, v_bar_e, work = correction_means(Bf.indptr, Bf.indices, Bf.data, ops.area, v_old, v_half,
                                                    self.imp_f)
+        if work_f is not None:   # what the ramp gave the body beyond the work of I on its velocity at
+            # t^n, (vbar^{n-1} + vbar^n) / 2: the energy it got ahead of the background (multirate.py)
+            self.transit_work += work_f - float(work)
         work = float(work)
         self.last.work_f = work
         self.momentum_f += self.last.momentum_f
@@ -321,11 +391,13 @@ class EmbeddedCoupling:
         self.dissipation += self.last.dissipation
         self.x = np.asarray(x_new, dtype=np.float64).reshape(-1, self.dim).copy()
         self.v = v_new.copy()
+        self.v_mean = v_half if v_half is not v_new else self.v
         return np.concatenate([self.imp_b.ravel(), v_half_e.ravel(), v_bar_e.ravel()])
 
     # ---- diagnostics and checkpoints ---------------------------------------------------------------
     DIAGNOSTICS = ("iterations", "residual", "dissipation", "foreground_work", "stable_dt_limit", "cond_H",
-                   "lambda_oscillation", "lambda_oscillation_max", "void_zones", "tied_orphans")
+                   "lambda_oscillation", "lambda_oscillation_max", "void_zones", "tied_orphans", "substeps",
+                   "substep_passes", "substep_residual", "momentum_in_transit", "energy_in_transit")
 
     def diagnostic_names(self) -> list[str]:
         return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
@@ -334,11 +406,17 @@ class EmbeddedCoupling:
         return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
                                         self.work_f, float(min(self.stable_limit, 1e300)),
                                         float(self.cond_H), self.lambda_oscillation, self.lambda_oscillation_max,
-                                        float(self.void_zones), float(self.tied_orphans)]
+                                        float(self.void_zones), float(self.tied_orphans), float(self.substeps),
+                                        float(self.substep_passes), self.substep_residual,
+                                        float(np.linalg.norm(self.transit)), self.transit_work]
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}
         out.update({"momentum_f": self.momentum_f, "sums": np.array([self.work_f, self.dissipation]),
+                    # the last impulses on the surface nodes (the next substeps' prediction, multirate.py)
+                    "impulse_f": self.imp_f,
+                    "transit": np.concatenate([self.transit, [self.transit_work]]), "v_mean": self.v_mean,
+                    **({"force_prev": self.force_prev} if self.force_prev is not None else {}),
                     "conditioning": np.array([self.cond_H, self.lambda_oscillation, self.lambda_oscillation_max])})
         return out
 
@@ -346,6 +424,15 @@ class EmbeddedCoupling:
         self.state.load_state({k[len("method_"):]: v for k, v in arrays.items() if k.startswith("method_")})
         self.momentum_f = np.array(arrays["momentum_f"], dtype=np.float64)
         self.work_f, self.dissipation = (float(a) for a in arrays["sums"])
+        if "transit" in arrays:
+            self.transit = np.array(arrays["transit"][:-1], dtype=np.float64)
+            self.transit_work = float(arrays["transit"][-1])
+        if "v_mean" in arrays and np.shape(arrays["v_mean"]) == self.v.shape:
+            self.v_mean = np.array(arrays["v_mean"], dtype=np.float64)
+        if "force_prev" in arrays and np.shape(arrays["force_prev"]) == self.imp_f.shape:
+            self.force_prev = np.array(arrays["force_prev"], dtype=np.float64)
+        if "impulse_f" in arrays and np.shape(arrays["impulse_f"]) == self.imp_f.shape:
+            self.imp_f = np.array(arrays["impulse_f"], dtype=np.float64)
         if "conditioning" in arrays:  # (a restart reports the first step's cond(H), not its own)
             self.cond_H, self.lambda_oscillation, self.lambda_oscillation_max = (
                 float(a) for a in arrays["conditioning"])

@@ -86,7 +86,9 @@ class ForegroundCouplings:
     # how a diagnostic of the members combines into the coupling's one (EmbeddedCoupling.DIAGNOSTICS)
     _COMBINE = {"iterations": max, "residual": max, "dissipation": sum, "foreground_work": sum,
                 "stable_dt_limit": min, "cond_H": _nanmax, "lambda_oscillation": max,
-                "lambda_oscillation_max": max, "void_zones": sum, "tied_orphans": sum}
+                "lambda_oscillation_max": max, "void_zones": sum, "tied_orphans": sum,
+                "substeps": max, "substep_passes": max, "substep_residual": max,
+                "momentum_in_transit": sum, "energy_in_transit": sum}
 
     def __init__(self, case: dict, surfaces: list[dict], roles: list[str]):
         self.roles = list(roles)
@@ -134,11 +136,23 @@ class ForegroundCouplings:
         for m in self.members:
             m.load_kernels()
 
-    def solve(self, dt: float, dt_avg: float, vstars: list, background: np.ndarray) -> list:
+    def solve(self, dt: float, dt_avg: float, vstars: list, background: np.ndarray, substeps=None,
+              predicted=None, mobility=None) -> list:
         """Each member's surface impulses from its rows of the background's interface packet
-        (v_b, m_b of the merged nodes, R and the fill of the merged cut zones)."""
+        (v_b, m_b of the merged nodes, R and the fill of the merged cut zones); ``substeps``,
+        ``predicted``: per member, its substeps and its predictor pass's impulses (EmbeddedCoupling.solve)."""
+        substeps = substeps or [1] * len(self.members)
+        predicted = predicted or [None] * len(self.members)
+        mobility = mobility or [1.0] * len(self.members)
+        return [self.solve_member(i, dt, dt_avg, vs, background, k, pred, c)
+                for i, (vs, k, pred, c) in enumerate(zip(vstars, substeps, predicted, mobility))]
+
+    def solve_member(self, i: int, dt: float, dt_avg: float, vstar, background: np.ndarray, substeps: int = 1,
+                     predicted=None, mobility: float = 1.0) -> np.ndarray:
+        """Member i's solve on its rows of the background's packet (again: a substeps' pass)."""
+        extra = (substeps, predicted, mobility) if substeps > 1 else ()   # (multi-rate's, multirate.py)
         if len(self.members) == 1:
-            return [self.members[0].solve(dt, dt_avg, vstars[0], background)]
+            return self.members[0].solve(dt, dt_avg, vstar, background, *extra)
         dim = self.dim
         nb, nc = self._nb, self._nc
         v_b = background[: nb * dim].reshape(nb, dim)
@@ -146,11 +160,9 @@ class ForegroundCouplings:
         a = nb * (dim + 1)
         R = background[a: a + nc * dim].reshape(nc, dim)
         fill = background[a + nc * dim:]
-        out = []
-        for m, (ic, inode), vs in zip(self.members, self._rows, vstars):
-            part = [v_b[inode].ravel(), m_b[inode], R[ic].ravel()] + ([fill[ic]] if fill.size else [])
-            out.append(m.solve(dt, dt_avg, vs, np.concatenate(part)))
-        return out
+        ic, inode = self._rows[i]
+        part = [v_b[inode].ravel(), m_b[inode], R[ic].ravel()] + ([fill[ic]] if fill.size else [])
+        return self.members[i].solve(dt, dt_avg, vstar, np.concatenate(part), *extra)
 
     def replace_surface(self, i: int, surface: dict) -> None:
         """Member i's foreground surface changed (elements eroded): the next geometry() is on it."""

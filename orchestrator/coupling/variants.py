@@ -218,7 +218,12 @@ class Multiplier(CouplingMethod):
 
     SCHEMA = {
         "type": "object",
-        "properties": {**COMMON, "alpha": _number(exclusiveMinimum=0), "beta": _number(minimum=0)},
+        "properties": {**COMMON, "alpha": _number(exclusiveMinimum=0), "beta": _number(minimum=0),
+                       # multi-rate's passes (orchestrator/coupling/multirate.py): a pass is accepted
+                       # when the solve after it would move the substeps' mean velocity by at most this
+                       # share of its scale; at most this many passes
+                       "substep_tolerance": _number(exclusiveMinimum=0, maximum=0.1),
+                       "substep_passes": {"type": "integer", "minimum": 2, "maximum": 100}},
         "required": ["method"],
         "additionalProperties": False,
     }

@@ -52,6 +52,14 @@ RUN = table(
         "diagnostics_every": integer("steps", minimum=1),
         # a step below this stops the run by name (its limiter named; LS-DYNA's DTMIN); unset: none
         "dt_min": number("s", exclusiveMinimum=0),
+        # multi-rate (orchestrator/coupling/multirate.py): foreground groups that can take each coupled
+        # step in substeps of their own stable step (true: all must; false or unset: none, for now:
+        # multirate.DEFAULT_ON)
+        "multirate": {"type": "boolean"},
+        "max_substeps": integer("substeps", minimum=1, maximum=1024),
+        # a group's stable step capped (s): a stiffer body's step, for studies of the ratio
+        "group_dt_max": {"type": "object", "propertyNames": {"enum": list(_registered_roles())},
+                         "additionalProperties": number("s", exclusiveMinimum=0)},
     },
     required=("dimension", "end_time"),
 )

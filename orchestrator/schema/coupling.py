@@ -57,8 +57,28 @@ def _body_box(mesh: dict, dim: int):
     return None
 
 
+def _check_multirate(case: dict) -> None:
+    """run.multirate = true: every foreground group must be able to substep (multi-rate,
+    orchestrator/coupling/multirate.py), tied by the multipliers."""
+    if case["run"].get("multirate") is not True:
+        return
+    from adapters import registry as roles
+
+    method = case["coupling"].get("method", "multiplier")
+    if method != "multiplier":
+        raise CaseError("run.multirate", True, f"needs coupling.method = 'multiplier' (not {method!r}): "
+                        "the substeps are tied by its multipliers")
+    for r in roles.roles_used(case):
+        if roles.coupling_side(r) == "foreground":
+            why = roles.substep_refusal(r, case)
+            if why:
+                raise CaseError("run.multirate", True, f"the {r} group cannot take substeps: {why} "
+                                "(false or unset: no group substeps)")
+
+
 def check(case: dict, data: dict) -> None:
     """The registry's hook."""
+    _check_multirate(case)
     if "ale" not in case:
         raise CaseError("ale", MISSING, "a [coupling] case needs the background grid [ale] its bodies move through")
     bodies = case.get("lagrange", {}).get("bodies", [])

@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-__all__ = ["INTEGRATORS", "Integrator", "register", "solver_class"]
+__all__ = ["INTEGRATORS", "Integrator", "register", "solver_class", "substep_refusal"]
 
 
 @dataclass(frozen=True)
@@ -45,3 +45,17 @@ def solver_class(name: str):
         raise KeyError(f"integrator {name!r}: registered: {', '.join(sorted(INTEGRATORS))}")
     it = INTEGRATORS[name]
     return getattr(importlib.import_module(it.module), it.attr)
+
+
+def substep_refusal(case: dict) -> str | None:
+    """Why the Lagrangian group of ``case`` cannot take its coupled steps in substeps (multi-rate:
+    orchestrator/coupling/multirate.py), None when it can: the explicit central difference can; an
+    implicit or quasi-static integrator takes its own steps, and contact's multipliers are solved
+    per step of the whole group (its state is not in the solver's snapshot)."""
+    name = (case.get("lagrange") or {}).get("integrator", "explicit")
+    it = INTEGRATORS.get(name)
+    if it is None or it.implicit or not it.dynamic:
+        return f"the {name!r} integrator takes its own steps"
+    if case.get("contact"):
+        return "contact between its bodies is solved once per step of the whole group"
+    return None

@@ -770,6 +770,41 @@ class LagrangeSolver:
             **({"eroded": 1.0 - self.alive} if self.erosion else {}),
         }
 
+    # ---- snapshot / restore (in memory: the substeps' corrector pass, adapters/substeps.py) ----------
+    _SNAPSHOT_OBJECTS = ("watch",)   # small objects the step changes in place (deep-copied)
+
+    def snapshot(self) -> dict:
+        """Everything a step may change: every array attribute (copied), every scalar, the objects
+        in _SNAPSHOT_OBJECTS (deep-copied); references to the rest (the surface caches are replaced,
+        not changed, by a renewal).  Not for contact (its state lives in the contact object)."""
+        import copy
+
+        if self.contact is not None:
+            raise ValueError("snapshot: a solver with contact takes no substeps")
+        out = {}
+        for k, v in vars(self).items():
+            if isinstance(v, np.ndarray):
+                out[k] = v.copy()
+            elif k in self._SNAPSHOT_OBJECTS:
+                out[k] = copy.deepcopy(v)
+            elif v is None or k == "_surf" or isinstance(v, (bool, int, float, str, np.generic, dict, tuple)):
+                out[k] = v
+        return out
+
+    def restore(self, snap: dict) -> None:
+        """Take back a snapshot (its arrays copied into the solver's own, which others may hold)."""
+        import copy
+
+        for k, v in snap.items():
+            cur = getattr(self, k, None)
+            if isinstance(v, np.ndarray) and isinstance(cur, np.ndarray) and cur.shape == v.shape \
+                    and cur.dtype == v.dtype:
+                np.copyto(cur, v)
+            elif k in self._SNAPSHOT_OBJECTS:
+                setattr(self, k, copy.deepcopy(v))
+            else:
+                setattr(self, k, v.copy() if isinstance(v, np.ndarray) else v)
+
     # ---- checkpoint / restart (global arrays, so any rank count can read; same count is bitwise) --
     STATE_NODES = ("x", "v", "f")
     STATE_CELLS = ("sig", "eps_p", "temp", "e_int", "q", "hgq")

@@ -104,7 +104,8 @@ def test_box2d_loads_with_all_defaults():
     assert case["run"] == {"dimension": 2, "end_time": 1e-4, "dt_scale": 0.9,
                            "output_interval": pytest.approx(5e-6, rel=1e-15),
                            "checkpoint_interval": None, "max_steps": 10_000_000,
-                           "diagnostics_every": 1, "dt_min": None}
+                           "diagnostics_every": 1, "dt_min": None, "multirate": None, "max_substeps": 64,
+                           "group_dt_max": {}}
     assert case["ranks"] == {"lagrange": 1}
     assert case["materials"] == {"steel": {"model": "linear_elastic", "density": 7850.0,
                                            "youngs_modulus": 210e9, "poisson_ratio": 0.3}}
@@ -198,6 +199,9 @@ BAD_CASES = [
     ("ale_mixed_piston", "ale.boundaries.x_lower", "not supported yet"),
     ("ale_inflow_unknown_material", "ale.boundaries.x_lower.inflow.material", "with an equation of state"),
     ("ale_void_inflow", "ale.boundaries.x_lower", "with a void material"),
+    ("multirate_with_contact", "run.multirate", "the lagrange group cannot take substeps: contact"),
+    ("multirate_penalty", "run.multirate", "needs coupling.method = 'multiplier'"),
+    ("group_dt_max_unknown_role", "run.group_dt_max.sph", "the case has no sph group"),
     ("output_interval_too_long", "run.output_interval", "<= run.end_time"),
     ("dimension_four", "run.dimension", "one of: 2, 3"),
     ("symmetry_axis_z_2d", "boundaries[0].axis", "dimension mismatch"),

@@ -47,7 +47,7 @@ def test_the_registry_has_the_three_variants_and_rejects_unknown_names_in_one_li
     ({"method": "penalty"}, "coupling.stiffness = <missing>: required with method = 'penalty'"),
     ({"method": "multiplier", "stiffness": 1e9},
      "coupling.stiffness = 1000000000.0: only with method = 'penalty'; method 'multiplier' takes alpha, beta, "
-     "condition, method, min_fill"),
+     "condition, method, min_fill, substep_passes, substep_tolerance"),
     ({"method": "penalty", "stiffness": 1e9, "gamma": 2.0},
      "coupling.gamma = 2.0: only with method = 'nitsche'; method 'penalty' takes condition, method, min_fill, "
          "stiffness"),
