@@ -124,6 +124,7 @@ class EmbeddedCoupling:
         self.force_prev = None
         self.transit = np.zeros(self.dim)
         self.transit_work = 0.0
+        self.impulse_size = 0.0
         self.last = StepRecord(np.zeros(self.dim), 0.0)
         # accumulated over the run (coupler diagnostics)
         self.momentum_f = np.zeros(self.dim)
@@ -387,6 +388,8 @@ class EmbeddedCoupling:
         work = float(work)
         self.last.work_f = work
         self.momentum_f += self.last.momentum_f
+        # (the largest step's impulses in size, node by node: the momentum balance's scale)
+        self.impulse_size = max(self.impulse_size, float(np.abs(self.imp_f).sum()))
         self.work_f += work
         self.dissipation += self.last.dissipation
         self.x = np.asarray(x_new, dtype=np.float64).reshape(-1, self.dim).copy()
@@ -412,7 +415,8 @@ class EmbeddedCoupling:
 
     def state_arrays(self) -> dict[str, np.ndarray]:
         out = {f"method_{k}": v for k, v in self.state.state_arrays().items()}
-        out.update({"momentum_f": self.momentum_f, "sums": np.array([self.work_f, self.dissipation]),
+        out.update({"momentum_f": self.momentum_f,
+                    "sums": np.array([self.work_f, self.dissipation, self.impulse_size]),
                     # the last impulses on the surface nodes (the next substeps' prediction, multirate.py)
                     "impulse_f": self.imp_f,
                     "transit": np.concatenate([self.transit, [self.transit_work]]), "v_mean": self.v_mean,
@@ -423,7 +427,9 @@ class EmbeddedCoupling:
     def load_state(self, arrays: dict) -> None:
         self.state.load_state({k[len("method_"):]: v for k, v in arrays.items() if k.startswith("method_")})
         self.momentum_f = np.array(arrays["momentum_f"], dtype=np.float64)
-        self.work_f, self.dissipation = (float(a) for a in arrays["sums"])
+        self.work_f, self.dissipation = (float(a) for a in arrays["sums"][:2])
+        if len(arrays["sums"]) > 2:
+            self.impulse_size = float(arrays["sums"][2])
         if "transit" in arrays:
             self.transit = np.array(arrays["transit"][:-1], dtype=np.float64)
             self.transit_work = float(arrays["transit"][-1])

@@ -115,8 +115,10 @@ class ForegroundCouplings:
     def momentum_scale(self) -> float:
         """The scale of the momentum balance: the members' impulses in size (two pistons driven
         apart give each other's opposite momentum: their sum alone would measure round-off against
-        round-off)."""
-        return float(sum(np.linalg.norm(m.momentum_f) for m in self.members))
+        round-off), and the largest step's impulses node by node (a block ringing in a box takes
+        impulses that cancel over its surface: measured 0.46 of round-off against its net's
+        round-off before)."""
+        return float(sum(max(np.linalg.norm(m.momentum_f), m.impulse_size) for m in self.members))
 
     @property
     def work_f(self) -> float:
