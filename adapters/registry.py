@@ -72,4 +72,12 @@ def adapter_class(role: str) -> type:
 declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground",
         substeps="solvers.lagrange.integrators:substep_refusal")
 declare("ale", "adapters.ale", "ale", coupling_side="background")
-declare("sph", "adapters.sph", "sph", coupling_side="foreground")  # LAMMPS particles
+declare("sph", "adapters.sph", "sph", coupling_side="foreground",  # LAMMPS particles
+        substeps="adapters.registry:sph_substep_refusal")
+
+
+def sph_substep_refusal(case: dict) -> str:
+    """Why an SPH group takes no substeps (yet): the passes restart from the step's start."""
+    return ("LAMMPS's particles take no substeps yet: each pass starts again from the coupling step's "
+            "start, and the adapter does not keep its atoms' state (positions, velocities, densities, "
+            "MACHDYN's deformation) in memory")
