@@ -258,11 +258,13 @@ class EmbeddedCoupling:
         if self.void_zones:
             ops = restrict(ops, fill >= self.method.min_fill)
         self.stable_limit = min(self.stable_limit, self.method.stable_dt(ops, m_b, self.m_solve, self.modulus))
+        # in substeps the stabilisation keeps the compliance it has at the substeps' step (multirate.py, 4)
+        stab = {"stab_scale": 1.0 / self.substeps} if self.substeps > 1 else {}
         if np.isnan(self.cond_H) and ops.n_zones:
             # once: what the stabilisation is for (s_con = λmax/λmin independent of h when stabilised)
-            self.cond_H = self.method.condition_number(ops, m_b, self.m_solve, dt)
+            self.cond_H = self.method.condition_number(ops, m_b, self.m_solve, dt, **stab)
         if ops.n_zones:
-            res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus)
+            res = self.method.step(ops, v_b, m_b, v_f, self.m_solve, dt, self.state, self.modulus, **stab)
         else:  # no constraint anywhere (a body in void, or out of the gas): no multiplier to carry on
             res = variants.StepResult(np.zeros((nb, dim)), np.zeros((self.ns, dim)), {})
             self.state = self.method.new_state()

@@ -237,21 +237,28 @@ class Multiplier(CouplingMethod):
     def stable_dt(self, ops, m_b, m_f, modulus=None) -> float:
         return math.inf
 
-    def condition_number(self, ops, m_b, m_f, dt) -> float:
+    def _stabilisation(self, stab_scale: float) -> tuple[float, float]:
+        """(alpha, beta) of a step whose stabilisation keeps the size it has at ``stab_scale`` times
+        the step: C̄^-1 ~ s_e ~ Δt, so alpha / scale, beta x scale (multi-rate: the substeps' step,
+        orchestrator/coupling/multirate.py)."""
+        return float(self.cfg["alpha"]) / stab_scale, float(self.cfg["beta"]) * stab_scale
+
+    def condition_number(self, ops, m_b, m_f, dt, stab_scale: float = 1.0) -> float:
         """λ_max/λ_min of the assembled H (S.assemble: the same system the matrix-free solve applies)."""
         if ops.n_zones == 0:
             return 1.0
-        sysm = S.assemble(ops, m_b, m_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
-                          beta=float(self.cfg["beta"]))
+        alpha, beta = self._stabilisation(stab_scale)
+        sysm = S.assemble(ops, m_b, m_f, dt, self.condition, alpha=alpha, beta=beta)
         return S.condition_number(sysm.H)
 
-    def step(self, ops, v_b, m_b, v_f, m_f, dt, state, modulus=None) -> StepResult:
+    def step(self, ops, v_b, m_b, v_f, m_f, dt, state, modulus=None, stab_scale: float = 1.0) -> StepResult:
         # (matrix_free: the same solve as S.solve in one numba kernel -- the step's hot path; imported
         # here: validating a case imports this module and no numba)
         from orchestrator.coupling import matrix_free
 
-        sol = matrix_free.solve(ops, m_b, m_f, v_b, v_f, dt, self.condition, alpha=float(self.cfg["alpha"]),
-                                beta=float(self.cfg["beta"]), warm=(state.zones, state.lam))
+        alpha, beta = self._stabilisation(stab_scale)
+        sol = matrix_free.solve(ops, m_b, m_f, v_b, v_f, dt, self.condition, alpha=alpha, beta=beta,
+                                warm=(state.zones, state.lam))
         lam = sol.lam.reshape(ops.n_zones, -1)
         # (consistent by construction: set directly, load_state's checks are for arrays read back)
         state.zones, state.lam, state.gap = ops.zones, lam, np.zeros((ops.n_zones, lam.shape[1]))

@@ -27,20 +27,20 @@ def errors(s):
 @pytest.mark.slow
 def test_embedded_piston_sod_with_the_body_16_times_below_the_gas(tmp_path):
     """embedded_piston_sod, the piston's step capped at 5.5e-4 / 16 s (32 substeps a coupling step):
-    the check's errors stay those of the single-rate runs (measured, this one / single-rate at the
-    piston's natural step / single-rate at the capped step: centre 6.19e-3 / 6.45e-3 / 6.37e-3,
-    velocity 2.3e-6 / 2.6e-6 / 1.4e-5, p_left 2.49e-5 / 2.01e-5 / 2.17e-5, p_right 1.71e-5 /
-    2.07e-5 / 2.45e-5), in 214 coupling steps (single-rate 6465: 2.5 s against 22.5 s); the
-    interface's work -4.15e-7 J (single-rate at its natural step -3.64e-7: the stabilisation's at
-    the same coupling step; 16 times smaller steps -5.5e-8); mass, energy and the coupling's momentum
-    at round-off; the passes converge in 3 (two relaxed)."""
+    the check's errors stay those of the single-rate run at the capped step (measured, this one /
+    that one: centre 6.37e-3 / 6.37e-3, velocity 1.86e-5 / 1.43e-5, p_left 2.56e-5 / 2.17e-5,
+    p_right 2.55e-5 / 2.45e-5; at 64: 6.39e-3 / 6.37e-3, 1.37e-5 / 1.46e-5, 1.96e-5 / 2.14e-5,
+    2.01e-5 / 2.45e-5), in 213 coupling steps (single-rate 6465: 2.2 s against 22.5 s); the
+    interface's work -2.4e-8 J (single-rate -5.5e-8: no more dissipation; with the stabilisation at
+    the coupling step's size, -4.15e-7); mass, energy and the coupling's momentum at round-off; the
+    passes converge in 3 (two relaxed)."""
     s = run(multirate(tmp_path, "embedded_piston_sod", 5.5e-4 / 16), tmp_path / "out")
     e = errors(s)
-    assert e["centre"] < 7e-3 and e["velocity"] < 1e-5, e
-    assert e["p_left"] < 3e-5 and e["p_right"] < 3e-5, e
+    assert e["centre"] < 6.6e-3 and e["velocity"] < 3e-5, e
+    assert e["p_left"] < 3.5e-5 and e["p_right"] < 3.5e-5, e
     assert s["steps"] < 250 and s["multirate"]["lagrange"]["per_step_max"] >= 30, (s["steps"], s["multirate"])
     f = s["final"]
-    assert -6e-7 < f["coupling.interface_work"] < 0.0, f["coupling.interface_work"]
+    assert -1e-7 < f["coupling.interface_work"] < 0.0, f["coupling.interface_work"]
     assert f["coupling.substep_passes"] <= 4 and f["coupling.substep_residual"] < 1e-6, f
     coupled_balances(s)
 
@@ -50,14 +50,15 @@ def test_acoustic_transmission_with_the_solid_16_times_below_the_water(tmp_path)
     """acoustic_transmission (a 1 MPa pulse in water through a solid block), the block's step capped
     at 1.53e-6 / 16 s: reflection and transmission errors 2.14e-3 and 1.13e-4 (single-rate at the
     water's step: 2.06e-3 and 3.8e-4; at the capped step: 2.39e-3 and 2.2e-3, the water stepped 16
-    times below its own limit); the interface's work -1.03e-7 J (single-rate at the water's step
-    -1.36e-7). The energy the body got ahead of the water (half a step: the ramp, multirate.py) is
-    reported apart: 5.1e-4 J at the end of a 0.34 J pulse, not lost."""
+    times below its own limit); the interface's work +6.2e-9 J of a 0.34 J pulse (single-rate at
+    the water's step -1.36e-7, at the capped step -6.5e-9: the pairing is second order, its residue
+    of either sign). The energy the body got ahead of the water (half a step: the ramp,
+    multirate.py) is reported apart: 5.1e-4 J at the end, not lost."""
     s = run(multirate(tmp_path, "acoustic_transmission", 1.53e-6 / 16), tmp_path / "out")
     e = errors(s)
     assert e["reflection"] < 3e-3 and e["transmission"] < 5e-4, e
     f = s["final"]
-    assert -3e-7 < f["coupling.interface_work"] < 0.0, f["coupling.interface_work"]
+    assert abs(f["coupling.interface_work"]) < 5e-8, f["coupling.interface_work"]
     assert 0.0 < f["coupling.energy_in_transit"] < 1e-3, f["coupling.energy_in_transit"]
     assert s["multirate"]["lagrange"]["per_step_min"] == 16, s["multirate"]
     coupled_balances(s)
@@ -65,17 +66,16 @@ def test_acoustic_transmission_with_the_solid_16_times_below_the_water(tmp_path)
 
 @pytest.mark.slow
 def test_the_steel_panel_in_a_shock_tube_at_the_gass_step(tmp_path):
-    """steel_panel_shock_2d in substeps: 585 coupling steps of ~17 substeps (single-rate: 9772 steps,
-    79.5 s against 9.6 s here); its tip history 6.2 % of the peak off the fine-zone reference (single-
-    rate 4.5 %) and 1.86 % of the peak off the single-rate run's: the stabilisation's slip, O(dt) at
-    the 17 times larger coupling step (with beta = 0.1 in both runs: 0.99 %, and 4.6 % off the
-    reference)."""
+    """steel_panel_shock_2d in substeps: 589 coupling steps of ~17 substeps (single-rate: 9772 steps,
+    79.5 s against 6.3 s here); its tip history 4.47 % of the peak off the fine-zone reference
+    (single-rate 4.53 %) and 0.62 % of the peak off the single-rate run's (with the stabilisation at
+    the coupling step's size: 6.2 % and 1.86 %, multirate.py, 4)."""
     s = run(multirate(tmp_path, "steel_panel_shock_2d"), tmp_path / "out")
-    assert s["check"]["metrics"]["tip_history_error"]["value"] < 0.08, s["check"]
+    assert s["check"]["metrics"]["tip_history_error"]["value"] < 0.05, s["check"]
     assert s["steps"] < 700 and s["multirate"]["lagrange"]["per_step_mean"] > 12, (s["steps"], s["multirate"])
     assert s["final"]["coupling.momentum_balance_rel"] < 1e-13
-    c = s["conservation"]   # (the gas through its open faces at its own step; single-rate: 9.9e-14)
-    assert c["mass_rel"] < 3e-13 and c["energy_rel"] < 3e-13, c   # 1.05e-13, 1.18e-13
+    c = s["conservation"]   # (the panel's own energy over ~10^4 substeps and their passes: 3.4e-13;
+    assert c["mass_rel"] < 3e-13 and c["energy_rel"] < 1e-12, c   # single-rate 9.9e-14; mass 1.1e-13)
 
 
 @pytest.mark.slow
