@@ -677,7 +677,9 @@ class Coupler:
         self.solver_time = {r: P.recv(self.inter[r], 0, P.TAG_TIMING) for r in self.roles}
         wall = _time.perf_counter() - wall0
         self.log(f"finished: {self.step} steps, t = {self.t:.6e} s, wall {wall:.2f} s"
-                 + (f"; the last step {self.clock.dt:.4g} s set by {set_by}" if set_by else ""))
+                 + (f"; the last step {self.clock.dt:.4g} s set by {set_by}" if set_by else "")
+                 + "".join(f"; {r} in {self.counts.total[r]} substeps ({self.counts.lo[r]}-{self.counts.hi[r]} "
+                           f"a step)" for r in self.multirate))
         return self.summary(wall)
 
     # ---- summary -------------------------------------------------------------------------------

@@ -43,6 +43,8 @@ def test_embedded_piston_sod_with_the_body_16_times_below_the_gas(tmp_path):
     assert -1e-7 < f["coupling.interface_work"] < 0.0, f["coupling.interface_work"]
     assert f["coupling.substep_passes"] <= 4 and f["coupling.substep_residual"] < 1e-6, f
     coupled_balances(s)
+    last = [ln for ln in (tmp_path / "out" / "log.txt").read_text().splitlines() if "] finished: " in ln][-1]
+    assert "; lagrange in " in last and " substeps (" in last, last   # (the log names the substeps)
 
 
 @pytest.mark.slow
