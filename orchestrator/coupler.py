@@ -163,8 +163,9 @@ class Coupler:
             self.spool.append(self.history_t[k], self.history_step[k], [self.history[r][k] for r in self.history])
 
     def _substepping(self, started: dict) -> list[str]:
-        """The foreground roles that take their coupled steps in substeps: run.multirate (default
-        true), the multiplier method, and a group that can (its start-up message: can_substep)."""
+        """The foreground roles that take their coupled steps in substeps: run.multirate = true (unset:
+        where it pays, once multirate.DEFAULT_ON), the multiplier method, and a group that can (its
+        start-up message: its substep cost, 0 when it cannot)."""
         from orchestrator.coupling.multirate import DEFAULT_ON, pays
 
         choice = self.case["run"].get("multirate")
