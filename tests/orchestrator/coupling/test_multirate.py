@@ -160,3 +160,14 @@ initial_velocity = ["300.0 * x / 0.01", "50.0"]
         b = again[k]
         assert (np.array_equal(a, b) if isinstance(a, np.ndarray) else a == b), k
     assert float(np.abs(first["eps_p"]).max()) > 0.0   # (plastic flow: the state that matters moved)
+
+
+def test_the_coupling_step_is_bounded_by_max_substeps_and_substeps_pay_beside_enough_zones():
+    """SubstepCounts.bound: max_substeps times the smallest substepping group's step (inf without
+    one); pays: at least PAYS (4) zones per element of the group (multirate.py: the cost model)."""
+    from orchestrator.coupling.multirate import PAYS, pays
+
+    c = SubstepCounts(["lagrange", "other"], max_substeps=16)
+    assert c.bound({"lagrange": 1e-6, "other": 3e-6}) == pytest.approx(16e-6, rel=1e-15)
+    assert SubstepCounts([], max_substeps=16).bound({}) == float("inf")
+    assert pays(4000.0, 1000.0) and not pays(3999.0, 1000.0) and PAYS == 4.0
