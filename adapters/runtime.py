@@ -67,6 +67,23 @@ def unpack_surface(buf: np.ndarray, dim: int) -> dict:
     return out
 
 
+def send_state(adapter, comm, ic, extra: list) -> None:
+    """A foreground's state after its step (TAG_STATE, collective): x^{n+1}, v^{n+1/2} of its surface
+    nodes on the surface the coupler's operators were built on, then ``extra`` (particles: their
+    volumes; substeps: their mean velocity and the ramp's work), then a flag: 1 when the surface
+    changed in this step (eroded elements), the new one following as TAG_SURFACE."""
+    renew = getattr(adapter, "renew_surface", None)
+    state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(), *extra, [0.0]])
+    changed = bool(renew and renew())
+    state[-1] = float(changed)
+    if comm.rank == 0:
+        P.send(ic, state, 0, P.TAG_STATE)
+    if changed:
+        buf = pack_surface(adapter)
+        if comm.rank == 0:
+            P.send(ic, buf, 0, P.TAG_SURFACE)
+
+
 def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: float, with_diagnostics: bool,
                      answer) -> float:
     """A foreground's coupled step in m substeps (orchestrator/coupling/multirate.py): the predictor
@@ -105,16 +122,7 @@ def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: floa
             break
         ramp = msg[:-1]
     t0 = _time.perf_counter()
-    renew = getattr(adapter, "renew_surface", None)
-    state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(), v_mean.ravel(), [w, 0.0]])
-    changed = bool(renew and renew())
-    state[-1] = float(changed)
-    if rank == 0:
-        P.send(ic, state, 0, P.TAG_STATE)
-    if changed:
-        buf = pack_surface(adapter)
-        if rank == 0:
-            P.send(ic, buf, 0, P.TAG_SURFACE)
+    send_state(adapter, comm, ic, [v_mean.ravel(), [w]])
     answer(with_diagnostics)
     return work + _time.perf_counter() - t0
 
@@ -182,19 +190,7 @@ def serve(adapter_cls, argv=None) -> None:
             t0 = _time.perf_counter()
             adapter.correct(imp.reshape(v.shape))
             volumes = getattr(adapter, "volumes", None)  # particles: their volumes too
-            # the state on the surface the coupler's operators were built on, then a flag: 1 when the
-            # surface changed in this step (eroded elements), the new one following as TAG_SURFACE
-            renew = getattr(adapter, "renew_surface", None)
-            state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(),
-                                    *([volumes()] if volumes else []), [0.0]])
-            changed = bool(renew and renew())
-            state[-1] = float(changed)
-            if rank == 0:
-                P.send(ic, state, 0, P.TAG_STATE)
-            if changed:
-                buf = pack_surface(adapter)
-                if rank == 0:
-                    P.send(ic, buf, 0, P.TAG_SURFACE)
+            send_state(adapter, comm, ic, [volumes()] if volumes else [])
             adapter.remap(None)
             answer(bool(cmd[5]))
             work_s += _time.perf_counter() - t0

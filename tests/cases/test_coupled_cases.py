@@ -128,16 +128,20 @@ def test_immersed_wall_on_two_plus_two_ranks_equals_one_plus_one(tmp_path):
     assert_same_steps(a, b)
 
 
-def restarted_equals_full(tmp_path, name, end_time, roles=("ale", "lagrange")):
+def restarted_equals_full(tmp_path, name, end_time, roles=("ale", "lagrange"), edits=()):
     """Shipped case ``name`` run to ``end_time`` (outputs every 0.02, one checkpoint at 0.03; exit 1
-    allowed: its check judges t = 0.2), then again from the checkpoint in a copy of its output: the
-    last output of every group of ``roles`` and the diagnostics are bit for bit the same.  Returns
-    the checkpoint."""
+    allowed: its check judges t = 0.2; ``edits``: further (old, new) texts of its case.toml), then
+    again from the checkpoint in a copy of its output: the last output of every group of ``roles``
+    and the diagnostics are bit for bit the same.  Returns the checkpoint."""
     case = tmp_path / "case"
     shutil.copytree(CASES / name, case, ignore=shutil.ignore_patterns("out"))
     p = case / "case.toml"
-    p.write_text(p.read_text().replace("end_time = 0.2", f"end_time = {end_time}").replace(
-        "output_interval = 0.05", "output_interval = 0.02\ncheckpoint_interval = 0.03"))
+    text = p.read_text().replace("end_time = 0.2", f"end_time = {end_time}").replace(
+        "output_interval = 0.05", "output_interval = 0.02\ncheckpoint_interval = 0.03")
+    for old, new in edits:
+        assert old in text, old
+        text = text.replace(old, new)
+    p.write_text(text)
     full = tmp_path / "full"
     r = immerse("run", case, "--out", full)
     assert r.returncode in (0, 1), r.stdout + r.stderr
