@@ -22,9 +22,9 @@ class LagrangeAdapter(SolverAdapter):
 
     def setup(self) -> None:
         from adapters import step_files
-        from solvers.lagrange.integrators import solver_class
+        from solvers.lagrange.integrators import solver_for
 
-        self.solver = solver_class(self.case["lagrange"].get("integrator", "explicit"))(self.comm, self.case)
+        self.solver = solver_for(self.case)(self.comm, self.case)
         self._dt = None
         self._step, self._time = 0, 0.0
         if self.comm.rank == 0:

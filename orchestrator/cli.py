@@ -8,7 +8,8 @@
       runs a matrix of cases x parameters (orchestrator/campaign), then campaign.csv/.h5 and the report
   immerse report OUT                           rebuilds a campaign's report from OUT/campaign.h5
   immerse bench NAME [--out FILE] [--quick]   NAME: lagrange, taylor, ale, sod, advect, memory, output, coupling,
-                                              plate_convergence, plate_convergence_3d, penalty_sweep, sph, contact
+                                              plate_convergence, plate_convergence_3d, penalty_sweep, sph, contact,
+                                              multirate, subcycling, steel_panel_convergence, implicit, startup
 
 Bad input: one line naming the key, the value and what is allowed; exit code 2; nothing launched,
 nothing written.

@@ -135,6 +135,15 @@ def _lagrange(dim: int, mesh: str, hourglass: str = "viscous") -> str:
     return text
 
 
+def _subcycled(dim: int) -> str:
+    """The explicit solver with element subcycling (its node and step kernels; no rigid wall there)."""
+    text = _lagrange(dim, "box", "assumed_strain")
+    wall = text.index('[[boundaries]]\ntype = "rigid_wall"')
+    text = text[:wall]
+    first = text.index("[[lagrange.bodies]]")
+    return text[:first] + "[lagrange]\nsubcycling = 4\n" + text[first:]
+
+
 def cases() -> dict[str, str]:
     """name -> case.toml text of every warm-up case."""
     out: dict[str, str] = {}
@@ -169,6 +178,8 @@ def cases() -> dict[str, str]:
                 dim, ("ideal_gas", "ideal_gas"), q,
                 boundaries=_faces(dim, **{f"{a}_{s}": '"periodic"' for a in "xyz"[:dim] for s in ("lower", "upper")}))
     out["lagrange_3d_quarter_cylinder"] = _lagrange(3, "quarter_cylinder")
+    for dim in (2, 3):   # element subcycling (solvers/lagrange/subcycling.py)
+        out[f"lagrange_{dim}d_subcycled"] = _subcycled(dim)
     for dim in (2, 3):   # the implicit step's element kernel (midpoint_svk_kernel.py)
         out[f"lagrange_{dim}d_midpoint"] = _midpoint(dim)
     out["lagrange_2d_contact"] = _contact()
@@ -275,9 +286,9 @@ def _step_ale(case: dict, comm, steps: int, blocked: bool) -> None:
 
 
 def _step_lagrange(case: dict, comm, steps: int) -> None:
-    from solvers.lagrange.integrators import solver_class
+    from solvers.lagrange.integrators import solver_for
 
-    s = solver_class(case["lagrange"].get("integrator", "explicit"))(comm, case)
+    s = solver_for(case)(comm, case)
     for n in range(steps):
         s.predict(0.5 * s.stable_dt())
         s.correct(None, step=n + 1, time=0.0)

@@ -28,7 +28,7 @@ import os
 from pathlib import Path
 
 from solvers.expressions import BOOL, NUM
-from solvers.lagrange.integrators import INTEGRATORS
+from solvers.lagrange.integrators import INTEGRATORS, SUBCYCLING_RATIOS
 from solvers.lagrange.mesh import body_mesh_size
 
 from .parts import BOX, NAME_PATTERN, integer, name, number, table, variants, vector
@@ -185,6 +185,10 @@ LAGRANGE = table(
         "time_step": number("s", exclusiveMinimum=0),
         "time_step_min": number("s", exclusiveMinimum=0),
         "energy_limit": number("dimensionless", exclusiveMinimum=0),
+        # element subcycling (solvers/lagrange/subcycling.py, LS-DYNA's *CONTROL_SUBCYCLE): each element
+        # and node at a power-of-two multiple of the smallest element's step, up to this ratio; 1: off
+        "subcycling": {"enum": list(SUBCYCLING_RATIOS),
+                       "x-allowed": "one of " + ", ".join(map(str, SUBCYCLING_RATIOS)) + " (1: off)"},
         "bodies": {"type": "array", "items": BODY},
     },
 )
@@ -313,8 +317,32 @@ def normalise_lagrange(raw: dict | None, case: dict) -> dict | None:
     for key in ("time_step", "time_step_min", "energy_limit"):
         if key in raw:
             lagrange[key] = to_float(raw[key])
+    lagrange["subcycling"] = int(raw.get("subcycling", 1))
     lagrange["bodies"] = bodies
     return lagrange
+
+
+def _check_subcycling(case: dict, integrator: str) -> None:
+    """Element subcycling (solvers/lagrange/subcycling.py) steps the explicit solver's elements and
+    nodes at their own rates; what would need the node's own times is refused in one line."""
+    ratio = case["lagrange"].get("subcycling", 1)
+    if ratio == 1:
+        return
+    why = None
+    if integrator != "explicit":
+        why = f"subcycles the explicit integrator's steps; lagrange.integrator = {integrator!r} takes its own"
+    elif case.get("coupling"):
+        why = "not with [coupling] yet (the coupler's impulses come at the group's step)"
+    elif case.get("contact"):
+        why = "not with [contact] yet (its multipliers are solved once per step of the whole group)"
+    elif any(g != 0.0 for g in case["lagrange"].get("gravity", [])):
+        why = "not with lagrange.gravity yet (a load at each node's own times)"
+    else:
+        kinds = {b["type"] for b in case.get("boundaries", [])} & {"rigid_wall", "traction"}
+        if kinds:
+            why = f"not with boundaries of type {', '.join(sorted(kinds))} yet (applied at each node's own times)"
+    if why:
+        raise CaseError("lagrange.subcycling", ratio, why + "; allowed here: 1 (off)")
 
 
 def mat_model(case: dict, body: dict) -> str:
@@ -363,6 +391,7 @@ def check_lagrange(case: dict, data: dict) -> None:
             raise CaseError("lagrange.integrator", integrator,
                             "[coupling] with an implicit integrator is not built yet (issue 12); allowed with "
                             "[coupling]: explicit")
+    _check_subcycling(case, integrator)
     seen: dict[str, int] = {}
     for i, (body, raw) in enumerate(zip(bodies, raw_bodies)):
         base = ["lagrange", "bodies", i]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass
 
-__all__ = ["INTEGRATORS", "Integrator", "register", "solver_class", "substep_refusal"]
+__all__ = ["INTEGRATORS", "Integrator", "register", "solver_class", "solver_for", "substep_refusal", "SUBCYCLING_RATIOS"]
 
 
 @dataclass(frozen=True)
@@ -25,6 +25,10 @@ class Integrator:
 
 
 INTEGRATORS: dict[str, Integrator] = {}
+
+SUBCYCLING_RATIOS = (1, 2, 4, 8, 16, 32, 64)
+"""The allowed ``[lagrange] subcycling`` values (1: off; subcycling.py): powers of two, so that every
+element's and node's period divides the solver's step (LS-DYNA's bins)."""
 
 
 def register(name: str, integrator: Integrator) -> None:
@@ -47,6 +51,18 @@ def solver_class(name: str):
     return getattr(importlib.import_module(it.module), it.attr)
 
 
+def solver_for(case: dict):
+    """The solver class of ``case``'s Lagrangian group: its integrator's, or the explicit one with
+    element subcycling (subcycling.py) when ``[lagrange] subcycling`` is above 1."""
+    opts = case.get("lagrange") or {}
+    name = opts.get("integrator", "explicit")
+    if int(opts.get("subcycling", 1)) > 1 and name == "explicit":
+        from solvers.lagrange.subcycling import SubcyclingSolver
+
+        return SubcyclingSolver
+    return solver_class(name)
+
+
 def substep_refusal(case: dict) -> str | None:
     """Why the Lagrangian group of ``case`` cannot take its coupled steps in substeps (multi-rate:
     orchestrator/coupling/multirate.py), None when it can: the explicit central difference can; an
@@ -58,4 +74,6 @@ def substep_refusal(case: dict) -> str | None:
         return f"the {name!r} integrator takes its own steps"
     if case.get("contact"):
         return "contact between its bodies is solved once per step of the whole group"
+    if int((case.get("lagrange") or {}).get("subcycling", 1)) > 1:
+        return "its elements are subcycled inside its own step (lagrange.subcycling)"
     return None

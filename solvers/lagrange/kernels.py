@@ -554,7 +554,7 @@ def _hex_assumed_strain(xe, gn, dt, G, kb, kap, vol0, hs, fe, j, ev, hm, hf, q, 
 @njit(cache=True)
 def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                 temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt,
-                hg_stiff, hgq):
+                hg_stiff, hgq, dt_el, dte_out):
     ne = conn.shape[0]
     xe = np.empty((8, 3))
     ve = np.empty((8, 3))
@@ -576,9 +576,19 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
     dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
     half_dt = 0.5 * dt
+    per_element = dt_el.shape[0] > 0   # subcycling (subcycling.py): each element its own step
+    keep_dte = dte_out.shape[0] > 0
     for e in range(ne):
         if alive[e] == 0:  # eroded: no force, no stable step (its nodes keep their mass)
             continue
+        if per_element:
+            dt = dt_el[e]
+            if dt < 0.0:  # not evaluated at this substep: no force (its corner forces at a cut zeroed)
+                r = cut_row[e]
+                if r >= 0:
+                    fe_cut[r, :, :] = 0.0
+                continue
+            half_dt = 0.5 * dt
         for i in range(8):
             nd = conn[e, i]
             for k in range(3):
@@ -758,6 +768,8 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
         if dte < erode_dt[e]:  # crushed below the body's smallest allowed step: erodes (its work booked)
             n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
             continue
+        if keep_dte:
+            dte_out[e] = dte
         if dte < dt_min:
             dt_min = dte
             dt_at = e
@@ -842,7 +854,7 @@ def _forces_hex(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e,
 @njit(cache=True)
 def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                  temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at, erode_dt,
-                 hg_stiff, hgq):
+                 hg_stiff, hgq, dt_el, dte_out):
     ne = conn.shape[0]
     xe = np.empty((4, 2))
     ve = np.empty((4, 2))
@@ -857,9 +869,19 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
     dt_at = -1   # the element that sets dt_min (the step's limiter, named in the log)
     n_eroded = 0
     half_dt = 0.5 * dt
+    per_element = dt_el.shape[0] > 0   # subcycling (subcycling.py): each element its own step
+    keep_dte = dte_out.shape[0] > 0
     for e in range(ne):
         if alive[e] == 0:  # eroded: no force, no stable step (its nodes keep their mass)
             continue
+        if per_element:
+            dt = dt_el[e]
+            if dt < 0.0:  # not evaluated at this substep: no force (its corner forces at a cut zeroed)
+                r = cut_row[e]
+                if r >= 0:
+                    fe_cut[r, :, :] = 0.0
+                continue
+            half_dt = 0.5 * dt
         for i in range(4):
             nd = conn[e, i]
             for k in range(2):
@@ -987,6 +1009,8 @@ def _forces_quad(x, v, dt, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e
         if dte < erode_dt[e]:  # crushed below the body's smallest allowed step: erodes (its work booked)
             n_eroded += _erode(e, alive, q_out, cut_row, fe_cut)
             continue
+        if keep_dte:
+            dte_out[e] = dte
         if dte < dt_min:
             dt_min = dte
             dt_at = e
@@ -1150,13 +1174,27 @@ def element_forces_cut(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, v
     and the element whose stable step is dt_min (-1 if none: the step's limiter the log names).
     On ``bad >= 0`` the call returns immediately (state and f are partially updated).
     """
+    none = np.empty(0)   # (one step for every element: no per-element steps)
+    return element_forces_levels(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
+                                 eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut,
+                                 alive, eps_eq, erode_at, erode_dt, hg_stiff, hgq, none, none)
+
+
+@njit(cache=True)
+def element_forces_levels(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig,
+                          eps_p, temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut,
+                          alive, eps_eq, erode_at, erode_dt, hg_stiff, hgq, dt_el, dte_out):
+    """element_forces_cut with each element's own step (subcycling.py): dt_el (ne,) the time since
+    the element's last evaluation (0: none yet, no stress update), negative for an element not
+    evaluated now (no force, its state untouched); dte_out (ne,): each evaluated element's stable
+    step (written).  Empty dt_el, dte_out: dt_prev for every element, element_forces_cut."""
     if x.shape[1] == 3:
         return _forces_hex(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                            temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
-                           erode_dt, hg_stiff, hgq)
+                           erode_dt, hg_stiff, hgq, dt_el, dte_out)
     return _forces_quad(x, v, dt_prev, conn, mat_id, mat_code, mat_par, gradN0, vol0, mass_e, sig, eps_p,
                         temp, e_int, q_out, hg_coef, q_lin, q_quad, f, cut_row, fe_cut, alive, eps_eq, erode_at,
-                        erode_dt, hg_stiff, hgq)
+                        erode_dt, hg_stiff, hgq, dt_el, dte_out)
 
 
 @njit(cache=True)
@@ -1178,7 +1216,7 @@ def _flush_stale_cache() -> None:
     flush_stale_cache([reference_gradients, _is_bad, _erode, _return_factor, _damping_share, _flow_stress_sq, _vm_dot,
                        _fibre_factor, _may_yield_3d, _may_yield_2d, _in_frame, _hex_moments, _hex_spread, _frame_of,
                        _quad_frame,
-                       assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut,
+                       assumed_strain_reference, _hex_assumed_strain, _forces_hex, _forces_quad, element_forces_cut, element_forces_levels,
                        element_forces],
                       [_materials.__file__, _elements.__file__], "kernels.deps.sha256")
 

@@ -256,14 +256,19 @@ class LagrangeSolver:
         return out
 
     # ---- the step --------------------------------------------------------------------------------
-    def _forces(self, dt_prev: float) -> float:
-        self.f[:] = 0.0
-        dt_min, bad, eroded, dt_at = kernels.element_forces_cut(
+    def _element_kernel(self, dt_prev: float) -> tuple:
+        """The element kernel's pass (kernels.element_forces_cut): (dt_min, bad, eroded, dt_at).  A
+        subclass that steps elements at their own rates (subcycling.py) calls another."""
+        return kernels.element_forces_cut(
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
             self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
             self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq,
         )
+
+    def _forces(self, dt_prev: float) -> float:
+        self.f[:] = 0.0
+        dt_min, bad, eroded, dt_at = self._element_kernel(dt_prev)
         if bad >= 0:
             gid = int(self.part.cells[bad])
             b = int(self.body_of_cell[gid])

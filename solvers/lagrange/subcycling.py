@@ -1,0 +1,379 @@
+"""Element subcycling of the explicit Lagrangian solver (``[lagrange] subcycling = R``): each element
+and node at the step its own size allows, up to R times the smallest, so that one small or crushed
+element no longer sets the whole body's step.
+
+The scheme is the nodal partition with straight-line interpolation of Belytschko, Yen & Mullen
+("Mixed methods for time integration", CMAME 17/18, 1979), the one LS-DYNA's *CONTROL_SUBCYCLE uses
+(its theory manual, "Subcycling (mixed time integration)": steps in powers of two of the smallest).
+One step of the solver (what the coupler and the step control see) is a major step dt = 2^K h, made
+of 2^K substeps h:
+
+* levels, set at the start of every major step from each element's stable step dte_e (the kernel's,
+  at the end of the last one) and the smallest of them, h_min: an element's own level is the largest
+  L <= log2 R with 2^L h_min <= MARGIN dte_e; a node's level is the smallest of its elements' (it
+  moves at the step of its stiffest element); an element is evaluated at the smallest level of its
+  nodes (an element between fine and coarse nodes at the fine rate);
+* substep j (t = t^n + j h): the nodes whose period 2^L divides j get their kick v += dt_avg f / m
+  with the force of all their elements (every one of them is evaluated at the node's times: its
+  level is at most the node's); every node moves x += h v, so a coarse node follows its straight
+  path x^n + (t - t^n) v^{n+1/2} between its kicks (the interpolation of the method); then the
+  elements whose period divides j + 1 are evaluated, their stress updated over their own period
+  2^L h (the velocities of their nodes are constant over it: a node's period is a multiple of it);
+* every period divides 2^K: at the major step's ends every node is kicked and every element
+  evaluated, and the levels are re-binned there.
+
+An element's step is the single-rate one at its own size; the stability of the scheme with integer
+ratios under element-wise Courant limits is Belytschko-Yen-Mullen's (the interface elements
+evaluated at the fine rate).  The balances book what every node got, as the single-rate step does
+(W_int, the reactions' work, impulse, torque): exact.  What the nodal partition does not conserve is
+momentum at the interface elements: a coarse node takes an interface element's force at its own times
+only, the fine nodes at every substep; the net impulse of the internal forces this leaves (a
+quadrature difference, O(h) of the interface's impulse) is reported as ``subcycling_impulse`` and is
+what ``momentum_balance_rel`` then shows (solvers/lagrange/solver.py: diagnostics).
+
+Not with (the case schema refuses them in one line): coupling, contact, rigid walls, gravity and
+surface loads (each would need its own per-node times), the implicit and quasi-static integrators.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from solvers.lagrange import kernels
+from solvers.lagrange.integrators import SUBCYCLING_RATIOS
+from solvers.lagrange.solver import LagrangeSolver, SolverError
+
+MARGIN = 0.9
+"""The share of an element's stable step its period may take to be binned above the finest level:
+the period is held for a whole major step (up to R substeps) while the element deforms; the finest
+level keeps the single-rate margin (its step h_min, re-taken every major step)."""
+
+
+
+SHARE_BINS = 64
+"""Bins per octave of the candidate shares of the substep (_cheapest_share): 1.1 % apart."""
+
+WINDOW = 8
+"""Major steps between re-takings of the elements' own levels (an element rises at most one level
+each time; it falls at once): the step control's window for the stable step (orchestrator/
+step_control.py: fluctuations of a few steps reach the highest modes' resonance)."""
+
+
+@njit(cache=True)
+def kick_due(v, v_old, f, inv_mass, level, j, h, step_prev, first, due, dt_avg):
+    """Substep j of a major step of substeps h: the nodes whose period 2^level divides j take their
+    kick v += dt_avg f / m (dt_avg: their own step, (previous + this) / 2 at j = 0, half of it on the
+    first step); due[i] = 1 for them (0 elsewhere), dt_avg[i] their dt_avg, v_old[i] their v before."""
+    nn, dim = v.shape
+    for i in range(nn):
+        period = 1 << level[i]
+        if j % period != 0:
+            due[i] = 0
+            continue
+        due[i] = 1
+        H = period * h
+        if j > 0:
+            dta = H
+        elif first:
+            dta = 0.5 * H
+        else:
+            dta = 0.5 * (step_prev[i] + H)
+        dt_avg[i] = dta
+        for c in range(dim):
+            v_old[i, c] = v[i, c]
+            v[i, c] += dta * f[i, c] * inv_mass[i]
+
+
+@njit(cache=True)
+def element_steps(period, j, h, out):
+    """out[e] = the step of element e's evaluation at the end of substep j (its period h, when its
+    period divides j + 1), -1 where it is not evaluated then (kernels.element_forces_levels)."""
+    for e in range(period.shape[0]):
+        out[e] = period[e] * h if (j + 1) % period[e] == 0 else -1.0
+
+
+@njit(cache=True)
+def account_and_move(x, v, v_old, v_free, f, mass, owned, due, dt_avg, h, sums, dv_prev):
+    """The kicked nodes' share of the balances (nodal.update_and_account, at each node's own
+    dt_avg: W_int, the reactions' work, impulse and torque about x at the kick, E_hf), added into
+    ``sums`` (its 13th-15th entries: the net internal impulse dt_avg f, what the partition does not
+    conserve; the 16th the reactions' gross size); then x += h v for every node.  Returns (the first
+    node whose velocity is not finite or -1, the node of the largest m |dv - dv_prev|^2, that value)."""
+    nn, dim = v.shape
+    bad = -1
+    worst = -1
+    worst_val = -1.0
+    r = np.zeros(3)
+    xi = np.zeros(3)
+    for i in range(nn):
+        if due[i]:
+            w = 1.0 if owned[i] else 0.0
+            dta = dt_avg[i]
+            wi = 0.0
+            we = 0.0
+            hf = 0.0
+            gross = 0.0
+            for c in range(3):
+                r[c] = 0.0
+                xi[c] = 0.0
+            for c in range(dim):
+                vc = v[i, c]
+                if not np.isfinite(vc) and bad < 0:
+                    bad = i
+                rc = mass[i] * (vc - v_free[i, c])
+                vbar = 0.5 * (v_old[i, c] + vc)
+                wi -= dta * f[i, c] * vbar
+                we += rc * vbar
+                r[c] = rc
+                xi[c] = x[i, c]
+                dv = vc - v_old[i, c]
+                hf += (dv - dv_prev[i, c]) ** 2
+                dv_prev[i, c] = dv
+                sums[10 + c] += w * dta * f[i, c]
+                gross += abs(rc)
+            sums[0] += w * wi
+            sums[1] += w * we
+            for c in range(3):
+                sums[2 + c] += w * r[c]
+            sums[5] += w * (xi[1] * r[2] - xi[2] * r[1])
+            sums[6] += w * (xi[2] * r[0] - xi[0] * r[2])
+            sums[7] += w * (xi[0] * r[1] - xi[1] * r[0])
+            hf *= mass[i]
+            sums[8] += w * hf
+            sums[13] += w * gross
+            if hf > worst_val:
+                worst_val = hf
+                worst = i
+        for c in range(dim):
+            x[i, c] += h * v[i, c]
+    return bad, worst, worst_val
+
+
+def cheapest_share(r: np.ndarray, top: int, allsum=lambda a: a) -> float:
+    """The share s of the smallest element's step h_min the levels are binned on, 1/2 < s <= 1,
+    that advances the body fastest for its element evaluations (``r``: the live elements' MARGIN dte
+    / h_min, ``top``: the highest level; ``allsum``: the ranks' sum, collective).  Binned on s h_min,
+    an element sits at level floor(log2(r / s)); as s falls from 1 the elements rise a level one by
+    one (at s = r / 2^(L+1)), halving their cost, while the substep s h_min shrinks.  Maximising
+    s / sum_e 2^-L_e(s) keeps a cluster of like elements in one level instead of splitting it at a
+    bin's edge.  A cantilever's rows at 8.5 and 9 times its corner's step split between levels 2 and
+    3 at s = 1: every element then at a fine-coarse interface, where the nodal partition is least
+    accurate (its tip 0.66 % of the peak off the single-rate run with the levels re-taken every step,
+    against 0.03 % for the coarse step alone, and 2-4 % with levels forced to alternate row by row);
+    s = 0.95 puts them all at level 3 (0.018 %).  (The substep itself is then the largest the levels
+    allow: _take_substep.)  The candidates are binned (SHARE_BINS per octave) so that ranks add
+    histograms, not elements."""
+    level = np.clip(np.floor(np.log2(r)), 0, top)
+    weight = np.exp2(-level)
+    rises = (level < top) & (r >= 1.0)
+    s_rise = r[rises] / np.exp2(level[rises] + 1.0)      # in (1/2, 1]
+    b = np.clip(np.floor((np.log2(s_rise) + 1.0) * SHARE_BINS), 0, SHARE_BINS - 1).astype(np.int64)
+    hist = np.bincount(b, weights=0.5 * weight[rises], minlength=SHARE_BINS).astype(np.float64)
+    tot = allsum(np.concatenate([hist, [weight.sum()]]))
+    hist, cost1 = tot[:-1], tot[-1]
+    if not cost1 > 0.0:
+        return 1.0
+    edges = np.exp2(np.arange(SHARE_BINS) / SHARE_BINS - 1.0)   # each bin's lower edge
+    cost = cost1 - np.cumsum(hist[::-1])[::-1]                  # at s = edge: the bins above it risen
+    speed = edges / np.maximum(cost, 1e-300)
+    best = int(np.argmax(speed))
+    return float(edges[best]) if speed[best] > (1.0 + 1e-12) / cost1 else 1.0
+
+
+class SubcyclingSolver(LagrangeSolver):
+    """The explicit solver with element subcycling (module docstring); its step is the major step."""
+
+    STATE_NODES = LagrangeSolver.STATE_NODES + ("node_step_prev",)
+    STATE_CELLS = LagrangeSolver.STATE_CELLS + ("dte", "own_level")
+    STATE_VECTORS = LagrangeSolver.STATE_VECTORS + ("subcycling_impulse",)
+    STATE_SCALARS = LagrangeSolver.STATE_SCALARS + ("share", "since_rebin")
+
+    def __init__(self, comm, case: dict):
+        ratio = int(case["lagrange"].get("subcycling", 1))
+        if ratio not in SUBCYCLING_RATIOS:
+            raise ValueError(f"lagrange.subcycling = {ratio}: allowed {', '.join(map(str, SUBCYCLING_RATIOS))}")
+        self.max_level = int(round(math.log2(ratio)))
+        self._dt_el = None   # the kernel pass's per-element steps (None: every element at dt_prev)
+        self.dte = None
+        self.own_level = None  # each element's own level (its stable step's), with its rise held back
+        self.since_rebin = 0   # major steps since the own levels were last re-taken
+        self.share = 1.0       # the substep's share of the smallest element's step (_cheapest_share)
+        super().__init__(comm, case)
+        nn = len(self.x)
+        self.node_step_prev = np.zeros(nn)    # each node's last own step (its dt_avg at the next kick)
+        self.due = np.zeros(nn, np.uint8)
+        self.node_dt_avg = np.zeros(nn)
+        self.subcycling_impulse = np.zeros(self.dim)
+        self._sums_sc = np.zeros(14)
+        self._dt_el_buf = np.zeros(len(self.conn))
+        self._h = 0.0
+        self._rebin()
+
+    # ---- levels ------------------------------------------------------------------------------------
+    def _element_kernel(self, dt_prev: float) -> tuple:
+        ne = len(self.conn)
+        if self.dte is None:
+            self.dte = np.full(ne, np.inf)
+        dt_el = self._dt_el if self._dt_el is not None else np.full(ne, dt_prev)
+        return kernels.element_forces_levels(
+            self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
+            self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
+            self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
+            self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq, dt_el, self.dte,
+        )
+
+    def _rebin(self) -> None:
+        """The levels and the substep of the next major step (module docstring).  The elements' own
+        levels are re-taken every WINDOW major steps, an element rising at most one level each time:
+        levels that jitter with the bulk viscosity's share of the stable step (51 of 205 nodes
+        changed level at every step of a ringing cantilever) pump the highest modes, as a jittering
+        step does (orchestrator/step_control.py), and re-taking them every step cost as much as the
+        element evaluations of 10^4 elements.  The substep follows every step: the largest at which
+        every element's period 2^level h is within its stable step (collective)."""
+        self.since_rebin += 1
+        if self.own_level is None or self.since_rebin >= WINDOW:
+            self.since_rebin = 0
+            top = self.max_level
+            live = (self.alive == 1) & np.isfinite(self.dte)
+            h_min = self._dt_stable
+            fits = np.full(len(self.conn), top, np.int64)   # (an eroded element holds no node back)
+            if np.isfinite(h_min) and h_min > 0.0:
+                r = MARGIN * self.dte[live] / h_min
+                self.share = cheapest_share(r, top, self._allsum)
+                fits[live] = np.clip(np.floor(np.log2(r / self.share)), 0, top).astype(np.int64)
+            self.own_level = fits if self.own_level is None else np.minimum(fits, self.own_level + 1)
+            self._levels()
+        self._take_substep()
+
+    def _take_substep(self) -> None:
+        """The largest substep at which every live element's own period is within its stable step."""
+        live = (self.alive == 1) & np.isfinite(self.dte)
+        h = float(np.min(self.dte[live] / np.exp2(self.own_level[live]))) if live.any() else np.inf
+        self._h_stable = self._min(h)
+
+    def _levels(self) -> None:
+        """The nodes' and elements' levels from the elements' own (module docstring)."""
+        top = self.max_level
+        own = self.own_level
+        nen = self.conn.shape[1]
+        node = np.full(len(self.x), top, np.int64)
+        np.minimum.at(node, self.conn.ravel(), np.repeat(own, nen))
+        if self._cut:   # a shared node's smallest level over every rank's elements: a histogram of them,
+            # summed in the one-rank order (shared_sums.py), its first non-empty bin
+            rows = np.flatnonzero(self._cut.row >= 0)
+            buf = self._cut.buffer(top + 1)
+            buf[self._cut.row[rows][:, None], np.arange(nen)[None, :], own[rows][:, None]] = 1.0
+            hist = np.zeros((len(self.x), top + 1))
+            self._cut.sum_into(buf, hist)
+            sh = self._cut.shared
+            node[sh] = np.argmax(hist[sh] > 0.0, axis=1)
+        self.node_level = node
+        self.element_level = node[self.conn].min(axis=1)
+        self._period = (1 << self.element_level).astype(np.int64)
+        k = int(node.max()) if len(node) else 0
+        self.levels = int(self.comm.allreduce(k, op=_max_op())) if self.comm.size > 1 else k
+        # the element evaluations of a major step against every element at every substep (cost share)
+        n = 1 << self.levels
+        alive = self.alive == 1
+        mine = np.array([float(np.sum(n // self._period[alive])), float(alive.sum())])
+        self._evaluations = self._allsum(mine)
+
+    def stable_dt(self) -> float:
+        return float((1 << self.levels) * self._h_stable) if np.isfinite(self._h_stable) else self._dt_stable
+
+    def local_limiter(self) -> dict | None:
+        """The element with the smallest step (the base of the levels), and what the body's step is
+        of it."""
+        d = super().local_limiter()
+        if d is not None:
+            n = 1 << self.levels
+            d["detail"] += (f"; subcycled: the body's step {self.stable_dt() / d['dt']:.3g} times that "
+                            f"element's, in {n} substeps")
+        return d
+
+    # ---- the major step ------------------------------------------------------------------------------
+    def predict(self, dt: float) -> None:
+        self.dt = dt
+        self.dt_avg = 0.5 * dt if self.first_step else 0.5 * (self.dt_prev + dt)
+        self._h = dt / (1 << self.levels)
+        self._sums_sc[:] = 0.0
+        kick_due(self.v, self.v_old, self.f, self.inv_mass, self.node_level, 0, self._h, self.node_step_prev,
+                 self.first_step, self.due, self.node_dt_avg)
+
+    def correct(self, impulse: np.ndarray | None = None, step: int = 0, time: float = 0.0,
+                surface_impulse: np.ndarray | None = None) -> None:
+        if impulse is not None or surface_impulse is not None:
+            raise ValueError("subcycling: a subcycled body takes no coupling impulses (the schema refuses "
+                             "[coupling] with lagrange.subcycling)")
+        n, h = 1 << self.levels, self._h
+        sums = self._sums_sc
+        worst, worst_hf = -1, -1.0
+        t0 = self.time
+        for j in range(n):   # (a loop over substeps: each one is the kernels' pass over nodes and elements)
+            if j:
+                kick_due(self.v, self.v_old, self.f, self.inv_mass, self.node_level, j, h, self.node_step_prev,
+                         self.first_step, self.due, self.node_dt_avg)
+            np.copyto(self.v_free, self.v)
+            self.bcs.apply(self.x, self.v, h)   # (prescribed velocities: unchanged on the nodes not kicked)
+            bad, w_at, w_hf = account_and_move(self.x, self.v, self.v_old, self.v_free, self.f, self.mass,
+                                               self.part.owned, self.due, self.node_dt_avg, h, sums, self._dv_prev)
+            if bad >= 0:
+                node = int(self.part.nodes[bad])
+                b = int(self.body_of_node[node])
+                raise SolverError(f"non-finite velocity at node {node} at step {step} (substep {j + 1} of {n}), "
+                                  f"t={t0 + (j + 1) * h:.6g} s (body {self.body_names[b]!r}, its node "
+                                  f"{node - int(self._body_first_node[b])})")
+            if w_hf > worst_hf:
+                worst, worst_hf = w_at, w_hf
+            element_steps(self._period, j, h, self._dt_el_buf)
+            self._dt_el = self._dt_el_buf
+            self.time = t0 + (j + 1) * h if j + 1 < n else time
+            dt_min = self._forces(h)
+        self._dt_el = None
+        tot = self._allsum(np.concatenate([sums, [0.5 * float(np.sum(self.mass[self.part.owned, None]
+                                                                    * self.v[self.part.owned] ** 2))]]))
+        self.w_int += tot[0]
+        self.w_ext += tot[1]
+        self.impulse += tot[2:2 + self.dim]
+        self.ang_impulse += tot[5:8] if self.dim == 3 else tot[7:8]
+        self.impulse_gross += tot[13]
+        self.subcycling_impulse += tot[10:10 + self.dim]
+        self.supplied_gross += abs(tot[1])
+        self.step, self.time = step, time
+        self.first_step = False
+        self.dt_prev = self.dt
+        self.node_step_prev = (1 << self.node_level) * h
+        self._dt_stable = dt_min if np.isfinite(dt_min) else self._dt_stable
+        self._rebin()
+        stored = float(self._allsum(self.e_int.sum()))
+        created = tot[14] + stored - self.ke0 - self.se0 - self.w_ext
+        if self.watch.update(step, tot[8] / 8.0, created, self.ke0 + self.se0 + self.supplied_gross):
+            raise SolverError(self._growing_mode(step, time, worst, worst_hf))
+
+    def diagnostics(self) -> dict[str, float]:
+        d = super().diagnostics()
+        p_scale = max(np.linalg.norm(self.p0), np.linalg.norm(self.momentum()), np.linalg.norm(self.impulse),
+                      float(self.impulse_gross[0]), 1e-300)
+        d["subcycling_substeps"] = float(1 << self.levels)
+        # element evaluations per major step over those of every element at every substep (its cost share)
+        d["subcycling_element_share"] = float(self._evaluations[0] / max(self._evaluations[1] * (1 << self.levels), 1.0))
+        for c, name in enumerate("xyz"[: self.dim]):
+            d[f"subcycling_impulse_{name}"] = float(self.subcycling_impulse[c])
+        d["subcycling_impulse_rel"] = float(np.linalg.norm(self.subcycling_impulse) / p_scale)
+        return d
+
+    def restart(self, path) -> None:
+        super().restart(path)
+        self._levels()
+        self._take_substep()
+
+    def snapshot(self) -> dict:
+        raise ValueError("snapshot: a subcycled solver takes no coupled substeps")
+
+
+def _max_op():
+    from mpi4py import MPI
+
+    return MPI.MAX
