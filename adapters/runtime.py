@@ -166,10 +166,13 @@ def serve(adapter_cls, argv=None) -> None:
                 reply[P.REPLY_HEAD:] = [diag[n] for n in names]
             ic.Send(reply, dest=0, tag=7)
 
+    stable = adapter.stable_dt()   # (collective)
     if rank == 0:  # once, at start-up: the names of the diagnostics, whether the solver steps by
-        # central differences and whether it can take a coupled step in substeps (pickled; not a hot path)
+        # central differences, whether it can take a coupled step in substeps and its stable step
+        # (whether substeps pay: orchestrator/coupling/multirate.py; pickled, not a hot path)
         ic.send((names, adapter.central_difference(),
-                 adapter.substep_cost() if side == "foreground" and adapter.can_substep() else 0.0), dest=0, tag=6)
+                 adapter.substep_cost() if side == "foreground" and adapter.can_substep() else 0.0, stable),
+                dest=0, tag=6)
     answer(True)
     cmd = np.empty(P.CMD_LEN)
     work_s = 0.0  # this rank's time in the steps' own work (the waits for the coupler excluded)

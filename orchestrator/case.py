@@ -42,7 +42,7 @@ Normalised layout (all keys always present)::
     {"name": str, "case_dir": Path,
      "run": {dimension, end_time, dt_scale, output_interval, checkpoint_interval (None if
              unset), max_steps, diagnostics_every, dt_min (None if unset), multirate (None if
-             unset: off until multirate.DEFAULT_ON, then on where a group can substep and it pays), max_substeps, group_dt_max {role: s}},
+             unset: where a group can substep and it pays, multirate.DEFAULT_ON), max_substeps, group_dt_max {role: s}},
      "ranks": {role: int}  (1 for every used solver unless given),
      "check": None | {kind, params, metrics: {name: {reference, tolerance}}},
      ... and the registered tables: "materials", "boundaries" (always), "lagrange", "ale" (when

@@ -125,7 +125,7 @@ class Coupler:
         # multi-rate (orchestrator/coupling/multirate.py): the foreground groups that take each coupled
         # step in substeps of their own stable step; run.group_dt_max caps a group's stable step
         self.group_dt_max = {r: float(v) for r, v in (run.get("group_dt_max") or {}).items()}
-        self.multirate = self._substepping(started)
+        self.multirate = self._substepping(started, restart)
         if self.multirate:
             from orchestrator.coupling.multirate import SubstepCounts
 
@@ -150,7 +150,7 @@ class Coupler:
         self._note, self._note_at = "", None
         # a jittering stable step destabilises central differences, not an implicit step: the step
         # control filters the rises only when a group steps by central differences
-        self.clock = (StepControl(self.end_time) if any(cd for _, cd, _ in started.values())
+        self.clock = (StepControl(self.end_time) if any(cd for _, cd, *_ in started.values())
                       else StepControl(self.end_time, window=1, growth=np.inf))
         self._receive_all()
         self._record(spool=False)
@@ -162,18 +162,32 @@ class Coupler:
         for k in range(len(self.history_t)):
             self.spool.append(self.history_t[k], self.history_step[k], [self.history[r][k] for r in self.history])
 
-    def _substepping(self, started: dict) -> list[str]:
+    def _substepping(self, started: dict, restart: str | None = None) -> list[str]:
         """The foreground roles that take their coupled steps in substeps: run.multirate = true (unset:
-        where it pays, once multirate.DEFAULT_ON), the multiplier method, and a group that can (its
-        start-up message: its substep cost, 0 when it cannot)."""
+        where it pays, multirate.DEFAULT_ON: the sizes and the stable steps at the start), the
+        multiplier method, and a group that can (its start-up message: its substep cost, 0 when it
+        cannot, and its stable step).  A restart keeps the choice of the run it continues (its
+        checkpoint's): the stable steps it starts from are another state's."""
         from orchestrator.coupling.multirate import DEFAULT_ON, pays
 
         choice = self.case["run"].get("multirate")
         if (self.coupling is None or choice is False or (choice is None and not DEFAULT_ON)
                 or self.coupling.method.NAME != "multiplier"):
             return []
+        if restart and choice is None:
+            import h5py
+
+            with h5py.File(restart, "r") as h:
+                if "multirate" in h.attrs:
+                    kept = str(h.attrs["multirate"])
+                    return [r for r in self.fgs if r in kept.split(",")]
         zones = float(np.prod(self.case["ale"]["grid"]["cells"]))
-        return [r for r in self.fgs if started[r][2] and (choice is True or pays(zones, started[r][2]))]
+        bg = started[self.bg][3]
+
+        def ratio(r):
+            return bg / min(started[r][3], self.group_dt_max.get(r, np.inf))
+
+        return [r for r in self.fgs if started[r][2] and (choice is True or pays(zones, started[r][2], ratio(r)))]
 
     def _stable(self) -> dict[str, float]:
         """Each group's stable step from its last reply, capped by run.group_dt_max."""
@@ -561,6 +575,7 @@ class Coupler:
                 for k, a in self.coupling.state_arrays().items():
                     h.create_dataset(f"coupling/{k}", data=a)
             h.create_dataset("step_control", data=self.clock.state())
+            h.attrs["multirate"] = ",".join(self.multirate)   # (the groups in substeps: a restart keeps them)
             if self.multirate:
                 h.create_dataset("substep_counts", data=self.counts.state())
             h.create_dataset("early_steps", data=np.array(self.early, dtype=np.float64))

@@ -136,10 +136,8 @@ def _lagrange(dim: int, mesh: str, hourglass: str = "viscous") -> str:
 
 
 def _subcycled(dim: int) -> str:
-    """The explicit solver with element subcycling (its node and step kernels; no rigid wall there)."""
+    """The explicit solver with element subcycling (its node, wall and step kernels)."""
     text = _lagrange(dim, "box", "assumed_strain")
-    wall = text.index('[[boundaries]]\ntype = "rigid_wall"')
-    text = text[:wall]
     first = text.index("[[lagrange.bodies]]")
     return text[:first] + "[lagrange]\nsubcycling = 4\n" + text[first:]
 

@@ -53,8 +53,8 @@ RUN = table(
         # a step below this stops the run by name (its limiter named; LS-DYNA's DTMIN); unset: none
         "dt_min": number("s", exclusiveMinimum=0),
         # multi-rate (orchestrator/coupling/multirate.py): foreground groups that can take each coupled
-        # step in substeps of their own stable step (true: all must; false or unset: none, for now:
-        # multirate.DEFAULT_ON)
+        # step in substeps of their own stable step (true: all must; false: none; unset: where it pays,
+        # multirate.DEFAULT_ON: PAYS zones per element and a step ratio of at least MIN_RATIO)
         "multirate": {"type": "boolean"},
         "max_substeps": integer("substeps", minimum=1, maximum=1024),
         # a group's stable step capped (s): a stiffer body's step, for studies of the ratio

@@ -338,7 +338,7 @@ def _check_subcycling(case: dict, integrator: str) -> None:
     elif any(g != 0.0 for g in case["lagrange"].get("gravity", [])):
         why = "not with lagrange.gravity yet (a load at each node's own times)"
     else:
-        kinds = {b["type"] for b in case.get("boundaries", [])} & {"rigid_wall", "traction"}
+        kinds = {b["type"] for b in case.get("boundaries", [])} & {"traction"}
         if kinds:
             why = f"not with boundaries of type {', '.join(sorted(kinds))} yet (applied at each node's own times)"
     if why:

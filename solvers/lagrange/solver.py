@@ -266,8 +266,13 @@ class LagrangeSolver:
             self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq,
         )
 
-    def _forces(self, dt_prev: float) -> float:
+    def _clear_forces(self) -> None:
+        """Zero the nodal forces before the element kernel adds its (a subclass stepping nodes at
+        their own rates clears those it moved: subcycling.py)."""
         self.f[:] = 0.0
+
+    def _forces(self, dt_prev: float) -> float:
+        self._clear_forces()
         dt_min, bad, eroded, dt_at = self._element_kernel(dt_prev)
         if bad >= 0:
             gid = int(self.part.cells[bad])

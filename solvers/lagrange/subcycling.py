@@ -8,19 +8,24 @@ The scheme is the nodal partition with straight-line interpolation of Belytschko
 One step of the solver (what the coupler and the step control see) is a major step dt = 2^K h, made
 of 2^K substeps h:
 
-* levels, set at the start of every major step from each element's stable step dte_e (the kernel's,
-  at the end of the last one) and the smallest of them, h_min: an element's own level is the largest
-  L <= log2 R with 2^L h_min <= MARGIN dte_e; a node's level is the smallest of its elements' (it
-  moves at the step of its stiffest element); an element is evaluated at the smallest level of its
-  nodes (an element between fine and coarse nodes at the fine rate);
+* levels, from each element's stable step dte_e (the kernel's, at the end of a major step) and the
+  smallest of them, h_min: an element's own level is the largest L <= log2 R with
+  2^L s h_min <= MARGIN dte_e, s the share that advances the body fastest (cheapest_share), re-taken
+  every WINDOW major steps (rising one level at a time); a node's level is the smallest of its
+  elements' (it moves at the step of its stiffest element); an element is evaluated at the smallest
+  level of its nodes (an element between fine and coarse nodes at the fine rate).  The substep h is
+  the largest at which every element's own period 2^L h is within its stable step, re-taken every
+  major step;
 * substep j (t = t^n + j h): the nodes whose period 2^L divides j get their kick v += dt_avg f / m
   with the force of all their elements (every one of them is evaluated at the node's times: its
-  level is at most the node's); every node moves x += h v, so a coarse node follows its straight
-  path x^n + (t - t^n) v^{n+1/2} between its kicks (the interpolation of the method); then the
-  elements whose period divides j + 1 are evaluated, their stress updated over their own period
-  2^L h (the velocities of their nodes are constant over it: a node's period is a multiple of it);
-* every period divides 2^K: at the major step's ends every node is kicked and every element
-  evaluated, and the levels are re-binned there.
+  level is at most the node's); a coarse node follows its straight path x^n + (t - t^n) v^{n+1/2}
+  between its kicks (the interpolation of the method), taken where it is needed: at the period of
+  its finest element (its position level), x += 2^P h v; then the elements whose period divides
+  j + 1 are evaluated, their stress updated over their own period 2^L h (the velocities of their
+  nodes are constant over it: a node's period is a multiple of it).  Each substep visits only the
+  nodes due (sorted by level: those due are a prefix); the element kernel skips the others;
+* every period divides 2^K: at the major step's ends every node is kicked and moved and every
+  element evaluated (output, checkpoints and re-binning fall there).
 
 An element's step is the single-rate one at its own size; the stability of the scheme with integer
 ratios under element-wise Courant limits is Belytschko-Yen-Mullen's (the interface elements
@@ -31,8 +36,9 @@ only, the fine nodes at every substep; the net impulse of the internal forces th
 quadrature difference, O(h) of the interface's impulse) is reported as ``subcycling_impulse`` and is
 what ``momentum_balance_rel`` then shows (solvers/lagrange/solver.py: diagnostics).
 
-Not with (the case schema refuses them in one line): coupling, contact, rigid walls, gravity and
-surface loads (each would need its own per-node times), the implicit and quasi-static integrators.
+Rigid walls hold each node over its own step.  Not with (the case schema refuses them in one line):
+coupling, contact, gravity and surface loads (each would need its own per-node times), the implicit
+and quasi-static integrators.
 """
 from __future__ import annotations
 
@@ -42,7 +48,6 @@ import numpy as np
 from numba import njit
 
 from solvers.lagrange import kernels
-from solvers.lagrange.integrators import SUBCYCLING_RATIOS
 from solvers.lagrange.solver import LagrangeSolver, SolverError
 
 MARGIN = 0.9
@@ -62,18 +67,25 @@ step_control.py: fluctuations of a few steps reach the highest modes' resonance)
 
 
 @njit(cache=True)
-def kick_due(v, v_old, f, inv_mass, level, j, h, step_prev, first, due, dt_avg):
-    """Substep j of a major step of substeps h: the nodes whose period 2^level divides j take their
-    kick v += dt_avg f / m (dt_avg: their own step, (previous + this) / 2 at j = 0, half of it on the
-    first step); due[i] = 1 for them (0 elsewhere), dt_avg[i] their dt_avg, v_old[i] their v before."""
-    nn, dim = v.shape
-    for i in range(nn):
-        period = 1 << level[i]
-        if j % period != 0:
-            due[i] = 0
-            continue
-        due[i] = 1
-        H = period * h
+def trailing_levels(j, top):
+    """The highest level whose period 2^level divides substep j (top for j = 0, every level)."""
+    if j == 0:
+        return top
+    k = 0
+    while k < top and (j >> (k + 1)) << (k + 1) == j:
+        k += 1
+    return k
+
+
+@njit(cache=True)
+def kick_nodes(v, v_old, f, inv_mass, order, count, level, j, h, step_prev, first, dt_avg):
+    """Substep j of a major step of substeps h: the nodes order[:count] (those whose period 2^level
+    divides j) take their kick v += dt_avg f / m, dt_avg their own step ((previous + this) / 2 at
+    j = 0, half of it on the first step); dt_avg[i] and v_old[i] (v before) are kept for the balances."""
+    dim = v.shape[1]
+    for k in range(count):
+        i = order[k]
+        H = (1 << level[i]) * h
         if j > 0:
             dta = H
         elif first:
@@ -87,67 +99,116 @@ def kick_due(v, v_old, f, inv_mass, level, j, h, step_prev, first, due, dt_avg):
 
 
 @njit(cache=True)
-def element_steps(period, j, h, out):
-    """out[e] = the step of element e's evaluation at the end of substep j (its period h, when its
-    period divides j + 1), -1 where it is not evaluated then (kernels.element_forces_levels)."""
-    for e in range(period.shape[0]):
-        out[e] = period[e] * h if (j + 1) % period[e] == 0 else -1.0
+def move_nodes(x, v, order, count, level, h):
+    """The nodes order[:count] (those whose position is needed at the end of this substep: their
+    position level's period divides it) move over that period, x += 2^level h v (their velocity is
+    constant over it: their kicks fall at multiples of it)."""
+    dim = v.shape[1]
+    for k in range(count):
+        i = order[k]
+        s = (1 << level[i]) * h
+        for c in range(dim):
+            x[i, c] += s * v[i, c]
 
 
 @njit(cache=True)
-def account_and_move(x, v, v_old, v_free, f, mass, owned, due, dt_avg, h, sums, dv_prev):
-    """The kicked nodes' share of the balances (nodal.update_and_account, at each node's own
-    dt_avg: W_int, the reactions' work, impulse and torque about x at the kick, E_hf), added into
-    ``sums`` (its 13th-15th entries: the net internal impulse dt_avg f, what the partition does not
-    conserve; the 16th the reactions' gross size); then x += h v for every node.  Returns (the first
-    node whose velocity is not finite or -1, the node of the largest m |dv - dv_prev|^2, that value)."""
-    nn, dim = v.shape
+def rigid_wall_nodes(x, v, point, normal, order, count, level, h):
+    """nodal.rigid_wall for the nodes order[:count] (those kicked now), each over its own step
+    2^level h: none may cross the plane before its next kick (tangential motion free)."""
+    dim = v.shape[1]
+    for k in range(count):
+        i = order[k]
+        H = (1 << level[i]) * h
+        gap = 0.0
+        vn = 0.0
+        for c in range(dim):
+            gap += (x[i, c] - point[c]) * normal[c]
+            vn += v[i, c] * normal[c]
+        if gap + H * vn < 0.0:
+            dv = -gap / H - vn
+            for c in range(dim):
+                v[i, c] += dv * normal[c]
+
+
+@njit(cache=True)
+def element_steps(level, t, h, out):
+    """out[e] = the step of element e's evaluation at the end of a substep whose highest dividing
+    level is t (its period 2^level h, when level <= t), -1 where it is not evaluated then
+    (kernels.element_forces_levels)."""
+    for e in range(level.shape[0]):
+        out[e] = (1 << level[e]) * h if level[e] <= t else -1.0
+
+
+@njit(cache=True)
+def copy_rows(dst, src, order, count):
+    """dst[i] = src[i] for i in order[:count]."""
+    for k in range(count):
+        i = order[k]
+        for c in range(src.shape[1]):
+            dst[i, c] = src[i, c]
+
+
+@njit(cache=True)
+def zero_rows(a, order, count):
+    """a[i] = 0 for i in order[:count]."""
+    for k in range(count):
+        i = order[k]
+        for c in range(a.shape[1]):
+            a[i, c] = 0.0
+
+
+@njit(cache=True)
+def account_nodes(x, v, v_old, v_free, f, mass, owned, order, count, dt_avg, sums, dv_prev):
+    """The kicked nodes' (order[:count]) share of the balances (nodal.update_and_account, at each
+    node's own dt_avg: W_int, the reactions' work, impulse and torque about x at the kick, E_hf),
+    added into ``sums`` (its 11th-13th entries: the net internal impulse dt_avg f, what the partition
+    does not conserve; the 14th the reactions' gross size).  Returns (the first node whose velocity
+    is not finite or -1, the node of the largest m |dv - dv_prev|^2, that value)."""
+    dim = v.shape[1]
     bad = -1
     worst = -1
     worst_val = -1.0
     r = np.zeros(3)
     xi = np.zeros(3)
-    for i in range(nn):
-        if due[i]:
-            w = 1.0 if owned[i] else 0.0
-            dta = dt_avg[i]
-            wi = 0.0
-            we = 0.0
-            hf = 0.0
-            gross = 0.0
-            for c in range(3):
-                r[c] = 0.0
-                xi[c] = 0.0
-            for c in range(dim):
-                vc = v[i, c]
-                if not np.isfinite(vc) and bad < 0:
-                    bad = i
-                rc = mass[i] * (vc - v_free[i, c])
-                vbar = 0.5 * (v_old[i, c] + vc)
-                wi -= dta * f[i, c] * vbar
-                we += rc * vbar
-                r[c] = rc
-                xi[c] = x[i, c]
-                dv = vc - v_old[i, c]
-                hf += (dv - dv_prev[i, c]) ** 2
-                dv_prev[i, c] = dv
-                sums[10 + c] += w * dta * f[i, c]
-                gross += abs(rc)
-            sums[0] += w * wi
-            sums[1] += w * we
-            for c in range(3):
-                sums[2 + c] += w * r[c]
-            sums[5] += w * (xi[1] * r[2] - xi[2] * r[1])
-            sums[6] += w * (xi[2] * r[0] - xi[0] * r[2])
-            sums[7] += w * (xi[0] * r[1] - xi[1] * r[0])
-            hf *= mass[i]
-            sums[8] += w * hf
-            sums[13] += w * gross
-            if hf > worst_val:
-                worst_val = hf
-                worst = i
+    for k in range(count):
+        i = order[k]
+        w = 1.0 if owned[i] else 0.0
+        dta = dt_avg[i]
+        wi = 0.0
+        we = 0.0
+        hf = 0.0
+        gross = 0.0
+        for c in range(3):
+            r[c] = 0.0
+            xi[c] = 0.0
         for c in range(dim):
-            x[i, c] += h * v[i, c]
+            vc = v[i, c]
+            if not np.isfinite(vc) and bad < 0:
+                bad = i
+            rc = mass[i] * (vc - v_free[i, c])
+            vbar = 0.5 * (v_old[i, c] + vc)
+            wi -= dta * f[i, c] * vbar
+            we += rc * vbar
+            r[c] = rc
+            xi[c] = x[i, c]
+            dv = vc - v_old[i, c]
+            hf += (dv - dv_prev[i, c]) ** 2
+            dv_prev[i, c] = dv
+            sums[10 + c] += w * dta * f[i, c]
+            gross += abs(rc)
+        sums[0] += w * wi
+        sums[1] += w * we
+        for c in range(3):
+            sums[2 + c] += w * r[c]
+        sums[5] += w * (xi[1] * r[2] - xi[2] * r[1])
+        sums[6] += w * (xi[2] * r[0] - xi[0] * r[2])
+        sums[7] += w * (xi[0] * r[1] - xi[1] * r[0])
+        hf *= mass[i]
+        sums[8] += w * hf
+        sums[13] += w * gross
+        if hf > worst_val:
+            worst_val = hf
+            worst = i
     return bad, worst, worst_val
 
 
@@ -191,19 +252,16 @@ class SubcyclingSolver(LagrangeSolver):
     STATE_SCALARS = LagrangeSolver.STATE_SCALARS + ("share", "since_rebin")
 
     def __init__(self, comm, case: dict):
-        ratio = int(case["lagrange"].get("subcycling", 1))
-        if ratio not in SUBCYCLING_RATIOS:
-            raise ValueError(f"lagrange.subcycling = {ratio}: allowed {', '.join(map(str, SUBCYCLING_RATIOS))}")
-        self.max_level = int(round(math.log2(ratio)))
+        ratio = int(case["lagrange"].get("subcycling", 1))   # (a power of two: the schema's
+        self.max_level = int(round(math.log2(ratio)))          # integrators.SUBCYCLING_RATIOS)
         self._dt_el = None   # the kernel pass's per-element steps (None: every element at dt_prev)
         self.dte = None
         self.own_level = None  # each element's own level (its stable step's), with its rise held back
         self.since_rebin = 0   # major steps since the own levels were last re-taken
-        self.share = 1.0       # the substep's share of the smallest element's step (_cheapest_share)
+        self.share = 1.0       # the share of the smallest element's step the levels are binned on (cheapest_share)
         super().__init__(comm, case)
         nn = len(self.x)
         self.node_step_prev = np.zeros(nn)    # each node's last own step (its dt_avg at the next kick)
-        self.due = np.zeros(nn, np.uint8)
         self.node_dt_avg = np.zeros(nn)
         self.subcycling_impulse = np.zeros(self.dim)
         self._sums_sc = np.zeros(14)
@@ -229,9 +287,9 @@ class SubcyclingSolver(LagrangeSolver):
         levels are re-taken every WINDOW major steps, an element rising at most one level each time:
         levels that jitter with the bulk viscosity's share of the stable step (51 of 205 nodes
         changed level at every step of a ringing cantilever) pump the highest modes, as a jittering
-        step does (orchestrator/step_control.py), and re-taking them every step cost as much as the
-        element evaluations of 10^4 elements.  The substep follows every step: the largest at which
-        every element's period 2^level h is within its stable step (collective)."""
+        step does (orchestrator/step_control.py); re-taking them takes a few passes over the elements
+        and nodes.  The substep follows every step: the largest at which every element's period
+        2^level h is within its stable step (collective)."""
         self.since_rebin += 1
         if self.own_level is None or self.since_rebin >= WINDOW:
             self.since_rebin = 0
@@ -254,24 +312,21 @@ class SubcyclingSolver(LagrangeSolver):
         self._h_stable = self._min(h)
 
     def _levels(self) -> None:
-        """The nodes' and elements' levels from the elements' own (module docstring)."""
+        """The nodes' and elements' levels from the elements' own (module docstring), and the orders
+        the substeps take the nodes in (by level: those due at a substep are a prefix)."""
+        self.node_level = self._node_min(self.own_level)
+        self.element_level = self.node_level[self.conn].min(axis=1)
+        # a node's position is needed where one of its elements is evaluated: at its position level,
+        # the smallest of its elements' (<= its own; over every rank's elements: the copies agree)
+        self.position_level = self._node_min(self.element_level)
         top = self.max_level
-        own = self.own_level
-        nen = self.conn.shape[1]
-        node = np.full(len(self.x), top, np.int64)
-        np.minimum.at(node, self.conn.ravel(), np.repeat(own, nen))
-        if self._cut:   # a shared node's smallest level over every rank's elements: a histogram of them,
-            # summed in the one-rank order (shared_sums.py), its first non-empty bin
-            rows = np.flatnonzero(self._cut.row >= 0)
-            buf = self._cut.buffer(top + 1)
-            buf[self._cut.row[rows][:, None], np.arange(nen)[None, :], own[rows][:, None]] = 1.0
-            hist = np.zeros((len(self.x), top + 1))
-            self._cut.sum_into(buf, hist)
-            sh = self._cut.shared
-            node[sh] = np.argmax(hist[sh] > 0.0, axis=1)
-        self.node_level = node
-        self.element_level = node[self.conn].min(axis=1)
+        self._kick_order = np.argsort(self.node_level, kind="stable").astype(np.int64)
+        self._kick_count = np.searchsorted(self.node_level[self._kick_order], np.arange(top + 1), side="right")
+        self._move_order = np.argsort(self.position_level, kind="stable").astype(np.int64)
+        self._move_count = np.searchsorted(self.position_level[self._move_order], np.arange(top + 1), side="right")
+        self._moved = len(self.x)
         self._period = (1 << self.element_level).astype(np.int64)
+        node = self.node_level
         k = int(node.max()) if len(node) else 0
         self.levels = int(self.comm.allreduce(k, op=_max_op())) if self.comm.size > 1 else k
         # the element evaluations of a major step against every element at every substep (cost share)
@@ -279,6 +334,39 @@ class SubcyclingSolver(LagrangeSolver):
         alive = self.alive == 1
         mine = np.array([float(np.sum(n // self._period[alive])), float(alive.sum())])
         self._evaluations = self._allsum(mine)
+
+    def _node_min(self, per_element: np.ndarray) -> np.ndarray:
+        """Each node's smallest value of a level over its elements, every rank's at a shared node (a
+        histogram of the levels summed in the one-rank order, shared_sums.py: its first non-empty bin)."""
+        top = self.max_level
+        nen = self.conn.shape[1]
+        node = np.full(len(self.x), top, np.int64)
+        np.minimum.at(node, self.conn.ravel(), np.repeat(per_element, nen))
+        if self._cut:
+            rows = np.flatnonzero(self._cut.row >= 0)
+            buf = self._cut.buffer(top + 1)
+            buf[self._cut.row[rows][:, None], np.arange(nen)[None, :], per_element[rows][:, None]] = 1.0
+            hist = np.zeros((len(self.x), top + 1))
+            self._cut.sum_into(buf, hist)
+            sh = self._cut.shared
+            node[sh] = np.argmax(hist[sh] > 0.0, axis=1)
+        return node
+
+    def _clear_forces(self) -> None:
+        """Zero the forces of the nodes whose position moved this substep (every node of an element
+        evaluated now is one; the others' forces are not read until theirs are)."""
+        if self._dt_el is None:
+            self.f[:] = 0.0
+        else:
+            zero_rows(self.f, self._move_order, self._moved)
+
+    def _boundaries(self, due: int, h: float) -> None:
+        """The velocity conditions on the nodes kicked now (bcs.apply's, each node over its own
+        step): prescribed components on every node (unchanged on the others), rigid walls on those."""
+        for nodes, c, val in self.bcs.prescribed:
+            self.v[nodes, c] = val
+        for point, normal in self.bcs.walls:
+            rigid_wall_nodes(self.x, self.v, point, normal, self._kick_order, due, self.node_level, h)
 
     def stable_dt(self) -> float:
         return float((1 << self.levels) * self._h_stable) if np.isfinite(self._h_stable) else self._dt_stable
@@ -299,8 +387,8 @@ class SubcyclingSolver(LagrangeSolver):
         self.dt_avg = 0.5 * dt if self.first_step else 0.5 * (self.dt_prev + dt)
         self._h = dt / (1 << self.levels)
         self._sums_sc[:] = 0.0
-        kick_due(self.v, self.v_old, self.f, self.inv_mass, self.node_level, 0, self._h, self.node_step_prev,
-                 self.first_step, self.due, self.node_dt_avg)
+        kick_nodes(self.v, self.v_old, self.f, self.inv_mass, self._kick_order, len(self._kick_order),
+                   self.node_level, 0, self._h, self.node_step_prev, self.first_step, self.node_dt_avg)
 
     def correct(self, impulse: np.ndarray | None = None, step: int = 0, time: float = 0.0,
                 surface_impulse: np.ndarray | None = None) -> None:
@@ -312,13 +400,15 @@ class SubcyclingSolver(LagrangeSolver):
         worst, worst_hf = -1, -1.0
         t0 = self.time
         for j in range(n):   # (a loop over substeps: each one is the kernels' pass over nodes and elements)
+            due = self._kick_count[trailing_levels(j, self.levels)]
             if j:
-                kick_due(self.v, self.v_old, self.f, self.inv_mass, self.node_level, j, h, self.node_step_prev,
-                         self.first_step, self.due, self.node_dt_avg)
-            np.copyto(self.v_free, self.v)
-            self.bcs.apply(self.x, self.v, h)   # (prescribed velocities: unchanged on the nodes not kicked)
-            bad, w_at, w_hf = account_and_move(self.x, self.v, self.v_old, self.v_free, self.f, self.mass,
-                                               self.part.owned, self.due, self.node_dt_avg, h, sums, self._dv_prev)
+                kick_nodes(self.v, self.v_old, self.f, self.inv_mass, self._kick_order, due, self.node_level, j, h,
+                           self.node_step_prev, self.first_step, self.node_dt_avg)
+            copy_rows(self.v_free, self.v, self._kick_order, due)
+            self._boundaries(due, h)
+            bad, w_at, w_hf = account_nodes(self.x, self.v, self.v_old, self.v_free, self.f, self.mass,
+                                            self.part.owned, self._kick_order, due, self.node_dt_avg, sums,
+                                            self._dv_prev)
             if bad >= 0:
                 node = int(self.part.nodes[bad])
                 b = int(self.body_of_node[node])
@@ -327,7 +417,10 @@ class SubcyclingSolver(LagrangeSolver):
                                   f"{node - int(self._body_first_node[b])})")
             if w_hf > worst_hf:
                 worst, worst_hf = w_at, w_hf
-            element_steps(self._period, j, h, self._dt_el_buf)
+            t = trailing_levels(j + 1, self.levels)
+            self._moved = self._move_count[t]
+            move_nodes(self.x, self.v, self._move_order, self._moved, self.position_level, h)
+            element_steps(self.element_level, t, h, self._dt_el_buf)
             self._dt_el = self._dt_el_buf
             self.time = t0 + (j + 1) * h if j + 1 < n else time
             dt_min = self._forces(h)

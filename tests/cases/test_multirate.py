@@ -84,16 +84,17 @@ def test_the_steel_panel_in_a_shock_tube_at_the_gass_step(tmp_path):
 @pytest.mark.slow
 def test_substeps_restart_bitwise_and_two_plus_two_ranks_equal_one_plus_one(tmp_path):
     """embedded_piston_sod in substeps (the piston 1 x 2 elements, its step capped 8 times below the
-    gas's), to 0.06 with a checkpoint at 0.03: continued from the checkpoint, the last output and
+    gas's: run.multirate unset, the default substeps it: multirate.MIN_RATIO, PAYS), to 0.06 with a
+    checkpoint at 0.03 (which keeps that choice): continued from the checkpoint, the last output and
     every diagnostic equal the run without it bit for bit (the coupler's substep counts, the body's
     last force and mean velocity, the impulses the predictor starts from are in the checkpoint; a
     checkpoint without the last force differs at the first step after it), and the same run on
     2 + 2 ranks equals 1 + 1 bit for bit."""
     restarted_equals_full(tmp_path, "embedded_piston_sod", 0.06, edits=[
-        ("[run]\n", f"[run]\nmultirate = true\ngroup_dt_max = {{ lagrange = {5.5e-4 / 8!r} }}\n")])
+        ("[run]\n", f"[run]\ngroup_dt_max = {{ lagrange = {5.5e-4 / 8!r} }}\n")])
     case, full, cont = tmp_path / "case", tmp_path / "full", tmp_path / "cont"
     sa, sb = (json.loads((d / "summary.json").read_text()) for d in (full, cont))
-    assert sa["multirate"] == sb["multirate"]
+    assert sa["multirate"] == sb["multirate"] and sa["multirate"]["lagrange"]["per_step_min"] >= 8
     two = tmp_path / "two"
     r = immerse("run", case, "--out", two, "--ranks", "ale=2", "lagrange=2", "--oversubscribe")
     assert r.returncode in (0, 1), r.stdout + r.stderr

@@ -164,10 +164,12 @@ initial_velocity = ["300.0 * x / 0.01", "50.0"]
 
 def test_the_coupling_step_is_bounded_by_max_substeps_and_substeps_pay_beside_enough_zones():
     """SubstepCounts.bound: max_substeps times the smallest substepping group's step (inf without
-    one); pays: at least PAYS (4) zones per element of the group (multirate.py: the cost model)."""
-    from orchestrator.coupling.multirate import PAYS, pays
+    one); pays: at least PAYS (4) zones per element of the group (multirate.py: the cost model) and,
+    by default, a stable step at least MIN_RATIO (4) times below the background's."""
+    from orchestrator.coupling.multirate import DEFAULT_ON, MIN_RATIO, PAYS, pays
 
     c = SubstepCounts(["lagrange", "other"], max_substeps=16)
     assert c.bound({"lagrange": 1e-6, "other": 3e-6}) == pytest.approx(16e-6, rel=1e-15)
     assert SubstepCounts([], max_substeps=16).bound({}) == float("inf")
     assert pays(4000.0, 1000.0) and not pays(3999.0, 1000.0) and PAYS == 4.0
+    assert pays(4000.0, 1000.0, 4.0) and not pays(4000.0, 1000.0, 3.99) and MIN_RATIO == 4.0 and DEFAULT_ON
