@@ -260,6 +260,9 @@ class SubcyclingSolver(LagrangeSolver):
         self.since_rebin = 0   # major steps since the own levels were last re-taken
         self.share = 1.0       # the share of the smallest element's step the levels are binned on (cheapest_share)
         super().__init__(comm, case)
+        if self.has_gravity or self.loads is not None or self.contact is not None:
+            raise ValueError("subcycling: not with gravity, surface loads or contact yet (the case schema "
+                             "refuses them: lagrange.subcycling)")
         nn = len(self.x)
         self.node_step_prev = np.zeros(nn)    # each node's last own step (its dt_avg at the next kick)
         self.node_dt_avg = np.zeros(nn)
