@@ -335,12 +335,6 @@ def _check_subcycling(case: dict, integrator: str) -> None:
         why = "not with [coupling] yet (the coupler's impulses come at the group's step)"
     elif case.get("contact"):
         why = "not with [contact] yet (its multipliers are solved once per step of the whole group)"
-    elif any(g != 0.0 for g in case["lagrange"].get("gravity", [])):
-        why = "not with lagrange.gravity yet (a load at each node's own times)"
-    else:
-        kinds = {b["type"] for b in case.get("boundaries", [])} & {"traction"}
-        if kinds:
-            why = f"not with boundaries of type {', '.join(sorted(kinds))} yet (applied at each node's own times)"
     if why:
         raise CaseError("lagrange.subcycling", ratio, why + "; allowed here: 1 (off)")
 

@@ -289,12 +289,17 @@ class LagrangeSolver:
                 self.surface_stale = True
         if self._cut:  # the cut nodes' forces in the one-rank order (shared_sums.py)
             self._cut.sum_into(self._fe_cut, self.f)
+        self._add_external_forces()
+        self._limiter = (float(dt_min), int(dt_at))   # this rank's: local_limiter() names it
+        return self._min(dt_min)
+
+    def _add_external_forces(self) -> None:
+        """Gravity and the surface loads at self.time into the nodal forces (a subclass stepping
+        nodes at their own rates adds them to those it moved: subcycling.py)."""
         if self.has_gravity:  # (every copy of a node has its full mass: the copies agree)
             self.f += self.mass[:, None] * self.gravity
         if self.loads is not None:  # (global: every copy of a node gets its full load)
             self.f += self._load_local(self.time)
-        self._limiter = (float(dt_min), int(dt_at))   # this rank's: local_limiter() names it
-        return self._min(dt_min)
 
     def _load_local(self, t: float) -> np.ndarray:
         """(nn_local, dim) the surface loads at t on this rank's nodes."""

@@ -36,9 +36,10 @@ only, the fine nodes at every substep; the net impulse of the internal forces th
 quadrature difference, O(h) of the interface's impulse) is reported as ``subcycling_impulse`` and is
 what ``momentum_balance_rel`` then shows (solvers/lagrange/solver.py: diagnostics).
 
-Rigid walls hold each node over its own step.  Not with (the case schema refuses them in one line):
-coupling, contact, gravity and surface loads (each would need its own per-node times), the implicit
-and quasi-static integrators.
+Rigid walls hold each node over its own step; gravity and the surface loads (at the time of each
+node's force evaluation) are booked at its kicks, as the single-rate step books them.  Not with (the
+case schema refuses them in one line): coupling and contact (their multipliers are solved at one
+step for the whole group), the implicit and quasi-static integrators.
 """
 from __future__ import annotations
 
@@ -158,18 +159,21 @@ def zero_rows(a, order, count):
 
 
 @njit(cache=True)
-def account_nodes(x, v, v_old, v_free, f, mass, owned, order, count, dt_avg, sums, dv_prev):
+def account_nodes(x, v, v_old, v_free, f, fg, fl, mass, owned, order, count, dt_avg, sums, dv_prev):
     """The kicked nodes' (order[:count]) share of the balances (nodal.update_and_account, at each
     node's own dt_avg: W_int, the reactions' work, impulse and torque about x at the kick, E_hf),
-    added into ``sums`` (its 11th-13th entries: the net internal impulse dt_avg f, what the partition
-    does not conserve; the 14th the reactions' gross size).  Returns (the first node whose velocity
-    is not finite or -1, the node of the largest m |dv - dv_prev|^2, that value)."""
+    added into ``sums``: its entries 10-12 the net internal impulse dt_avg (f - fg - fl), what the
+    partition does not conserve; 13 the reactions' gross size; 14, 15 the work of gravity fg and of
+    the surface loads fl (in f) on the mean velocity, 16-18 their impulse, 19-21 its torque, booked
+    as solver.py's _book_force books them.  Returns (the first node whose velocity is not finite or
+    -1, the node of the largest m |dv - dv_prev|^2, that value)."""
     dim = v.shape[1]
     bad = -1
     worst = -1
     worst_val = -1.0
     r = np.zeros(3)
     xi = np.zeros(3)
+    fe = np.zeros(3)
     for k in range(count):
         i = order[k]
         w = 1.0 if owned[i] else 0.0
@@ -178,9 +182,12 @@ def account_nodes(x, v, v_old, v_free, f, mass, owned, order, count, dt_avg, sum
         we = 0.0
         hf = 0.0
         gross = 0.0
+        wg = 0.0
+        wl = 0.0
         for c in range(3):
             r[c] = 0.0
             xi[c] = 0.0
+            fe[c] = 0.0
         for c in range(dim):
             vc = v[i, c]
             if not np.isfinite(vc) and bad < 0:
@@ -194,8 +201,11 @@ def account_nodes(x, v, v_old, v_free, f, mass, owned, order, count, dt_avg, sum
             dv = vc - v_old[i, c]
             hf += (dv - dv_prev[i, c]) ** 2
             dv_prev[i, c] = dv
-            sums[10 + c] += w * dta * f[i, c]
+            sums[10 + c] += w * dta * (f[i, c] - fg[i, c] - fl[i, c])
             gross += abs(rc)
+            wg += dta * fg[i, c] * vbar
+            wl += dta * fl[i, c] * vbar
+            fe[c] = dta * (fg[i, c] + fl[i, c])
         sums[0] += w * wi
         sums[1] += w * we
         for c in range(3):
@@ -206,6 +216,13 @@ def account_nodes(x, v, v_old, v_free, f, mass, owned, order, count, dt_avg, sum
         hf *= mass[i]
         sums[8] += w * hf
         sums[13] += w * gross
+        sums[14] += w * wg
+        sums[15] += w * wl
+        for c in range(3):
+            sums[16 + c] += w * fe[c]
+        sums[19] += w * (xi[1] * fe[2] - xi[2] * fe[1])
+        sums[20] += w * (xi[2] * fe[0] - xi[0] * fe[2])
+        sums[21] += w * (xi[0] * fe[1] - xi[1] * fe[0])
         if hf > worst_val:
             worst_val = hf
             worst = i
@@ -260,14 +277,16 @@ class SubcyclingSolver(LagrangeSolver):
         self.since_rebin = 0   # major steps since the own levels were last re-taken
         self.share = 1.0       # the share of the smallest element's step the levels are binned on (cheapest_share)
         super().__init__(comm, case)
-        if self.has_gravity or self.loads is not None or self.contact is not None:
-            raise ValueError("subcycling: not with gravity, surface loads or contact yet (the case schema "
-                             "refuses them: lagrange.subcycling)")
+        if self.contact is not None:
+            raise ValueError("subcycling: not with contact yet (the case schema refuses it: lagrange.subcycling)")
         nn = len(self.x)
+        # gravity m g and the surface loads at each node's last force evaluation (its kick's)
+        self._fg = self.mass[:, None] * self.gravity if self.has_gravity else np.zeros((nn, self.dim))
+        self._fl = self._load_local(self.time) if self.loads is not None else np.zeros((nn, self.dim))
         self.node_step_prev = np.zeros(nn)    # each node's last own step (its dt_avg at the next kick)
         self.node_dt_avg = np.zeros(nn)
         self.subcycling_impulse = np.zeros(self.dim)
-        self._sums_sc = np.zeros(14)
+        self._sums_sc = np.zeros(22)
         self._dt_el_buf = np.zeros(len(self.conn))
         self._h = 0.0
         self._rebin()
@@ -355,6 +374,21 @@ class SubcyclingSolver(LagrangeSolver):
             node[sh] = np.argmax(hist[sh] > 0.0, axis=1)
         return node
 
+    def _add_external_forces(self) -> None:
+        """Gravity and the surface loads at this substep's time on the nodes moved now (those whose
+        forces the next kicks read), kept per node for their booking at the kick."""
+        if not hasattr(self, "_fl") or self._dt_el is None:
+            super()._add_external_forces()
+            if hasattr(self, "_fl") and self.loads is not None:
+                self._fl[:] = self._load_local(self.time)
+            return
+        rows = self._move_order[:self._moved]
+        if self.has_gravity:
+            self.f[rows] += self._fg[rows]
+        if self.loads is not None:
+            self._fl[rows] = self._load_local(self.time)[rows]
+            self.f[rows] += self._fl[rows]
+
     def _clear_forces(self) -> None:
         """Zero the forces of the nodes whose position moved this substep (every node of an element
         evaluated now is one; the others' forces are not read until theirs are)."""
@@ -409,7 +443,8 @@ class SubcyclingSolver(LagrangeSolver):
                            self.node_step_prev, self.first_step, self.node_dt_avg)
             copy_rows(self.v_free, self.v, self._kick_order, due)
             self._boundaries(due, h)
-            bad, w_at, w_hf = account_nodes(self.x, self.v, self.v_old, self.v_free, self.f, self.mass,
+            bad, w_at, w_hf = account_nodes(self.x, self.v, self.v_old, self.v_free, self.f, self._fg, self._fl,
+                                            self.mass,
                                             self.part.owned, self._kick_order, due, self.node_dt_avg, sums,
                                             self._dv_prev)
             if bad >= 0:
@@ -436,7 +471,11 @@ class SubcyclingSolver(LagrangeSolver):
         self.ang_impulse += tot[5:8] if self.dim == 3 else tot[7:8]
         self.impulse_gross += tot[13]
         self.subcycling_impulse += tot[10:10 + self.dim]
-        self.supplied_gross += abs(tot[1])
+        self.w_gravity += tot[14]
+        self.w_load += tot[15]
+        self.impulse += tot[16:16 + self.dim]
+        self.ang_impulse += tot[19:22] if self.dim == 3 else tot[21:22]
+        self.supplied_gross += abs(tot[1]) + abs(tot[14]) + abs(tot[15])
         self.step, self.time = step, time
         self.first_step = False
         self.dt_prev = self.dt
@@ -444,7 +483,7 @@ class SubcyclingSolver(LagrangeSolver):
         self._dt_stable = dt_min if np.isfinite(dt_min) else self._dt_stable
         self._rebin()
         stored = float(self._allsum(self.e_int.sum()))
-        created = tot[14] + stored - self.ke0 - self.se0 - self.w_ext
+        created = tot[22] + stored - self.ke0 - self.se0 - (self.w_ext + self.w_gravity + self.w_load)
         if self.watch.update(step, tot[8] / 8.0, created, self.ke0 + self.se0 + self.supplied_gross):
             raise SolverError(self._growing_mode(step, time, worst, worst_hf))
 
@@ -464,6 +503,8 @@ class SubcyclingSolver(LagrangeSolver):
         super().restart(path)
         self._levels()
         self._take_substep()
+        if self.loads is not None:   # (the loads in the checkpoint's forces: every node's, at its time)
+            self._fl[:] = self._load_local(self.time)
 
     def snapshot(self) -> dict:
         raise ValueError("snapshot: a subcycled solver takes no coupled substeps")

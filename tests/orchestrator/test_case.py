@@ -231,7 +231,7 @@ BAD_CASES = [
     ("lagrange_implicit_johnson_cook", "materials.steel.model", "allowed: linear_elastic, neo_hookean"),
     ("lagrange_time_step_min_above", "lagrange.time_step_min", "must be <= lagrange.time_step (0.001)"),
     ("lagrange_subcycling_three", "lagrange.subcycling", "one of 1, 2, 4, 8, 16, 32, 64 (1: off)"),
-    ("lagrange_subcycling_traction", "lagrange.subcycling", "not with boundaries of type traction yet"),
+    ("lagrange_subcycling_contact", "lagrange.subcycling", "not with [contact] yet"),
     ("lagrange_subcycling_midpoint", "lagrange.subcycling", "lagrange.integrator = 'midpoint' takes its own"),
 ]
 
