@@ -499,6 +499,11 @@ class SubcyclingSolver(LagrangeSolver):
         d["subcycling_impulse_rel"] = float(np.linalg.norm(self.subcycling_impulse) / p_scale)
         return d
 
+    def cell_fields(self) -> dict[str, np.ndarray]:
+        """The explicit solver's, and each element's subcycling level (its evaluations every 2^level
+        substeps: where the step ratio goes, for the analyst's picture)."""
+        return {**super().cell_fields(), "subcycling_level": self.element_level.astype(np.float64)}
+
     def restart(self, path) -> None:
         super().restart(path)
         self._levels()

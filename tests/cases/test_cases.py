@@ -6,6 +6,7 @@ import json
 import shutil
 
 import h5py
+import numpy as np
 import pytest
 
 from tests.conftest import CASES, immerse
@@ -90,8 +91,6 @@ def test_taylor_bar_two_ranks_equals_one(tmp_path):
     """The whole job on 2 solver ranks equals 1 rank bit for bit (the cut nodes add their elements'
     forces and masses in the one-rank order, solvers/lagrange/shared_sums.py): positions, velocities,
     stresses and plastic strains of every output step of a plastic impact."""
-    import numpy as np
-
     from orchestrator import output
 
     case = tmp_path / "case"
@@ -174,6 +173,13 @@ def test_cantilever_refined_corner_subcycled(tmp_path):
     tip against the same mesh single-rate (the case's check: measured 1.04e-4 of the peak); 10,320
     steps of 8 substeps against the single-rate 82,010, each evaluating 0.134 of the elements."""
     out, s = run_case("cantilever_refined_corner", tmp_path)
+    from orchestrator import output
+
+    steps = output.read_steps(out, "lagrange")
+    cells = output.read_step(out, "lagrange", steps[-1][2])[2]
+    levels = cells["subcycling_level"]   # (the analyst's view of the levels: the corner's fine)
+    assert levels.min() == 0.0 and levels.max() == 3.0, np.bincount(levels.astype(int))
+    assert (levels == 3.0).sum() > 0.95 * levels.size
     f = s["final"]
     assert f["lagrange.subcycling_substeps"] == 8.0 and f["lagrange.subcycling_element_share"] < 0.15
     assert s["steps"] < 82010 / 7
