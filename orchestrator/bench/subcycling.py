@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator.bench.coupling_studies import _figure
 from orchestrator.bench.registry import bench, machine
 
 STEEL = {"model": "linear_elastic", "density": 7850.0, "youngs_modulus": 200e9, "poisson_ratio": 0.3}
@@ -107,12 +108,7 @@ def results(rows, span: float, repeats: int) -> list[dict]:
 
 
 def draw(rows, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4), layout="constrained")
+    plt, fig, (ax1, ax2) = _figure(2)
     for dim, style in ((2, "o-"), (3, "s-")):
         sel = [r for r in rows if r["dim"] == dim]
         if not sel:
@@ -127,6 +123,7 @@ def draw(rows, path: Path) -> None:
     ax2.set(xlabel="elements", ylabel="single-rate / subcycled", ylim=(0, None))
     ax1.legend(fontsize=8)
     ax2.legend(fontsize=8)
+    fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

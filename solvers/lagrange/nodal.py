@@ -32,6 +32,50 @@ def rigid_wall(x, v, point, normal, dt):
                 v[i, c] += dv * normal[c]
 
 
+@njit(cache=True, inline="always")
+def account_node(i, x, v, v_old, v_free, f, mass, impulse, has_impulse, dt_avg, dv_prev, r, xi):
+    """One node's share of a kick's balances, update_and_account's per node (subcycling.account_nodes
+    calls it at each node's own dt_avg): its reaction R = m (v - v_free) (+ impulse) into r, its
+    position before the move into xi, dv_prev updated; returns (internal work, R's work on the mean
+    velocity, |dv - dv_prev|^2, |v|^2, whether a component is not finite).  update_and_account keeps
+    the same arithmetic fused in its own loop: calling this from it cost 5 % of a quad's
+    element-cycle (bench lagrange, 10^5 quads: 0.081 against 0.077 us) -- change the two together."""
+    dim = v.shape[1]
+    wi = 0.0
+    we = 0.0
+    hf = 0.0
+    v2 = 0.0
+    nonfinite = False
+    for c in range(3):
+        r[c] = 0.0
+        xi[c] = 0.0
+    for c in range(dim):
+        vc = v[i, c]
+        if not np.isfinite(vc):
+            nonfinite = True
+        rc = mass[i] * (vc - v_free[i, c])
+        if has_impulse:
+            rc += impulse[i, c]
+        vbar = 0.5 * (v_old[i, c] + vc)
+        wi -= dt_avg * f[i, c] * vbar
+        we += rc * vbar
+        r[c] = rc
+        xi[c] = x[i, c]
+        dv = vc - v_old[i, c]
+        hf += (dv - dv_prev[i, c]) ** 2
+        dv_prev[i, c] = dv
+        v2 += vc * vc
+    return wi, we, hf, v2, nonfinite
+
+
+@njit(cache=True, inline="always")
+def add_torque(sums, k, xi, a, w):
+    """sums[k:k+3] += w xi x a (3-vectors: a 2-D one's z component in sums[k + 2])."""
+    sums[k] += w * (xi[1] * a[2] - xi[2] * a[1])
+    sums[k + 1] += w * (xi[2] * a[0] - xi[0] * a[2])
+    sums[k + 2] += w * (xi[0] * a[1] - xi[1] * a[0])
+
+
 @njit(cache=True)
 def update_and_account(x, v, v_old, v_free, f, mass, owned, impulse, dt, dt_avg, sums, dv_prev):
     """Close the step on the nodes: reaction R = m (v - v_free) (+ coupling impulse), the exact

@@ -35,6 +35,10 @@ from solvers.lagrange.surface import exterior_facets
 from solvers.step_health import GrowthWatch
 
 
+_NO_STEPS = np.empty(0)
+"""No per-element steps (kernels.element_forces_levels: every element at the pass's dt_prev)."""
+
+
 class SolverError(RuntimeError):
     """A physical failure (inverted element, NaN) with the body, element or node, step and time named."""
 
@@ -256,14 +260,16 @@ class LagrangeSolver:
         return out
 
     # ---- the step --------------------------------------------------------------------------------
-    def _element_kernel(self, dt_prev: float) -> tuple:
-        """The element kernel's pass (kernels.element_forces_cut): (dt_min, bad, eroded, dt_at).  A
-        subclass that steps elements at their own rates (subcycling.py) calls another."""
-        return kernels.element_forces_cut(
+    def _element_kernel(self, dt_prev: float, dt_el: np.ndarray = _NO_STEPS,
+                        dte_out: np.ndarray = _NO_STEPS) -> tuple:
+        """The element kernel's pass (kernels.element_forces_levels): (dt_min, bad, eroded, dt_at).
+        Every element at dt_prev; a subclass stepping elements at their own rates (subcycling.py)
+        gives each its step (dt_el) and takes each one's stable step (dte_out)."""
+        return kernels.element_forces_levels(
             self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
             self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
             self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
-            self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq,
+            self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq, dt_el, dte_out,
         )
 
     def _clear_forces(self) -> None:

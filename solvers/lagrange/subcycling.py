@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numba import njit
 
-from solvers.lagrange import kernels
+from solvers.lagrange.nodal import account_node, add_torque
 from solvers.lagrange.solver import LagrangeSolver, SolverError
 
 MARGIN = 0.9
@@ -160,13 +160,13 @@ def zero_rows(a, order, count):
 
 @njit(cache=True)
 def account_nodes(x, v, v_old, v_free, f, fg, fl, mass, owned, order, count, dt_avg, sums, dv_prev):
-    """The kicked nodes' (order[:count]) share of the balances (nodal.update_and_account, at each
-    node's own dt_avg: W_int, the reactions' work, impulse and torque about x at the kick, E_hf),
-    added into ``sums``: its entries 10-12 the net internal impulse dt_avg (f - fg - fl), what the
-    partition does not conserve; 13 the reactions' gross size; 14, 15 the work of gravity fg and of
-    the surface loads fl (in f) on the mean velocity, 16-18 their impulse, 19-21 its torque, booked
-    as solver.py's _book_force books them.  Returns (the first node whose velocity is not finite or
-    -1, the node of the largest m |dv - dv_prev|^2, that value)."""
+    """The kicked nodes' (order[:count]) share of the balances (nodal.account_node, as
+    update_and_account takes it, at each node's own dt_avg: W_int, the reactions' work, impulse and
+    torque about x at the kick, E_hf), added into ``sums``: its entries 10-12 the net internal
+    impulse dt_avg (f - fg - fl), what the partition does not conserve; 13 the reactions' gross size;
+    14, 15 the work of gravity fg and of the surface loads fl (in f) on the mean velocity, 16-18 their
+    impulse, 19-21 its torque, booked as solver.py's _book_force books them.  Returns (the first node
+    whose velocity is not finite or -1, the node of the largest m |dv - dv_prev|^2, that value)."""
     dim = v.shape[1]
     bad = -1
     worst = -1
@@ -174,35 +174,24 @@ def account_nodes(x, v, v_old, v_free, f, fg, fl, mass, owned, order, count, dt_
     r = np.zeros(3)
     xi = np.zeros(3)
     fe = np.zeros(3)
+    no_impulse = np.empty((0, dim))
     for k in range(count):
         i = order[k]
         w = 1.0 if owned[i] else 0.0
         dta = dt_avg[i]
-        wi = 0.0
-        we = 0.0
-        hf = 0.0
+        wi, we, hf, _, nonfinite = account_node(i, x, v, v_old, v_free, f, mass, no_impulse, False, dta, dv_prev,
+                                                r, xi)
+        if nonfinite and bad < 0:
+            bad = i
         gross = 0.0
         wg = 0.0
         wl = 0.0
         for c in range(3):
-            r[c] = 0.0
-            xi[c] = 0.0
             fe[c] = 0.0
         for c in range(dim):
-            vc = v[i, c]
-            if not np.isfinite(vc) and bad < 0:
-                bad = i
-            rc = mass[i] * (vc - v_free[i, c])
-            vbar = 0.5 * (v_old[i, c] + vc)
-            wi -= dta * f[i, c] * vbar
-            we += rc * vbar
-            r[c] = rc
-            xi[c] = x[i, c]
-            dv = vc - v_old[i, c]
-            hf += (dv - dv_prev[i, c]) ** 2
-            dv_prev[i, c] = dv
+            vbar = 0.5 * (v_old[i, c] + v[i, c])
             sums[10 + c] += w * dta * (f[i, c] - fg[i, c] - fl[i, c])
-            gross += abs(rc)
+            gross += abs(r[c])
             wg += dta * fg[i, c] * vbar
             wl += dta * fl[i, c] * vbar
             fe[c] = dta * (fg[i, c] + fl[i, c])
@@ -210,9 +199,7 @@ def account_nodes(x, v, v_old, v_free, f, fg, fl, mass, owned, order, count, dt_
         sums[1] += w * we
         for c in range(3):
             sums[2 + c] += w * r[c]
-        sums[5] += w * (xi[1] * r[2] - xi[2] * r[1])
-        sums[6] += w * (xi[2] * r[0] - xi[0] * r[2])
-        sums[7] += w * (xi[0] * r[1] - xi[1] * r[0])
+        add_torque(sums, 5, xi, r, w)
         hf *= mass[i]
         sums[8] += w * hf
         sums[13] += w * gross
@@ -220,9 +207,7 @@ def account_nodes(x, v, v_old, v_free, f, fg, fl, mass, owned, order, count, dt_
         sums[15] += w * wl
         for c in range(3):
             sums[16 + c] += w * fe[c]
-        sums[19] += w * (xi[1] * fe[2] - xi[2] * fe[1])
-        sums[20] += w * (xi[2] * fe[0] - xi[0] * fe[2])
-        sums[21] += w * (xi[0] * fe[1] - xi[1] * fe[0])
+        add_torque(sums, 19, xi, fe, w)
         if hf > worst_val:
             worst_val = hf
             worst = i
@@ -294,15 +279,10 @@ class SubcyclingSolver(LagrangeSolver):
     # ---- levels ------------------------------------------------------------------------------------
     def _element_kernel(self, dt_prev: float) -> tuple:
         ne = len(self.conn)
-        if self.dte is None:
+        if self.dte is None:   # (the base's set-up makes the first pass: all elements, at dt_prev)
             self.dte = np.full(ne, np.inf)
         dt_el = self._dt_el if self._dt_el is not None else np.full(ne, dt_prev)
-        return kernels.element_forces_levels(
-            self.x, self.v, dt_prev, self.conn, self.mat_id, self.mat_code, self.mat_par,
-            self.gradN0, self.vol0, self.mass_e, self.sig, self.eps_p, self.temp, self.e_int, self.q,
-            self.hg, self.q_lin, self.q_quad, self.f, self._cut_row, self._fe_cut,
-            self.alive, self.eps_eq, self.erode_at, self.erode_dt, self.hg_stiff, self.hgq, dt_el, self.dte,
-        )
+        return super()._element_kernel(dt_prev, dt_el, self.dte)
 
     def _rebin(self) -> None:
         """The levels and the substep of the next major step (module docstring).  The elements' own
@@ -347,14 +327,13 @@ class SubcyclingSolver(LagrangeSolver):
         self._move_order = np.argsort(self.position_level, kind="stable").astype(np.int64)
         self._move_count = np.searchsorted(self.position_level[self._move_order], np.arange(top + 1), side="right")
         self._moved = len(self.x)
-        self._period = (1 << self.element_level).astype(np.int64)
         node = self.node_level
         k = int(node.max()) if len(node) else 0
         self.levels = int(self.comm.allreduce(k, op=_max_op())) if self.comm.size > 1 else k
         # the element evaluations of a major step against every element at every substep (cost share)
         n = 1 << self.levels
         alive = self.alive == 1
-        mine = np.array([float(np.sum(n // self._period[alive])), float(alive.sum())])
+        mine = np.array([float(np.sum(n >> self.element_level[alive])), float(alive.sum())])
         self._evaluations = self._allsum(mine)
 
     def _node_min(self, per_element: np.ndarray) -> np.ndarray:
@@ -493,7 +472,8 @@ class SubcyclingSolver(LagrangeSolver):
                       float(self.impulse_gross[0]), 1e-300)
         d["subcycling_substeps"] = float(1 << self.levels)
         # element evaluations per major step over those of every element at every substep (its cost share)
-        d["subcycling_element_share"] = float(self._evaluations[0] / max(self._evaluations[1] * (1 << self.levels), 1.0))
+        n = 1 << self.levels
+        d["subcycling_element_share"] = float(self._evaluations[0] / max(self._evaluations[1] * n, 1.0))
         for c, name in enumerate("xyz"[: self.dim]):
             d[f"subcycling_impulse_{name}"] = float(self.subcycling_impulse[c])
         d["subcycling_impulse_rel"] = float(np.linalg.norm(self.subcycling_impulse) / p_scale)
@@ -519,3 +499,17 @@ def _max_op():
     from mpi4py import MPI
 
     return MPI.MAX
+
+
+def _flush_stale_cache() -> None:
+    """nodal.account_node and add_torque are compiled into account_nodes (solvers.numba_cache):
+    drop these kernels' cache when nodal.py changed."""
+    from solvers import numba_cache
+    from solvers.lagrange import nodal
+
+    numba_cache.flush_stale_cache([trailing_levels, kick_nodes, move_nodes, rigid_wall_nodes, element_steps,
+                                   copy_rows, zero_rows, account_nodes], [nodal.__file__],
+                                  "subcycling.deps.sha256")
+
+
+_flush_stale_cache()
