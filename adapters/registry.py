@@ -18,17 +18,27 @@ _SIDES: dict[str, str] = {}
 # role -> "module:function" that says why a case's group of that role cannot take its coupled steps
 # in substeps (multi-rate, orchestrator/coupling/multirate.py), None when it can; absent: it cannot
 _SUBSTEPS: dict[str, str] = {}
+# roles whose groups substep only when the case asks (run.multirate = true), never by default
+_SUBSTEPS_ON_REQUEST: set[str] = set()
 
 
 def declare(role: str, module: str, case_table: str, coupling_side: str | None = None,
-            substeps: str | None = None) -> None:
+            substeps: str | None = None, substeps_by_default: bool = True) -> None:
     """Make a role known without importing its (heavy) module; ``substeps``: "module:function"
-    (case -> reason or None) when its group can take substeps."""
+    (case -> reason or None) when its group can take substeps; ``substeps_by_default`` False: only
+    when the case asks (run.multirate = true), not where multi-rate's default finds that it pays."""
     _MODULES[role] = (module, case_table)
     if coupling_side is not None:
         _SIDES[role] = coupling_side
     if substeps is not None:
         _SUBSTEPS[role] = substeps
+    if not substeps_by_default:
+        _SUBSTEPS_ON_REQUEST.add(role)
+
+
+def substeps_by_default(role: str) -> bool:
+    """Whether multi-rate's default (run.multirate unset) may substep the role's group where it pays."""
+    return role in _SUBSTEPS and role not in _SUBSTEPS_ON_REQUEST
 
 
 def substep_refusal(role: str, case: dict) -> str | None:
@@ -73,11 +83,11 @@ declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground",
         substeps="solvers.lagrange.integrators:substep_refusal")
 declare("ale", "adapters.ale", "ale", coupling_side="background")
 declare("sph", "adapters.sph", "sph", coupling_side="foreground",  # LAMMPS particles
-        substeps="adapters.registry:sph_substep_refusal")
+        substeps="adapters.registry:sph_substep_refusal", substeps_by_default=False)
 
 
-def sph_substep_refusal(case: dict) -> str:
-    """Why an SPH group takes no substeps (yet): the passes restart from the step's start."""
-    return ("LAMMPS's particles take no substeps yet: each pass starts again from the coupling step's "
-            "start, and the adapter does not keep its atoms' state (positions, velocities, densities, "
-            "MACHDYN's deformation) in memory")
+def sph_substep_refusal(case: dict) -> str | None:
+    """Why an SPH group takes no substeps, or None: it can (adapters/sph.py snapshot, restore).  Only
+    on request (run.multirate = true): a body of particles substepped at coupling steps near its own
+    lowest period rings (orchestrator/coupling/multirate.py, known limits)."""
+    return None

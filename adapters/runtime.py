@@ -122,7 +122,8 @@ def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: floa
             break
         ramp = msg[:-1]
     t0 = _time.perf_counter()
-    send_state(adapter, comm, ic, [v_mean.ravel(), [w]])
+    volumes = getattr(adapter, "volumes", None)  # particles: their volumes last
+    send_state(adapter, comm, ic, [v_mean.ravel(), [w]] + ([volumes()] if volumes else []))
     answer(with_diagnostics)
     return work + _time.perf_counter() - t0
 

@@ -51,6 +51,10 @@ FAMILY = {"taitwater": lammps_model, "idealgas": lammps_model, "tlsph": lammps_t
 total-Lagrangian solids (atom_style smd).  Each module gives box_commands, particles,
 setup_commands and the per-atom arrays it creates, checkpoints and restores after a set-up run."""
 
+SUBSTEP_PARTICLE_COST = 4.0
+"""What a particle's substep costs in background zone-steps (multi-rate's default weighs a group's
+substeps against the background's zones: orchestrator/coupling/multirate.py pays)."""
+
 
 @contextlib.contextmanager
 def _quiet_stdout():
@@ -390,6 +394,44 @@ class SphAdapter(SolverAdapter):
         get = self.lmp.numpy.extract_atom
         rho, drho, t = get("rho")[:nlocal], get("drho")[:nlocal], get("type")[:nlocal]
         np.maximum(rho, self._rho_floor[t] - 0.5 * self._dt * drho, out=rho)
+
+    # ---- substeps (multi-rate: orchestrator/coupling/multirate.py, adapters/substeps.py) ----------
+    def can_substep(self) -> bool:
+        """Substeps (multi-rate): each pass starts again from the coupling step's start, the state
+        snapshot() keeps in memory (adapters/registry.py sph_substep_refusal says when not)."""
+        from adapters.registry import sph_substep_refusal
+
+        return sph_substep_refusal(self.case) is None
+
+    def substep_cost(self) -> float:
+        """A particle step, in background zone-steps: tlsph or a fluid's pair over ~30 neighbours
+        (bench sph: 94 ns a particle-step for the fluid, tlsph several times that) plus the
+        substep's gathers and LAMMPS call, about SUBSTEP_PARTICLE_COST zone-steps a particle."""
+        return SUBSTEP_PARTICLE_COST * float(self.n)
+
+    _FIXED = ("type", "mask")   # per-atom arrays a step never changes (not in a snapshot)
+
+    def snapshot(self):
+        """The particles' state at the coupling step's start, in memory: every per-atom array a step
+        changes (the checkpoint's, by id, on every rank) and the adapter's own scalars (the step's dt,
+        the coupling's work, tlsph's energy shift).  restore() scatters them back by id: no set-up run
+        (LAMMPS's partner lists and kernel weights are the reference configuration's, its neighbour
+        lists cover any displacement a coupling step's substeps make within the skin, and the next
+        step's first half kick reads only the arrays put back)."""
+        arrays = {name: self._gather(name, count, integer) for name, count, integer in self.F.CHECKPOINT
+                  if name not in self._FIXED}
+        return arrays, (self._dt, self._external_work, getattr(self, "_stepped", False), self._shift,
+                        self._d_last, self._batches, self._batches_shifted)
+
+    def restore(self, state) -> None:
+        arrays, scalars = state
+        for name, _, integer in self.F.CHECKPOINT:
+            if name in arrays:
+                self._scatter(name, arrays[name], integer)
+        dt, self._external_work, self._stepped, self._shift, self._d_last, self._batches, self._batches_shifted = scalars
+        if dt is not None:
+            self._set_dt(dt)
+        self._invalidate()
 
     # ---- the embedded coupling (foreground side; collective, every rank gets the same arrays) ----
     def surface(self) -> dict:

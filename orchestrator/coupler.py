@@ -166,8 +166,9 @@ class Coupler:
         """The foreground roles that take their coupled steps in substeps: run.multirate = true (unset:
         where it pays, multirate.DEFAULT_ON: the sizes and the stable steps at the start), the
         multiplier method, and a group that can (its start-up message: its substep cost, 0 when it
-        cannot, and its stable step).  A restart keeps the choice of the run it continues (its
+        cannot, and its stable step; unset, only a role adapters/registry.py substeps_by_default).  A restart keeps the choice of the run it continues (its
         checkpoint's): the stable steps it starts from are another state's."""
+        from adapters import registry as roles
         from orchestrator.coupling.multirate import DEFAULT_ON, pays
 
         choice = self.case["run"].get("multirate")
@@ -187,7 +188,8 @@ class Coupler:
         def ratio(r):
             return bg / min(started[r][3], self.group_dt_max.get(r, np.inf))
 
-        return [r for r in self.fgs if started[r][2] and (choice is True or pays(zones, started[r][2], ratio(r)))]
+        return [r for r in self.fgs if started[r][2] and (choice is True or (
+            roles.substeps_by_default(r) and pays(zones, started[r][2], ratio(r))))]
 
     def _stable(self) -> dict[str, float]:
         """Each group's stable step from its last reply, capped by run.group_dt_max."""

@@ -358,12 +358,13 @@ class EmbeddedCoupling:
 
     def take_state(self, buf: np.ndarray) -> np.ndarray:
         """The foreground's state after its correct (protocol TAG_STATE): x^{n+1}, v^{n+1/2} of its
-        surface nodes (particles: and their volumes; in substeps: after v^{n+1/2}, the substeps' mean
-        velocity and the mean of their time-centred ones, adapters/substeps.py); returns
+        surface nodes (in substeps: then the substeps' mean velocity and the ramp's work,
+        adapters/substeps.py; particles: then their volumes); returns
         :meth:`background_correction`'s."""
         n = self.ns * self.dim
+        rest = 2 * n + (n + 1 if self.substeps > 1 else 0)   # (the volumes come last)
         if self.particles:
-            self.volume = np.asarray(buf[2 * n:], dtype=np.float64).copy()
+            self.volume = np.asarray(buf[rest:], dtype=np.float64).copy()
         if self.substeps > 1:
             return self.background_correction(buf[:n], buf[n: 2 * n], buf[2 * n: 3 * n], float(buf[3 * n]))
         return self.background_correction(buf[:n], buf[n: 2 * n])

@@ -202,7 +202,6 @@ BAD_CASES = [
     ("multirate_with_contact", "run.multirate", "the lagrange group cannot take substeps: contact"),
     ("multirate_penalty", "run.multirate", "needs coupling.method = 'multiplier'"),
     ("group_dt_max_unknown_role", "run.group_dt_max.sph", "the case has no sph group"),
-    ("multirate_sph", "run.multirate", "the sph group cannot take substeps: LAMMPS's particles"),
     ("multirate_max_substeps_zero", "run.max_substeps", "must be an integer >= 1 and <= 1024"),
     ("output_interval_too_long", "run.output_interval", "<= run.end_time"),
     ("dimension_four", "run.dimension", "one of: 2, 3"),
