@@ -42,11 +42,13 @@ $(WARM): $(STAMP)
 venv: $(STAMP) $(WARM)
 
 # the main job: an elastic plate in a shock tube, the body coupled to the gas (about 10 s), then its
-# pictures: every field at the end, the pressure with the plate over it at every output step
+# pictures: every field at the end, the pressure with the plate over it at every output step, and the
+# plate's tip against time beside its reference (OUT/plots/)
 demo: venv
 	$(VENV)/bin/immerse run cases/plate_in_shock_2d --out cases/plate_in_shock_2d/out --replace
 	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out
 	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out --field pressure --step all
+	$(VENV)/bin/immerse plot cases/plate_in_shock_2d/out tip --csv
 
 test: test-serial test-mpi
 

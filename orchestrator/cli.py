@@ -4,6 +4,7 @@
   immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [--engine local|slurm] [MACHINE]
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...]
+  immerse plot OUT [QUANTITY ...] [--csv] [--list]    time histories (diagnostics, probes) against time
   immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--cores N] [--retry-failed] [--only AXIS=L1,L2]
       runs a matrix of cases x parameters (orchestrator/campaign), then campaign.csv/.h5 and the report
   immerse report OUT                           rebuilds a campaign's report from OUT/campaign.h5
@@ -191,6 +192,26 @@ def cmd_view(args) -> int:
     return 0
 
 
+def cmd_plot(args) -> int:
+    from orchestrator.plot import PlotError, listing, plot
+
+    out = Path(args.out)
+    if not out.is_dir():
+        return _fail(f"OUT = {str(out)!r}: not a directory (a run's output directory)")
+    try:
+        if args.list:
+            print(listing(out))
+            return 0
+        paths = plot(out, args.quantity, csv_too=args.csv)
+    except PlotError as e:
+        return _fail(str(e))
+    except (OSError, KeyError, ValueError, TypeError) as e:   # a damaged diagnostics.h5
+        return _damaged(out, "its diagnostics.h5 is", e)
+    for p in paths:
+        print(p)
+    return 0
+
+
 def cmd_bench(args) -> int:
     from orchestrator import bench
 
@@ -253,6 +274,19 @@ def cmd_report(args) -> int:
     return 0
 
 
+def _version() -> str:
+    """The installed distribution's version (pyproject.toml), else the source tree's."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("immerse")
+    except PackageNotFoundError:
+        import tomllib
+
+        with open(Path(__file__).resolve().parent.parent / "pyproject.toml", "rb") as f:
+            return tomllib.load(f)["project"]["version"]
+
+
 class _Parser(argparse.ArgumentParser):
     """Command-line errors are bad input too: one line, exit 2 (argparse prints usage + error)."""
 
@@ -262,6 +296,7 @@ class _Parser(argparse.ArgumentParser):
 
 def main(argv=None) -> int:
     ap = _Parser(prog="immerse", description=__doc__.split("\n")[0])
+    ap.add_argument("--version", action="version", version=f"immerse {_version()}")
     sub = ap.add_subparsers(dest="verb", required=True)
     p = sub.add_parser("check", help="validate a case directory")
     p.add_argument("case")
@@ -287,6 +322,15 @@ def main(argv=None) -> int:
     p.add_argument("--field", nargs="*")
     p.add_argument("--step", nargs="*")
     p.set_defaults(func=cmd_view)
+    p = sub.add_parser("plot", help="draw a run's time histories (diagnostics, probes) against time",
+                       description="Draw time histories of a run (OUT/diagnostics.h5) against time, with the "
+                       "case's check's reference curve where it has one, to OUT/plots/.")
+    p.add_argument("out")
+    p.add_argument("quantity", nargs="*", help="<role>.<name> as diagnostics.h5 holds it, a pattern "
+                   "('*.total_energy') or a probe's name; none: the probes, else the total energies")
+    p.add_argument("--csv", action="store_true", help="also write the histories as CSV")
+    p.add_argument("--list", action="store_true", help="list the run's histories with their units")
+    p.set_defaults(func=cmd_plot)
     p = sub.add_parser("campaign", help="run a validation campaign (cases x parameters) and its report")
     p.add_argument("campaign", help="the campaign file (or a directory holding campaign.toml)")
     p.add_argument("--out", help="output directory (default: CAMPAIGN_DIR/out); an interrupted "

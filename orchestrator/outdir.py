@@ -48,7 +48,7 @@ RUN_DIR = ".run"
 _NAME = r"[A-Za-z][A-Za-z0-9_-]*"
 _TMP = r"(?:\.\d+)?(?:\.tmp)?"
 RUN_FILES = re.compile(
-    rf"^(?:(?:log\.txt|results\.h5|results\.xdmf|summary\.json|diagnostics\.h5){_TMP}"
+    rf"^(?:(?:log\.txt|results\.h5|results\.xdmf|summary\.json|diagnostics\.h5|probes\.csv){_TMP}"
     rf"|steps/{_NAME}_(?:\d+|mesh)\.h5{_TMP}"
     rf"|checkpoints/checkpoint_\d+\.(?:h5|tmp)"
     rf"|checkpoints/step_\d+/{_NAME}\.h5{_TMP})$")
@@ -56,7 +56,7 @@ RUN_FILES = re.compile(
 _BLOCKING = re.compile(rf"{RUN_FILES.pattern}|^\.run(?:/.*)?$")
 _STEP_FILE = re.compile(rf"^steps/{_NAME}_(\d+)\.h5{_TMP}$")
 # directories the run writes into: they must be real directories (not links to elsewhere)
-_RUN_DIRS = re.compile(r"^(?:steps|checkpoints|checkpoints/step_\d+|pictures|\.run|\.immerse)$")
+_RUN_DIRS = re.compile(r"^(?:steps|checkpoints|checkpoints/step_\d+|pictures|plots|\.run|\.immerse)$")
 _CLAIM_SLACK_S = 2.0  # file times vs the launcher's clock
 
 

@@ -69,12 +69,31 @@ def contact_balances(hist: dict[str, np.ndarray], roles) -> dict[str, dict[str, 
 
 
 def write_diagnostics(out: Path, hist: dict[str, np.ndarray]) -> None:
-    """diagnostics.h5, written whole beside and renamed over (readable if killed at any instant)."""
+    """diagnostics.h5, written whole beside and renamed over (readable if killed at any instant);
+    the case's probes also as probes.csv (write_probes)."""
     tmp = Path(out) / "diagnostics.h5.tmp"
     with h5py.File(tmp, "w") as h:
         for k, a in hist.items():
             h.create_dataset(k, data=a)
     os.replace(tmp, Path(out) / "diagnostics.h5")
+    write_probes(out, hist)
+
+
+def write_probes(out: Path, hist: dict[str, np.ndarray]) -> None:
+    """OUT/probes.csv when the run has probes (``<role>.probe_<name>``): time (s), step, then one
+    column per probe named ``<role>.<name>``, every diagnostics step once (a step recorded at its
+    diagnostics and again at its output keeps its first record); written beside and renamed over."""
+    keys = [k for k in hist if ".probe_" in k]
+    if not keys or not len(hist.get("time", ())):
+        return
+    _, first = np.unique(hist["step"], return_index=True)
+    cols = [hist["time"][first], hist["step"][first]] + [np.asarray(hist[k])[first] for k in keys]
+    tmp = Path(out) / "probes.csv.tmp"
+    with open(tmp, "w") as f:
+        f.write(",".join(["time", "step"] + [k.replace(".probe_", ".") for k in keys]) + "\n")
+        for row in zip(*cols):
+            f.write(f"{float(row[0])!r},{int(row[1])}," + ",".join(repr(float(v)) for v in row[2:]) + "\n")
+    os.replace(tmp, Path(out) / "probes.csv")
 
 
 def write_summary(out: Path, s: dict) -> None:

@@ -49,7 +49,7 @@ def _parse(argv: list[str], monkeypatch) -> SimpleNamespace:
         seen["args"] = args
         return 0
 
-    for name in ("cmd_check", "cmd_run", "cmd_view", "cmd_bench", "cmd_campaign", "cmd_report"):
+    for name in ("cmd_check", "cmd_run", "cmd_view", "cmd_plot", "cmd_bench", "cmd_campaign", "cmd_report"):
         monkeypatch.setattr(cli, name, record)
     assert cli.main(argv) == 0
     return seen["args"]
@@ -57,7 +57,7 @@ def _parse(argv: list[str], monkeypatch) -> SimpleNamespace:
 
 def test_readme_has_the_commands():
     verbs = {c[1] for c in IMMERSE}
-    assert verbs == {"check", "run", "view", "bench", "campaign", "report"}
+    assert verbs == {"check", "run", "view", "plot", "bench", "campaign", "report"}
     assert [c[:2] for c in commands("make")] == [["make", "demo"], ["make", "test"]]
 
 
@@ -85,8 +85,8 @@ def test_every_immerse_command_parses_and_names_what_exists(monkeypatch):
             outputs[out] = args.case
             for item in args.ranks or []:
                 assert cli._parse_ranks([item]) == {item.split("=")[0]: int(item.split("=")[1])}
-        if cmd[1] == "view":
-            assert args.out in outputs, f"{line}: views an output no README run writes"
+        if cmd[1] in ("view", "plot"):
+            assert args.out in outputs, f"{line}: draws an output no README run writes"
         if cmd[1] == "bench":
             assert args.name in bench.BENCHES, line
         if cmd[1] == "campaign":
@@ -107,9 +107,10 @@ def test_check_commands_run(cmd):
 
 def test_restart_example_works_as_written(tmp_path):
     """The README's sod lines, verbatim, in a copy of the case: the run writes the checkpoint the
-    restart line names, the restart ends where the run ended, and the view draws the pictures."""
+    restart line names, the restart ends where the run ended, the view draws the pictures and the
+    plot the total energy's history."""
     sod = [c for c in IMMERSE if any(a.startswith("cases/sod") for a in c[2:3])]
-    assert [c[1] for c in sod] == ["run", "run", "view"], sod
+    assert [c[1] for c in sod] == ["run", "run", "view", "plot"], sod
     assert "--restart" in sod[1]
     shutil.copytree(REPO / "cases" / "sod", tmp_path / "cases" / "sod", ignore=shutil.ignore_patterns("out"))
     results = []
@@ -120,6 +121,7 @@ def test_restart_example_works_as_written(tmp_path):
         if cmd[1] == "run" and "--restart" not in cmd:
             assert (tmp_path / sod[1][sod[1].index("--restart") + 1]).is_file()
     assert results[2].stderr == "" and len(results[2].stdout.split()) == 3
+    assert results[3].stderr == "" and results[3].stdout.split() == ["cases/sod/out/plots/ale.total_energy.png"]
     assert "check passed" in results[0].stdout and "check passed" in results[1].stdout
 
 

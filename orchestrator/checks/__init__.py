@@ -9,6 +9,6 @@ penetration.py, coupled.py.
 from __future__ import annotations
 
 from orchestrator.checks import contact, coupled, gas, liquid, penetration, solids  # noqa: F401  (they register)
-from orchestrator.checks.registry import CHECKS, PARAMS, RULES, compare, register_check, run_check
+from orchestrator.checks.registry import CHECKS, CURVES, PARAMS, RULES, compare, reference_curve, register_check, run_check
 
-__all__ = ["CHECKS", "PARAMS", "RULES", "compare", "register_check", "run_check"]
+__all__ = ["CHECKS", "CURVES", "PARAMS", "RULES", "compare", "reference_curve", "register_check", "run_check"]

@@ -37,17 +37,35 @@ RULES: dict[str, Callable] = {}
 (param name, what is allowed), checked when the case is loaded."""
 
 
-def register_check(name: str, params: dict | None = None, rule: Callable | None = None):
+CURVES: dict[str, Callable] = {}
+"""Each kind's reference curve against time, where it has one (optional): curve(case, params)
+returns None or (history key, times, values, label): the history the check measures (e.g. a probe,
+``lagrange.probe_tip``) and what it is compared with, drawn beside it by ``immerse plot``."""
+
+
+def register_check(name: str, params: dict | None = None, rule: Callable | None = None,
+                   curve: Callable | None = None):
     """Register check ``name``; ``params``: the properties of its ``[check] params`` table (with
-    ``required``: a ``schema.parts.table``), None for a kind that takes none; ``rule``: RULES'."""
+    ``required``: a ``schema.parts.table``), None for a kind that takes none; ``rule``: RULES';
+    ``curve``: CURVES'."""
     def deco(fn):
         CHECKS[name] = fn
         PARAMS[name] = params if params is not None else table({})
         if rule is not None:
             RULES[name] = rule
+        if curve is not None:
+            CURVES[name] = curve
         return fn
 
     return deco
+
+
+def reference_curve(case: dict) -> tuple[str, np.ndarray, np.ndarray, str] | None:
+    """The case's check's reference curve (CURVES), or None: no check, or a kind without one."""
+    spec = case.get("check")
+    if not spec or spec["kind"] not in CURVES:
+        return None
+    return CURVES[spec["kind"]](case, spec.get("params", {}))
 
 
 def compare(value: float, reference: float, tolerance: float) -> dict:

@@ -220,7 +220,20 @@ def _probe_of_role(case, params):
     return None
 
 
-@register_check("free_end", rule=_probe_of_role, params=table(
+def _free_end_curve(case, params):
+    """free_end's reference on its probe: the triangle wave u(t) = v0 (L/c) tri(t c / L), rising to
+    v0 L / c at L / c, through zero at 2 L / c, down to -v0 L / c at 3 L / c (1-D wave theory)."""
+    if "probe" not in params:
+        return None
+    length, v0, c = float(params["length"]), float(params["speed"]), float(params["wave_speed"])
+    end = float(case["run"]["end_time"])
+    period = 4.0 * length / c
+    t = np.arange(0.0, end + period / 4.0, period / 4.0)
+    u = v0 * length / c * np.array([0.0, 1.0, 0.0, -1.0])[np.arange(t.size) % 4]
+    return f"{params.get('role', 'sph')}.probe_{params['probe']}", t, u, "1-D wave theory (triangle wave)"
+
+
+@register_check("free_end", rule=_probe_of_role, curve=_free_end_curve, params=table(
     {"role": {"type": "string"}, "axis": {"type": "string", "enum": ["x", "y", "z"]},
      "length": number("m", exclusiveMinimum=0), "speed": number("m/s", exclusiveMinimum=0),
      "wave_speed": number("m/s", exclusiveMinimum=0), "probe": {"type": "string"}},
@@ -243,13 +256,7 @@ def free_end(case, out, history, params):
     role, a = params.get("role", "sph"), "xyz".index(params["axis"])
     length, v0, c = float(params["length"]), float(params["speed"]), float(params["wave_speed"])
     if "probe" in params:
-        key = f"{role}.probe_{params['probe']}"
-        if key not in history:
-            raise ValueError(f"check.params.probe = {params['probe']!r}: no history {key!r} (a [probes] "
-                             f"entry of role {role!r})")
-        # (a step recorded twice, at its diagnostics and at its output, counts once)
-        _, first = np.unique(history["step"], return_index=True)
-        ts, us = history["time"][first], history[key][first]
+        ts, us = _probe_history(history, role, params["probe"])
     else:
         steps = output.read_steps(out, role)
         x0 = output.read_step(out, role, steps[0][2])[0][:, a]
@@ -283,18 +290,39 @@ def free_end(case, out, history, params):
     return vals
 
 
-@register_check("tip_history", params=table(
+def _probe_history(history, role, probe):
+    """A probe's history (times, values), each step once (a step recorded twice, at its diagnostics
+    and at its output, counts once)."""
+    key = f"{role}.probe_{probe}"
+    if key not in history:
+        raise ValueError(f"check.params.probe = {probe!r}: no history {key!r} (a [probes] entry of role {role!r})")
+    _, first = np.unique(history["step"], return_index=True)
+    return history["time"][first], history[key][first]
+
+
+def _tip_curve(case, params):
+    """tip_history's reference curve, on the probe it reads (none without one)."""
+    if "probe" not in params:
+        return None
+    ref = np.asarray(params["reference"], float)
+    label = "reference" + (f" ({params['reference_source']})" if params.get("reference_source") else "")
+    return f"{params['role']}.probe_{params['probe']}", ref[:, 0], ref[:, 1], label
+
+
+@register_check("tip_history", rule=_probe_of_role, curve=_tip_curve, params=table(
     {"role": {"type": "string", "enum": ["lagrange", "sph"]}, "axis": {"type": "string", "enum": ["x", "y", "z"]},
      "along": {"type": "string", "enum": ["x", "y", "z"]},
      "reference": {"type": "array", "minItems": 2, "items": {"type": "array", "minItems": 2, "maxItems": 2,
                                                              "items": {"type": "number"}}},
-     "reference_source": {"type": "string"}},
+     "reference_source": {"type": "string"}, "probe": {"type": "string"}},
     required=("role", "axis", "along", "reference")))
 def tip_history(case, out, history, params):
     """A body's tip (its nodes or particles that start at the largest coordinate ``along``): their
-    mean displacement along ``axis`` over the output steps against a reference history [[t, d],
-    ...] (e.g. the same body modelled otherwise, finer: ``reference_source`` says which), linearly
-    interpolated in time.  Metrics: ``tip_history_error`` = the largest |d - d_ref| over the
+    mean displacement along ``axis`` against a reference history [[t, d], ...] (e.g. the same body
+    modelled otherwise, finer: ``reference_source`` says which), linearly interpolated in time; read
+    from the history of the case's probe ``probe`` (a ``[probes]`` entry of ``role`` that measures
+    that displacement: every diagnostics step, drawn against the reference by ``immerse plot``) or
+    else from the output steps.  Metrics: ``tip_history_error`` = the largest |d - d_ref| over the
     reference's span relative to the largest |d_ref| (one number for two curves, as an FE and an
     SPH model of one body are compared), ``tip_final_error`` = the relative error at the reference's
     last time."""
@@ -302,11 +330,14 @@ def tip_history(case, out, history, params):
 
     role, a, b = params["role"], "xyz".index(params["axis"]), "xyz".index(params["along"])
     ref = np.asarray(params["reference"], float)
-    steps = output.read_steps(out, role)
-    x0 = output.read_step(out, role, steps[0][2])[0]
-    top = x0[:, b] >= x0[:, b].max() - 1e-9 * max(abs(x0[:, b].max()), 1.0)
-    ts = np.array([t for t, _, _ in steps])
-    ds = np.array([np.mean(output.read_step(out, role, i)[0][top, a] - x0[top, a]) for _, _, i in steps])
+    if "probe" in params:
+        ts, ds = _probe_history(history, role, params["probe"])
+    else:
+        steps = output.read_steps(out, role)
+        x0 = output.read_step(out, role, steps[0][2])[0]
+        top = x0[:, b] >= x0[:, b].max() - 1e-9 * max(abs(x0[:, b].max()), 1.0)
+        ts = np.array([t for t, _, _ in steps])
+        ds = np.array([np.mean(output.read_step(out, role, i)[0][top, a] - x0[top, a]) for _, _, i in steps])
     span = (ts >= ref[0, 0] - 1e-12) & (ts <= ref[-1, 0] + 1e-12)
     scale = np.abs(ref[:, 1]).max()
     err = np.abs(ds[span] - np.interp(ts[span], ref[:, 0], ref[:, 1]))

@@ -1,0 +1,6 @@
+"""`python -m orchestrator ...` is `immerse ...` (orchestrator/cli.py)."""
+import sys
+
+from orchestrator.cli import main
+
+sys.exit(main())
