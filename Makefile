@@ -47,7 +47,7 @@ venv: $(STAMP) $(WARM)
 demo: venv
 	$(VENV)/bin/immerse run cases/plate_in_shock_2d --out cases/plate_in_shock_2d/out --replace
 	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out
-	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out --field pressure --step all
+	$(VENV)/bin/immerse view cases/plate_in_shock_2d/out --field pressure --step all --movie
 	$(VENV)/bin/immerse plot cases/plate_in_shock_2d/out tip --csv
 
 test: test-serial test-mpi

@@ -3,7 +3,7 @@
   immerse check CASE [--ranks ROLE=N ...] [MACHINE]   validate only (case, meshes, expressions, resources)
   immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [--engine local|slurm] [MACHINE]
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
-  immerse view OUT [--field NAME ...] [--step all|last|N ...]
+  immerse view OUT [--field NAME ...] [--step all|last|N ...] [--range fixed|step] [--movie]
   immerse plot OUT [QUANTITY ...] [--csv] [--list]    time histories (diagnostics, probes) against time
   immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--cores N] [--retry-failed] [--only AXIS=L1,L2]
       runs a matrix of cases x parameters (orchestrator/campaign), then campaign.csv/.h5 and the report
@@ -182,7 +182,7 @@ def cmd_view(args) -> int:
         return _fail(f"OUT = {str(out)!r}: no results.h5 there (run the case first)")
     steps = tuple(args.step) if args.step else ("last",)
     try:
-        paths = render(out, fields=args.field or None, steps=steps)
+        paths = render(out, fields=args.field or None, steps=steps, value_range=args.range, animate=args.movie)
     except (ViewError, OutputError) as e:
         return _fail(str(e))
     except (OSError, KeyError, ValueError, TypeError) as e:   # an index or step file damaged
@@ -317,10 +317,18 @@ def main(argv=None) -> int:
                         "allocation, and follow it")
     _add_machine_flags(p)
     p.set_defaults(func=cmd_run)
-    p = sub.add_parser("view", help="render PNG pictures of a run's output")
+    p = sub.add_parser("view", help="render PNG pictures of a run's output",
+                       description="Render PNG pictures of a run's output steps to OUT/pictures/ (1-D runs as "
+                       "line plots against the exact solution where the case's check has one).")
     p.add_argument("out")
-    p.add_argument("--field", nargs="*")
-    p.add_argument("--step", nargs="*")
+    p.add_argument("--field", nargs="*", help="fields to draw (default: all the output holds; an unknown "
+                   "one is refused with the list of those it has)")
+    p.add_argument("--step", nargs="*", help="output steps: first, last (default), all, or indices")
+    p.add_argument("--range", choices=("fixed", "step"), default=None,
+                   help="fixed: one colour (value) range for all steps drawn (default for several "
+                        "steps); step: each step's own")
+    p.add_argument("--movie", action="store_true", help="also an animated GIF per field of the steps "
+                   "drawn (OUT/pictures/<role>_<field>.gif)")
     p.set_defaults(func=cmd_view)
     p = sub.add_parser("plot", help="draw a run's time histories (diagnostics, probes) against time",
                        description="Draw time histories of a run (OUT/diagnostics.h5) against time, with the "

@@ -240,8 +240,9 @@ def line_profile(out_dir, role: str, field: str, index: int, axis: int, case=Non
     return prof
 
 
-def line_figure(prof: LineProfile, size: tuple[int, int] = (1024, 768)):
-    """A matplotlib Figure of a LineProfile (computed: markers and line; exact: black line)."""
+def line_figure(prof: LineProfile, size: tuple[int, int] = (1024, 768), ylim=None):
+    """A matplotlib Figure of a LineProfile (computed: markers and line; exact: black line);
+    ``ylim``: the value axis's range (one range for every frame of a sequence), None: its own."""
     from matplotlib.figure import Figure
 
     dpi = 100
@@ -254,6 +255,8 @@ def line_figure(prof: LineProfile, size: tuple[int, int] = (1024, 768)):
             label=f"{prof.role} ({len(prof.x)} stations)", zorder=2)
     for k, (role, lo, hi) in enumerate(prof.bodies):  # coupled bodies in the background
         ax.axvspan(lo, hi, color="tab:grey", alpha=0.35, zorder=1, label=f"{role} body" if k == 0 else None)
+    if ylim is not None:
+        ax.set_ylim(*ylim)
     ax.set_xlabel(prof.xlabel)
     ax.set_ylabel(prof.ylabel)
     ax.set_title(f"{prof.role}: {prof.label}, t = {prof.time:.6g} s (step {prof.step})")
@@ -290,8 +293,8 @@ def _grid(pv, points: np.ndarray, cells: np.ndarray, cell_type: str):
 
 
 def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, preference: str,
-                    title: str, planar: bool, window_size, show_edges, overlays=()):
-    lo, hi = float(np.nanmin(values)), float(np.nanmax(values))
+                    title: str, planar: bool, window_size, show_edges, overlays=(), clim=None):
+    lo, hi = (float(np.nanmin(values)), float(np.nanmax(values))) if clim is None else clim
     if not hi > lo:  # constant field: give the colour map a finite range
         pad = max(abs(lo), 1.0) * 1e-6
         lo, hi = lo - pad, hi + pad
@@ -322,14 +325,43 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
                             show_zlabels=not planar)
         if planar:
             plotter.view_xy()
+            _frame_planar(plotter, grid, overlays, window_size)
         else:
             plotter.view_isometric()
-        plotter.camera.zoom(0.75)  # room for the axis titles, the text and the colour bar
+            plotter.camera.zoom(0.75)  # room for the axis titles, the text and the colour bar
         plotter.screenshot(str(path))
     except Exception as e:
         raise RuntimeError(f"rendering {path.name} failed: {e}; VTK said: {sink.GetOutput().strip()}") from e
     finally:
         plotter.close()
+
+
+FRAME = (0.10, 0.92, 0.27, 0.87)
+"""Where a planar domain is drawn in the picture (fractions of its width and height: left, right,
+bottom, top): the title above, the axis labels and the colour bar below it, clear of each other."""
+
+
+def _frame_planar(plotter, grid, overlays, window_size) -> None:
+    """A planar picture framed to its domain (the background's grid and the bodies on it): a
+    parallel projection whose scale makes the domain fill FRAME, whatever its aspect (a slender body
+    or a long tube no longer shrinks to a strip in the middle of a square view)."""
+    b = np.array(grid.bounds, dtype=float)
+    for o in overlays:
+        ob = np.array(o.bounds, dtype=float)
+        b[0::2], b[1::2] = np.minimum(b[0::2], ob[0::2]), np.maximum(b[1::2], ob[1::2])
+    w, h = max(b[1] - b[0], 1e-300), max(b[3] - b[2], 1e-300)
+    left, right, bottom, top = FRAME
+    aspect = window_size[0] / window_size[1]
+    # parallel scale = half the visible height (world units)
+    scale = max(h / (top - bottom), w / ((right - left) * aspect)) / 2.0
+    cx = 0.5 * (b[0] + b[1]) - ((left + right) / 2.0 - 0.5) * 2.0 * scale * aspect
+    cy = 0.5 * (b[2] + b[3]) - ((bottom + top) / 2.0 - 0.5) * 2.0 * scale
+    cam = plotter.camera
+    plotter.enable_parallel_projection()
+    z = cam.position[2] - cam.focal_point[2]
+    cam.focal_point = (cx, cy, cam.focal_point[2])
+    cam.position = (cx, cy, cam.focal_point[2] + z)
+    cam.parallel_scale = scale
 
 
 def _is_background(role: str) -> bool:
@@ -357,15 +389,74 @@ def _picture_path(pictures: Path, role: str, name: str, index: int) -> Path:
 
 
 # ---------------------------------------------------------------------------------------------
+RANGES = ("fixed", "step")
+"""--range: one colour (or value-axis) range for all the steps drawn of a field (``fixed``, the
+default for several steps: frames compare and animate), or each step's own (``step``)."""
+
+
+def _frame_values(out_dir: Path, role: str, name: str, index: int, axis: int | None, coupled: bool):
+    """The values a picture of (role, name, step) colours, or a line plot draws (NaN: left out)."""
+    _, pd, cd = read_step(out_dir, role, index)
+    data = pd[name] if name in pd else cd[name]
+    if axis is not None:
+        return _axial(name, data, axis)[1]
+    values = scalar_field(name, data)[1]
+    if name not in pd and coupled and "blocked_fraction" in cd and name != "blocked_fraction":
+        values = np.where(cd["blocked_fraction"] >= 1.0 - 1e-12, np.nan, values)
+    return values
+
+
+def _fixed_range(out_dir: Path, role: str, name: str, chosen, axis, coupled: bool, exact=None):
+    """(lo, hi) over every chosen step (module RANGES); a constant field gets a finite range; a line
+    plot's a 5 % margin (and its exact curve's values, ``exact``)."""
+    lo, hi = np.inf, -np.inf
+    for _, _, index in chosen:
+        v = np.asarray(_frame_values(out_dir, role, name, index, axis, coupled), dtype=float)
+        if np.isfinite(v).any():
+            lo, hi = min(lo, float(np.nanmin(v))), max(hi, float(np.nanmax(v)))
+    for e in exact or ():
+        if e is not None and np.isfinite(e).any():
+            lo, hi = min(lo, float(np.nanmin(e))), max(hi, float(np.nanmax(e)))
+    if not np.isfinite(lo):
+        return None
+    if not hi > lo:
+        pad = max(abs(lo), 1.0) * 1e-6
+        lo, hi = lo - pad, hi + pad
+    if axis is not None:
+        m = 0.05 * (hi - lo)
+        lo, hi = lo - m, hi + m
+    return lo, hi
+
+
+def movie(frames: Sequence[Path], path: Path, seconds_per_frame: float = 0.4) -> Path:
+    """An animated GIF of the frames (Pillow, matplotlib's own image library), looping."""
+    from PIL import Image
+
+    images = [Image.open(f).convert("RGB") for f in frames]
+    # one palette for all frames (the first's adaptive one): colours keep their values frame to frame
+    first = images[0].quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+    rest = [im.quantize(palette=first, dither=Image.Dither.NONE) for im in images[1:]]
+    tmp = path.with_name(path.name + ".tmp")
+    first.save(tmp, format="GIF", save_all=True, append_images=rest, duration=int(1000 * seconds_per_frame),
+               loop=0)
+    tmp.replace(path)
+    return path
+
+
 def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("last",),
            role: str | None = None, *, window_size: tuple[int, int] = (1024, 768),
-           show_edges: bool | None = None) -> list[Path]:
+           show_edges: bool | None = None, value_range: str | None = None,
+           animate: bool = False) -> list[Path]:
     """Render PNGs into out_dir/pictures; returns the written paths.
 
     fields: names of point or cell data (None: all of them); steps: 'first', 'last',
-    'all' or output indices; role: one role (None: every role with output).
+    'all' or output indices; role: one role (None: every role with output); value_range: RANGES
+    (None: fixed for several steps); animate: also one GIF per role and field of its frames
+    (pictures/<role>_<field>.gif).
     Raises ViewError (nothing written) for a field or step the output does not hold.
     """
+    if value_range is not None and value_range not in RANGES:
+        raise ViewError(f"--range {value_range!r}: allowed: {', '.join(RANGES)}")
     out_dir = Path(out_dir)
     if isinstance(steps, (str, int, np.integer)):
         steps = (steps,)
@@ -399,12 +490,13 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
     from orchestrator import outdir
 
     for r, chosen, names in plan:
-        for _, _, index in chosen:
-            for name in names:
-                path = _picture_path(pictures, r, name, index)
-                if not outdir.may_write(out_dir, path):
-                    raise ViewError(f"{path}: a file immerse did not write is there; move it away "
-                                    "(immerse never overwrites a file it did not write)")
+        paths = [_picture_path(pictures, r, name, index) for _, _, index in chosen for name in names]
+        if animate:
+            paths += [pictures / f"{_SAFE.sub('_', r)}_{_SAFE.sub('_', name)}.gif" for name in names]
+        for path in paths:
+            if not outdir.may_write(out_dir, path):
+                raise ViewError(f"{path}: a file immerse did not write is there; move it away "
+                                "(immerse never overwrites a file it did not write)")
     written: list[Path] = []
     pv = sink = None
     case = None
@@ -416,6 +508,16 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
         if axis is not None and case is None:
             case = _load_case(out_dir) or False
         planar = bool(np.all(first_points[:, 2] == first_points[0, 2]))
+        coupled = bool(bodies) and _is_background(r)
+        fixed = (value_range or ("fixed" if len(chosen) > 1 else "step")) == "fixed"
+        ranges = {}
+        if fixed:
+            for name in names:
+                exact = None
+                if axis is not None:   # the exact curves' values belong in the range too
+                    exact = [line_profile(out_dir, r, name, i, axis, case or None).exact_values for _, _, i in chosen]
+                ranges[name] = _fixed_range(out_dir, r, name, chosen, axis, coupled, exact)
+        frames = {name: [] for name in names}
         for time, step, index in chosen:
             pictures.mkdir(parents=True, exist_ok=True)
             if axis is not None:
@@ -424,10 +526,11 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                     prof = line_profile(out_dir, r, name, index, axis, case or None)
                     if _is_background(r):
                         prof.bodies = [(b, *_extent(out_dir, b, index, axis)) for b in bodies]
-                    fig = line_figure(prof, window_size)
+                    fig = line_figure(prof, window_size, ranges.get(name))
                     fig.savefig(path)
                     outdir.record_written(out_dir, path)
                     written.append(path)
+                    frames[name].append(path)
                 continue
             if pv is None:
                 pv, sink = _quiet_vtk()
@@ -454,7 +557,14 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                 title = f"{r}: {label}" + (f" with {', '.join(bodies)} bodies (grey)" if overlays else "")
                 _render_pyvista(pv, sink, path, grid, label, name, values, preference,
                                 f"{title}\nt = {time:.6g} s (step {step})", planar,
-                                window_size, show_edges, overlays)
+                                window_size, show_edges, overlays, ranges.get(name))
                 outdir.record_written(out_dir, path)
                 written.append(path)
+                frames[name].append(path)
+        if animate:
+            for name in names:
+                gif = pictures / f"{_SAFE.sub('_', r)}_{_SAFE.sub('_', name)}.gif"
+                movie(frames[name], gif)
+                outdir.record_written(out_dir, gif)
+                written.append(gif)
     return written

@@ -247,3 +247,78 @@ def test_view_owns_its_pictures_and_never_overwrites_a_users_file(tmp_path):
     r = immerse("run", CASES / "sod", "--out", out, "--replace")
     assert r.returncode in (0, 1), r.stderr
     assert not mine.exists() and users.read_bytes() == b"my picture"
+
+
+# ------------------------------------------------------------------ ranges, movies, framing
+def _clims(monkeypatch):
+    """Record the colour range each picture is drawn with (and still draw it)."""
+    import orchestrator.view as view
+
+    seen, real = [], view._render_pyvista
+
+    def record(*a, **kw):
+        seen.append((a[2].name, a[-1]))
+        return real(*a, **kw)
+
+    monkeypatch.setattr(view, "_render_pyvista", record)
+    return seen
+
+
+def test_all_steps_share_one_colour_range_and_animate(tmp_path, monkeypatch):
+    """--step all: one colour range over the steps drawn (the temperature 300 + x is the same at both
+    steps; the velocity magnitude grows with the step: its range is the union), and --movie writes a
+    GIF of the frames; --range step gives each its own."""
+    out = tmp_path / "out"
+    mesh = box_mesh([0, 0], [2, 1], [8, 4])
+    _synthetic(out, mesh, n=3)
+    seen = _clims(monkeypatch)
+    paths = render(out, fields=["velocity"], steps=("all",), window_size=(320, 240), animate=True)
+    speeds = [np.hypot(mesh.points[:, 0] * (i + 1), mesh.points[:, 1] ** 2) for i in range(3)]
+    assert [c for _, c in seen] == [(min(v.min() for v in speeds), max(v.max() for v in speeds))] * 3
+    gif = out / "pictures" / "lagrange_velocity.gif"
+    assert paths[-1] == gif and Image.open(gif).n_frames == 3
+    seen.clear()
+    import shutil
+
+    shutil.rmtree(out / "pictures")   # (a synthetic output: not immerse's own, its pictures are not rewritten)
+    render(out, fields=["velocity"], steps=("all",), window_size=(320, 240), value_range="step")
+    assert [c for _, c in seen] == [None] * 3
+
+
+def test_line_plots_of_all_steps_share_one_value_range(tmp_path):
+    import orchestrator.view as view
+
+    out, _ = _sod_output(tmp_path)
+    paths = render(out, fields=["density"], steps=("all",), window_size=(400, 300))
+    assert len(paths) == 3
+    prof = line_profile(out, "ale", "density", 0, axis=0, case=_case(tmp_path))
+    lo, hi = view._fixed_range(out, "ale", "density", view.read_steps(out, "ale"), 0, False)
+    assert (lo, hi) == pytest.approx((0.125 - 0.04375, 1.0 + 0.04375)) and prof.values.max() == 1.0
+    assert line_figure(prof, (400, 300), (lo, hi)).axes[0].get_ylim() == (lo, hi)
+
+
+def _coloured_box(png):
+    """Rows and columns (fractions of the picture, from its top-left) of the coloured pixels above
+    the colour bar's band: the domain as drawn."""
+    img = np.asarray(Image.open(png).convert("RGB"), dtype=float) / 255.0
+    h = img.shape[0]
+    sat = img.max(axis=2) - img.min(axis=2)     # viridis is saturated; white, black, grey are not
+    rows, cols = np.nonzero(sat[: int(0.80 * h)] > 0.15)
+    return rows.min() / h, rows.max() / h, cols.min() / img.shape[1], cols.max() / img.shape[1]
+
+
+@pytest.mark.parametrize("upper, fills", [([1.6, 0.1], "width"), ([0.03, 0.3], "height"), ([1.0, 0.75], "height")])
+def test_a_planar_domain_fills_its_picture_clear_of_the_colour_bar(tmp_path, upper, fills):
+    """A long tube, a slender plate and a squarish box each fill the picture's frame (orchestrator/
+    view.py FRAME) in the direction that limits them: at least 75 % of the width or 55 % of the
+    height (the rest: title, axis labels, colour bar), and end above the colour bar's band (the
+    bar's top at 88 % of the height)."""
+    out = tmp_path / "out"
+    _synthetic(out, box_mesh([0, 0], upper, [16, 4]), n=1)
+    png = render(out, fields=["temperature"], window_size=(1024, 768))[0]
+    top, bottom, left, right = _coloured_box(png)
+    if fills in ("width", "both"):
+        assert right - left > 0.75, (left, right)
+    if fills in ("height", "both"):
+        assert bottom - top > 0.55, (top, bottom)
+    assert bottom < 0.80 and top > 0.10, (top, bottom)
