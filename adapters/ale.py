@@ -24,6 +24,12 @@ class AleAdapter(SolverAdapter):
     def local_limiter(self) -> dict | None:
         return self.solver.local_limiter()
 
+    def describe(self) -> str:
+        cells = [int(c) for c in self.case["ale"]["grid"]["cells"]]
+        n = len(self.case["ale"].get("materials", {}))
+        return (f"{int(np.prod(cells)):,} zones ({' x '.join(map(str, cells))}), {n} material{'s' if n != 1 else ''}, "
+                f"{self.case['ale'].get('mode', 'eulerian')}")
+
     # ---- the embedded-mesh coupling (background side; the runtime moves the buffers) --------------
     def unpack_geometry(self, buf):
         from solvers.ale.coupled import BodyGeometry
@@ -71,6 +77,7 @@ class AleAdapter(SolverAdapter):
         if self.comm.rank != 0:
             return
         points, cells, point_data, cell_data = data
+        _blank_covered(cell_data)
         if not self._mesh_written:
             step_files.write_mesh(self.out_dir, self.role, cells, "hexahedron" if cells.shape[1] == 8 else "quad")
             self._mesh_written = True
@@ -84,6 +91,30 @@ class AleAdapter(SolverAdapter):
 
     def restart(self, path: Path) -> None:
         self.solver.restart(path)
+
+
+GAS_STATE = ("density", "pressure", "specific_internal_energy", "sound_speed", "artificial_viscosity")
+"""The zone fields that describe the gas in a zone (and their per-material columns, <name>_<material>):
+NaN in the output where bodies fill the zone whole (_blank_covered)."""
+
+
+def _blank_covered(cell_data: dict) -> None:
+    """Zones wholly inside bodies (blocked_fraction 1) hold no gas: their gas state is written as NaN,
+    so that ParaView's colour ranges and Plot Over Time see only gas (a covered zone's density and
+    pressure read 0 before: the default range started at 0 and hid the gas around the body); the
+    volume and blocked fractions stay (they say the zone is covered).  A covered zone that still
+    holds gas (density > 0: a leak, what checks' covered_gas_mass measures) keeps its values."""
+    bf = cell_data.get("blocked_fraction")
+    if bf is None:
+        return
+    covered = np.asarray(bf) >= 1.0 - 1e-12
+    if "density" in cell_data:
+        covered &= np.asarray(cell_data["density"]) == 0.0
+    if not covered.any():
+        return
+    for name, a in cell_data.items():
+        if name in GAS_STATE or any(name.startswith(f"{g}_") for g in GAS_STATE):
+            cell_data[name] = np.where(covered, np.nan, a)
 
 
 if __name__ == "__main__":

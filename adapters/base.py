@@ -87,6 +87,11 @@ class SolverAdapter(ABC):
         orchestrator/coupling/multirate.py): it then also gives snapshot() and restore()."""
         return False
 
+    def describe(self) -> str:
+        """What the group holds, in a few words for the start-up line (e.g. "9,600 zones, 1 material");
+        called once after setup() (collective; meaningful on the group root)."""
+        return ""
+
     def substep_cost(self) -> float:
         """What one substep costs, in background zone-steps (multi-rate's default weighs it against the
         background's zones, orchestrator/coupling/multirate.py pays): e.g. the group's element count."""

@@ -51,6 +51,12 @@ class LagrangeAdapter(SolverAdapter):
 
         return substep_refusal(self.case) is None
 
+    def describe(self) -> str:
+        s = self.solver
+        n = len(self.case["lagrange"].get("bodies", []))
+        return (f"{n} bod{'y' if n == 1 else 'ies'}, {s.n_cells_global:,} {s.cell_type} elements, "
+                f"{s.n_nodes_global:,} nodes")
+
     def substep_cost(self) -> float:
         """An element step costs about a zone step (bench lagrange / bench ale)."""
         return float(self.solver.n_cells_global)

@@ -168,12 +168,13 @@ def serve(adapter_cls, argv=None) -> None:
             ic.Send(reply, dest=0, tag=7)
 
     stable = adapter.stable_dt()   # (collective)
+    adapter.describe()             # (collective where a solver sums over its ranks)
     if rank == 0:  # once, at start-up: the names of the diagnostics, whether the solver steps by
         # central differences, whether it can take a coupled step in substeps and its stable step
         # (whether substeps pay: orchestrator/coupling/multirate.py; pickled, not a hot path)
         ic.send((names, adapter.central_difference(),
-                 adapter.substep_cost() if side == "foreground" and adapter.can_substep() else 0.0, stable),
-                dest=0, tag=6)
+                 adapter.substep_cost() if side == "foreground" and adapter.can_substep() else 0.0, stable,
+                 adapter.describe()), dest=0, tag=6)
     answer(True)
     cmd = np.empty(P.CMD_LEN)
     work_s = 0.0  # this rank's time in the steps' own work (the waits for the coupler excluded)

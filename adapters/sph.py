@@ -396,6 +396,9 @@ class SphAdapter(SolverAdapter):
         np.maximum(rho, self._rho_floor[t] - 0.5 * self._dt * drho, out=rho)
 
     # ---- substeps (multi-rate: orchestrator/coupling/multirate.py, adapters/substeps.py) ----------
+    def describe(self) -> str:
+        return f"{self.n:,} particles ({self.model}), LAMMPS"
+
     def can_substep(self) -> bool:
         """Substeps (multi-rate): each pass starts again from the coupling step's start, the state
         snapshot() keeps in memory (adapters/registry.py sph_substep_refusal says when not)."""

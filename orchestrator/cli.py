@@ -5,6 +5,7 @@
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
   immerse view OUT [--field NAME ...] [--step all|last|N ...] [--range fixed|step] [--movie]
   immerse plot OUT [QUANTITY ...] [--csv] [--list]    time histories (diagnostics, probes) against time
+  immerse keys [TABLE] [--markdown]            every case.toml key: type, unit, range, default, meaning
   immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--cores N] [--retry-failed] [--only AXIS=L1,L2]
       runs a matrix of cases x parameters (orchestrator/campaign), then campaign.csv/.h5 and the report
   immerse report OUT                           rebuilds a campaign's report from OUT/campaign.h5
@@ -212,6 +213,17 @@ def cmd_plot(args) -> int:
     return 0
 
 
+def cmd_keys(args) -> int:
+    from orchestrator.keys import keys, markdown, select, text
+
+    try:
+        chosen = select(keys(), args.table)
+    except ValueError as e:
+        return _fail(str(e))
+    print(markdown(chosen) if args.markdown else text(chosen), end="")
+    return 0
+
+
 def cmd_bench(args) -> int:
     from orchestrator import bench
 
@@ -339,6 +351,13 @@ def main(argv=None) -> int:
     p.add_argument("--csv", action="store_true", help="also write the histories as CSV")
     p.add_argument("--list", action="store_true", help="list the run's histories with their units")
     p.set_defaults(func=cmd_plot)
+    p = sub.add_parser("keys", help="the reference of every case.toml key (from the case schema)",
+                       description="Print every case.toml key the case schema knows: its type or allowed "
+                       "values, unit, range, default and meaning (the README's reference is this, --markdown).")
+    p.add_argument("table", nargs="?", help="only the keys under this table or key, e.g. run, "
+                   "ale.materials, lagrange.bodies")
+    p.add_argument("--markdown", action="store_true", help="as Markdown tables (the README's reference)")
+    p.set_defaults(func=cmd_keys)
     p = sub.add_parser("campaign", help="run a validation campaign (cases x parameters) and its report")
     p.add_argument("campaign", help="the campaign file (or a directory holding campaign.toml)")
     p.add_argument("--out", help="output directory (default: CAMPAIGN_DIR/out); an interrupted "
@@ -357,7 +376,15 @@ def main(argv=None) -> int:
     p.add_argument("out")
     p.set_defaults(func=cmd_report)
     p = sub.add_parser("bench", help="run a benchmark, write bench-NAME.json")
-    p.add_argument("name")
+    p.add_argument("name", help="the benchmark (listed below)")
+    plain_help = p.format_help
+
+    def bench_help():   # (the benches' registry takes ~2 s to import: only for --help)
+        from orchestrator import bench
+
+        return plain_help() + "\nbenchmarks: " + ", ".join(sorted(bench.BENCHES)) + "\n"
+
+    p.format_help = bench_help
     p.add_argument("--out")
     p.add_argument("--quick", action="store_true", help="small sizes (smoke test)")
     p.set_defaults(func=cmd_bench)

@@ -120,7 +120,16 @@ class Coupler:
         self.coupling = None
         if case.get("coupling"):
             self._start_coupling()
-        started = {r: P.recv_object(self.inter[r], 0, 6) for r in self.roles}
+        self.log(f"case {self.case['name']}: solvers {', '.join(self.roles)}; end time {self.end_time:g} s; "
+                 "setting up")
+        started = {}
+        t_start = _time.perf_counter()
+        for r in self.roles:   # each group's start-up message once it is set up, said as it comes
+            started[r] = P.recv_object(self.inter[r], 0, 6)
+            n = self.inter[r].Get_remote_size()
+            what = started[r][4] if len(started[r]) > 4 else ""
+            self.log(f"{r}: {what + '; ' if what else ''}{n} rank{'s' if n > 1 else ''}; ready "
+                     f"{_time.perf_counter() - t_start:.1f} s after the coupler; stable step {started[r][3]:.4g} s")
         self.names = {r: names for r, (names, *_) in started.items()}
         # multi-rate (orchestrator/coupling/multirate.py): the foreground groups that take each coupled
         # step in substeps of their own stable step; run.group_dt_max caps a group's stable step
@@ -629,11 +638,15 @@ class Coupler:
 
         wall0 = _time.perf_counter()
         self.first_step_s = None
-        self.log(f"case {self.case['name']}: solvers {', '.join(self.roles)}; end time {self.end_time:g} s")
         if self.dt_scale > 1.0:
             self.log(f"warning: run.dt_scale = {self.dt_scale:g} > 1: every step is beyond the solvers' "
                      "stable (Courant) limit (a stability study); a failure is reported as that")
         if self.out_index == 0:
+            from adapters.registry import coupling_side
+            from orchestrator import paraview_script
+
+            paraview_script.write(self.out, self.roles,   # (OUT/open_in_paraview.py: groups named in ParaView)
+                                  next((r for r in self.roles if coupling_side(r) == "background"), None))
             self.write_output()
         self.next_output_t = next_time(self.t, self.output_interval)
         self.next_checkpoint_t = next_time(self.t, self.checkpoint_interval)
@@ -711,7 +724,8 @@ class Coupler:
 
     def summary(self, wall: float) -> dict:
         from orchestrator import checks
-        from orchestrator.run_record import conservation_residuals, contact_balances, write_diagnostics, write_summary
+        from orchestrator.run_record import (conservation_residuals, contact_balances, final_units, write_diagnostics,
+                                             write_summary)
 
         hist = self.diagnostics_history()
         write_diagnostics(self.out, hist)
@@ -742,6 +756,7 @@ class Coupler:
             "conservation": conservation,
             **({"contact": contact} if (contact := contact_balances(hist, list(self.history))) else {}),
             "final": final,
+            "units": final_units(final, self.case.get("probes")),   # (of "final"'s values)
             "machine": {"host": socket.gethostname(), "cores": os.cpu_count()},
         }
         if self.coupling is not None:  # the coupler's own work: solve, correction, geometry (the
@@ -755,7 +770,7 @@ class Coupler:
             for name, m in s["check"]["metrics"].items():
                 self.log(f"check {name}: {m['value']:.6g} vs {m['reference']:.6g} "
                          f"(rel. error {m['rel_error']:.3g}, tolerance {m['tolerance']:g}) "
-                         f"{'passed' if m['passed'] else 'FAILED'}")
+                         f"{'passed' if m['passed'] else 'FAILED'}" + (f": {m['note']}" if m.get("note") else ""))
         return s
 
 

@@ -48,7 +48,7 @@ RUN_DIR = ".run"
 _NAME = r"[A-Za-z][A-Za-z0-9_-]*"
 _TMP = r"(?:\.\d+)?(?:\.tmp)?"
 RUN_FILES = re.compile(
-    rf"^(?:(?:log\.txt|results\.h5|results\.xdmf|summary\.json|diagnostics\.h5|probes\.csv){_TMP}"
+    rf"^(?:(?:log\.txt|results\.h5|results\.xdmf|summary\.json|diagnostics\.h5|probes\.csv|open_in_paraview\.py){_TMP}"
     rf"|steps/{_NAME}_(?:\d+|mesh)\.h5{_TMP}"
     rf"|checkpoints/checkpoint_\d+\.(?:h5|tmp)"
     rf"|checkpoints/step_\d+/{_NAME}\.h5{_TMP})$")

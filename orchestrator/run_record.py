@@ -96,6 +96,15 @@ def write_probes(out: Path, hist: dict[str, np.ndarray]) -> None:
     os.replace(tmp, Path(out) / "probes.csv")
 
 
+def final_units(final: dict, probes: dict | None) -> dict:
+    """summary.json's "units": the SI unit of each of "final"'s histories ("1": dimensionless; a name
+    without a known unit is left out), orchestrator/units.py history_unit.  The other keys carry
+    their unit in their names (wall_time_s, end_time and dt in s, conservation's *_rel relative)."""
+    from orchestrator.units import history_unit
+
+    return {k: u for k in final if (u := history_unit(k, probes)) is not None}
+
+
 def write_summary(out: Path, s: dict) -> None:
     tmp = Path(out) / "summary.json.tmp"
     tmp.write_text(json.dumps(s, indent=2))
@@ -127,6 +136,7 @@ def ended_summary(case: dict, hist: dict[str, np.ndarray] | None, status: str, m
         "final": {k: float(a[-1]) for k, a in hist.items() if k not in ("time", "step")} if n else {},
         "machine": {"host": socket.gethostname(), "cores": os.cpu_count()},
     }
+    s["units"] = final_units(s["final"], case.get("probes"))
     if n and (contact := contact_balances(hist, roles)):
         s["contact"] = contact
     return s

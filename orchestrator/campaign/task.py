@@ -53,6 +53,17 @@ def classify(rc: int, message: str, summary: dict | None, warnings: list[str] | 
     return "unstable" if INSTABILITY.search(message or "") else "failed"
 
 
+def failed_metrics(summary: dict) -> str:
+    """A check_failed run's message: each metric outside its tolerance, with why where it is NaN."""
+    out = []
+    for name, m in summary["check"]["metrics"].items():
+        if not m["passed"]:
+            text = (f"{name}: {m['value']:.6g} vs {m['reference']:.6g} (rel. error {m['rel_error']:.3g}, "
+                    f"tolerance {m['tolerance']:g})")
+            out.append(text + (f": {m['note']}" if m.get("note") else ""))
+    return "; ".join(out)[:2000]
+
+
 def _message(stderr: str) -> str:
     """The run's one-line failure message: its last line that starts with 'immerse:'."""
     lines = [ln.strip() for ln in stderr.splitlines() if ln.strip()]
@@ -135,6 +146,8 @@ def run_task(d: Path, timeout: float | None = None, engine: str = "local") -> in
     status = "timeout" if timed_out else classify(rc, message, summary, warnings)
     if status == "warned":
         message = "; ".join(warnings)[:2000]
+    if status == "check_failed" and not message:
+        message = failed_metrics(summary)
     if timed_out:
         message = f"timed out after {timeout:g} s (the campaign's timeout); ended"
     result = {"name": meta["name"], "status": status, "returncode": rc, "message": message,

@@ -253,8 +253,9 @@ def coupled_balances(case, out, history, params):
         g = case["ale"]["grid"]
         zone_volume = float(np.prod((np.array(g["upper"]) - np.array(g["lower"])) / np.array(g["cells"])))
         full = cd["blocked_fraction"] >= 1.0 - 1e-12
-        # (density there is 0 when the zone holds nothing: the check's reference is exactly 0)
-        vals["covered_gas_mass"] = float(np.sum(cd["density"][full]) * zone_volume)
+        # (a covered zone that holds nothing is written as NaN, one that holds gas with its density:
+        # adapters/ale.py _blank_covered; the check's reference is exactly 0)
+        vals["covered_gas_mass"] = float(np.nansum(cd["density"][full]) * zone_volume)
     # the largest displacement of a body node at the end (m): what a body did, for comparing methods
     lag = output.read_steps(out, "lagrange")
     if lag:

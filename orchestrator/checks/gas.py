@@ -225,6 +225,11 @@ def reflected_shock(case, out, history, params):
         "exact_p_reflected": ex.p5,
         "exact_reflected_shock_position": xs,
     }
+    if x_wall - xs <= 2 * margin:   # why the reflected state's window is empty (summary, campaigns)
+        why = (f"the reflected shock (exact position {xs:.6g} m at t = {t:.6g} s) is within 8 zones "
+               f"({2 * margin:.3g} m) of the wall at {x_wall:g} m: no zone between them, 4 zones clear of "
+               "each; a later end time measures it")
+        vals["_notes"] = {"p_reflected": why, "rho_reflected": why}
     k, xc = crossings(x, rho, 0.5 * (ex.rho2 + ex.rho5))
     if len(k):
         vals["reflected_shock_position_error_cells"] = float(np.min(np.abs(xc - xs)) / dx)

@@ -74,15 +74,27 @@ def compare(value: float, reference: float, tolerance: float) -> dict:
             "tolerance": float(tolerance), "passed": bool(err <= tolerance)}
 
 
+NAN_NOTE = ("not a number: the check had nothing to measure at the run's last output (an empty window: "
+            "see the kind's measuring windows in `immerse keys check` and the check's docstring)")
+"""A metric's note when its value is NaN and the check gives no reason of its own."""
+
+
 def run_check(case: dict, out: Path, history: dict[str, np.ndarray]) -> dict:
+    """The check's metrics compared with their references.  A check function may return, beside its
+    numbers, ``"_notes": {metric: why}``: why a value is NaN (e.g. the window between a shock and
+    the wall holding no zone); a NaN metric without one gets NAN_NOTE.  The note goes into the
+    metric's record (summary.json) and a campaign's failure column."""
     spec = case["check"]
-    values = CHECKS[spec["kind"]](case, Path(out), history, spec.get("params", {}))
+    values = dict(CHECKS[spec["kind"]](case, Path(out), history, spec.get("params", {})))
+    notes = values.pop("_notes", {})
     metrics = {}
     for name, ref in spec.get("metrics", {}).items():
         if name not in values:
             raise KeyError(f"check.metrics.{name}: check kind {spec['kind']!r} computes "
                            f"only {', '.join(sorted(values))}")
         metrics[name] = compare(values[name], ref["reference"], ref["tolerance"])
+        if not np.isfinite(metrics[name]["value"]):
+            metrics[name]["note"] = notes.get(name, NAN_NOTE)
     extra = {k: float(v) for k, v in values.items() if k not in metrics}
     return {"kind": spec["kind"], "passed": all(m["passed"] for m in metrics.values()),
             "metrics": metrics, "reported": extra}

@@ -29,14 +29,31 @@ from .rules import CaseError, format_key
 CONTACT = table(
     {
         "pairs": {"type": "array", "minItems": 1,
-                  "items": {"type": "array", "items": name_schema(), "minItems": 2, "maxItems": 2}},
-        "method": {"enum": sorted(METHODS)},
-        "alpha": number(exclusiveMinimum=0.0),
-        "capture": number("m", exclusiveMinimum=0.0),
-        "friction": number("dimensionless", minimum=0.0),
-        "return_energy": {"type": "boolean"},
+                  "items": {"type": "array", "items": name_schema(), "minItems": 2, "maxItems": 2},
+                  "description": "The pairs of [[lagrange.bodies]] names that may touch, e.g. [[\"striker\", "
+                                 "\"target\"]]; a body twice is self contact."},
+        "method": {"enum": sorted(METHODS), "default": "dual_pass_mortar",
+                   "description": "How the gaps are measured and enforced. dual_pass_mortar: Puso & Solberg's "
+                                  "stabilized dual-pass mortar (2-D and 3-D, self contact); mortar: single-pass "
+                                  "mortar (biased); node_to_surface(_double): one side's nodes (both sides') on "
+                                  "the other's facets; penalty, node_to_surface(_double)_penalty: the same gaps with "
+                                  "a penalty law (2-D comparisons)."},
+        "alpha": number(exclusiveMinimum=0.0, default=1.0,
+                        description="Weight of the stabilization term J of the multiplier solve; penalty methods: "
+                                    "the compliance factor, stiffness k = 100 E / (alpha h)."),
+        "capture": number("m", exclusiveMinimum=0.0,
+                          description="Search distance: facets and nodes closer than this are tested for contact "
+                                      "(default: the median element edge)."),
+        "friction": number("dimensionless", minimum=0.0, default=0.0,
+                           description="Coulomb friction coefficient mu: tangential impulses bounded by mu times "
+                                       "the normal ones (0: frictionless; mortar methods, explicit integrator)."),
+        "return_energy": {"type": "boolean", "default": True,  # (solvers/lagrange/implicit_dynamic.py)
+                          "description": "midpoint integrator: when a pair's contact ends, give back along its last "
+                                         "force the energy the contact took (false: it stays lost, "
+                                         "contact_lost_energy)."},
     },
     required=("pairs",),
+    description="Contact between Lagrangian bodies, enforced every step by impulses from a multiplier solve.",
 )
 
 

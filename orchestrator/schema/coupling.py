@@ -15,20 +15,64 @@ several materials (or void) in the background beside the bodies (mixed.py with b
 """
 from __future__ import annotations
 
-from orchestrator.coupling import variants
+from orchestrator.coupling import multirate, variants
 
 from .registry import register_table
 from .rules import MISSING, CaseError, format_key
+
+KEYS = {
+    "method": "The coupling method. multiplier: stabilised Lagrange multipliers, one per cut zone (Puso, Kokko, "
+              "Settgast & Liu 2015; never cuts the step); penalty: a spring per cut zone on the accumulated "
+              "relative interface displacement; nitsche: that spring with the stiffness gamma K / h.",
+    "condition": "What the interface ties: tied, every velocity component (no slip); slip, the normal "
+                 "component only (an inviscid gas slides along the surface).",
+    "min_fill": "A cut zone whose open volume holds less than this share of material (the rest void) gets no "
+                "constraint (LS-DYNA's FRCMIN).",
+    "alpha": "multiplier: the stabilisation's weight, the compliance C^-1 = J + I / alpha of each multiplier.",
+    "beta": "multiplier: the weight of the jump term J between neighbouring cut zones.",
+    "substep_tolerance": "multirate: a pass of a group's substeps is accepted when the solve after it would move "
+                         "their mean velocity by at most this share of its scale.",
+    "substep_passes": "multirate: the most passes of a coupling step's substeps (the last is accepted and "
+                      "reported).",
+    "gamma": "nitsche: the factor gamma of the interface stiffness gamma K / h (K the coupled material's "
+             "modulus, h the zone width).",
+    "stiffness": "penalty: the spring's stiffness, traction per metre of relative interface displacement.",
+}
+"""What each key of the coupling variants means (orchestrator/coupling/variants.py holds their schemas)."""
+
+
+def _defaults(method: str) -> dict:
+    """The values a variant takes for its keys left out (CouplingMethod.__init__; the multi-rate passes:
+    orchestrator/coupler.py).  Not ``method``: within a variant's branch it is given; left out, it is
+    the multiplier method's (variants.make), said at the table's own ``method``."""
+    return {"min_fill": variants.MIN_FILL, **variants.METHODS[method].DEFAULTS,
+            "substep_tolerance": multirate.PASS_TOLERANCE, "substep_passes": multirate.MAX_PASSES}
+
+
+def _described(properties: dict, method: str) -> dict:
+    """Copies of a variant's key schemas with their meanings and defaults (the variants' own stay bare)."""
+    defaults = _defaults(method)
+    return {k: {**v, **({"description": KEYS[k]} if k in KEYS else {}),
+                **({"default": defaults[k]} if k in defaults else {})}
+            for k, v in properties.items()}
+
 
 def _schema() -> dict:
     """The variants' branches (variants.schema()) under a closed table of all their keys: a key of
     another variant gets the variant's own message, an unknown key the schema's."""
     s = variants.schema()
+    branches = []
     props = {}
     for branch in s["allOf"]:
-        props.update(branch["then"]["properties"])
-    props["method"] = s["properties"]["method"]
-    return {**s, "properties": props, "additionalProperties": False}
+        method = branch["if"]["properties"]["method"]["const"]
+        then = {**branch["then"], "properties": _described(branch["then"]["properties"], method)}
+        branches.append({**branch, "then": then})
+        props.update(then["properties"])
+    # (method left out: the multiplier method, variants.make)
+    props["method"] = {**s["properties"]["method"], "description": KEYS["method"], "default": "multiplier"}
+    return {**s, "allOf": branches, "properties": props, "additionalProperties": False,
+            "description": "Lagrangian bodies and SPH particles immersed in the ALE background (Eulerian), tied "
+                           "to it by the method this table names."}
 
 
 COUPLING = _schema()

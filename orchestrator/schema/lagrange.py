@@ -31,7 +31,7 @@ from solvers.expressions import BOOL, NUM
 from solvers.lagrange.integrators import INTEGRATORS, SUBCYCLING_RATIOS
 from solvers.lagrange.mesh import body_mesh_size
 
-from .parts import BOX, NAME_PATTERN, integer, name, number, table, variants, vector
+from .parts import BOX, NAME_PATTERN, doc, integer, name, number, table, variants, vector
 from .registry import register_table
 from .rules import (MISSING, CaseError, check_expression, check_extent, check_length,
                            check_path_inside, expression_names, fmt_num, format_bytes, format_key,
@@ -67,27 +67,49 @@ MODEL_KEYS = {
     "johnson_cook": _ELASTIC_KEYS + _JC_EXTRA,
 }
 
+# Johnson-Cook flow stress (solvers/lagrange/materials.py jc_yield), the equation its keys are named in
+_JC = "Johnson-Cook's sigma_y = (A + B eps_p^n)(1 + C ln(rate / rate0))(1 - T*^m)"
 MATERIAL = {
     "type": "object",
     "properties": {
-        "model": {"type": "string", "enum": list(MATERIAL_MODELS)},
-        "density": number("kg/m^3", exclusiveMinimum=0),
-        "youngs_modulus": number("Pa", exclusiveMinimum=0),
-        "poisson_ratio": number("dimensionless", exclusiveMinimum=-1, exclusiveMaximum=0.5),
-        "yield_stress": number("Pa", minimum=0),
-        "hardening_modulus": number("Pa", minimum=0),
-        "hardening_exponent": number("dimensionless", exclusiveMinimum=0),
-        "strain_rate_coefficient": number("dimensionless", minimum=0),
-        "reference_strain_rate": number("1/s", exclusiveMinimum=0),
-        "thermal_exponent": number("dimensionless", exclusiveMinimum=0),
-        "melt_temperature": number("K", exclusiveMinimum=0),
-        "room_temperature": number("K", exclusiveMinimum=0),
-        "specific_heat": number("J/(kg K)", exclusiveMinimum=0),
-        "taylor_quinney": number("dimensionless", minimum=0, maximum=1),
+        "model": doc({"type": "string", "enum": list(MATERIAL_MODELS)},
+                     "Constitutive model. linear_elastic: hypoelastic (Jaumann rate) Hooke's law; neo_hookean: "
+                     "compressible neo-Hookean hyperelasticity from the deformation gradient; johnson_cook: J2 "
+                     "plasticity with Johnson-Cook hardening, rate and adiabatic thermal softening (radial return)."),
+        "density": number("kg/m^3", exclusiveMinimum=0, description="Initial (reference) mass density rho0."),
+        "youngs_modulus": number("Pa", exclusiveMinimum=0, description="Young's modulus E."),
+        "poisson_ratio": number("dimensionless", exclusiveMinimum=-1, exclusiveMaximum=0.5,
+                                description="Poisson's ratio nu (with E: the shear and bulk moduli)."),
+        "yield_stress": number("Pa", minimum=0, description=f"A: the initial yield stress in {_JC}."),
+        "hardening_modulus": number("Pa", minimum=0, description=f"B: the strain-hardening modulus in {_JC}."),
+        "hardening_exponent": number("dimensionless", exclusiveMinimum=0,
+                                     description=f"n: the strain-hardening exponent in {_JC}."),
+        "strain_rate_coefficient": number("dimensionless", minimum=0,
+                                          description=f"C: the strain-rate coefficient in {_JC} (no rate term "
+                                                      "below rate0)."),
+        "reference_strain_rate": number("1/s", exclusiveMinimum=0,
+                                        description=f"rate0: the reference plastic strain rate in {_JC}."),
+        "thermal_exponent": number("dimensionless", exclusiveMinimum=0,
+                                   description=f"m: the thermal-softening exponent in {_JC}, T* = (T - T_room) "
+                                               "/ (T_melt - T_room)."),
+        "melt_temperature": number("K", exclusiveMinimum=0,
+                                   description="T_melt: the temperature at which Johnson-Cook's flow stress "
+                                               "vanishes (above room_temperature)."),
+        "room_temperature": number("K", exclusiveMinimum=0,
+                                   description="T_room: the temperature below which Johnson-Cook has no thermal "
+                                               "softening; also the bodies' initial temperature unless they give "
+                                               "one."),
+        "specific_heat": number("J/(kg K)", exclusiveMinimum=0,
+                                description="Specific heat c_p: the temperature rise of the adiabatic plastic "
+                                            "heating, dT = taylor_quinney sigma_y d(eps_p) / (rho c_p)."),
+        "taylor_quinney": number("dimensionless", minimum=0, maximum=1,
+                                 description="Taylor-Quinney coefficient: the share of the plastic work that "
+                                             "heats the material (the rest is stored)."),
     },
     "additionalProperties": False,
     "required": ["model", "density", "youngs_modulus", "poisson_ratio"],
     "allOf": variants("model", MODEL_KEYS),
+    "description": "A solid material of the Lagrangian bodies, by the name the bodies use.",
 }
 MATERIALS = {
     "type": "object",
@@ -95,102 +117,174 @@ MATERIALS = {
     "propertyNames": {"pattern": NAME_PATTERN},
     "additionalProperties": MATERIAL,
     "x-allowed": "at least one material table, e.g. [materials.steel]",
+    "description": "The Lagrangian bodies' solid materials, one table each by name, e.g. [materials.steel].",
 }
 
+# (the defaults of base and centre: solvers/lagrange/mesh.py body_mesh, the origin)
 QUARTER_CYLINDER = table(
     {
-        "radius": number("m", exclusiveMinimum=0),
-        "length": number("m", exclusiveMinimum=0),
-        "radial_cells": integer(None, minimum=2),  # butterfly grid needs >= 2
-        "axial_cells": integer(None, minimum=1),
+        "radius": number("m", exclusiveMinimum=0, description="The cylinder's radius."),
+        "length": number("m", exclusiveMinimum=0, description="The cylinder's length along z."),
+        "radial_cells": integer(None, minimum=2,  # butterfly grid needs >= 2
+                                description="Elements across the radius (a square core and an O-grid ring)."),
+        "axial_cells": integer(None, minimum=1, description="Elements along the axis."),
         # the centre of its bottom face (default the origin): a rod placed in a background grid
-        "base": {**vector("m"), "minItems": 3},
+        "base": {**vector("m", description="The centre of the bottom face: the mesh is moved there.",
+                          default=[0.0, 0.0, 0.0]), "minItems": 3},
     },
     required=("radius", "length", "radial_cells", "axial_cells"),
+    description="3-D: the quarter x >= 0, y >= 0 of a cylinder along z from its bottom face, as a butterfly "
+                "(O-grid) hexahedral mesh (a quarter of a rod: symmetry conditions on x = 0 and y = 0 make it "
+                "whole).",
 )
 QUARTER_DISK = table(
     {
-        "radius": number("m", exclusiveMinimum=0),
-        "radial_cells": integer(None, minimum=2),
+        "radius": number("m", exclusiveMinimum=0, description="The disk's radius."),
+        "radial_cells": integer(None, minimum=2, description="Elements across the radius (a square core and "
+                                                             "an O-grid ring)."),
         # the disk's centre (default the origin)
-        "base": {**vector("m"), "minItems": 2, "maxItems": 2},
+        "base": {**vector("m", description="The disk's centre: the mesh is moved there.", default=[0.0, 0.0]),
+                 "minItems": 2, "maxItems": 2},
     },
     required=("radius", "radial_cells"),
+    description="2-D: the quarter x >= 0, y >= 0 of a disk as a butterfly (O-grid) quadrilateral mesh.",
 )
 RING = table(
     {
-        "inner_radius": number("m", exclusiveMinimum=0),
-        "outer_radius": number("m", exclusiveMinimum=0),
-        "radial_cells": integer(None, minimum=1),
-        "angular_cells": integer(None, minimum=3),  # fewer would be flat (zero area)
+        "inner_radius": number("m", exclusiveMinimum=0, description="The annulus's inner radius."),
+        "outer_radius": number("m", exclusiveMinimum=0, description="The annulus's outer radius (above "
+                                                                    "inner_radius)."),
+        "radial_cells": integer(None, minimum=1, description="Elements through the wall."),
+        "angular_cells": integer(None, minimum=3,  # fewer would be flat (zero area)
+                                 description="Elements around the circumference."),
         # the ring's centre (default the origin)
-        "centre": {**vector("m"), "minItems": 2, "maxItems": 2},
+        "centre": {**vector("m", description="The annulus's centre.", default=[0.0, 0.0]),
+                   "minItems": 2, "maxItems": 2},
     },
     required=("inner_radius", "outer_radius", "radial_cells", "angular_cells"),
+    description="2-D: a full annulus of quadrilaterals on a polar grid (the seam's nodes merged).",
 )
 MESH = table(
     {
-        "box": BOX,
+        "box": doc(BOX, "A structured box of quadrilaterals (2-D) or hexahedra (3-D)."),
         "quarter_cylinder": QUARTER_CYLINDER,
         "quarter_disk": QUARTER_DISK,
         "ring": RING,
-        "file": {"type": "string", "minLength": 1},
+        "file": {"type": "string", "minLength": 1,
+                 "description": "A mesh file (Gmsh .msh or .vtu, read through meshio) of quadrilaterals (2-D) or "
+                                "hexahedra (3-D), relative to the case directory and inside it (or inside a "
+                                "directory of $IMMERSE_ALLOW_PATH)."},
     },
     minProperties=1,
     maxProperties=1,
+    description="The body's mesh: exactly one of a generated shape or a mesh file.",
 )
 MESH["x-allowed"] = "must have exactly one of: box, quarter_cylinder, quarter_disk, ring, file"
 
 BODY = table(
     {
-        "name": name(),
-        "material": {"type": "string", "minLength": 1},
+        "name": name(description="The body's name (unique): in [contact] pairs, outputs and messages."),
+        "material": {"type": "string", "minLength": 1,
+                     "description": "The body's material: the name of one of the [materials] tables."},
         "mesh": MESH,
-        "initial_velocity": vector("m/s", {"type": ["number", "string"]}),
-        "initial_temperature": number("K", exclusiveMinimum=0),
+        "initial_velocity": vector("m/s", {"type": ["number", "string"]},
+                                   description="Initial velocity of the nodes: per component a number or an "
+                                               "expression in the initial coordinates x, y (, z), e.g. \"2 - 100*y\" "
+                                               "(default: at rest)."),
+        "initial_temperature": number("K", exclusiveMinimum=0,
+                                      description="Initial temperature of the body (Johnson-Cook's thermal "
+                                                  "softening; default: the material's room_temperature, else "
+                                                  f"{DEFAULT_ROOM_TEMPERATURE} K)."),
         # element erosion (LS-DYNA's MAT_ADD_EROSION, effective strain): an element whose effective
         # strain (sqrt(2/3 d':d') integrated over the steps) reaches this, or that would invert,
         # erodes: no force from then on, its nodes keep their mass, its internal energy is booked;
         # time_step: so does one whose stable step falls below this share of the solver's first one
         # (LS-DYNA's DTMIN with ERODE = 1: a crushed element stops the run by its step long before
         # it inverts)
-        "erosion": table({"strain": number("dimensionless", exclusiveMinimum=0),
-                          "time_step": number("dimensionless", exclusiveMinimum=0, exclusiveMaximum=1)},
-                         required=("strain",)),
+        "erosion": table({"strain": number("dimensionless", exclusiveMinimum=0,
+                                           description="An element whose effective strain (sqrt(2/3 d':d') "
+                                                       "integrated over the steps) reaches this, or that would "
+                                                       "invert, erodes."),
+                          # (absent: 0.0 in the normalised case, i.e. off; outside the key's range, so said
+                          # rather than given as a "default")
+                          "time_step": number("dimensionless", exclusiveMinimum=0, exclusiveMaximum=1,
+                                              description="An element whose stable step falls below this share "
+                                                          "of the solver's first step erodes too (LS-DYNA's "
+                                                          "DTMIN with ERODE = 1; absent: no step criterion).")},
+                         required=("strain",),
+                         description="Element erosion (LS-DYNA's *MAT_ADD_EROSION): an eroded element gives no "
+                                     "force or stable step from then on, its nodes keep their mass and its "
+                                     "internal energy is booked (absent: no erosion)."),
         # a body coupled to the background thinner than 1.5 of its zones is refused unless this is
         # true (orchestrator/coupling/thickness.py: gas on both its sides in one zone leaks through)
-        "accept_thin": {"type": "boolean"},
+        "accept_thin": doc({"type": "boolean"},
+                           "Coupled to a background: run the body even where it is thinner than 1.5 of the "
+                           "background's zones (refused otherwise: gas on both its sides in one zone leaks "
+                           "through).", default=False),
         # hourglass control of the one-point elements: the viscous Flanagan-Belytschko force (which
         # adds no bending stiffness: a body 2 elements thick bends 4/3 too softly) or the
         # assumed-strain stiffness of Belytschko & Bindeman (exact bending of rectangular quads and
         # hexahedra, no shear or volumetric locking)
-        "hourglass_control": {"type": "string", "enum": ["viscous", "assumed_strain"]},
+        "hourglass_control": doc({"type": "string", "enum": ["viscous", "assumed_strain"]},
+                                 "Hourglass control of the one-point elements. assumed_strain: Belytschko & "
+                                 "Bindeman's co-rotational hourglass stiffness (the bending the bi-/trilinear "
+                                 "element holds; no shear or volumetric locking); viscous: Flanagan-Belytschko's "
+                                 "viscous force alone (no bending stiffness: thin walls bend too softly).",
+                                 default="assumed_strain"),
     },
     required=("name", "material", "mesh"),
+    description="A Lagrangian body ([[lagrange.bodies]]): its mesh, material and initial state.",
 )
 
 LAGRANGE = table(
     {
         # FB viscous hourglass damping is itself explicit: stable for coefficient <= 1/8 at dt = h/c
-        "hourglass": number("dimensionless", minimum=0, maximum=0.125),
-        "bulk_viscosity_linear": number("dimensionless", minimum=0),
-        "bulk_viscosity_quadratic": number("dimensionless", minimum=0),
-        "gravity": vector("m/s^2"),
+        "hourglass": number("dimensionless", minimum=0, maximum=0.125, default=LAGRANGE_DEFAULTS["hourglass"],
+                            description="Flanagan-Belytschko viscous hourglass coefficient (bodies with "
+                                        "hourglass_control = \"assumed_strain\" damp their hourglass rate at a "
+                                        "tenth of it besides their stiffness)."),
+        "bulk_viscosity_linear": number("dimensionless", minimum=0,
+                                        default=LAGRANGE_DEFAULTS["bulk_viscosity_linear"],
+                                        description="Linear coefficient of the artificial bulk viscosity that "
+                                                    "spreads shocks over a few elements (LS-DYNA's Q2)."),
+        "bulk_viscosity_quadratic": number("dimensionless", minimum=0,
+                                           default=LAGRANGE_DEFAULTS["bulk_viscosity_quadratic"],
+                                           description="Quadratic coefficient of the artificial bulk viscosity "
+                                                       "(LS-DYNA's Q1)."),
+        "gravity": vector("m/s^2", description="Gravitational acceleration g: the force m g on every node (its "
+                                               "work: the gravity_work diagnostic; absent: none)."),
         # the time integrator (solvers/lagrange/integrators.py registers them by name);
         # quasi_static: equilibrium states, time a load parameter, load_steps of end_time / load_steps
-        "integrator": {"enum": sorted(INTEGRATORS)},
-        "load_steps": integer(None, minimum=1),
+        "integrator": doc({"enum": sorted(INTEGRATORS)},
+                          "Time integration of the bodies. explicit: central differences at the stable step; "
+                          "quasi_static: equilibrium states of elastic bodies, time only a load parameter; "
+                          "midpoint: the implicit energy-momentum midpoint scheme; newmark: the implicit "
+                          "trapezoidal rule (the comparison).", default="explicit"),
+        "load_steps": integer(None, minimum=1, default=1,  # (solvers/lagrange/quasi_static.py)
+                              description="quasi_static: the load steps, each end_time / load_steps, with the "
+                                          "loads ramped by t / end_time."),
         # midpoint, newmark: the implicit step (s) and the energy balance a step may be off by before
         # the run stops as unstable (relative to the energy)
-        "time_step": number("s", exclusiveMinimum=0),
-        "time_step_min": number("s", exclusiveMinimum=0),
-        "energy_limit": number("dimensionless", exclusiveMinimum=0),
+        "time_step": number("s", exclusiveMinimum=0,
+                            description="midpoint, newmark (required there): the implicit step, the first and "
+                                        "the largest (a step's Newton iterations halve or grow the next one)."),
+        "time_step_min": number("s", exclusiveMinimum=0,
+                                description="midpoint, newmark: the smallest step that a failed Newton iteration "
+                                            "is halved down to before the run stops (default: time_step / 1024)."),
+        "energy_limit": number("dimensionless", exclusiveMinimum=0, default=0.01,  # (implicit_dynamic.py)
+                               description="midpoint, newmark: a step whose energy balance is off by more than "
+                                           "this share of the energy stops the run as unstable."),
         # element subcycling (solvers/lagrange/subcycling.py, LS-DYNA's *CONTROL_SUBCYCLE): each element
         # and node at a power-of-two multiple of the smallest element's step, up to this ratio; 1: off
-        "subcycling": {"enum": list(SUBCYCLING_RATIOS),
-                       "x-allowed": "one of " + ", ".join(map(str, SUBCYCLING_RATIOS)) + " (1: off)"},
-        "bodies": {"type": "array", "items": BODY},
+        "subcycling": doc({"enum": list(SUBCYCLING_RATIOS),
+                           "x-allowed": "one of " + ", ".join(map(str, SUBCYCLING_RATIOS)) + " (1: off)"},
+                          "Element subcycling (LS-DYNA's *CONTROL_SUBCYCLE): elements and nodes step at powers "
+                          "of two of the smallest element's step, up to this ratio, so a small or crushed "
+                          "element sets only its own step; 1: off (explicit integrator only).", default=1),
+        "bodies": {"type": "array", "items": BODY,
+                   "description": "The Lagrangian (finite-element) bodies, one [[lagrange.bodies]] table each."},
     },
+    description="The Lagrangian solver (finite elements for solids): its options and its bodies.",
 )
 
 BOUNDARY_KEYS = {
@@ -205,31 +299,48 @@ BOUNDARY_KEYS = {
 BOUNDARY = {
     "type": "object",
     "properties": {
-        "type": {"type": "string", "enum": list(BOUNDARY_TYPES)},
-        "region": {"type": "string", "minLength": 1},
+        "type": doc({"type": "string", "enum": list(BOUNDARY_TYPES)},
+                    "The condition. fixed: every velocity component of the region's nodes held at 0; velocity: the "
+                    "given components prescribed; symmetry: the axis component held at 0 on the plane axis = at; "
+                    "rigid_wall: a frictionless plane wall the nodes cannot pass; traction: a surface load on the "
+                    "region's exterior facets. Velocity conditions apply in file order (a later one wins)."),
+        "region": {"type": "string", "minLength": 1,
+                   "description": "The nodes it applies to: a boolean expression in the initial coordinates x, y "
+                                  "(, z), e.g. \"x < 1e-9\" (traction: the exterior facets whose nodes all hold "
+                                  "it)."},
         "velocity": table(
-            {c: number("m/s") for c in ("x", "y", "z")},
+            {c: number("m/s", description=f"The prescribed {c} velocity.") for c in ("x", "y", "z")},
             minProperties=1,
+            description="The prescribed velocity components (any subset of x, y, z; the others stay free).",
         ),
         "traction": table(
-            {c: number("Pa") for c in ("x", "y", "z")},
+            {c: number("Pa", description=f"The traction's {c} component.") for c in ("x", "y", "z")},
             minProperties=1,
+            description="A uniform traction (force per area) on the region's exterior facets, as consistent "
+                        "nodal forces (components not given: 0).",
         ),
         # the traction's history: [[t (s), factor], ...], t increasing, linear between the points and
         # the end values held outside (LS-DYNA's *DEFINE_CURVE; a hat pulse: [[0, 0], [2.5, 2.5], [5, 0]])
         "curve": {"type": "array", "minItems": 2,
                   "items": {"type": "array", "items": {"type": "number"}, "minItems": 2, "maxItems": 2},
-                  "x-allowed": "must be a list of at least 2 [time (s), factor] pairs"},
-        "axis": {"type": "string", "enum": ["x", "y", "z"]},
-        "at": number("m"),
-        "point": vector("m"),
-        "normal": vector(None),
+                  "x-allowed": "must be a list of at least 2 [time (s), factor] pairs",
+                  "description": "The traction's history, [[t, factor], ...] (t in s, strictly increasing; linear "
+                                 "between the points, the end values held outside: LS-DYNA's *DEFINE_CURVE); "
+                                 "absent: constant (quasi_static: ramped by t / end_time, no curve)."},
+        "axis": doc({"type": "string", "enum": ["x", "y", "z"]}, "symmetry: the axis normal to the symmetry "
+                                                                 "plane (its velocity component is held at 0)."),
+        "at": number("m", description="symmetry: the plane's coordinate along axis (the nodes on it are held)."),
+        "point": vector("m", description="rigid_wall: a point of the wall's plane."),
+        "normal": vector(None, description="rigid_wall: the wall's normal, pointing to the bodies' side (any "
+                                           "non-zero length)."),
     },
     "additionalProperties": False,
     "required": ["type"],
     "allOf": variants("type", BOUNDARY_KEYS, {**BOUNDARY_KEYS, "traction": ("type", "region", "traction")}),
+    "description": "One boundary condition of the Lagrangian bodies.",
 }
-BOUNDARIES = {"type": "array", "items": BOUNDARY}
+BOUNDARIES = {"type": "array", "items": BOUNDARY,
+              "description": "Boundary conditions of the Lagrangian bodies, one [[boundaries]] table each."}
 
 
 # ---- [materials] ----------------------------------------------------------------------------------

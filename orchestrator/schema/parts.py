@@ -8,11 +8,17 @@ by the validator, used by :mod:`orchestrator.case` to word messages):
 ``x-allowed``  replaces the generated "allowed" text for errors on that node;
 ``x-when``     for per-variant key sets (``if``/``then``): names the variant in messages.
 ``x-physical`` the bounds :func:`number` added from :data:`UNIT_LIMITS` (named as the physical range).
+
+Every key also carries the standard annotations (ignored by the validator as well) that ``immerse
+keys`` prints (:mod:`orchestrator.keys`): ``description``, what the key means, and ``default``, the
+value the code takes when the key is absent, only where that value is one constant (a default that
+depends on other keys is said in the description).  The helpers take both as keyword arguments;
+:func:`doc` adds them to a node written out as a dict.
 """
 from __future__ import annotations
 
 __all__ = ["SCHEMA_URI", "NAME_PATTERN", "NAME_TEXT", "UNIT_LIMITS", "number", "integer", "vector", "table",
-           "variants", "name", "BOX"]
+           "variants", "name", "doc", "BOX"]
 
 SCHEMA_URI = "https://json-schema.org/draft/2020-12/schema"
 
@@ -40,7 +46,23 @@ sound speed, an energy, a stable step) unless the key gives its own bounds.  Non
 cases (Sod: pressures of 1) are well inside."""
 
 
-def number(unit: str | None = None, **bounds) -> dict:
+def _annotate(s: dict, description: str | None, default) -> dict:
+    """``s`` with the annotations that are given (None: none; TOML has no null, so no key's default
+    is None)."""
+    if description is not None:
+        s["description"] = description
+    if default is not None:
+        s["default"] = default
+    return s
+
+
+def doc(node: dict, description: str, default=None) -> dict:
+    """A copy of ``node`` (a schema written out, or a shared one such as :data:`BOX`) with its meaning
+    and, when given, its default: the shared node keeps its own."""
+    return _annotate(dict(node), description, default)
+
+
+def number(unit: str | None = None, *, description: str | None = None, default=None, **bounds) -> dict:
     s: dict = {"type": "number", **bounds}
     if unit:
         s["x-unit"] = unit
@@ -55,17 +77,18 @@ def number(unit: str | None = None, **bounds) -> dict:
             added.append("minimum")
         if added:
             s["x-physical"] = added   # (named apart in messages: orchestrator/case.py _range_text)
-    return s
+    return _annotate(s, description, default)
 
 
-def integer(unit: str | None = None, **bounds) -> dict:
+def integer(unit: str | None = None, *, description: str | None = None, default=None, **bounds) -> dict:
     s: dict = {"type": "integer", **bounds}
     if unit:
         s["x-unit"] = unit
-    return s
+    return _annotate(s, description, default)
 
 
-def vector(unit: str | None, items: dict | None = None) -> dict:
+def vector(unit: str | None, items: dict | None = None, *, description: str | None = None,
+           default=None) -> dict:
     """A 2- or 3-vector (its length against run.dimension is a cross-field check)."""
     s: dict = {
         "type": "array",
@@ -75,16 +98,17 @@ def vector(unit: str | None, items: dict | None = None) -> dict:
     }
     if unit:
         s["x-unit"] = unit
-    return s
+    return _annotate(s, description, default)
 
 
-def table(properties: dict, required: tuple[str, ...] = (), **extra) -> dict:
+def table(properties: dict, required: tuple[str, ...] = (), *, description: str | None = None,
+          **extra) -> dict:
     """A table with a fixed key set: any other key is an error ("unknown key; allowed: ...")."""
     s = {"type": "object", "properties": properties, "additionalProperties": False}
     if required:
         s["required"] = list(required)
     s.update(extra)
-    return s
+    return _annotate(s, description, None)
 
 
 def variants(selector: str, allowed: dict, required: dict | None = None) -> list:
@@ -105,17 +129,21 @@ def variants(selector: str, allowed: dict, required: dict | None = None) -> list
     ]
 
 
-def name() -> dict:
+def name(*, description: str | None = None) -> dict:
     """A name the user gives (body, material): a TOML bare key."""
-    return {"type": "string", "minLength": 1, "pattern": NAME_PATTERN, "x-allowed": NAME_TEXT}
+    return _annotate({"type": "string", "minLength": 1, "pattern": NAME_PATTERN, "x-allowed": NAME_TEXT},
+                     description, None)
 
 
 BOX = table(
     {
-        "lower": vector("m"),
-        "upper": vector("m"),
-        "cells": vector(None, {"type": "integer", "minimum": 1}),
+        "lower": vector("m", description="The box's lower corner: its smallest coordinate along each axis."),
+        "upper": vector("m", description="The box's upper corner: its largest coordinate along each axis "
+                                         "(above lower in every component)."),
+        "cells": vector(None, {"type": "integer", "minimum": 1},
+                        description="Cells (elements or zones) along each axis, of equal width along it."),
     },
     required=("lower", "upper", "cells"),
 )
-"""An axis-aligned box cut into cells: a body's mesh, the background grid."""
+"""An axis-aligned box cut into cells: a body's mesh, the background grid (each use describes the box
+itself: :func:`doc`)."""

@@ -31,17 +31,30 @@ REDUCTIONS = ("mean", "max", "min")
 
 PROBE = table(
     {
-        "role": {"enum": list(ROLES)},
-        "quantity": {"enum": list(QUANTITIES)},
-        "component": {"enum": list(COMPONENTS)},
-        "reduce": {"enum": list(REDUCTIONS)},
-        "box": table({"lower": vector("m"), "upper": vector("m")}, required=("lower", "upper")),
+        "role": {"enum": list(ROLES), "description": "The solver whose points the probe follows: lagrange (the "
+                                                     "bodies' nodes) or sph (the particles)."},
+        "quantity": {"enum": list(QUANTITIES),
+                     "description": "What is recorded: displacement (from the initial position), velocity or "
+                                    "position."},
+        "component": {"enum": list(COMPONENTS),
+                      "description": "The component of quantity recorded: x, y, z or its magnitude."},
+        "reduce": {"enum": list(REDUCTIONS), "default": "mean",
+                   "description": "How the points' values make one number per step: their mean, max or min."},
+        "box": table({"lower": vector("m", description="The box's lower corner."),
+                      "upper": vector("m", description="The box's upper corner (>= lower).")},
+                     required=("lower", "upper"),
+                     description="The points whose initial position lies in this box (bounds included) are "
+                                 "the probe's; a box that holds none stops the run at its set-up."),
     },
     required=("role", "quantity", "component", "box"),
+    description="One probe: a time history <role>.probe_<name> in diagnostics.h5, recorded at every "
+                "diagnostics step.",
 )
 
 PROBES = {"type": "object", "minProperties": 1, "propertyNames": {"pattern": NAME_PATTERN},
-          "additionalProperties": PROBE}
+          "additionalProperties": PROBE,
+          "description": "Time histories of node or particle sets, by name, recorded with the diagnostics at every "
+                         "diagnostics step (independent of run.output_interval)."}
 
 
 def normalise(raw: dict | None, case: dict) -> dict | None:

@@ -43,7 +43,7 @@ from pathlib import Path
 from solvers.expressions import BOOL
 
 from adapters.lammps_lines import LammpsLineError, check_line, line_scales
-from .parts import NAME_PATTERN, integer, name, number, table, variants, vector
+from .parts import NAME_PATTERN, doc, integer, name, number, table, variants, vector
 from .registry import register_table
 from .rules import (CaseError, check_expression, check_faces, check_length, expression_refusal,
                            format_key, to_float)
@@ -62,60 +62,118 @@ MODEL_REQUIRED = {"taitwater": ("model", "density", "sound_speed", "viscosity"),
 STRENGTH_TEXT = ("\"linear\", { linear_plastic = { yield_stress, hardening } } or "
                  "{ johnson_cook = { A, B, n, C, strain_rate0, room_temperature, melt_temperature, m } }")
 EOS_TEXT = "\"linear\", \"none\" or { shock = { c0, s, gamma } } (Mie-Grueneisen, linear us-up)"
+# MACHDYN's Johnson-Cook strength (LAMMPS *STRENGTH_JOHNSON_COOK; the keys have no unit in the schema)
+_JC = "MACHDYN's Johnson-Cook sigma_y = (A + B eps_p^n)(1 + C ln(rate / strain_rate0))(1 - T*^m)"
+_JC_KEYS = {
+    "A": f"A: the initial yield stress (Pa) in {_JC}.",
+    "B": f"B: the strain-hardening modulus (Pa) in {_JC}.",
+    "n": f"n: the strain-hardening exponent in {_JC}.",
+    "C": f"C: the strain-rate coefficient in {_JC}.",
+    "strain_rate0": f"strain_rate0: the reference plastic strain rate (1/s) in {_JC}.",
+    "room_temperature": "T_room (K): no thermal softening below it; T* = (T - T_room) / (T_melt - T_room).",
+    "melt_temperature": "T_melt (K): the temperature at which the flow stress vanishes.",
+    "m": f"m: the thermal-softening exponent in {_JC}, T* = (T - T_room) / (T_melt - T_room).",
+}
 STRENGTH = {
     "oneOf": [
         {"type": "string", "enum": ["linear"], "x-allowed": "must be " + STRENGTH_TEXT},
-        table({"linear_plastic": table({"yield_stress": number("Pa", exclusiveMinimum=0),
-                                        "hardening": number("Pa", minimum=0)}, required=("yield_stress",))},
+        table({"linear_plastic": table({"yield_stress": number("Pa", exclusiveMinimum=0,
+                                                               description="The yield stress sigma0."),
+                                        "hardening": number("Pa", minimum=0,
+                                                            description="The linear hardening modulus (0: "
+                                                                        "perfectly plastic).")},
+                                       required=("yield_stress",),
+                                       description="Elastic-plastic with linear hardening "
+                                                   "(*STRENGTH_LINEAR_PLASTIC).")},
               required=("linear_plastic",)),
-        table({"johnson_cook": table({k: number(None) for k in ("A", "B", "n", "C", "strain_rate0",
-                                                                "room_temperature", "melt_temperature", "m")},
+        table({"johnson_cook": table({k: number(None, description=text) for k, text in _JC_KEYS.items()},
                                      required=("A", "B", "n", "C", "strain_rate0", "room_temperature",
-                                               "melt_temperature", "m"))},
+                                               "melt_temperature", "m"),
+                                     description="Johnson-Cook plasticity (*STRENGTH_JOHNSON_COOK).")},
               required=("johnson_cook",)),
     ],
     "x-allowed": "must be " + STRENGTH_TEXT,
+    "default": "linear",   # (adapters/lammps_tlsph.py DEFAULTS)
+    "description": "tlsph: the deviatoric (shear) response. linear: elastic (*STRENGTH_LINEAR); or a table "
+                   "linear_plastic or johnson_cook.",
 }
 EOS = {
     "oneOf": [
         {"type": "string", "enum": ["linear", "none"], "x-allowed": "must be " + EOS_TEXT},
-        table({"shock": table({"c0": number("m/s", exclusiveMinimum=0), "s": number("dimensionless", minimum=0),
-                               "gamma": number("dimensionless", minimum=0)}, required=("c0", "s", "gamma"))},
+        table({"shock": table({"c0": number("m/s", exclusiveMinimum=0,
+                                            description="The bulk sound speed c0, intercept of us = c0 + s up."),
+                               "s": number("dimensionless", minimum=0, description="The slope s of us = c0 + s up."),
+                               "gamma": number("dimensionless", minimum=0, description="The Grueneisen gamma.")},
+                              required=("c0", "s", "gamma"),
+                              description="Mie-Grueneisen about the linear us = c0 + s up Hugoniot "
+                                          "(*EOS_SHOCK).")},
               required=("shock",)),
     ],
     "x-allowed": "must be " + EOS_TEXT,
+    "default": "linear",   # (adapters/lammps_tlsph.py DEFAULTS)
+    "description": "tlsph: the pressure. linear: from the volumetric strain and the bulk modulus of E and nu "
+                   "(*EOS_LINEAR); none: no pressure (*EOS_NONE); or a table shock.",
 }
 MATERIAL = {
     "type": "object",
     "properties": {
-        "model": {"type": "string", "enum": list(MODEL_KEYS)},
-        "density": number("kg/m^3", exclusiveMinimum=0),
-        "sound_speed": number("m/s", exclusiveMinimum=0),
-        "viscosity": number("dimensionless", minimum=0),
-        "pressure_cutoff": number("Pa", maximum=0),
-        "youngs_modulus": number("Pa", exclusiveMinimum=0),
-        "poisson_ratio": number("dimensionless", minimum=0, exclusiveMaximum=0.5),
+        "model": doc({"type": "string", "enum": list(MODEL_KEYS)},
+                     "The LAMMPS pair style (one model per case). taitwater: a weakly compressible liquid, p = B "
+                     "((rho/rho0)^7 - 1), B = c0^2 rho0 / 7 (pair sph/taitwater); idealgas: p = (gamma - 1) rho e "
+                     "with LAMMPS's fixed gamma = 1.4 (pair sph/idealgas); tlsph: an elastic or elastic-plastic "
+                     "solid, total-Lagrangian SPH (MACHDYN's pair smd/tlsph)."),
+        "density": number("kg/m^3", exclusiveMinimum=0,
+                          description="taitwater: the reference density rho0 of Tait's law; tlsph: the solid's "
+                                      "density."),
+        "sound_speed": number("m/s", exclusiveMinimum=0, description="taitwater: the sound speed c0 at rho0 (sets "
+                                                                     "Tait's B and the step)."),
+        "viscosity": number("dimensionless", minimum=0,
+                            description="The artificial viscosity: taitwater: Monaghan's alpha; idealgas: the "
+                                        "viscosity nu of pair sph/idealgas."),
+        "pressure_cutoff": number("Pa", maximum=0,
+                                  description="taitwater: the least pressure (above -B): the material cavitates "
+                                              "instead of holding Tait's tension (absent: none)."),
+        "youngs_modulus": number("Pa", exclusiveMinimum=0, description="tlsph: Young's modulus E."),
+        "poisson_ratio": number("dimensionless", minimum=0, exclusiveMaximum=0.5,
+                                description="tlsph: Poisson's ratio nu."),
         "strength": STRENGTH,
         "eos": EOS,
-        "viscosity_q1": number("dimensionless", minimum=0),
-        "viscosity_q2": number("dimensionless", minimum=0),
-        "hourglass": number("dimensionless", minimum=0),
-        "heat_capacity": number("J/(kg K)", exclusiveMinimum=0),
+        # (the defaults: adapters/lammps_tlsph.py DEFAULTS, MACHDYN's example values; not imported: that
+        # module imports solvers.particles, which validating a case must not)
+        "viscosity_q1": number("dimensionless", minimum=0, default=1.0,
+                               description="tlsph: the linear artificial viscosity coefficient Q1."),
+        "viscosity_q2": number("dimensionless", minimum=0, default=0.0,
+                               description="tlsph: the quadratic artificial viscosity coefficient Q2."),
+        "hourglass": number("dimensionless", minimum=0, default=10.0,
+                            description="tlsph: the hourglass control amplitude (suppresses the zero-energy "
+                                        "modes of the particle pairs)."),
+        "heat_capacity": number("J/(kg K)", exclusiveMinimum=0, default=1.0,
+                                description="tlsph: the heat capacity (read only by Johnson-Cook's thermal "
+                                            "softening)."),
     },
     "additionalProperties": False,
     "required": ["model"],
     "allOf": variants("model", MODEL_KEYS, MODEL_REQUIRED),
+    "description": "A particle material, by the name the bodies use.",
 }
-REGION_BOX = table({"lower": vector("m"), "upper": vector("m")}, required=("lower", "upper"))
-SPHERE = table({"centre": vector("m"), "radius": number("m", exclusiveMinimum=0)},
-               required=("centre", "radius"))
-CYLINDER = table({"base": vector("m"), "axis": {"type": "string", "enum": ["x", "y", "z"]},
-                  "radius": number("m", exclusiveMinimum=0), "length": number("m", exclusiveMinimum=0)},
-                 required=("base", "axis", "radius", "length"))
+REGION_BOX = table({"lower": vector("m", description="The box's lower corner."),
+                    "upper": vector("m", description="The box's upper corner (above lower in every component).")},
+                   required=("lower", "upper"))
+SPHERE = table({"centre": vector("m", description="The sphere's (2-D: the disc's) centre."),
+                "radius": number("m", exclusiveMinimum=0, description="The sphere's radius.")},
+               required=("centre", "radius"), description="A sphere (in 2-D a disc).")
+CYLINDER = table({"base": vector("m", description="The centre of the cylinder's base."),
+                  "axis": {"type": "string", "enum": ["x", "y", "z"],
+                           "description": "The axis the cylinder runs along from its base."},
+                  "radius": number("m", exclusiveMinimum=0, description="The cylinder's radius."),
+                  "length": number("m", exclusiveMinimum=0, description="The cylinder's length along axis.")},
+                 required=("base", "axis", "radius", "length"), description="3-D: a circular cylinder.")
 REGION = {
     "type": "object",
-    "properties": {"box": REGION_BOX, "sphere": SPHERE, "cylinder": CYLINDER,
-                   "where": {"type": "string", "minLength": 1}},
+    "properties": {"box": doc(REGION_BOX, "An axis-aligned box."), "sphere": SPHERE, "cylinder": CYLINDER,
+                   "where": {"type": "string", "minLength": 1,
+                             "description": "Optional: only the points where this boolean expression in x, y (, "
+                                            "z) holds."}},
     "additionalProperties": False,
     "oneOf": [{"required": ["box"]}, {"required": ["sphere"]}, {"required": ["cylinder"]}],
     "x-allowed": "needs exactly one of box = { lower, upper }, sphere = { centre, radius }, "
@@ -123,56 +181,47 @@ REGION = {
 }
 BODY = table(
     {
-        "name": name(),
-        "material": {"type": "string", "minLength": 1},
-        "region": REGION,
+        "name": name(description="The body's name (default: body<i>, i its place in sph.bodies from 0)."),
+        "material": {"type": "string", "minLength": 1,
+                     "description": "The body's material: one of sph.materials."},
+        "region": doc(REGION, "Where the body's particles are: the cell centres of a square (cubic) lattice of "
+                              "the body's spacing inside exactly one of box, sphere, cylinder (and where)."),
         # particle positions from a LAMMPS data file (its Atoms section), in place of a region
-        "data_file": {"type": "string", "minLength": 1},
-        "density": number("kg/m^3", exclusiveMinimum=0),
-        "pressure": number("Pa"),
-        "specific_internal_energy": number("J/kg", minimum=0),
-        "velocity": vector("m/s"),
-        "fixed": {"type": "boolean"},
-        "spacing": number("m", exclusiveMinimum=0),
+        "data_file": {"type": "string", "minLength": 1,
+                      "description": "Instead of a region: the particle positions of a LAMMPS data file's Atoms "
+                                     "section (inside the case directory), each particle of volume spacing^dim."},
+        "density": number("kg/m^3", exclusiveMinimum=0,
+                          description="The particles' initial density (their mass: density spacing^dim)."),
+        "pressure": number("Pa", description="idealgas: the initial pressure (or specific_internal_energy)."),
+        "specific_internal_energy": number("J/kg", minimum=0,
+                                           description="idealgas: the initial specific internal energy (or "
+                                                       "pressure)."),
+        "velocity": vector("m/s", description="Initial velocity (default: at rest)."),
+        "fixed": doc({"type": "boolean"}, "true: boundary particles that never move (fix sph/stationary; tlsph: "
+                                          "held, still bonded).", default=False),
+        "spacing": number("m", exclusiveMinimum=0, description="The body's own lattice spacing (default: "
+                                                               "sph.spacing)."),
         # taitwater under gravity: the density of the column at rest (else a start-up pressure wave)
-        "hydrostatic": {"type": "boolean"},
+        "hydrostatic": doc({"type": "boolean"}, "taitwater under gravity: start the column at its hydrostatic "
+                                                "density (at rest; else a start-up pressure wave).", default=False),
         # tlsph: the body's particles in this region are held at rest (a clamp)
-        "clamp": REGION,
+        "clamp": doc(REGION, "tlsph: the body's particles in this region are held at rest (still bonded: they "
+                             "carry stress)."),
         # velocity components held at zero (a body sliding between walls: ["y"])
         "hold": {"type": "array", "items": {"type": "string", "enum": ["x", "y", "z"]}, "uniqueItems": True,
-                 "minItems": 1},
+                 "minItems": 1,
+                 "description": "Velocity components held at zero, e.g. [\"y\"]: a piston sliding along a "
+                                "channel's walls (absent: none)."},
     },
     required=("material", "density"),
     oneOf=[{"required": ["region"]}, {"required": ["data_file"]}],
+    description="A body of particles ([[sph.bodies]]): where its particles are, their material and initial state.",
     **{"x-allowed": "needs exactly one of region = { ... } or data_file = \"file\" (a LAMMPS data file)"},
 )
-SPH_FACE = {"type": "string", "enum": ["open", "periodic", "wall"]}
+SPH_FACE = {"type": "string", "enum": ["open", "periodic", "wall"], "default": "open",   # (_normalise)
+            "description": "open: the particles may leave (LAMMPS's shrink-wrapped box); periodic: wraps to the "
+                           "opposite face (set both); wall: a reflecting wall (fix wall/reflect)."}
 FACES = ("x_lower", "x_upper", "y_lower", "y_upper", "z_lower", "z_upper")
-SPH = table(
-    {
-        "spacing": number("m", exclusiveMinimum=0),
-        "smoothing_length": number("m", exclusiveMinimum=0),
-        "cfl": number("dimensionless", minimum=1e-4, maximum=1),   # (5e-324: a step of nothing)
-        "domain": REGION_BOX,
-        "boundaries": table({f: SPH_FACE for f in FACES}),
-        "gravity": vector("m/s^2"),
-        "density_summation": {"type": "boolean"},
-        "materials": {
-            "type": "object",
-            "minProperties": 1,
-            "propertyNames": {"pattern": NAME_PATTERN},
-            "additionalProperties": MATERIAL,
-        },
-        "bodies": {"type": "array", "minItems": 1, "items": BODY},
-        "lammps_commands": {"type": "array", "items": {"type": "string"}},
-        "neighbor_skin": number("m", exclusiveMinimum=0),
-        # LAMMPS steps per coupler step when the particles are not coupled (adapters/sph.py)
-        "substeps": integer(minimum=1, maximum=1000),
-        # (LAMMPS's atom ids are 32-bit integers in its default build: 2^31 - 1 particles at most)
-        "max_particles": integer(minimum=1, maximum=2**31 - 1),
-    },
-    required=("spacing", "smoothing_length", "domain", "materials", "bodies"),
-)
 
 DEFAULT_SUBSTEPS = 20
 """LAMMPS steps per coupler step of an uncoupled SPH group (the stable step re-evaluated between
@@ -184,6 +233,55 @@ DEFAULT_CFL = 0.1
 """dt = cfl h / max(c + |v|) (Monaghan's acoustic limit on the kernel support h).  0.1: a taitwater
 column at rest with fixed boundary particles goes unstable at 0.2 (alpha 0.1 .. 0.3, h = 2 .. 4 dx)
 and holds at 0.1 with alpha >= 0.3 (0.05 for alpha 0.1)."""
+
+SPH = table(
+    {
+        "spacing": number("m", exclusiveMinimum=0,
+                          description="The lattice spacing dx of the bodies' particles (each of volume dx^dim); a "
+                                      "body may set its own."),
+        "smoothing_length": number("m", exclusiveMinimum=0,
+                                   description="h: the kernel's support (LAMMPS's cutoff), at least spacing."),
+        "cfl": number("dimensionless", minimum=1e-4, maximum=1,   # (5e-324: a step of nothing)
+                      default=DEFAULT_CFL,
+                      description="The step's factor: dt = cfl h / max(c + |v|), and at most cfl sqrt(h / "
+                                  "max|a|)."),
+        "domain": doc(REGION_BOX, "The LAMMPS simulation box: every body lies inside it."),
+        "boundaries": table({f: SPH_FACE for f in FACES},
+                            description="The condition on each face of the domain, x_lower ... z_upper (faces not "
+                                        "given: open)."),
+        "gravity": vector("m/s^2", description="Gravitational acceleration on the moving particles (default: "
+                                               "none)."),
+        "density_summation": doc({"type": "boolean"}, "true: the density is the kernel sum over the neighbours "
+                                                      "every step (sph/rhosum); false: integrated by the continuity "
+                                                      "equation.", default=False),
+        "materials": {
+            "type": "object",
+            "minProperties": 1,
+            "propertyNames": {"pattern": NAME_PATTERN},
+            "additionalProperties": MATERIAL,
+            "description": "The particles' materials by name, e.g. materials.water = { model = \"taitwater\", "
+                           "... }; one model for all of them.",
+        },
+        "bodies": {"type": "array", "minItems": 1, "items": BODY,
+                   "description": "The bodies of particles, one [[sph.bodies]] table each."},
+        "lammps_commands": {"type": "array", "items": {"type": "string"},
+                            "description": "Extra LAMMPS input lines (groups, regions, fixes, computes, neighbour "
+                                           "settings), checked against an allow-list (adapters/lammps_lines.py)."},
+        "neighbor_skin": number("m", exclusiveMinimum=0,
+                                description="LAMMPS's neighbour-list skin beyond h (default: 0.1 "
+                                            "smoothing_length)."),
+        # LAMMPS steps per coupler step when the particles are not coupled (adapters/sph.py)
+        "substeps": integer(minimum=1, maximum=1000, default=DEFAULT_SUBSTEPS,
+                            description="LAMMPS steps per coupler step when the particles are not coupled (with "
+                                        "[coupling]: 1)."),
+        # (LAMMPS's atom ids are 32-bit integers in its default build: 2^31 - 1 particles at most)
+        "max_particles": integer(minimum=1, maximum=2**31 - 1, default=MAX_PARTICLES,
+                                 description="A case whose bodies give more particles than this is refused before "
+                                             "anything runs."),
+    },
+    required=("spacing", "smoothing_length", "domain", "materials", "bodies"),
+    description="The SPH particles (LAMMPS's SPH and MACHDYN packages, run as their own process group).",
+)
 
 
 def _vec(v):

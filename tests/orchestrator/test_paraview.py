@@ -292,3 +292,71 @@ def test_two_roles_in_one_file(pvbatch, tmp_path):
         index.append(i, ["lagrange", "ale"])
     compared = check_every_array(pvbatch, out, tmp_path)
     assert compared == {r: 3 * (3 + 3) for r in READERS}
+
+
+TRACE_CHECK = textwrap.dedent('''
+    """Loads a run's open_in_paraview.py as a module (its pipeline, not its view: no display here) and
+    writes what ParaView got: each block's name, cell count, and the background's pressure."""
+    import importlib.util
+    import json
+    import sys
+
+    import numpy as np
+    from paraview import servermanager as sm
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    spec = importlib.util.spec_from_file_location("trace", sys.argv[1])
+    trace = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(trace)
+    results, blocks, times = trace.open_results()
+    got = {"times": times, "roles": list(blocks), "range": list(trace.field_range(blocks["ale"], times))}
+
+    def leaf(obj):
+        while obj is not None and (obj.IsA("vtkMultiBlockDataSet") or obj.IsA("vtkMultiPieceDataSet")):
+            obj = obj.GetBlock(0) if obj.IsA("vtkMultiBlockDataSet") else obj.GetPiece(0)
+        return obj
+
+    for role, block in blocks.items():
+        block.UpdatePipeline(times[-1])
+        data = leaf(sm.Fetch(block))
+        got[role] = {"cells": data.GetNumberOfCells()}
+        if role == "ale":
+            p = vtk_to_numpy(data.GetCellData().GetArray("pressure"))
+            got[role].update(nan=int(np.isnan(p).sum()), min=float(np.nanmin(p)), zeros=int((p == 0).sum()))
+    root = sm.Fetch(results)
+    got["names"] = [root.GetMetaData(i).Get(root.NAME()) for i in range(root.GetNumberOfBlocks())]
+    json.dump(got, open(sys.argv[2], "w"))
+''')
+
+
+@pytest.mark.timeout(900)
+@pytest.mark.parametrize("name, edits, body", [
+    ("plate_in_shock_2d", [("end_time = 4.0e-3", "end_time = 1.0e-3"), ("output_interval = 0.5e-3", "output_interval = 2.5e-4")],
+     "lagrange"),
+    ("embedded_sph_piston", [("end_time = 0.2", "end_time = 0.02"), ("output_interval = 0.05", "output_interval = 0.01")],
+     "sph")])
+def test_the_runs_paraview_script_names_the_groups_and_blanks_covered_zones(pvbatch, tmp_path, name, edits, body):
+    """A coupled run's OUT/open_in_paraview.py (orchestrator/paraview_script.py) under pvbatch: the
+    blocks are named by their roles (ale and the body's group), each holds its cells, and the gas
+    pressure has no zero: the zones the body fills whole are NaN (the plate: 90 of 9,600 zones at the
+    start, 57 at 4 ms as it bends; the SPH piston fills none whole), its smallest value and its range
+    over the outputs those of the gas (the default reader's pieces read 0 there before, and "0" / "1"
+    as names)."""
+    from tests.cases.test_cases import case_variant
+
+    case = case_variant(tmp_path, name, *edits)
+    out = tmp_path / "out"
+    r = immerse("run", case, "--out", out)
+    assert r.returncode in (0, 1), r.stderr
+    script = tmp_path / "trace_check.py"
+    script.write_text(TRACE_CHECK)
+    dest = tmp_path / "got.json"
+    p = subprocess.run([pvbatch, str(script), str(out / "open_in_paraview.py"), str(dest)], capture_output=True,
+                       text=True, env=_pvbatch_env(), timeout=300)
+    assert p.returncode == 0, p.stderr[-3000:]
+    got = json.loads(dest.read_text())
+    assert got["names"] == ["ale", body] and got["roles"] == ["ale", body], got
+    assert got["ale"]["cells"] > 0 and got[body]["cells"] >= 0 and len(got["times"]) >= 3
+    assert got["ale"]["zeros"] == 0 and got["ale"]["min"] > 0.0 and got["range"][0] > 0.0, got
+    if body == "lagrange":
+        assert got["ale"]["nan"] > 0, got

@@ -1167,3 +1167,26 @@ def test_self_contact(tmp_path):
     case, _ = ring_output(tmp_path / "none", pressed=())
     r = checks.run_check(case, tmp_path / "none", ring_history(energy=1e-13))
     assert failed(r) == ["energy_balance_rel", "self_contact_nodes"]
+
+
+def test_a_nan_metric_says_why_in_the_summary_the_log_and_a_campaigns_message(tmp_path):
+    """shock_reflection_obstacle ended at 0.12 s, 13 ms after the shock met the wall: the reflected
+    shock is within 8 zones of the wall, so the reflected state's window is empty and p_reflected is
+    NaN; its record says why (the reflected_shock check's own note), the log line too, and the
+    message a campaign lists for the run (task.failed_metrics) carries it."""
+    from orchestrator.campaign.task import failed_metrics
+
+    case = tmp_path / "case"
+    shutil.copytree(CASES / "shock_reflection_obstacle", case, ignore=shutil.ignore_patterns("out"))
+    p = case / "case.toml"
+    p.write_text(p.read_text().replace("end_time = 0.25", "end_time = 0.12").replace(
+        "output_interval = 0.05", "output_interval = 0.06"))
+    r = immerse("run", case, "--out", tmp_path / "out")
+    assert r.returncode == 1, r.stdout + r.stderr
+    s = json.loads((tmp_path / "out" / "summary.json").read_text())
+    m = s["check"]["metrics"]["p_reflected"]
+    assert m["value"] != m["value"] and not m["passed"]
+    assert m["note"].startswith("the reflected shock (exact position 0.7367") and "of the wall at 0.7525 m" in m["note"]
+    assert "check p_reflected: nan vs 15 (rel. error nan, tolerance 0.0003) FAILED: the reflected shock" in r.stdout
+    msg = failed_metrics(s)
+    assert msg.startswith("p_reflected: nan vs 15 (rel. error nan, tolerance 0.0003): the reflected shock"), msg

@@ -248,7 +248,7 @@ def test_a_coupled_job_gives_the_plain_jobs_results(socket_path, tmp_path):
             a.visit(names.append)
             for n in names:
                 if isinstance(a[n], h5py.Dataset):
-                    assert np.array_equal(a[n][()], b[n][()]), (f, n)
+                    assert np.array_equal(a[n][()], b[n][()], equal_nan=True), (f, n)
 
 
 def test_the_suites_jobs_start_warm(tmp_path):
