@@ -364,6 +364,24 @@ def _frame_planar(plotter, grid, overlays, window_size) -> None:
     cam.parallel_scale = scale
 
 
+def _particle_axis(case, role: str) -> int | None:
+    """A particle run drawn as a line plot: when the case's check compares this role's profile along
+    an axis with an exact one (e.g. the SPH shock tube's riemann check), that axis; the particles
+    that start at one coordinate along it are one station (their mean)."""
+    if not case:
+        return None
+    from orchestrator.exact_profiles import exact_profile
+
+    params = (case.get("check") or {}).get("params") or {}
+    if params.get("role", role) != role:
+        return None
+    try:
+        ex = exact_profile(case, 0.0)
+    except (KeyError, ValueError, TypeError):
+        return None
+    return None if ex is None else ex.axis
+
+
 def _is_background(role: str) -> bool:
     from adapters.registry import coupling_side
 
@@ -505,6 +523,9 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
         cells, cell_type = read_mesh_file(out_dir, r)
         first_points = read_step(out_dir, r, min(s[2] for s in found[r]["steps"]))[0]
         axis = one_d_axis(first_points, cells)
+        if axis is None and cell_type == "vertex":   # particles: 1-D where the case's check has an exact
+            case = _load_case(out_dir) or False if case is None else case   # profile of this role
+            axis = _particle_axis(case, r)
         if axis is not None and case is None:
             case = _load_case(out_dir) or False
         planar = bool(np.all(first_points[:, 2] == first_points[0, 2]))

@@ -13,7 +13,7 @@ from orchestrator.units import unit_of, with_unit
 from orchestrator.view import ViewError, line_figure, line_profile, one_d_axis, render, scalar_field
 from solvers.ale.exact.riemann import RiemannSolution
 from solvers.lagrange.mesh import box_mesh, quarter_cylinder_mesh
-from tests.conftest import immerse
+from tests.conftest import CASES, immerse
 from tests.orchestrator.case_texts import SOD_2D
 
 pytest.importorskip("pyvista")
@@ -322,3 +322,30 @@ def test_a_planar_domain_fills_its_picture_clear_of_the_colour_bar(tmp_path, upp
     if fills in ("height", "both"):
         assert bottom - top > 0.55, (top, bottom)
     assert bottom < 0.80 and top > 0.10, (top, bottom)
+
+
+def test_a_one_d_particle_run_is_a_line_plot_against_the_exact_solution(tmp_path):
+    """Particles in a tube (two rows along x, as cases/sph_shock_tube's) whose case checks the SPH
+    role's profile against Riemann's: drawn as a line plot (the particles starting at one x are one
+    station) with the exact solution, not as a cloud of dots."""
+    from orchestrator.case import load_case
+    from orchestrator.exact_profiles import riemann_solution
+
+    case = load_case(CASES / "sph_shock_tube")
+    ex = riemann_solution(case["check"]["params"])
+    out = tmp_path / "out"
+    x = np.repeat(np.linspace(-0.5, 0.5, 101), 2)
+    pts = np.zeros((x.size, 3))
+    pts[:, 0], pts[:, 1] = x, np.tile([0.005, 0.015], 101)
+    write_mesh(out, "sph", np.arange(x.size)[:, None], "vertex")
+    for i, t in enumerate((0.0, 0.2)):
+        rho = ex.sample(x, t, 0.0)[0]
+        write_step(out, "sph", i, 10 * i, t, pts, {"density": rho}, {})
+    write_index(out)
+    (out / "summary.json").write_text(json.dumps({"case": "sph_shock_tube", "case_dir": str(CASES / "sph_shock_tube")}))
+    paths = render(out, fields=["density"], steps="last", window_size=(640, 480))
+    assert [p.name for p in paths] == ["sph_density_000001.png"]
+    assert Image.open(paths[0]).info.get("Software", "").startswith("Matplotlib")
+    prof = line_profile(out, "sph", "density", 1, axis=0, case=case)
+    assert len(prof.x) == 101 and prof.exact_x is not None
+    np.testing.assert_allclose(prof.values, ex.sample(prof.x, 0.2, 0.0)[0])
