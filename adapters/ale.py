@@ -24,6 +24,10 @@ class AleAdapter(SolverAdapter):
     def local_limiter(self) -> dict | None:
         return self.solver.local_limiter()
 
+    def values_at(self, points, quantities):
+        """The zones' state at points for the case's background probes (solvers/probes.py FieldProbes)."""
+        return self.solver.values_at(points, quantities)
+
     def describe(self) -> str:
         cells = [int(c) for c in self.case["ale"]["grid"]["cells"]]
         n = len(self.case["ale"].get("materials", {}))

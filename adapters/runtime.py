@@ -12,7 +12,7 @@ import numpy as np
 from adapters import case_file
 from adapters import protocol as P
 from adapters.registry import coupling_side
-from solvers.probes import PointProbes
+from solvers.probes import probes_for
 
 
 def parse_args(argv=None):
@@ -143,9 +143,9 @@ def serve(adapter_cls, argv=None) -> None:
     if side == "background":  # the bodies' initial geometry in the grid, before the initial state
         adapter.bodies = adapter.unpack_geometry(P.share(comm, P.recv(ic, 0, P.TAG_GEOMETRY) if rank == 0 else None))
     adapter.setup()
-    probes = PointProbes(case.get("probes"), args.role, comm)
+    probes = probes_for(case.get("probes"), args.role, comm)
     if probes:  # the probes' sets, from the initial positions (before a restart moves them)
-        probes.check_sets(adapter.probe_points()[0], args.role)
+        probes.start(adapter, args.role)
     if args.restart:
         adapter.restart(restart_file(Path(args.restart), args.role))
     if side == "foreground":  # the surface (fixed), its positions and velocities now
@@ -159,7 +159,7 @@ def serve(adapter_cls, argv=None) -> None:
         dt = adapter.stable_dt()
         diag = adapter.diagnostics() if with_diagnostics else None
         if with_diagnostics and probes:
-            diag.update(probes.values(*adapter.probe_points()))
+            diag.update(probes.values_of(adapter))
         if rank == 0:
             reply[0] = 0.0
             reply[1] = dt

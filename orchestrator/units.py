@@ -70,7 +70,7 @@ _HISTORY_ENDINGS = (("_rel", DIMENSIONLESS), ("_energy", "J"), ("_work", "J"), (
                     ("_impulse", "N s"), ("_force", "N"), ("_count", DIMENSIONLESS), ("_dt", "s"),
                     ("_time_s", "s"), ("_mass", "kg"), ("_share", DIMENSIONLESS))
 _HISTORY_PREFIXES = (("momentum_", "kg m/s"), ("angular_momentum", "kg m^2/s"), ("contact_force", "N"),
-                     ("interface_momentum_", "kg m/s"), ("foreground_momentum_", "kg m/s"),
+                     ("interface_momentum_", "kg m/s"), ("interface_force_", "N"), ("foreground_momentum_", "kg m/s"),
                      ("impulse_", "N s"), ("force_", "N"), ("substeps_", DIMENSIONLESS))
 PROBE_UNITS = {"displacement": "m", "velocity": "m/s", "position": "m"}
 

@@ -38,6 +38,13 @@ class PointProbes:
             out.append(np.all((X >= lo) & (X <= hi), axis=1))
         return out
 
+    def start(self, adapter, role: str) -> None:
+        """At set-up, before a restart moves the points: every probe's box holds a point."""
+        self.check_sets(adapter.probe_points()[0], role)
+
+    def values_of(self, adapter) -> dict[str, float]:
+        return self.values(*adapter.probe_points())
+
     def check_sets(self, X: np.ndarray, role: str) -> None:
         """Every probe's box holds a point at the start (collective): else one line naming it."""
         from mpi4py import MPI
@@ -73,3 +80,35 @@ class PointProbes:
             out[f"probe_{name}"] = float(sums[2 * i] / max(sums[2 * i + 1], 1.0) if r == "mean"
                                          else ext[2 * i] if r == "max" else -ext[2 * i + 1])
         return out
+
+
+class FieldProbes:
+    """The probes of the background (``point``): the zone holding each point, its density, pressure,
+    specific internal energy, sound speed or velocity component (the adapter's values_at)."""
+
+    def __init__(self, specs: dict | None, role: str, comm):
+        self.comm = comm
+        self.probes = [(name, p) for name, p in (specs or {}).items() if p["role"] == role]
+        self.names = [f"probe_{name}" for name, _ in self.probes]
+
+    def __bool__(self) -> bool:
+        return bool(self.probes)
+
+    def start(self, adapter, role: str) -> None:
+        """Nothing to check at the start (the case's check put every point in the fixed grid)."""
+
+    def values_of(self, adapter) -> dict[str, float]:
+        pts = np.array([p["point"] for _, p in self.probes])
+        quantities = [(p["quantity"], None if p["component"] is None else
+                       (-1 if p["component"] == "magnitude" else _COMPONENT[p["component"]])) for _, p in self.probes]
+        v = adapter.values_at(pts, quantities)     # (quantities, points): probe i is entry (i, i)
+        return {f"probe_{name}": float(v[i, i]) for i, (name, _) in enumerate(self.probes)}
+
+
+def probes_for(specs: dict | None, role: str, comm):
+    """The probes of ``role``: of its points (PointProbes) or, for the background, of its fields at
+    points (FieldProbes)."""
+    mine = {n: p for n, p in (specs or {}).items() if p["role"] == role}
+    if any("point" in p for p in mine.values()):
+        return FieldProbes(mine, role, comm)
+    return PointProbes(mine, role, comm)

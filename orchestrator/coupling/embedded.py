@@ -231,6 +231,7 @@ class EmbeddedCoupling:
         substeps (multirate.py) gives as ``vstar_f`` a pass's mean velocities under the interface
         impulses ``predicted``; their rigid answer to the impulses is ``mobility`` / m: the solve then
         sees its masses M / mobility and the predictor vstar_f - mobility M^-1 predicted."""
+        self.dt_last = dt_avg   # (the interface force: the impulse of the leapfrog kick at t^n / its dt_avg)
         ops, dim = self.ops, self.dim
         self.substeps = int(substeps)
         self.c = float(mobility) if self.substeps > 1 else 1.0
@@ -406,10 +407,16 @@ class EmbeddedCoupling:
                    "substep_passes", "substep_residual", "momentum_in_transit", "energy_in_transit")
 
     def diagnostic_names(self) -> list[str]:
-        return [f"foreground_momentum_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS)
+        """foreground_momentum_<c>: the impulse the coupling gave the bodies so far (load and constraint);
+        interface_force_<c>: the last step's of it over its dt, the force the background exerts on the
+        bodies (N; per unit depth in 2-D), what an analyst plots against time; then DIAGNOSTICS."""
+        return ([f"foreground_momentum_{c}" for c in "xyz"[: self.dim]]
+                + [f"interface_force_{c}" for c in "xyz"[: self.dim]] + list(self.DIAGNOSTICS))
 
     def diagnostics(self) -> list[float]:
-        return list(self.momentum_f) + [float(self.last.iterations), self.last.residual, self.dissipation,
+        dt = getattr(self, "dt_last", None)
+        force = self.last.momentum_f / dt if dt and self.last.momentum_f is not None else np.zeros(self.dim)
+        return list(self.momentum_f) + list(force) + [float(self.last.iterations), self.last.residual, self.dissipation,
                                         self.work_f, float(min(self.stable_limit, 1e300)),
                                         float(self.cond_H), self.lambda_oscillation, self.lambda_oscillation_max,
                                         float(self.void_zones), float(self.tied_orphans), float(self.substeps),

@@ -199,7 +199,8 @@ class ForegroundCouplings:
         out = []
         for j, name in enumerate(names):
             vals = [r[j] for r in rows]
-            out.append(sum(vals) if name.startswith("foreground_momentum_") else self._COMBINE[name](vals))
+            out.append(sum(vals) if name.startswith(("foreground_momentum_", "interface_force_"))
+                       else self._COMBINE[name](vals))
         return out
 
     def state_arrays(self) -> dict[str, np.ndarray]:

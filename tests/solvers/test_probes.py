@@ -87,3 +87,70 @@ def test_a_lagrange_probe_records_every_step(tmp_path):
     assert len(t) > 10                       # every step, against 2 output steps
     assert np.max(np.abs(u - 10.0 * t)) < 1e-12 * 10.0 * t[-1]
     assert np.max(np.abs(s - np.hypot(10.0, 4.0))) < 1e-12
+
+
+SOD_PROBED = """
+[run]
+dimension = 2
+end_time = 0.2
+output_interval = 0.05
+
+[ale]
+grid = { lower = [0.0, 0.0], upper = [1.0, 0.02], cells = [100, 2] }
+materials.gas = { eos = "ideal_gas", gamma = 1.4 }
+regions = [
+  { material = "gas", density = 1.0, pressure = 1.0 },
+  { material = "gas", region = "x > 0.5", density = 0.125, pressure = 0.1 },
+]
+
+[probes]
+p_star = { role = "ale", quantity = "pressure", point = [0.6, 0.005] }
+u_star = { role = "ale", quantity = "velocity", component = "x", point = [0.6, 0.015] }
+rho_left = { role = "ale", quantity = "density", point = [0.0, 0.0] }
+"""
+
+
+def test_background_probes_read_the_zone_at_their_point_on_any_rank_count(tmp_path):
+    """Sod on 100 x 2 zones with probes at points: p at (0.6, 0.005) is zone (60, 0)'s pressure, u at
+    (0.6, 0.015) the mean x velocity of zone (60, 1)'s four nodes, rho at the grid's corner zone
+    (0, 0)'s: equal to the output steps' values at every output, and the same on 2 ALE ranks (a
+    point's zone on the other rank: summed from its owner); at 0.2 s the probe sits between the
+    contact (0.685) and the rarefaction's tail (0.486): p* = 0.30313 (measured 0.30294, 6.3e-4 off; u 0.92806
+    against u* = 0.92745)."""
+    from orchestrator import output
+
+    case = tmp_path / "case"
+    case.mkdir()
+    (case / "case.toml").write_text(SOD_PROBED)
+    rows = {}
+    for ranks in (1, 2):
+        out = tmp_path / f"out{ranks}"
+        r = immerse("run", case, "--out", out, "--ranks", f"ale={ranks}")
+        assert r.returncode == 0, r.stderr
+        rows[ranks] = np.loadtxt(out / "probes.csv", delimiter=",", skiprows=1)
+        head = (out / "probes.csv").read_text().splitlines()[0]
+        assert head == "time,step,ale.p_star,ale.u_star,ale.rho_left"
+    out = tmp_path / "out1"
+    for t, step, i in output.read_steps(out, "ale"):
+        pts, pd, cd = output.read_step(out, "ale", i)
+        row = rows[1][rows[1][:, 1] == step][0]
+        assert row[2] == cd["pressure"][60] and row[4] == cd["density"][0]
+        nodes = [60, 61, 60 + 101, 61 + 101]          # zone (60, 0)'s nodes: x fastest, 101 a row
+        assert row[3] == pytest.approx(pd["velocity"][[n + 101 for n in nodes], 0].mean(), rel=1e-14, abs=1e-15)
+    np.testing.assert_allclose(rows[2], rows[1], rtol=1e-12, atol=1e-14)
+    assert rows[1][-1, 2] == pytest.approx(0.30313, rel=1e-3)
+
+
+@pytest.mark.parametrize("probe, key, fragment", [
+    ('{ role = "ale", quantity = "pressure", point = [1.5, 0.01] }', "probes.x.point", "must lie in the grid"),
+    ('{ role = "ale", quantity = "displacement", point = [0.5, 0.01] }', "probes.x.quantity", "allowed for role = 'ale'"),
+    ('{ role = "ale", quantity = "velocity", point = [0.5, 0.01] }', "probes.x.component", "allowed for the velocity"),
+    ('{ role = "ale", quantity = "pressure", component = "x", point = [0.5, 0.01] }', "probes.x.component", "a scalar"),
+])
+def test_bad_background_probes_are_refused_in_one_line(tmp_path, probe, key, fragment):
+    case = tmp_path / "case"
+    case.mkdir()
+    text = SOD_PROBED.split("[probes]")[0] + f"[probes]\nx = {probe}\n"
+    (case / "case.toml").write_text(text)
+    r = immerse("check", case)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and key in r.stderr and fragment in r.stderr, r.stderr

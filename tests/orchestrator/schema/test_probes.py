@@ -24,10 +24,13 @@ def test_a_probe_is_normalised(tmp_path):
 
 
 @pytest.mark.parametrize("old, new, key, fragment", [
-    ('role = "lagrange"', 'role = "sph"', "probes.tip.role", "the case has no [sph] table; allowed: a point "
+    ('role = "lagrange"', 'role = "sph"', "probes.tip.role", "the case has no [sph] table; allowed: a "
      "solver the case runs (lagrange)"),
-    ('role = "lagrange"', 'role = "ale"', "probes.tip.role", "must be one of: 'lagrange', 'sph'"),
-    ('quantity = "displacement"', 'quantity = "stress"', "probes.tip.quantity", "one of: 'displacement'"),
+    ('role = "lagrange"', 'role = "ale"', "probes.tip.role", "the case has no [ale] table"),
+    ('role = "lagrange"', 'role = "nodes"', "probes.tip.role", "must be one of: 'lagrange', 'sph', 'ale'"),
+    ('quantity = "displacement"', 'quantity = "stress"', "probes.tip.quantity", "one of: 'density', 'displacement'"),
+    ('quantity = "displacement"', 'quantity = "pressure"', "probes.tip.quantity",
+     "allowed for role = 'lagrange': displacement, velocity, position"),
     ('component = "x"', 'component = "z"', "probes.tip.component", "allowed in 2-D: x, y, magnitude"),
     ('component = "x"', 'component = "x", reduce = "median"', "probes.tip.reduce", "one of: 'mean', 'max', 'min'"),
     ("lower = [0.09, 0.0]", "lower = [0.09, 0.0, 0.0]", "probes.tip.box.lower", "dimension mismatch"),
