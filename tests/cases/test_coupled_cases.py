@@ -342,6 +342,16 @@ def test_plate_in_shock_2d_runs_with_coupled_balances(tmp_path):
     np.testing.assert_allclose(f[1:][inner], rate[inner], rtol=2e-2, atol=1e-3 * f.max())
     assert 3.2e4 < f.max() < 4.0e4 and 0.75e-3 < t[np.argmax(f)] < 0.95e-3, (f.max(), t[np.argmax(f)])
     assert abs(f[-1] / f[-2] - 1.0) < 0.01, f[-3:]
+    # its pictures framed to their domains: the 1.6 x 0.6 m tube fills the width, the 0.03 x 0.3 m
+    # plate the height, both clear of the colour bar (tests/orchestrator/test_view.py's measure)
+    from tests.orchestrator.test_view import _coloured_box
+
+    r = immerse("view", out, "--field", "pressure")
+    assert r.returncode == 0, r.stderr
+    pics = sorted(out.glob("pictures/*_pressure_*.png"))
+    boxes = {p.name.split("_")[0]: _coloured_box(p) for p in pics}
+    assert boxes["ale"][3] - boxes["ale"][2] > 0.75 and boxes["lagrange"][1] - boxes["lagrange"][0] > 0.55, boxes
+    assert all(b[1] < 0.80 for b in boxes.values()), boxes
 
 
 @pytest.mark.slow
