@@ -51,3 +51,14 @@ def test_the_cli_prints_a_table_or_refuses_in_one_line():
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "TABLE = 'nope': no such key or table; tables: run" in r.stderr
     md = immerse("keys", "probes", "--markdown").stdout
     assert md == markdown(select(keys(), "probes")) and md.startswith("#### `[probes]`\n\n| key | type |")
+
+
+def test_the_readmes_key_reference_is_the_generated_one():
+    """README.md's "Key reference (generated)" between its markers ends with `immerse keys --markdown`
+    (regenerate: the section's text after its introduction)."""
+    from pathlib import Path
+
+    readme = (Path(__file__).resolve().parents[2] / "README.md").read_text()
+    section = readme.split("<!-- keys:begin -->", 1)[1].split("<!-- keys:end -->", 1)[0]
+    generated = markdown(keys())
+    assert section.endswith(generated), "README's key reference is stale: paste `immerse keys --markdown` into it"
