@@ -1,5 +1,6 @@
-"""Probes of node and particle sets (case ``[probes]``, orchestrator/schema/probes.py): one number
-per probe at every diagnostics step, appended to the solver's diagnostics as ``probe_<name>``.
+"""Probes of node and particle sets, and of the background's fields at points (case ``[probes]``,
+orchestrator/schema/probes.py): one number per probe at every diagnostics step, appended to the
+solver's diagnostics as ``probe_<name>`` (PointProbes, FieldProbes; probes_for picks by role).
 
 A figure read from the output steps (a peak, a zero crossing) depends on how often the run writes
 its fields; the same figure read from a probe's history does not (the diagnostics are recorded at
