@@ -3,7 +3,7 @@
   immerse check CASE [--ranks ROLE=N ...] [MACHINE]   validate only (case, meshes, expressions, resources)
   immerse run CASE [--out DIR] [--replace] [--ranks ROLE=N ...] [--restart FILE] [--engine local|slurm] [MACHINE]
       MACHINE: [--nodes N] [--memory-per-node SIZE] [--oversubscribe]
-  immerse view OUT [--field NAME ...] [--step all|last|N ...] [--range fixed|step] [--movie]
+  immerse view OUT [--field NAME ...] [--step all|last|N ...] [--range fixed|step] [--movie] [--list]
   immerse plot OUT [QUANTITY ...] [--csv] [--list]    time histories (diagnostics, probes) against time
   immerse keys [TABLE] [--markdown]            every case.toml key: type, unit, range, default, meaning
   immerse campaign CAMPAIGN.toml [--out DIR] [--engine local|slurm] [--cores N] [--retry-failed] [--only AXIS=L1,L2]
@@ -182,6 +182,11 @@ def cmd_view(args) -> int:
     if not (out / "results.h5").is_file():
         return _fail(f"OUT = {str(out)!r}: no results.h5 there (run the case first)")
     steps = tuple(args.step) if args.step else ("last",)
+    if args.list:
+        from orchestrator.view import listing
+
+        print(listing(out))
+        return 0
     try:
         paths = render(out, fields=args.field or None, steps=steps, value_range=args.range, animate=args.movie)
     except (ViewError, OutputError) as e:
@@ -341,6 +346,8 @@ def main(argv=None) -> int:
                         "steps); step: each step's own")
     p.add_argument("--movie", action="store_true", help="also an animated GIF per field of the steps "
                    "drawn (OUT/pictures/<role>_<field>.gif)")
+    p.add_argument("--list", action="store_true", help="list the output's fields (with units) and steps, "
+                   "draw nothing")
     p.set_defaults(func=cmd_view)
     p = sub.add_parser("plot", help="draw a run's time histories (diagnostics, probes) against time",
                        description="Draw time histories of a run (OUT/diagnostics.h5) against time, with the "

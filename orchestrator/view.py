@@ -67,6 +67,19 @@ def available(out_dir) -> dict[str, dict]:
     return found
 
 
+def listing(out_dir) -> str:
+    """What `immerse view OUT --list` prints: per role its fields (with units) and its output steps
+    (index, step, time)."""
+    from orchestrator.units import unit_of
+
+    lines = []
+    for r, info in available(out_dir).items():
+        fields = [f + (f" ({'-' if u == '1' else u})" if (u := unit_of(f)) else "") for f in info["fields"]]
+        lines.append(f"{r}: fields {', '.join(fields)}")
+        lines.append(f"{r}: steps (index: step, time) " + ", ".join(f"{i}: {s}, {t:.6g} s" for t, s, i in info["steps"]))
+    return "\n".join(lines)
+
+
 def _ranges(indices: Sequence[int]) -> str:
     """[0, 1, 2, 3, 7] -> "0-3, 7"."""
     parts, i = [], 0

@@ -349,3 +349,13 @@ def test_a_one_d_particle_run_is_a_line_plot_against_the_exact_solution(tmp_path
     prof = line_profile(out, "sph", "density", 1, axis=0, case=case)
     assert len(prof.x) == 101 and prof.exact_x is not None
     np.testing.assert_allclose(prof.values, ex.sample(prof.x, 0.2, 0.0)[0])
+
+
+def test_cli_view_list_names_fields_with_units_and_steps(tmp_path):
+    out = tmp_path / "out"
+    _synthetic(out, box_mesh([0, 0], [2, 1], [4, 2]), n=2)
+    r = immerse("view", out, "--list")
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert r.stdout.splitlines() == ["lagrange: fields temperature (K), velocity (m/s), stress (Pa)",
+                                     "lagrange: steps (index: step, time) 0: 0, 0 s, 1: 5, 0.0001 s"]
+    assert not (out / "pictures").exists()
