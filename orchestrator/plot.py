@@ -74,7 +74,8 @@ def select(hist: dict, wanted, case) -> list[str]:
     chosen = []
     for q in wanted:
         found = [k for k in keys if fnmatch.fnmatchcase(k, q)] if any(c in q for c in "*?[") else (
-            [q] if q in keys else [k for k in keys if k.split(".", 1)[-1] in (q, f"probe_{q}")])
+            [q] if q in keys else [k for k in keys if k.split(".", 1)[-1] in (q, f"probe_{q}")]
+            or [k for k in keys if re.fullmatch(rf"[^.]+\.probe_{re.escape(q)}_\d+", k)])   # (a line's points)
         if not found:
             near = sorted({k for k in keys if q.lower() in k.lower()})[:8]
             probes = sorted(k.split("probe_", 1)[1] for k in keys if ".probe_" in k)

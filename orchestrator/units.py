@@ -80,8 +80,9 @@ def history_unit(key: str, probes: dict | None = None) -> str | None:
     (``<role>.probe_<name>``) from its quantity in ``probes`` (the case's normalised [probes])."""
     name = key.split(".", 1)[-1]
     if name.startswith("probe_"):
-        p = (probes or {}).get(name[len("probe_"):])
-        return PROBE_UNITS.get(p["quantity"]) if p else None
+        stem = name[len("probe_"):]
+        p = (probes or {}).get(stem) or (probes or {}).get(stem.rsplit("_", 1)[0])   # (a line's <name>_<k>)
+        return PROBE_UNITS.get(p["quantity"], FIELD_UNITS.get(p["quantity"])) if p else None
     if name in _HISTORY_EXACT:
         return _HISTORY_EXACT[name]
     for stem, unit in _HISTORY_PREFIXES:

@@ -90,7 +90,20 @@ class FieldProbes:
     def __init__(self, specs: dict | None, role: str, comm):
         self.comm = comm
         self.probes = [(name, p) for name, p in (specs or {}).items() if p["role"] == role]
-        self.names = [f"probe_{name}" for name, _ in self.probes]
+        # every point of every probe: a line's N points are N histories probe_<name>_<k>
+        self.points, self.names, self.quantities = [], [], []
+        for name, p in self.probes:
+            q = (p["quantity"], None if p["component"] is None else
+                 (-1 if p["component"] == "magnitude" else _COMPONENT[p["component"]]))
+            if "line" in p:
+                a, b, n = np.array(p["line"]["start"]), np.array(p["line"]["end"]), p["line"]["points"]
+                pts = a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)
+                names = [f"probe_{name}_{k}" for k in range(n)]
+            else:
+                pts, names = np.array([p["point"]]), [f"probe_{name}"]
+            self.points += list(pts)
+            self.names += names
+            self.quantities += [q] * len(names)
 
     def __bool__(self) -> bool:
         return bool(self.probes)
@@ -99,11 +112,9 @@ class FieldProbes:
         """Nothing to check at the start (the case's check put every point in the fixed grid)."""
 
     def values_of(self, adapter) -> dict[str, float]:
-        pts = np.array([p["point"] for _, p in self.probes])
-        quantities = [(p["quantity"], None if p["component"] is None else
-                       (-1 if p["component"] == "magnitude" else _COMPONENT[p["component"]])) for _, p in self.probes]
-        v = adapter.values_at(pts, quantities)     # (quantities, points): probe i is entry (i, i)
-        return {f"probe_{name}": float(v[i, i]) for i, (name, _) in enumerate(self.probes)}
+        kinds = sorted(set(self.quantities), key=self.quantities.index)
+        v = adapter.values_at(np.array(self.points), kinds)     # (kinds, points)
+        return {n: float(v[kinds.index(q), i]) for i, (n, q) in enumerate(zip(self.names, self.quantities))}
 
 
 def probes_for(specs: dict | None, role: str, comm):

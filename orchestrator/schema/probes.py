@@ -23,6 +23,8 @@ dimension has, for vector quantities only.
 """
 from __future__ import annotations
 
+import numpy as np
+
 from .parts import NAME_PATTERN, table, vector
 from .registry import register_table
 from .rules import CaseError, check_length, format_key
@@ -50,6 +52,14 @@ PROBE = table(
                                     "point (its state at the step's end, as written in the outputs)."},
         "point": vector("m", description="A background probe's point (ale): the zone that holds it is read "
                                          "(ale.mode = 'eulerian': the grid does not move)."),
+        "line": table({"start": vector("m", description="The line's first point."),
+                       "end": vector("m", description="The line's last point."),
+                       "points": {"type": "integer", "minimum": 2, "maximum": 1000,
+                                  "description": "Points along the line, evenly spaced, ends included."}},
+                      required=("start", "end", "points"),
+                      description="A background probe along a line (ale, instead of point): one history per "
+                                  "point, <role>.probe_<name>_<k> for k = 0 (start) .. points - 1 (end), e.g. "
+                                  "a row of pressure gauges."),
         "component": {"enum": list(COMPONENTS),
                       "description": "The component of quantity recorded: x, y, z or its magnitude."},
         "reduce": {"enum": list(REDUCTIONS), "default": "mean",
@@ -82,6 +92,9 @@ def normalise(raw: dict | None, case: dict) -> dict | None:
             q["box"] = {"lower": [float(v) for v in p["box"]["lower"]], "upper": [float(v) for v in p["box"]["upper"]]}
         if "point" in p:
             q["point"] = [float(v) for v in p["point"]]
+        if "line" in p:
+            a, b, n = (np.array(p["line"][k], dtype=float) for k in ("start", "end", "points"))
+            q["line"] = {"start": a.tolist(), "end": b.tolist(), "points": int(n)}
         out[name] = q
     return out
 
@@ -118,15 +131,19 @@ def check(case: dict, data: dict) -> None:
 def _check_field_probe(case: dict, p: dict, raw: dict, key: str, dim: int) -> None:
     """A background probe: a point inside the fixed grid, a field the background writes, a component
     for the velocity (none for a scalar), no box."""
-    if "point" not in p or "box" in p:
-        raise CaseError(f"{key}.point" if "point" not in p else f"{key}.box", raw.get("box", "missing"),
-                        "a background (ale) probe reads the zone at a point: give point = [x, y(, z)], no box")
+    if ("point" in p) == ("line" in p) or "box" in p:
+        bad = "box" if "box" in p else ("line" if "point" in p else "point")
+        raise CaseError(f"{key}.{bad}", raw.get(bad, "missing"), "a background (ale) probe reads the zones at a "
+                        "point or along a line: give point = [x, y(, z)] or line = { start, end, points }, no box")
     if p["quantity"] not in FIELDS:
         raise CaseError(f"{key}.quantity", raw["quantity"], f"allowed for role = 'ale': {', '.join(FIELDS)}")
-    check_length(f"{key}.point", raw["point"], dim)
     grid = case["ale"]["grid"]
-    if not all(lo <= x <= hi for x, lo, hi in zip(p["point"], grid["lower"], grid["upper"])):
-        raise CaseError(f"{key}.point", raw["point"], f"must lie in the grid [{grid['lower']}, {grid['upper']}]")
+    spots = [("point", raw.get("point"), p.get("point"))] if "point" in p else [
+        (f"line.{k}", raw["line"][k], p["line"][k]) for k in ("start", "end")]
+    for sub, given, x in spots:
+        check_length(f"{key}.{sub}", given, dim)
+        if not all(lo <= v <= hi for v, lo, hi in zip(x, grid["lower"], grid["upper"])):
+            raise CaseError(f"{key}.{sub}", given, f"must lie in the grid [{grid['lower']}, {grid['upper']}]")
     if case["ale"].get("mode", "eulerian") != "eulerian":
         raise CaseError(f"{key}.role", raw["role"], "a background probe needs ale.mode = 'eulerian' (a fixed "
                         "grid: the zone at the point is the same at every step)")

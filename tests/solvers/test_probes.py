@@ -154,3 +154,30 @@ def test_bad_background_probes_are_refused_in_one_line(tmp_path, probe, key, fra
     (case / "case.toml").write_text(text)
     r = immerse("check", case)
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and key in r.stderr and fragment in r.stderr, r.stderr
+
+
+def test_a_line_of_background_probes_is_a_history_per_point(tmp_path):
+    """line = { start, end, points = 5 } along the Sod tube: five histories probe_gauge_0..4, each
+    the zone at its point (x = 0.105, 0.3025, 0.5, 0.6975, 0.895), as a point probe there reads;
+    `immerse plot OUT gauge` draws the five."""
+    case = tmp_path / "case"
+    case.mkdir()
+    text = SOD_PROBED.split("[probes]")[0] + """[probes]
+gauge = { role = "ale", quantity = "pressure", line = { start = [0.105, 0.005], end = [0.895, 0.005], points = 5 } }
+third = { role = "ale", quantity = "pressure", point = [0.6975, 0.005] }
+"""
+    (case / "case.toml").write_text(text)
+    out = tmp_path / "out"
+    r = immerse("run", case, "--out", out)
+    assert r.returncode == 0, r.stderr
+    head = (out / "probes.csv").read_text().splitlines()[0]
+    assert head == "time,step,ale.gauge_0,ale.gauge_1,ale.gauge_2,ale.gauge_3,ale.gauge_4,ale.third"
+    rows = np.loadtxt(out / "probes.csv", delimiter=",", skiprows=1)
+    assert np.array_equal(rows[:, 5], rows[:, 7])          # gauge_3 is the point probe's zone
+    # (the ends undisturbed: measured 1 - 5.8e-15 and 0.1 + 2.1e-8, the shock at 0.85 m, its smear ahead)
+    assert rows[-1, 2] == pytest.approx(1.0, rel=1e-13) and rows[-1, 6] == pytest.approx(0.1, rel=1e-6)
+    r = immerse("plot", out, "gauge", "--csv")
+    assert r.returncode == 0, r.stderr
+    plotted = (out / "plots").glob("*.csv")
+    assert [p.read_text().splitlines()[0] for p in plotted] == [
+        "time (s)," + ",".join(f"ale.probe_gauge_{k} (Pa)" for k in range(5))]
