@@ -14,7 +14,6 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from orchestrator.schema.parts import UNIT_LIMITS
 
 
 @dataclass
@@ -205,4 +204,4 @@ def markdown(chosen: list[Key]) -> str:
     return "\n".join(out)
 
 
-__all__ = ["Key", "keys", "select", "tables", "text", "markdown", "UNIT_LIMITS"]
+__all__ = ["Key", "keys", "select", "tables", "text", "markdown"]
