@@ -589,6 +589,10 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                     preference = "cell"
                 path = _picture_path(pictures, r, name, index)
                 title = f"{r}: {label}" + (f" with {', '.join(bodies)} bodies (grey)" if overlays else "")
+                if np.isfinite(values).any() and np.nanmin(values) == np.nanmax(values):
+                    # the same everywhere at this step (e.g. a contact pressure after the contact): said,
+                    # so that a blank picture is not taken for a failed one
+                    title += f" (uniform: {float(np.nanmin(values)):.6g} at this step)"
                 _render_pyvista(pv, sink, path, grid, label, name, values, preference,
                                 f"{title}\nt = {time:.6g} s (step {step})", planar,
                                 window_size, show_edges, overlays, ranges.get(name))

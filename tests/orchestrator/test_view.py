@@ -359,3 +359,25 @@ def test_cli_view_list_names_fields_with_units_and_steps(tmp_path):
     assert r.stdout.splitlines() == ["lagrange: fields temperature (K), velocity (m/s), stress (Pa)",
                                      "lagrange: steps (index: step, time) 0: 0, 0 s, 1: 5, 0.0001 s"]
     assert not (out / "pictures").exists()
+
+
+def test_a_uniform_field_says_so_in_its_title(tmp_path, monkeypatch):
+    """A field the same everywhere at a step (bars_impact's contact pressure after the contact) is
+    drawn with a title that says so: a blank picture is not a failed one."""
+    import orchestrator.view as view
+
+    titles, real = [], view._render_pyvista
+
+    def record(*a, **kw):
+        out = real(*a, **kw)
+        titles.append(a[8])
+        return out
+
+    monkeypatch.setattr(view, "_render_pyvista", record)
+    out = tmp_path / "out"
+    mesh = box_mesh([0, 0], [2, 1], [4, 2])
+    write_mesh(out, "lagrange", mesh.cells, mesh.cell_type)
+    write_step(out, "lagrange", 0, 0, 0.0, mesh.points, {"contact_pressure": np.zeros(mesh.num_points)}, {})
+    write_index(out)
+    render(out, window_size=(320, 240))
+    assert titles == ["lagrange: contact_pressure (uniform: 0 at this step)\nt = 0 s (step 0)"], titles
