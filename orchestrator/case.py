@@ -474,6 +474,9 @@ def load_case(case_dir: str | os.PathLike) -> dict:
     try:
         data, sha = _read_toml(toml_path)
         _check_finite(data)   # (first: an inf is "not finite", not "beyond the range")
+        from orchestrator.schema.spellings import respell
+
+        notes = respell(data)   # (older spellings under their one name, before the schema sees them)
         err = _best_schema_error(None, data)
         if err is not None:
             raise _schema_error_to_case_error(err)
@@ -484,6 +487,7 @@ def load_case(case_dir: str | os.PathLike) -> dict:
         raise CaseError(CASE_FILE, str(toml_path), "nested too deeply (arrays or tables inside "
                         "each other beyond what can be read)") from None
     case["case_sha256"] = sha   # (after the tables' hooks: they see the documented layout)
+    case["_notes"] = notes      # (printed by check and run; not part of the case's identity)
     return case
 
 

@@ -79,6 +79,13 @@ def _admit(args, case: dict, ranks: dict, overridden) -> int:
     return estimate
 
 
+def _notes(case: dict) -> None:
+    """The case's notes (an older spelling read under its one name: orchestrator/schema/spellings.py),
+    one line each, before anything runs."""
+    for n in case.get("_notes", ()):
+        print(f"immerse: {n}", flush=True)
+
+
 def cmd_check(args) -> int:
     from orchestrator.case import CaseError, load_case, ranks_for
 
@@ -94,6 +101,7 @@ def cmd_check(args) -> int:
     from orchestrator.case import solvers_used
     from orchestrator.resources import format_bytes
 
+    _notes(case)
     print(f"{case['name']}: ok (dimension {case['run']['dimension']}, solvers: "
           f"{', '.join(solvers_used(case))}; memory about {format_bytes(estimate)})")
     return 0
@@ -113,6 +121,7 @@ def cmd_run(args) -> int:
         _admit(args, case, ranks, overridden)
     except CaseError as e:
         return _fail(str(e))
+    _notes(case)
     # everything is checked before anything is created or launched
     from orchestrator import outdir
     from orchestrator.restart import RestartError

@@ -39,9 +39,9 @@ _RUN3 = "[run]\ndimension = 3\nend_time = 1.0\n"
 _EOS = {
     "ideal_gas": '{ eos = "ideal_gas", gamma = 1.4 }',
     "stiffened_gas": '{ eos = "stiffened_gas", gamma = 4.4, p_inf = 6.0e8 }',
-    "tait": '{ eos = "tait", rho0 = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }',
-    "jwl": '{ eos = "jwl", A = 3.712e11, B = 3.231e9, R1 = 4.15, R2 = 0.95, omega = 0.3, rho0 = 1630.0 }',
-    "mie_gruneisen": '{ eos = "mie_gruneisen", rho0 = 2700.0, c0 = 5350.0, s = 1.34, gamma0 = 2.0 }',
+    "tait": '{ eos = "tait", density = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }',
+    "jwl": '{ eos = "jwl", A = 3.712e11, B = 3.231e9, R1 = 4.15, R2 = 0.95, omega = 0.3, density = 1630.0 }',
+    "mie_gruneisen": '{ eos = "mie_gruneisen", density = 2700.0, c0 = 5350.0, s = 1.34, gamma0 = 2.0 }',
 }
 # a state each EOS accepts (density, pressure)
 _STATE = {"ideal_gas": (1.0, 1.0), "stiffened_gas": (1000.0, 1.0e9), "tait": (1000.0, 1.0e5),

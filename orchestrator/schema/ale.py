@@ -27,17 +27,17 @@ from .rules import CaseError, check_expression, check_extent, check_faces, check
 EOS_KEYS = {
     "ideal_gas": ("eos", "gamma"),
     "stiffened_gas": ("eos", "gamma", "p_inf", "cavitation_pressure"),
-    "tait": ("eos", "rho0", "bulk_modulus", "exponent", "p0", "cavitation_pressure"),
-    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
-    "mie_gruneisen": ("eos", "rho0", "c0", "s", "gamma0", "pressure_cutoff", "cavitation_pressure"),
+    "tait": ("eos", "density", "bulk_modulus", "exponent", "p0", "cavitation_pressure"),
+    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "density"),
+    "mie_gruneisen": ("eos", "density", "c0", "s", "gamma0", "pressure_cutoff", "cavitation_pressure"),
     "void": ("eos",),   # empty space: volume only (several materials per zone)
 }
 EOS_REQUIRED = {
     "ideal_gas": ("eos", "gamma"),
     "stiffened_gas": ("eos", "gamma", "p_inf"),
-    "tait": ("eos", "rho0", "bulk_modulus", "exponent"),
-    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "rho0"),
-    "mie_gruneisen": ("eos", "rho0", "c0", "s", "gamma0"),
+    "tait": ("eos", "density", "bulk_modulus", "exponent"),
+    "jwl": ("eos", "A", "B", "R1", "R2", "omega", "density"),
+    "mie_gruneisen": ("eos", "density", "c0", "s", "gamma0"),
     "void": ("eos",),
 }
 # the equations the EOS keys are named in (solvers/ale/eos.py)
@@ -57,10 +57,11 @@ FLUID = {
                                     "1) rho e (- gamma p_inf)."),
         "p_inf": number("Pa", minimum=0, description="stiffened_gas: the stiffening pressure p_inf in p = (gamma - "
                                                      "1) rho e - gamma p_inf (c^2 = gamma (p + p_inf) / rho)."),
-        "rho0": number("kg/m^3", exclusiveMinimum=0,
-                       description="Reference density. tait: the density at p = p0; jwl: the unreacted "
-                                   "explosive's, V = rho0/rho; mie_gruneisen: the density at zero pressure and "
-                                   "energy, where the Hugoniot starts."),
+        "density": number("kg/m^3", exclusiveMinimum=0,
+                          description="The reference density rho0 (the same key as [materials] and [sph] "
+                                      "use; the older spelling rho0 is read with a note). tait: the density at "
+                                      "p = p0; jwl: the unreacted explosive's, V = rho0/rho; mie_gruneisen: "
+                                      "the density at zero pressure and energy, where the Hugoniot starts."),
         "bulk_modulus": number("Pa", exclusiveMinimum=0,
                                description="tait: the bulk modulus K at rho0 (the sound speed there: "
                                            "sqrt(K / rho0))."),
@@ -254,8 +255,9 @@ def _normalise(a: dict, dim: int) -> dict:
                  "upper": [to_float(v) for v in grid["upper"]],
                  "cells": [int(v) for v in grid["cells"]]},
         "boundaries": {},
-        "materials": {n: {k: (v if k == "eos" else to_float(v)) for k, v in m.items()}
-                      for n, m in a["materials"].items()},
+        # (the reference density under the solvers' own name, rho0: solvers/ale/eos.py)
+        "materials": {n: {("rho0" if k == "density" else k): (v if k == "eos" else to_float(v))
+                          for k, v in m.items()} for n, m in a["materials"].items()},
         "regions": [],
         "energy_sources": [{"energy": to_float(e["energy"]), "at": [to_float(v) for v in e["at"]]}
                            for e in a.get("energy_sources", [])],

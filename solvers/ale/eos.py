@@ -152,6 +152,8 @@ def eos_params(name: str, props: Mapping) -> tuple[int, np.ndarray]:
     if name not in _SCHEMA:
         raise ValueError(f"eos = {name!r}: unknown equation of state; allowed: {sorted(_SCHEMA)}")
     schema = _SCHEMA[name]
+    if "density" in props and "rho0" not in props:   # (the case's one name for the reference density:
+        props = {("rho0" if k == "density" else k): v for k, v in props.items()}   # orchestrator/schema/spellings.py)
     known = {k for k, *_ in schema}
     unknown = sorted(k for k in props if k not in known and k not in IGNORED_KEYS)
     if unknown:

@@ -49,7 +49,7 @@ def test_mg_shock_tube_with_gamma0_2_2_fails(tmp_path):
     """Gamma0 = 2.2 instead of 2.0 in the aluminium's material card (judged against the exact
     solution of Gamma0 = 2.0): the left state's energy and the isentrope change, p* moves 0.44 %,
     u* 0.33 %, rho*L 0.086 %, rho*R 0.036 % (tolerances 0.2 %, 0.15 %, 0.03 %, 0.015 %)."""
-    old = 'materials.aluminium = { eos = "mie_gruneisen", rho0 = 2700.0, c0 = 5350.0, s = 1.34, gamma0 = 2.0 }'
+    old = 'materials.aluminium = { eos = "mie_gruneisen", density = 2700.0, c0 = 5350.0, s = 1.34, gamma0 = 2.0 }'
     r, s, failed = run_modified(tmp_path, "mg_shock_tube", old, old.replace("gamma0 = 2.0", "gamma0 = 2.2"))
     assert r.returncode == 1 and "check FAILED" in r.stdout, r.stdout + r.stderr
     assert {"p_star", "u_star", "rho_star_left", "rho_star_right"} <= set(failed), s["check"]["metrics"]

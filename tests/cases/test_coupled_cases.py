@@ -669,7 +669,7 @@ mode = "eulerian"
 grid = { lower = [0.0, 0.0], upper = [0.2, 0.1], cells = [80, 40] }
 boundaries = { x_lower = "outflow", x_upper = "wall", y_lower = "wall", y_upper = "outflow" }
 materials.air = { eos = "ideal_gas", gamma = 1.4 }
-materials.water = { eos = "tait", rho0 = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }
+materials.water = { eos = "tait", density = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }
 regions = [
   { material = "air", density = 1.2, pressure = 1.0e5 },
   { material = "water", region = "x > 0.1", density = 1000.0, pressure = 1.0e5 },

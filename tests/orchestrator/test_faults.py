@@ -152,7 +152,7 @@ def test_ale_physical_failure_names_zone_step_time(tmp_path, run_immerse):
     p = -p_inf, and the run stops naming the zone, the state, step and time."""
     case = _ale_case(tmp_path, "water_piston_column", **{
         "piston = { velocity = 50.0 }": "piston = { velocity = -3000.0 }",
-        'materials.water = { eos = "tait", rho0 = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }':
+        'materials.water = { eos = "tait", density = 1000.0, bulk_modulus = 2.19e9, exponent = 7.15, p0 = 1.0e5 }':
             'materials.water = { eos = "stiffened_gas", gamma = 4.4, p_inf = 6.0e8 }'})
     r = run_immerse("run", case, "--out", tmp_path / "out", timeout=300)
     assert r.returncode != 0

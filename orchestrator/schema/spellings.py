@@ -1,0 +1,41 @@
+"""Older spellings of case keys, read under their one name with a one-line note (``immerse check``
+and ``immerse run`` print it): one vocabulary for a quantity across the solvers' tables.
+
+The reference density of a material is ``density`` in every table ([materials] of the bodies,
+[sph] materials and bodies, [ale.materials]); the background's equations of state (tait, jwl,
+mie_gruneisen) used to call it ``rho0``.  A case that gives both for one material is refused (one
+line): which one it means is not ours to guess.
+"""
+from __future__ import annotations
+
+from .rules import CaseError, format_key
+
+_DENSITY = "the reference density's one name in every table ([materials], [sph] materials, [ale.materials])"
+SPELLINGS = (
+    # (the path of keys to a {name: material} table, or to one material table (named=False); old; new; why)
+    (("ale", "materials"), True, "rho0", "density", _DENSITY),
+    (("check", "params", "eos_left"), False, "rho0", "density", _DENSITY),    # (EOS tables of a check)
+    (("check", "params", "eos_right"), False, "rho0", "density", _DENSITY),
+)
+
+
+def respell(data: dict) -> list[str]:
+    """Rename every older spelling in the raw case ``data`` in place (before the schema sees it);
+    returns the notes, one line each."""
+    notes = []
+    for path, named, old, new, why in SPELLINGS:
+        table = data
+        for k in path:
+            table = table.get(k) if isinstance(table, dict) else None
+        if not isinstance(table, dict):
+            continue
+        for name, m in (table.items() if named else [(None, table)]):
+            if not isinstance(m, dict) or old not in m:
+                continue
+            key = format_key([*path, name] if named else list(path))
+            if new in m:
+                raise CaseError(f"{key}.{old}", m[old], f"give only {new} (its one spelling; {old} is the older "
+                                f"one and {key}.{new} is given too)")
+            m[new] = m.pop(old)
+            notes.append(f"note: {key}.{old} is read as {new}: {why}")
+    return notes
