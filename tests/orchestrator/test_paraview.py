@@ -334,14 +334,17 @@ TRACE_CHECK = textwrap.dedent('''
     ("plate_in_shock_2d", [("end_time = 4.0e-3", "end_time = 1.0e-3"), ("output_interval = 0.5e-3", "output_interval = 2.5e-4")],
      "lagrange"),
     ("embedded_sph_piston", [("end_time = 0.2", "end_time = 0.02"), ("output_interval = 0.05", "output_interval = 0.01")],
-     "sph")])
+     "sph"),
+    ("water_air_box_body", [("end_time = 4.0e-3", "end_time = 1.0e-3"), ("output_interval = 1.0e-3", "output_interval = 2.5e-4")],
+     "lagrange")])
 def test_the_runs_paraview_script_names_the_groups_and_blanks_covered_zones(pvbatch, tmp_path, name, edits, body):
     """A coupled run's OUT/open_in_paraview.py (orchestrator/paraview_script.py) under pvbatch: the
     blocks are named by their roles (ale and the body's group), each holds its cells, and the gas
     pressure has no zero: the zones the body fills whole are NaN (the plate: 90 of 9,600 zones at the
-    start, 57 at 4 ms as it bends; the SPH piston fills none whole), its smallest value and its range
-    over the outputs those of the gas (the default reader's pieces read 0 there before, and "0" / "1"
-    as names)."""
+    start, 57 at 4 ms as it bends; the block crossing the water surface of water_air_box_body, two
+    materials per zone: its covered zones too; the SPH piston fills none whole), its smallest value
+    and its range over the outputs those of the fluids (the default reader's pieces read 0 there
+    before, and "0" / "1" as names)."""
     from tests.cases.test_cases import case_variant
 
     case = case_variant(tmp_path, name, *edits)
