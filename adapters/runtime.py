@@ -69,11 +69,14 @@ def unpack_surface(buf: np.ndarray, dim: int) -> dict:
 
 def send_state(adapter, comm, ic, extra: list) -> None:
     """A foreground's state after its step (TAG_STATE, collective): x^{n+1}, v^{n+1/2} of its surface
-    nodes on the surface the coupler's operators were built on, then ``extra`` (particles: their
-    volumes; substeps: their mean velocity and the ramp's work), then a flag: 1 when the surface
-    changed in this step (eroded elements), the new one following as TAG_SURFACE."""
+    nodes on the surface the coupler's operators were built on, then ``extra`` (substeps: their mean
+    velocity and the ramp's work), then the particles' volumes (a foreground with volumes()), then a
+    flag: 1 when the surface changed in this step (eroded elements), the new one following as
+    TAG_SURFACE (orchestrator/coupling/embedded.py take_state reads it in this order)."""
     renew = getattr(adapter, "renew_surface", None)
-    state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(), *extra, [0.0]])
+    volumes = getattr(adapter, "volumes", None)
+    state = np.concatenate([adapter.positions().ravel(), adapter.velocities().ravel(), *extra,
+                            volumes() if volumes else [], [0.0]])
     changed = bool(renew and renew())
     state[-1] = float(changed)
     if comm.rank == 0:
@@ -122,8 +125,7 @@ def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: floa
             break
         ramp = msg[:-1]
     t0 = _time.perf_counter()
-    volumes = getattr(adapter, "volumes", None)  # particles: their volumes last
-    send_state(adapter, comm, ic, [v_mean.ravel(), [w]] + ([volumes()] if volumes else []))
+    send_state(adapter, comm, ic, [v_mean.ravel(), [w]])
     answer(with_diagnostics)
     return work + _time.perf_counter() - t0
 
@@ -194,8 +196,7 @@ def serve(adapter_cls, argv=None) -> None:
             imp = P.share(comm, P.recv(ic, 0, P.TAG_IMPULSE) if rank == 0 else None)
             t0 = _time.perf_counter()
             adapter.correct(imp.reshape(v.shape))
-            volumes = getattr(adapter, "volumes", None)  # particles: their volumes too
-            send_state(adapter, comm, ic, [volumes()] if volumes else [])
+            send_state(adapter, comm, ic, [])
             adapter.remap(None)
             answer(bool(cmd[5]))
             work_s += _time.perf_counter() - t0

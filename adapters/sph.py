@@ -421,17 +421,17 @@ class SphAdapter(SolverAdapter):
         (LAMMPS's partner lists and kernel weights are the reference configuration's, its neighbour
         lists cover any displacement a coupling step's substeps make within the skin, and the next
         step's first half kick reads only the arrays put back)."""
-        arrays = {name: self._gather(name, count, integer) for name, count, integer in self.F.CHECKPOINT
-                  if name not in self._FIXED}
-        return arrays, (self._dt, self._external_work, getattr(self, "_stepped", False), self._shift,
-                        self._d_last, self._batches, self._batches_shifted)
+        scalars = (self._dt, self._external_work, getattr(self, "_stepped", False), self._shift, self._d_last,
+                   self._batches, self._batches_shifted)
+        return self._state(skip=self._FIXED), scalars
 
     def restore(self, state) -> None:
         arrays, scalars = state
         for name, _, integer in self.F.CHECKPOINT:
             if name in arrays:
                 self._scatter(name, arrays[name], integer)
-        dt, self._external_work, self._stepped, self._shift, self._d_last, self._batches, self._batches_shifted = scalars
+        (dt, self._external_work, self._stepped, self._shift, self._d_last, self._batches,
+         self._batches_shifted) = scalars
         if dt is not None:
             self._set_dt(dt)
         self._invalidate()
@@ -519,8 +519,10 @@ class SphAdapter(SolverAdapter):
         step_files.write_step(self.out_dir, self.role, index, step, time, x, point_data=fields)
 
     # ---- checkpoint / restart ---------------------------------------------------------------
-    def _state(self) -> dict:
-        return {name: self._gather(name, count, integer) for name, count, integer in self.F.CHECKPOINT}
+    def _state(self, skip=()) -> dict:
+        """Every per-atom array of the checkpoint (but ``skip``), by id on every rank."""
+        return {name: self._gather(name, count, integer) for name, count, integer in self.F.CHECKPOINT
+                if name not in skip}
 
     def checkpoint(self, path: Path) -> None:
         import h5py

@@ -57,6 +57,12 @@ def remove_spool(out: Path) -> None:
         p.unlink(missing_ok=True)
 
 
+def each_step_once(hist: dict[str, np.ndarray]) -> np.ndarray:
+    """Indices of a history's rows with each step once, in step order: a step recorded at its
+    diagnostics and again at its output keeps its first record."""
+    return np.unique(hist["step"], return_index=True)[1]
+
+
 def read_history(out: Path) -> dict[str, np.ndarray] | None:
     """The spooled history as diagnostics.h5 holds it ({"time", "step", "<role>.<name>"}), a partial
     last record dropped; None when the run spooled nothing."""

@@ -6,14 +6,14 @@ refuses a key and the text that explains it.
 
 Paths: ``run.dt_scale``; ``<name>`` a table the user names (``materials.<name>.density``); ``[]``
 each table of an array (``lagrange.bodies[].mesh``); ``<face>`` each face of the box (x_lower,
-x_upper, y_lower, y_upper, z_lower, z_upper) where all six take the same keys.  A key allowed only in some variants of its
-table (a material model's parameters, an EOS's) says which (``when model = 'johnson_cook'``).
+x_upper, y_lower, y_upper, z_lower, z_upper) where all six take the same keys. A key allowed only in
+some variants of its table (a material model's parameters, an EOS's) says which (``when model =
+'johnson_cook'``).
 """
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-
 
 
 @dataclass

@@ -17,12 +17,13 @@ from __future__ import annotations
 
 import csv
 import fnmatch
-import json
 import re
 from pathlib import Path
 
 import numpy as np
 
+from orchestrator.history_spool import each_step_once
+from orchestrator.run_record import case_of_run
 from orchestrator.units import DIMENSIONLESS, history_unit
 
 PLOTS_DIR = "plots"
@@ -50,19 +51,8 @@ def read_history(out: Path) -> dict[str, np.ndarray]:
         hist = spooled(Path(out))
     if not hist or "time" not in hist or len(hist["time"]) == 0:
         raise PlotError(f"OUT = {str(out)!r}: no history there yet (diagnostics.h5 or a running job's spool)")
-    _, first = np.unique(hist["step"], return_index=True)
+    first = each_step_once(hist)
     return {k: np.asarray(v)[first] for k, v in hist.items()}
-
-
-def _load_case(out: Path):
-    """The run's validated case (summary.json names its directory), or None."""
-    try:
-        case_dir = json.loads((Path(out) / "summary.json").read_text())["case_dir"]
-        from orchestrator.case import load_case
-
-        return load_case(case_dir)
-    except Exception:   # no summary yet, the case moved or changed: no references, no probe units
-        return None
 
 
 def select(hist: dict, wanted, case) -> list[str]:
@@ -103,7 +93,7 @@ def _draw(out_dir, wanted):
 
     out = Path(out_dir)
     hist = read_history(out)
-    case = _load_case(out)
+    case = case_of_run(out)
     keys = select(hist, list(wanted or ()), case)
     probes = (case or {}).get("probes")
     ref = None
@@ -154,6 +144,6 @@ def listing(out_dir) -> str:
     """The run's histories, one per line with its unit, for ``--list``."""
     out = Path(out_dir)
     hist = read_history(out)
-    case = _load_case(out)
+    case = case_of_run(out)
     probes = (case or {}).get("probes")
     return "\n".join(_label(k, probes) for k in hist if k not in ("time", "step"))

@@ -19,6 +19,8 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from orchestrator.history_spool import each_step_once
+
 
 def conservation_residuals(hist: dict[str, np.ndarray], roles) -> dict[str, float]:
     """summary.json's `conservation`: for each balanced quantity Q (mass, energy, momentum, ...)
@@ -79,6 +81,18 @@ def write_diagnostics(out: Path, hist: dict[str, np.ndarray]) -> None:
     write_probes(out, hist)
 
 
+def case_of_run(out: Path) -> dict | None:
+    """The validated case of the run in ``out`` (its summary.json names the case directory), or None:
+    no summary yet, the case moved or it no longer validates (readers then draw without it)."""
+    try:
+        case_dir = json.loads((Path(out) / "summary.json").read_text())["case_dir"]
+        from orchestrator.case import load_case
+
+        return load_case(case_dir)
+    except Exception:
+        return None
+
+
 def write_probes(out: Path, hist: dict[str, np.ndarray]) -> None:
     """OUT/probes.csv when the run has probes (``<role>.probe_<name>``): time (s), step, then one
     column per probe named ``<role>.<name>``, every diagnostics step once (a step recorded at its
@@ -86,7 +100,7 @@ def write_probes(out: Path, hist: dict[str, np.ndarray]) -> None:
     keys = [k for k in hist if ".probe_" in k]
     if not keys or not len(hist.get("time", ())):
         return
-    _, first = np.unique(hist["step"], return_index=True)
+    first = each_step_once(hist)
     cols = [hist["time"][first], hist["step"][first]] + [np.asarray(hist[k])[first] for k in keys]
     tmp = Path(out) / "probes.csv.tmp"
     with open(tmp, "w") as f:

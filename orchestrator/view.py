@@ -21,7 +21,6 @@ from __future__ import annotations
 import dataclasses
 
 import ctypes.util
-import json
 import os
 import re
 from dataclasses import dataclass
@@ -33,6 +32,7 @@ import numpy as np
 
 from orchestrator.output import (TENSOR6_COMPONENTS, list_roles, read_mesh_file, read_step, read_steps,
                                  step_path, von_mises)
+from orchestrator.run_record import case_of_run
 from orchestrator.units import with_unit
 
 __all__ = ["render", "scalar_field", "available", "line_profile", "line_figure", "ViewError",
@@ -76,7 +76,8 @@ def listing(out_dir) -> str:
     for r, info in available(out_dir).items():
         fields = [f + (f" ({'-' if u == '1' else u})" if (u := unit_of(f)) else "") for f in info["fields"]]
         lines.append(f"{r}: fields {', '.join(fields)}")
-        lines.append(f"{r}: steps (index: step, time) " + ", ".join(f"{i}: {s}, {t:.6g} s" for t, s, i in info["steps"]))
+        steps = ", ".join(f"{i}: {s}, {t:.6g} s" for t, s, i in info["steps"])
+        lines.append(f"{r}: steps (index: step, time) {steps}")
     return "\n".join(lines)
 
 
@@ -208,17 +209,6 @@ def _stations(coord0: np.ndarray, coord: np.ndarray, values: np.ndarray):
     v = np.bincount(inv, weights=values) / n
     order = np.argsort(x)
     return x[order], v[order]
-
-
-def _load_case(out: Path):
-    """The validated case of a run (summary.json names its directory), or None."""
-    try:
-        case_dir = json.loads((out / "summary.json").read_text())["case_dir"]
-        from orchestrator.case import load_case
-
-        return load_case(case_dir)
-    except Exception:  # no summary yet, case moved or changed: draw without the exact curve
-        return None
 
 
 def line_profile(out_dir, role: str, field: str, index: int, axis: int, case=None) -> LineProfile:
@@ -425,38 +415,33 @@ RANGES = ("fixed", "step")
 default for several steps: frames compare and animate), or each step's own (``step``)."""
 
 
-def _frame_values(out_dir: Path, role: str, name: str, index: int, axis: int | None, coupled: bool):
-    """The values a picture of (role, name, step) colours, or a line plot draws (NaN: left out)."""
-    _, pd, cd = read_step(out_dir, role, index)
-    data = pd[name] if name in pd else cd[name]
-    if axis is not None:
-        return _axial(name, data, axis)[1]
-    values = scalar_field(name, data)[1]
-    if name not in pd and coupled and "blocked_fraction" in cd and name != "blocked_fraction":
-        values = np.where(cd["blocked_fraction"] >= 1.0 - 1e-12, np.nan, values)
-    return values
+def _colour_values(name: str, point_data: dict, cell_data: dict, coupled: bool):
+    """(label, values, "point" | "cell") a picture colours for field ``name`` of a step; in a coupled
+    background the zones a body fills whole are NaN (no gas: drawn under the body, out of the range)."""
+    if name in point_data:
+        label, values = scalar_field(name, point_data[name])
+        return label, values, "point"
+    label, values = scalar_field(name, cell_data[name])
+    if coupled and "blocked_fraction" in cell_data and name != "blocked_fraction":
+        values = np.where(cell_data["blocked_fraction"] >= 1.0 - 1e-12, np.nan, values)
+    return label, values, "cell"
 
 
-def _fixed_range(out_dir: Path, role: str, name: str, chosen, axis, coupled: bool, exact=None):
-    """(lo, hi) over every chosen step (module RANGES); a constant field gets a finite range; a line
-    plot's a 5 % margin (and its exact curve's values, ``exact``)."""
+def _span(arrays, margin: float = 0.0):
+    """(lo, hi) over the finite values of ``arrays`` (None entries skipped), widened by ``margin`` of
+    its width (line plots); a constant field gets a finite range; None when nothing is finite."""
     lo, hi = np.inf, -np.inf
-    for _, _, index in chosen:
-        v = np.asarray(_frame_values(out_dir, role, name, index, axis, coupled), dtype=float)
-        if np.isfinite(v).any():
-            lo, hi = min(lo, float(np.nanmin(v))), max(hi, float(np.nanmax(v)))
-    for e in exact or ():
-        if e is not None and np.isfinite(e).any():
-            lo, hi = min(lo, float(np.nanmin(e))), max(hi, float(np.nanmax(e)))
+    for a in arrays:
+        a = None if a is None else np.asarray(a, dtype=float)
+        if a is not None and np.isfinite(a).any():
+            lo, hi = min(lo, float(np.nanmin(a))), max(hi, float(np.nanmax(a)))
     if not np.isfinite(lo):
         return None
     if not hi > lo:
         pad = max(abs(lo), 1.0) * 1e-6
         lo, hi = lo - pad, hi + pad
-    if axis is not None:
-        m = 0.05 * (hi - lo)
-        lo, hi = lo - m, hi + m
-    return lo, hi
+    m = margin * (hi - lo)
+    return lo - m, hi + m
 
 
 def movie(frames: Sequence[Path], path: Path, seconds_per_frame: float = 0.4) -> Path:
@@ -536,28 +521,36 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
         cells, cell_type = read_mesh_file(out_dir, r)
         first_points = read_step(out_dir, r, min(s[2] for s in found[r]["steps"]))[0]
         axis = one_d_axis(first_points, cells)
+        if case is None and (axis is not None or cell_type == "vertex"):
+            case = case_of_run(out_dir) or False
         if axis is None and cell_type == "vertex":   # particles: 1-D where the case's check has an exact
-            case = _load_case(out_dir) or False if case is None else case   # profile of this role
-            axis = _particle_axis(case, r)
-        if axis is not None and case is None:
-            case = _load_case(out_dir) or False
+            axis = _particle_axis(case, r)           # profile of this role
         planar = bool(np.all(first_points[:, 2] == first_points[0, 2]))
         coupled = bool(bodies) and _is_background(r)
         fixed = (value_range or ("fixed" if len(chosen) > 1 else "step")) == "fixed"
-        ranges = {}
-        if fixed:
-            for name in names:
-                exact = None
-                if axis is not None:   # the exact curves' values belong in the range too
-                    exact = [line_profile(out_dir, r, name, i, axis, case or None).exact_values for _, _, i in chosen]
-                ranges[name] = _fixed_range(out_dir, r, name, chosen, axis, coupled, exact)
+        ranges, profiles = {}, {}
+        if axis is not None:   # line plots: each profile once (the range, with the exact curves, then the frame)
+            profiles = {(name, i): line_profile(out_dir, r, name, i, axis, case or None)
+                        for _, _, i in chosen for name in names}
+            if fixed:
+                ranges = {name: _span([a for _, _, i in chosen for a in (profiles[name, i].values,
+                                                                          profiles[name, i].exact_values)], 0.05)
+                          for name in names}
+        elif fixed:   # each step read once, only its extremes kept (a 3-D run's fields do not all fit)
+            extremes = {name: [] for name in names}
+            for _, _, i in chosen:
+                _, pd, cd = read_step(out_dir, r, i)
+                for name in names:
+                    v = _colour_values(name, pd, cd, coupled)[1]
+                    extremes[name].append(np.array([np.nanmin(v), np.nanmax(v)]) if np.isfinite(v).any() else None)
+            ranges = {name: _span(extremes[name]) for name in names}
         frames = {name: [] for name in names}
         for time, step, index in chosen:
             pictures.mkdir(parents=True, exist_ok=True)
             if axis is not None:
                 for name in names:
                     path = _picture_path(pictures, r, name, index)
-                    prof = line_profile(out_dir, r, name, index, axis, case or None)
+                    prof = profiles[name, index]
                     if _is_background(r):
                         prof.bodies = [(b, *_extent(out_dir, b, index, axis)) for b in bodies]
                     fig = line_figure(prof, window_size, ranges.get(name))
@@ -576,17 +569,8 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                     bcells, btype = read_mesh_file(out_dir, b)
                     overlays.append(_grid(pv, read_step(out_dir, b, index)[0], bcells, btype))
             for name in names:
-                if name in point_data:
-                    label, values = scalar_field(name, point_data[name])
-                    grid.point_data[label] = values
-                    preference = "point"
-                else:
-                    label, values = scalar_field(name, cell_data[name])
-                    if overlays and "blocked_fraction" in cell_data and name != "blocked_fraction":
-                        # zones a body fills hold no gas: left out of the colours (drawn under the body)
-                        values = np.where(cell_data["blocked_fraction"] >= 1.0 - 1e-12, np.nan, values)
-                    grid.cell_data[label] = values
-                    preference = "cell"
+                label, values, preference = _colour_values(name, point_data, cell_data, coupled)
+                (grid.point_data if preference == "point" else grid.cell_data)[label] = values
                 path = _picture_path(pictures, r, name, index)
                 title = f"{r}: {label}" + (f" with {', '.join(bodies)} bodies (grey)" if overlays else "")
                 if np.isfinite(values).any() and np.nanmin(values) == np.nanmax(values):

@@ -121,6 +121,6 @@ def probes_for(specs: dict | None, role: str, comm):
     """The probes of ``role``: of its points (PointProbes) or, for the background, of its fields at
     points (FieldProbes)."""
     mine = {n: p for n, p in (specs or {}).items() if p["role"] == role}
-    if any("point" in p for p in mine.values()):
+    if any("point" in p or "line" in p for p in mine.values()):
         return FieldProbes(mine, role, comm)
     return PointProbes(mine, role, comm)

@@ -7,6 +7,7 @@ import numpy as np
 
 from orchestrator.checks.fields import body_meshes, cell_centroids, last_step
 from orchestrator.checks.registry import AXIS, register_check
+from orchestrator.history_spool import each_step_once
 from orchestrator.schema.parts import number, table
 
 
@@ -296,7 +297,7 @@ def _probe_history(history, role, probe):
     key = f"{role}.probe_{probe}"
     if key not in history:
         raise ValueError(f"check.params.probe = {probe!r}: no history {key!r} (a [probes] entry of role {role!r})")
-    _, first = np.unique(history["step"], return_index=True)
+    first = each_step_once(history)
     return history["time"][first], history[key][first]
 
 

@@ -292,7 +292,8 @@ def test_line_plots_of_all_steps_share_one_value_range(tmp_path):
     paths = render(out, fields=["density"], steps=("all",), window_size=(400, 300))
     assert len(paths) == 3
     prof = line_profile(out, "ale", "density", 0, axis=0, case=_case(tmp_path))
-    lo, hi = view._fixed_range(out, "ale", "density", view.read_steps(out, "ale"), 0, False)
+    lo, hi = view._span([view.line_profile(out, "ale", "density", i, 0).values for _, _, i in view.read_steps(out, "ale")],
+                        0.05)
     assert (lo, hi) == pytest.approx((0.125 - 0.04375, 1.0 + 0.04375)) and prof.values.max() == 1.0
     assert line_figure(prof, (400, 300), (lo, hi)).axes[0].get_ylim() == (lo, hi)
 

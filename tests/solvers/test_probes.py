@@ -10,6 +10,7 @@ from mpi4py import MPI
 
 from solvers.probes import PointProbes
 from tests.conftest import immerse
+from tests.orchestrator.case_texts import SOD_2D
 
 
 def _specs(**over):
@@ -89,25 +90,15 @@ def test_a_lagrange_probe_records_every_step(tmp_path):
     assert np.max(np.abs(s - np.hypot(10.0, 4.0))) < 1e-12
 
 
-SOD_PROBED = """
-[run]
-dimension = 2
-end_time = 0.2
-output_interval = 0.05
-
-[ale]
-grid = { lower = [0.0, 0.0], upper = [1.0, 0.02], cells = [100, 2] }
-materials.gas = { eos = "ideal_gas", gamma = 1.4 }
-regions = [
-  { material = "gas", density = 1.0, pressure = 1.0 },
-  { material = "gas", region = "x > 0.5", density = 0.125, pressure = 0.1 },
-]
-
+# Sod (tests/orchestrator/case_texts.py) on two rows of zones, 0.01 m each, outputs every 0.05 s
+SOD_PROBED = (SOD_2D.replace("end_time = 0.2\n", "end_time = 0.2\noutput_interval = 0.05\n")
+              .replace("upper = [1.0, 0.01], cells = [100, 1]", "upper = [1.0, 0.02], cells = [100, 2]") + """
 [probes]
 p_star = { role = "ale", quantity = "pressure", point = [0.6, 0.005] }
 u_star = { role = "ale", quantity = "velocity", component = "x", point = [0.6, 0.015] }
 rho_left = { role = "ale", quantity = "density", point = [0.0, 0.0] }
-"""
+""")
+assert "cells = [100, 2]" in SOD_PROBED and "output_interval = 0.05" in SOD_PROBED
 
 
 def test_background_probes_read_the_zone_at_their_point_on_any_rank_count(tmp_path):
@@ -181,3 +172,15 @@ third = { role = "ale", quantity = "pressure", point = [0.6975, 0.005] }
     plotted = (out / "plots").glob("*.csv")
     assert [p.read_text().splitlines()[0] for p in plotted] == [
         "time (s)," + ",".join(f"ale.probe_gauge_{k} (Pa)" for k in range(5))]
+
+
+def test_a_line_alone_is_a_background_probe():
+    """A role whose only probe is a line reads the background's fields (FieldProbes), one history per
+    point, the points evenly spaced with both ends."""
+    from solvers.probes import FieldProbes, probes_for
+
+    spec = {"g": {"role": "ale", "quantity": "pressure", "component": None, "reduce": "mean",
+                  "line": {"start": [0.0, 0.5], "end": [1.0, 0.5], "points": 3}}}
+    p = probes_for(spec, "ale", MPI.COMM_SELF)
+    assert isinstance(p, FieldProbes) and p.names == ["probe_g_0", "probe_g_1", "probe_g_2"]
+    np.testing.assert_array_equal(np.array(p.points), [[0.0, 0.5], [0.5, 0.5], [1.0, 0.5]])
