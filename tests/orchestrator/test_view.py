@@ -382,3 +382,11 @@ def test_a_uniform_field_says_so_in_its_title(tmp_path, monkeypatch):
     write_index(out)
     render(out, window_size=(320, 240))
     assert titles == ["lagrange: contact_pressure (uniform: 0 at this step)\nt = 0 s (step 0)"], titles
+
+
+def test_cli_view_bad_range_is_one_line(tmp_path):
+    out = tmp_path / "out"
+    _synthetic(out, box_mesh([0, 0], [2, 1], [4, 2]), n=1)
+    r = immerse("view", out, "--range", "global")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "--range" in r.stderr and "'fixed', 'step'" in r.stderr
+    assert not (out / "pictures").exists()

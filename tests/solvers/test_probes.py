@@ -137,6 +137,12 @@ def test_background_probes_read_the_zone_at_their_point_on_any_rank_count(tmp_pa
     ('{ role = "ale", quantity = "displacement", point = [0.5, 0.01] }', "probes.x.quantity", "allowed for role = 'ale'"),
     ('{ role = "ale", quantity = "velocity", point = [0.5, 0.01] }', "probes.x.component", "allowed for the velocity"),
     ('{ role = "ale", quantity = "pressure", component = "x", point = [0.5, 0.01] }', "probes.x.component", "a scalar"),
+    ('{ role = "ale", quantity = "pressure", line = { start = [0.0, 0.01], end = [1.2, 0.01], points = 3 } }',
+     "probes.x.line.end", "must lie in the grid"),
+    ('{ role = "ale", quantity = "pressure", point = [0.5, 0.01], line = { start = [0.0, 0.01], end = [1.0, 0.01], '
+     'points = 3 } }', "probes.x.line", "at a point or along a line"),
+    ('{ role = "ale", quantity = "pressure", line = { start = [0.0, 0.01], end = [1.0, 0.01], points = 1 } }',
+     "probes.x.line.points", ">= 2"),
 ])
 def test_bad_background_probes_are_refused_in_one_line(tmp_path, probe, key, fragment):
     case = tmp_path / "case"
