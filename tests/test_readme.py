@@ -53,7 +53,8 @@ def _parse(argv: list[str], monkeypatch) -> SimpleNamespace:
         seen["args"] = args
         return 0
 
-    for name in ("cmd_check", "cmd_run", "cmd_view", "cmd_plot", "cmd_bench", "cmd_campaign", "cmd_report"):
+    for name in ("cmd_check", "cmd_run", "cmd_view", "cmd_plot", "cmd_keys", "cmd_bench", "cmd_campaign",
+                 "cmd_report"):
         monkeypatch.setattr(cli, name, record)
     assert cli.main(argv) == 0
     return seen["args"]
@@ -61,7 +62,7 @@ def _parse(argv: list[str], monkeypatch) -> SimpleNamespace:
 
 def test_readme_has_the_commands():
     verbs = {c[1] for c in IMMERSE}
-    assert verbs == {"check", "run", "view", "plot", "bench", "campaign", "report"}
+    assert verbs == {"check", "run", "view", "plot", "keys", "bench", "campaign", "report"}
     assert [c[:2] for c in commands("make")] == [["make", "demo"], ["make", "test"]]
 
 
