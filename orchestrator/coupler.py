@@ -673,8 +673,9 @@ class Coupler:
                 subs = self.counts.update(self.clock.dt, {r: self.dt_scale * groups[r] for r in self.multirate})
             self._watch_step(self.clock.dt)
             self.step += 1
-            output_due = reached(t_new, self.next_output_t) or done
-            checkpoint_due = reached(t_new, self.next_checkpoint_t) and not done
+            # the last step (end_time or run.max_steps) always writes: a run cut short keeps its state
+            output_due = reached(t_new, self.next_output_t) or done or self.step >= self.max_steps
+            checkpoint_due = reached(t_new, self.next_checkpoint_t) and not done and self.step < self.max_steps
             # a record at every output and checkpoint step too: the history of a run that ends
             # early reaches its last written output (run_record.py)
             diag = output_due or checkpoint_due or self.step % self.diag_every == 0

@@ -182,6 +182,8 @@ def summary_line(out: Path) -> tuple[str, bool]:
     any) passed."""
     s = json.loads((out / "summary.json").read_text())
     line = f"{s['case']}: {s['steps']} steps in {s['wall_time_s']:.2f} s -> {out}"
+    if s.get("status") == "max_steps":   # a check of a run cut short measures the part it ran
+        line += f"; stopped by run.max_steps at t = {s['end_time']:.6g} s, before the case's end_time"
     if "check" in s:
         line += f"; check {'passed' if s['check']['passed'] else 'FAILED'}"
     return line, s.get("check", {}).get("passed", True)

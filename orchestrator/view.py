@@ -164,13 +164,26 @@ def _axial(name: str, values, axis: int) -> tuple[str, np.ndarray]:
     return f"{name} {c}", a[:, axis]
 
 
+TUBE_CELLS_ACROSS = 4
+TUBE_ASPECT = 20.0
+
+
 def one_d_axis(points: np.ndarray, cells: np.ndarray) -> int | None:
-    """The axis of a mesh that is one cell across in every other direction, else None."""
+    """The axis of a mesh that is one cell across in every other direction, or a tube (at most
+    TUBE_CELLS_ACROSS cells across and TUBE_ASPECT times longer than wide: a shock tube with a few
+    rows, whose field picture is a line), else None."""
     centres = points[cells].mean(axis=1)
     span = float(np.max(np.ptp(points, axis=0))) or 1.0
-    varying = [d for d in range(3) if len(np.unique(np.round(centres[:, d] / span, 9))) > 1]
+    across = [len(np.unique(np.round(centres[:, d] / span, 9))) for d in range(3)]
+    varying = [d for d in range(3) if across[d] > 1]
     if len(varying) == 1 and len(cells) > 1:
         return varying[0]
+    extent = np.ptp(points, axis=0)
+    long = int(np.argmax(extent))
+    others = [d for d in varying if d != long]
+    if (others and all(across[d] <= TUBE_CELLS_ACROSS for d in others)
+            and extent[long] >= TUBE_ASPECT * max(extent[d] for d in others)):
+        return long
     return None
 
 
@@ -256,8 +269,11 @@ def line_figure(prof: LineProfile, size: tuple[int, int] = (1024, 768), ylim=Non
                 zorder=3)
     ax.plot(prof.x, prof.values, color="tab:blue", marker="o", markersize=2.5, linewidth=0.8,
             label=f"{prof.role} ({len(prof.x)} stations)", zorder=2)
-    for k, (role, lo, hi) in enumerate(prof.bodies):  # coupled bodies in the background
-        ax.axvspan(lo, hi, color="tab:grey", alpha=0.35, zorder=1, label=f"{role} body" if k == 0 else None)
+    shades = {}
+    for role, lo, hi in prof.bodies:  # coupled bodies in the background: one shade and legend entry a role
+        first = role not in shades
+        shades.setdefault(role, ("tab:grey", "tab:brown", "tab:olive", "tab:pink")[len(shades) % 4])
+        ax.axvspan(lo, hi, color=shades[role], alpha=0.35, zorder=1, label=f"{role} body" if first else None)
     if ylim is not None:
         ax.set_ylim(*ylim)
     ax.set_xlabel(prof.xlabel)
@@ -310,6 +326,8 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
         plotter.set_background("white")
         plotter.add_mesh(grid, scalars=label, preference=preference, cmap="viridis",
                          clim=(lo, hi), show_edges=edges, edge_color="grey",
+                         # unlit: a colour reads as the bar's value on every face of a 3-D view
+                         lighting=planar,
                          scalar_bar_args={"title": bar_title, "color": "black",
                                           "fmt": "%.3g", "n_labels": 3 if small else 5,
                                           "title_font_size": font, "label_font_size": font,
@@ -320,18 +338,23 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
                              show_scalar_bar=False)
         # tick labels below the bar, the title above it: they overlapped on the same side
         plotter.scalar_bar.SetTextPositionToPrecedeScalarBar()
-        plotter.add_text(title, position="upper_left", font_size=font, color="black")
-        # coordinate axes with units along the bounds: two labels each (ends) keep them readable
-        plotter.show_bounds(xtitle="x (m)", ytitle="y (m)", ztitle="z (m)", color="black",
-                            font_size=font, fmt="%.3g", grid=False, location="outer", ticks="outside",
-                            n_xlabels=2, n_ylabels=2, n_zlabels=2, show_zaxis=not planar,
-                            show_zlabels=not planar)
         if planar:
+            plotter.add_text(title, position="upper_left", font_size=font, color="black")
+            # coordinate axes with units along the bounds: two labels each (ends) keep them readable
+            plotter.show_bounds(xtitle="x (m)", ytitle="y (m)", color="black", font_size=font, fmt="%.3g",
+                                grid=False, location="outer", ticks="outside", n_xlabels=2, n_ylabels=2,
+                                show_zaxis=False, show_zlabels=False)
             plotter.view_xy()
-            _frame_planar(plotter, grid, overlays, window_size)
         else:
+            # a 3-D box's axis labels meet at its corners and run together (and a slender body's
+            # short axes label round-off): its extent is written under the title instead, and an
+            # orientation triad clear of the colour bar says which way is which
+            plotter.add_text(f"{title}\n{_extent_text([grid, *overlays])}", position="upper_left",
+                             font_size=font, color="black")
+            plotter.add_axes(color="black", viewport=(0.0, 0.14, 0.14, 0.28))
+            plotter.add_mesh(grid.outline(), color="black", line_width=1)  # the unlit box's edges
             plotter.view_isometric()
-            plotter.camera.zoom(0.75)  # room for the axis titles, the text and the colour bar
+        _frame(plotter, [grid, *overlays], window_size, FRAME if planar else FRAME_3D)
         plotter.screenshot(str(path))
     except Exception as e:
         raise RuntimeError(f"rendering {path.name} failed: {e}; VTK said: {sink.GetOutput().strip()}") from e
@@ -343,28 +366,58 @@ FRAME = (0.10, 0.92, 0.27, 0.87)
 """Where a planar domain is drawn in the picture (fractions of its width and height: left, right,
 bottom, top): the title above, the axis labels and the colour bar below it, clear of each other."""
 
+FRAME_3D = (0.12, 0.90, 0.22, 0.85)
+"""Where a 3-D view's projected domain is drawn: no axis labels below it, a title of three lines
+above it, the orientation triad at the lower left."""
 
-def _frame_planar(plotter, grid, overlays, window_size) -> None:
-    """A planar picture framed to its domain (the background's grid and the bodies on it): a
-    parallel projection whose scale makes the domain fill FRAME, whatever its aspect (a slender body
-    or a long tube no longer shrinks to a strip in the middle of a square view)."""
-    b = np.array(grid.bounds, dtype=float)
-    for o in overlays:
+
+def _extent_text(grids) -> str:
+    """'x 0 to 1.03 m, y ...' of the drawn domain (a coordinate within 1e-9 of the largest span
+    of zero written as 0, not as round-off)."""
+    b = _bounds(grids)
+    tiny = 1e-9 * float(np.max(b[1::2] - b[0::2]) or 1.0)
+    b = np.where(np.abs(b) < tiny, 0.0, b)
+    return ", ".join(f"{a} {b[2 * k]:.3g} to {b[2 * k + 1]:.3g}" for k, a in enumerate("xyz")) + " m"
+
+
+def _bounds(grids) -> np.ndarray:
+    b = np.array(grids[0].bounds, dtype=float)
+    for o in grids[1:]:
         ob = np.array(o.bounds, dtype=float)
         b[0::2], b[1::2] = np.minimum(b[0::2], ob[0::2]), np.maximum(b[1::2], ob[1::2])
-    w, h = max(b[1] - b[0], 1e-300), max(b[3] - b[2], 1e-300)
-    left, right, bottom, top = FRAME
+    return b
+
+
+def _frame(plotter, grids, window_size, frame) -> None:
+    """A picture framed to its domain (the grid and the bodies drawn on it): a parallel projection
+    along the camera's present direction whose centre and scale put the domain's projected
+    bounding box into ``frame`` (fractions: left, right, bottom, top), whatever its aspect (a
+    slender body or a long tube no longer shrinks to a strip in the middle of a square view)."""
+    b = _bounds(grids)
+    corners = np.array([[b[i], b[2 + j], b[4 + k]] for i in (0, 1) for j in (0, 1) for k in (0, 1)])
+    cam = plotter.camera
+    pos, focal = np.array(cam.position, dtype=float), np.array(cam.focal_point, dtype=float)
+    look = (focal - pos) / np.linalg.norm(focal - pos)
+    up = np.array(cam.up, dtype=float)
+    up = up - (up @ look) * look
+    up /= np.linalg.norm(up)
+    right = np.cross(look, up)
+    u, v = corners @ right, corners @ up                 # screen axes, world units
+    w, h = max(np.ptp(u), 1e-300), max(np.ptp(v), 1e-300)
+    left, rgt, bottom, top = frame
     aspect = window_size[0] / window_size[1]
     # parallel scale = half the visible height (world units)
-    scale = max(h / (top - bottom), w / ((right - left) * aspect)) / 2.0
-    cx = 0.5 * (b[0] + b[1]) - ((left + right) / 2.0 - 0.5) * 2.0 * scale * aspect
-    cy = 0.5 * (b[2] + b[3]) - ((bottom + top) / 2.0 - 0.5) * 2.0 * scale
-    cam = plotter.camera
+    scale = max(h / (top - bottom), w / ((rgt - left) * aspect)) / 2.0
+    cu = 0.5 * (u.min() + u.max()) - ((left + rgt) / 2.0 - 0.5) * 2.0 * scale * aspect
+    cv = 0.5 * (v.min() + v.max()) - ((bottom + top) / 2.0 - 0.5) * 2.0 * scale
+    centre = corners.mean(axis=0)
+    centre = centre + (cu - centre @ right) * right + (cv - centre @ up) * up
+    distance = np.linalg.norm(focal - pos)
     plotter.enable_parallel_projection()
-    z = cam.position[2] - cam.focal_point[2]
-    cam.focal_point = (cx, cy, cam.focal_point[2])
-    cam.position = (cx, cy, cam.focal_point[2] + z)
+    cam.focal_point = tuple(centre)
+    cam.position = tuple(centre - distance * look)
     cam.parallel_scale = scale
+    plotter.renderer.ResetCameraClippingRange()
 
 
 def _particle_axis(case, role: str) -> int | None:
@@ -400,9 +453,21 @@ def _foreground_roles(found: dict) -> list[str]:
     return [r for r in found if coupling_side(r) == "foreground"]
 
 
-def _extent(out_dir: Path, role: str, index: int, axis: int) -> tuple[float, float]:
+def _intervals(out_dir: Path, role: str, index: int, axis: int) -> list[tuple[float, float]]:
+    """Where a role's bodies lie along the axis: the union of its cells' spans (particles: of
+    their positions, neighbours closer than 3 median spacings joined), one interval a body."""
     x = read_step(out_dir, role, index)[0][:, axis]
-    return float(x.min()), float(x.max())
+    cells, _ = read_mesh_file(out_dir, role)
+    lo, hi = x[cells].min(axis=1), x[cells].max(axis=1)
+    order = np.argsort(lo)
+    lo, hi = lo[order], np.maximum.accumulate(hi[order])
+    gap = 0.0
+    if cells.shape[1] == 1 and len(lo) > 1:   # particles: no cell spans, join at the spacing
+        steps = np.diff(np.unique(lo))
+        gap = 3.0 * float(np.median(steps)) if steps.size else 0.0
+    new = np.nonzero(lo[1:] > hi[:-1] + gap)[0] + 1   # a body starts where the last one ended
+    starts, ends = np.r_[0, new], np.r_[new - 1, len(lo) - 1]
+    return [(float(lo[a]), float(hi[b])) for a, b in zip(starts, ends)]
 
 
 def _picture_path(pictures: Path, role: str, name: str, index: int) -> Path:
@@ -552,7 +617,7 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
                     path = _picture_path(pictures, r, name, index)
                     prof = profiles[name, index]
                     if _is_background(r):
-                        prof.bodies = [(b, *_extent(out_dir, b, index, axis)) for b in bodies]
+                        prof.bodies = [(b, lo, hi) for b in bodies for lo, hi in _intervals(out_dir, b, index, axis)]
                     fig = line_figure(prof, window_size, ranges.get(name))
                     fig.savefig(path)
                     outdir.record_written(out_dir, path)

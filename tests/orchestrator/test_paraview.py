@@ -103,18 +103,26 @@ def _pvbatch_env() -> dict:
     return env
 
 
-@pytest.fixture(scope="module")
-def pvbatch():
+def find_pvbatch() -> tuple[str | None, str]:
+    """(pvbatch's path, "") or (None, why it cannot be used)."""
     exe = shutil.which("pvbatch", path=_pvbatch_env()["PATH"])
     if exe is None:
-        pytest.skip("pvbatch not found: install Debian's paraview and python3-paraview "
-                    "(apt-get install -y --no-install-recommends paraview python3-paraview; .ci/run does "
-                    "where it runs as root)")
+        return None, ("pvbatch not found: install Debian's paraview and python3-paraview "
+                      "(apt-get install -y --no-install-recommends paraview python3-paraview; .ci/run does "
+                      "where it runs as root)")
     probe = subprocess.run([exe, "-c", "from paraview import simple; print('ok')"], capture_output=True,
                            text=True, env=_pvbatch_env(), timeout=120)
     if "ok" not in probe.stdout:
-        pytest.skip(f"pvbatch cannot import paraview.simple (python3-paraview missing?): "
-                    f"{(probe.stderr.strip().splitlines() or ['no output'])[-1]}")
+        return None, (f"pvbatch cannot import paraview.simple (python3-paraview missing?): "
+                      f"{(probe.stderr.strip().splitlines() or ['no output'])[-1]}")
+    return exe, ""
+
+
+@pytest.fixture(scope="module")
+def pvbatch():
+    exe, why = find_pvbatch()
+    if exe is None:
+        pytest.skip(why)
     return exe
 
 
@@ -322,11 +330,25 @@ TRACE_CHECK = textwrap.dedent('''
         got[role] = {"cells": data.GetNumberOfCells()}
         if role == "ale":
             p = vtk_to_numpy(data.GetCellData().GetArray("pressure"))
-            got[role].update(nan=int(np.isnan(p).sum()), min=float(np.nanmin(p)), zeros=int((p == 0).sum()))
+            bf = data.GetCellData().GetArray("blocked_fraction")
+            covered = (vtk_to_numpy(bf) if bf is not None else np.zeros(p.shape)) >= 1.0 - 1e-12
+            got[role].update(nan=int(np.isnan(p).sum()), min=float(np.nanmin(p)), zeros=int((p == 0).sum()),
+                             covered=int(covered.sum()), covered_zeros=int((p[covered] == 0).sum()))
     root = sm.Fetch(results)
     got["names"] = [root.GetMetaData(i).Get(root.NAME()) for i in range(root.GetNumberOfBlocks())]
     json.dump(got, open(sys.argv[2], "w"))
 ''')
+
+
+def trace_check(exe: str, out: Path, tmp: Path) -> dict:
+    """What OUT/open_in_paraview.py shows under pvbatch at the last output (TRACE_CHECK)."""
+    script = tmp / "trace_check.py"
+    script.write_text(TRACE_CHECK)
+    dest = tmp / "got.json"
+    p = subprocess.run([exe, str(script), str(out / "open_in_paraview.py"), str(dest)], capture_output=True,
+                       text=True, env=_pvbatch_env(), timeout=300)
+    assert p.returncode == 0, p.stderr[-3000:]
+    return json.loads(dest.read_text())
 
 
 @pytest.mark.timeout(900)
@@ -351,13 +373,7 @@ def test_the_runs_paraview_script_names_the_groups_and_blanks_covered_zones(pvba
     out = tmp_path / "out"
     r = immerse("run", case, "--out", out)
     assert r.returncode in (0, 1), r.stderr
-    script = tmp_path / "trace_check.py"
-    script.write_text(TRACE_CHECK)
-    dest = tmp_path / "got.json"
-    p = subprocess.run([pvbatch, str(script), str(out / "open_in_paraview.py"), str(dest)], capture_output=True,
-                       text=True, env=_pvbatch_env(), timeout=300)
-    assert p.returncode == 0, p.stderr[-3000:]
-    got = json.loads(dest.read_text())
+    got = trace_check(pvbatch, out, tmp_path)
     assert got["names"] == ["ale", body] and got["roles"] == ["ale", body], got
     assert got["ale"]["cells"] > 0 and got[body]["cells"] >= 0 and len(got["times"]) >= 3
     assert got["ale"]["zeros"] == 0 and got["ale"]["min"] > 0.0 and got["range"][0] > 0.0, got

@@ -108,3 +108,19 @@ def test_run_dt_min_stops_the_run_naming_what_set_the_step(tmp_path):
     last = r.stderr.strip().splitlines()[-1]
     assert re.fullmatch(r"immerse: run failed: coupler rank 0: RuntimeError: time step \S+ s below run.dt_min = 1e-07 s "
                         r"at step 1, t = 0 s; set by lagrange: sound speed limit in element \d+ of body 'bar' .*", last), last
+
+
+def test_a_run_cut_short_by_max_steps_writes_its_last_state_and_says_so(tmp_path):
+    """run.max_steps = 3 in Sod's tube (outputs every 0.01 s, 0.2 s to go): the third step's state is
+    written (outputs held only step 0 before: the run's last state was lost), no checkpoint is taken
+    at it, and the run's last line says it stopped before its end time (its check measures the part
+    it ran)."""
+    from orchestrator.view import available
+
+    case = _variant(tmp_path, "sod", _few_steps("0.2"))
+    r = immerse("run", case, "--out", tmp_path / "out", timeout=300)
+    assert r.returncode in (0, 1), r.stdout + r.stderr
+    assert [s[1] for s in available(tmp_path / "out")["ale"]["steps"]] == [0, 3]
+    last = r.stdout.strip().splitlines()[-1]
+    assert re.search(r"sod: 3 steps in \S+ s -> .*; stopped by run\.max_steps at t = \S+ s, before the case's "
+                     r"end_time; check (passed|FAILED)$", last), last
