@@ -220,8 +220,8 @@ def _sph(dim: int, model: str) -> str:
     """A small block of particles (taitwater under gravity on fixed particles, or an ideal gas)."""
     z = [0.0] * dim
     lo, hi = [-0.1] * dim, [0.5] * dim
-    mat = ('{ model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.3 }' if model == "taitwater"
-           else '{ model = "idealgas", viscosity = 0.5 }')
+    mat = ('{ model = "tait", density = 1000.0, sound_speed = 20.0, viscosity = 0.3 }' if model == "taitwater"
+           else '{ model = "ideal_gas", viscosity = 0.5 }')
     state = "" if model == "taitwater" else ", pressure = 1.0"
     floor = (f'  {{ material = "m", region = {{ box = {{ lower = {[-0.1] * dim}, upper = {[0.4] + [0.0] * (dim - 1)} }} }}, '
              'density = 1000.0, fixed = true },\n') if model == "taitwater" else ""

@@ -32,7 +32,7 @@ domain = {{ lower = [{lo!r}, {lo!r}], upper = [{xhi!r}, 1.0] }}
 boundaries = {{ x_lower = "wall", x_upper = "wall", y_lower = "wall", y_upper = "open" }}
 gravity = [0.0, -9.81]
 substeps = {substeps}
-materials.water = {{ model = "taitwater", density = 1000.0, sound_speed = 22.15, viscosity = 0.3 }}
+materials.water = {{ model = "tait", density = 1000.0, sound_speed = 22.15, viscosity = 0.3 }}
 bodies = [
   {{ name = "water", material = "water", region = {{ box = {{ lower = [0.0, 0.0], upper = [0.25, 0.5] }} }}, density = 1000.0, hydrostatic = true }},
   {{ name = "floor", material = "water", region = {{ box = {{ lower = [{w!r}, {w!r}], upper = [{fx!r}, 0.0] }} }}, density = 1000.0, fixed = true }},
@@ -62,7 +62,7 @@ smoothing_length = {h!r}
 domain = {{ lower = [0.0, 0.0], upper = [1.5, 0.75] }}
 boundaries = {{ x_lower = "wall", x_upper = "wall", y_lower = "wall", y_upper = "wall" }}
 gravity = [0.0, -9.81]
-materials.water = {{ model = "taitwater", density = 1000.0, sound_speed = 22.15, viscosity = 0.3 }}
+materials.water = {{ model = "tait", density = 1000.0, sound_speed = 22.15, viscosity = 0.3 }}
 bodies = [ {{ name = "water", material = "water", region = {{ box = {{ lower = [0.0, 0.0], upper = [0.25, 0.5] }} }}, density = 1000.0, hydrostatic = true }} ]
 
 [coupling]

@@ -19,6 +19,15 @@ SPELLINGS = (
 )
 
 
+_SPH_MODEL = ("the background's EOS name for the same law (sph.materials model names LAMMPS's pair style "
+              "before)")
+VALUE_SPELLINGS = (
+    # (the path of keys to a {name: material} table; key; old value; new value; why)
+    (("sph", "materials"), "model", "taitwater", "tait", _SPH_MODEL),
+    (("sph", "materials"), "model", "idealgas", "ideal_gas", _SPH_MODEL),
+)
+
+
 def respell(data: dict) -> list[str]:
     """Rename every older spelling in the raw case ``data`` in place (before the schema sees it);
     returns the notes, one line each."""
@@ -38,4 +47,14 @@ def respell(data: dict) -> list[str]:
                                 f"one and {key}.{new} is given too)")
             m[new] = m.pop(old)
             notes.append(f"note: {key}.{old} is read as {new}: {why}")
+    for path, key, old, new, why in VALUE_SPELLINGS:
+        table = data
+        for k in path:
+            table = table.get(k) if isinstance(table, dict) else None
+        if not isinstance(table, dict):
+            continue
+        for name, m in table.items():
+            if isinstance(m, dict) and m.get(key) == old:
+                m[key] = new
+                notes.append(f"note: {format_key([*path, name, key])} = {old!r} is read as {new!r}: {why}")
     return notes

@@ -29,11 +29,11 @@ Any body may give ``hold``, velocity components held at zero (e.g. ["y"]: a pist
 a channel's walls, as a Lagrangian body's symmetry planes hold it; a free block under end loads
 is otherwise unstable to rigid rotation).
 
-* ``taitwater`` (pair sph/taitwater): p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7; keys density
+* ``tait`` (pair sph/taitwater; the background's ``eos = "tait"`` names the same law): p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7; keys density
   (rho0), sound_speed (c0), viscosity (Monaghan's alpha), optional pressure_cutoff (the least
   pressure, <= 0 and > -B: a strength-free liquid or metal cavitates instead of pulling its
   neighbours back; Tait's law alone holds tension down to -B, 23 GPa for steel);
-* ``idealgas`` (pair sph/idealgas): p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4; key
+* ``ideal_gas`` (pair sph/idealgas; the background's ``eos = "ideal_gas"``): p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4; key
   viscosity (LAMMPS's nu).  Its bodies give pressure or specific_internal_energy.
 """
 from __future__ import annotations
@@ -52,13 +52,18 @@ MAX_PARTICLES = 20_000_000
 """More particles than this in one case is refused (memory of the SPH group and of its output)."""
 
 MODEL_KEYS = {
-    "taitwater": ("model", "density", "sound_speed", "viscosity", "pressure_cutoff"),
-    "idealgas": ("model", "viscosity"),
+    "tait": ("model", "density", "sound_speed", "viscosity", "pressure_cutoff"),
+    "ideal_gas": ("model", "viscosity"),
     "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio", "strength", "eos", "viscosity_q1",
               "viscosity_q2", "hourglass", "heat_capacity"),
 }
-MODEL_REQUIRED = {"taitwater": ("model", "density", "sound_speed", "viscosity"), "idealgas": MODEL_KEYS["idealgas"],
+MODEL_REQUIRED = {"tait": ("model", "density", "sound_speed", "viscosity"), "ideal_gas": MODEL_KEYS["ideal_gas"],
                   "tlsph": ("model", "density", "youngs_modulus", "poisson_ratio")}
+PAIR_STYLE = {"tait": "taitwater", "ideal_gas": "idealgas", "tlsph": "tlsph"}
+"""A case's model name (the background's EOS names where the law is the same) -> the name the
+normalised case and the SPH group use: LAMMPS's pair style (the case's older spellings,
+orchestrator/schema/spellings.py)."""
+CASE_NAME = {v: k for k, v in PAIR_STYLE.items()}
 STRENGTH_TEXT = ("\"linear\", { linear_plastic = { yield_stress, hardening } } or "
                  "{ johnson_cook = { A, B, n, C, strain_rate0, room_temperature, melt_temperature, m } }")
 EOS_TEXT = "\"linear\", \"none\" or { shock = { c0, s, gamma } } (Mie-Grueneisen, linear us-up)"
@@ -118,20 +123,22 @@ MATERIAL = {
     "type": "object",
     "properties": {
         "model": doc({"type": "string", "enum": list(MODEL_KEYS)},
-                     "The LAMMPS pair style (one model per case). taitwater: a weakly compressible liquid, p = B "
-                     "((rho/rho0)^7 - 1), B = c0^2 rho0 / 7 (pair sph/taitwater); idealgas: p = (gamma - 1) rho e "
-                     "with LAMMPS's fixed gamma = 1.4 (pair sph/idealgas); tlsph: an elastic or elastic-plastic "
-                     "solid, total-Lagrangian SPH (MACHDYN's pair smd/tlsph)."),
+                     "The particles' material law (one model per case; the background's EOS names where the "
+                     "law is the same; LAMMPS's pair style names taitwater and idealgas are read with a note). "
+                     "tait: a weakly compressible liquid, p = B ((rho/rho0)^7 - 1), B = c0^2 rho0 / 7 (pair "
+                     "sph/taitwater); ideal_gas: p = (gamma - 1) rho e with LAMMPS's fixed gamma = 1.4 (pair "
+                     "sph/idealgas); tlsph: an elastic or elastic-plastic solid, total-Lagrangian SPH (MACHDYN's "
+                     "pair smd/tlsph)."),
         "density": number("kg/m^3", exclusiveMinimum=0,
-                          description="taitwater: the reference density rho0 of Tait's law; tlsph: the solid's "
+                          description="tait: the reference density rho0 of Tait's law; tlsph: the solid's "
                                       "density."),
-        "sound_speed": number("m/s", exclusiveMinimum=0, description="taitwater: the sound speed c0 at rho0 (sets "
+        "sound_speed": number("m/s", exclusiveMinimum=0, description="tait: the sound speed c0 at rho0 (sets "
                                                                      "Tait's B and the step)."),
         "viscosity": number("dimensionless", minimum=0,
-                            description="The artificial viscosity: taitwater: Monaghan's alpha; idealgas: the "
+                            description="The artificial viscosity: tait: Monaghan's alpha; ideal_gas: the "
                                         "viscosity nu of pair sph/idealgas."),
         "pressure_cutoff": number("Pa", maximum=0,
-                                  description="taitwater: the least pressure (above -B): the material cavitates "
+                                  description="tait: the least pressure (above -B): the material cavitates "
                                               "instead of holding Tait's tension (absent: none)."),
         "youngs_modulus": number("Pa", exclusiveMinimum=0, description="tlsph: Young's modulus E."),
         "poisson_ratio": number("dimensionless", minimum=0, exclusiveMaximum=0.5,
@@ -192,17 +199,17 @@ BODY = table(
                                      "section (inside the case directory), each particle of volume spacing^dim."},
         "density": number("kg/m^3", exclusiveMinimum=0,
                           description="The particles' initial density (their mass: density spacing^dim)."),
-        "pressure": number("Pa", description="idealgas: the initial pressure (or specific_internal_energy)."),
+        "pressure": number("Pa", description="ideal_gas: the initial pressure (or specific_internal_energy)."),
         "specific_internal_energy": number("J/kg", minimum=0,
-                                           description="idealgas: the initial specific internal energy (or "
+                                           description="ideal_gas: the initial specific internal energy (or "
                                                        "pressure)."),
         "velocity": vector("m/s", description="Initial velocity (default: at rest)."),
         "fixed": doc({"type": "boolean"}, "true: boundary particles that never move (fix sph/stationary; tlsph: "
                                           "held, still bonded).", default=False),
         "spacing": number("m", exclusiveMinimum=0, description="The body's own lattice spacing (default: "
                                                                "sph.spacing)."),
-        # taitwater under gravity: the density of the column at rest (else a start-up pressure wave)
-        "hydrostatic": doc({"type": "boolean"}, "taitwater under gravity: start the column at its hydrostatic "
+        # tait under gravity: the density of the column at rest (else a start-up pressure wave)
+        "hydrostatic": doc({"type": "boolean"}, "tait under gravity: start the column at its hydrostatic "
                                                 "density (at rest; else a start-up pressure wave).", default=False),
         # tlsph: the body's particles in this region are held at rest (a clamp)
         "clamp": doc(REGION, "tlsph: the body's particles in this region are held at rest (still bonded: they "
@@ -230,7 +237,7 @@ them).  `immerse bench sph`, driver against LAMMPS alone on the dam break: 0.67 
 round trip, `run` re-initialisation and the t = 0 output amortised (adapters/sph.py)."""
 
 DEFAULT_CFL = 0.1
-"""dt = cfl h / max(c + |v|) (Monaghan's acoustic limit on the kernel support h).  0.1: a taitwater
+"""dt = cfl h / max(c + |v|) (Monaghan's acoustic limit on the kernel support h).  0.1: a tait
 column at rest with fixed boundary particles goes unstable at 0.2 (alpha 0.1 .. 0.3, h = 2 .. 4 dx)
 and holds at 0.1 with alpha >= 0.3 (0.05 for alpha 0.1)."""
 
@@ -259,7 +266,7 @@ SPH = table(
             "minProperties": 1,
             "propertyNames": {"pattern": NAME_PATTERN},
             "additionalProperties": MATERIAL,
-            "description": "The particles' materials by name, e.g. materials.water = { model = \"taitwater\", "
+            "description": "The particles' materials by name, e.g. materials.water = { model = \"tait\", "
                            "... }; one model for all of them.",
         },
         "bodies": {"type": "array", "minItems": 1, "items": BODY,
@@ -304,7 +311,9 @@ def _region(r: dict) -> dict:
 
 
 def _material_value(key: str, v):
-    if key == "model" or isinstance(v, str):
+    if key == "model":
+        return PAIR_STYLE[v]    # (the SPH group's name of the law: LAMMPS's pair style)
+    if isinstance(v, str):
         return v
     if isinstance(v, dict):  # strength / eos tables
         return {k: _material_value(k, w) for k, w in v.items()}
@@ -433,8 +442,8 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
                         f"must be >= sph.spacing = {raw['spacing']} m (the kernel must reach the neighbours)")
     models = {m["model"] for m in sph["materials"].values()}
     if len(models) > 1:
-        raise CaseError("sph.materials", sorted(models), "one material model per case (LAMMPS runs one "
-                        "pair style); allowed: all taitwater, all idealgas or all tlsph")
+        raise CaseError("sph.materials", sorted(CASE_NAME[m] for m in models), "one material model per case "
+                        "(LAMMPS runs one pair style); allowed: all tait, all ideal_gas or all tlsph")
     for mname, m in sph["materials"].items():
         if "pressure_cutoff" in m:
             b = tait_b(m)
@@ -452,13 +461,13 @@ def _check(sph: dict, raw: dict, dim: int, case_dir) -> None:
         state = [k for k in ("pressure", "specific_internal_energy") if k in rb]
         if model == "idealgas" and len(state) != 1:
             raise CaseError(format_key(base), {k: rb[k] for k in state} or "no state",
-                            "an idealgas body needs exactly one of pressure, specific_internal_energy")
+                            "an ideal_gas body needs exactly one of pressure, specific_internal_energy")
         if model == "taitwater" and state:
             raise CaseError(format_key(base + [state[0]]), rb[state[0]],
-                            "a taitwater body's pressure follows from its density (Tait's equation); remove it")
+                            "a tait body's pressure follows from its density (Tait's equation); remove it")
         if body["hydrostatic"] and (model != "taitwater" or not any(sph["gravity"])):
             raise CaseError(format_key(base + ["hydrostatic"]), True,
-                            "needs a taitwater body and a non-zero sph.gravity")
+                            "needs a tait body and a non-zero sph.gravity")
         if model == "tlsph" and state:
             raise CaseError(format_key(base + [state[0]]), rb[state[0]],
                             "a tlsph body starts unstressed at its density; remove it")

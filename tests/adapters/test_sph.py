@@ -224,7 +224,7 @@ smoothing_length = 0.003
 cfl = 0.25
 domain = {{ lower = [-0.05, -0.05], upper = [0.05, 0.05] }}
 boundaries = {{ x_lower = "open", x_upper = "open", y_lower = "open", y_upper = "open" }}
-materials.water = {{ model = "taitwater", density = 1000.0, sound_speed = 50.0, viscosity = 1.0{cutoff} }}
+materials.water = {{ model = "tait", density = 1000.0, sound_speed = 50.0, viscosity = 1.0{cutoff} }}
 bodies = [
   {{ name = "left", material = "water", region = {{ box = {{ lower = [-0.01, -0.005], upper = [0.0, 0.005] }} }}, velocity = [-1.0, 0.0], density = 1000.0 }},
   {{ name = "right", material = "water", region = {{ box = {{ lower = [0.0, -0.005], upper = [0.01, 0.005] }} }}, velocity = [1.0, 0.0], density = 1000.0 }},

@@ -1,5 +1,5 @@
 """SPH particles coupled to the ALE background (issue 10 item 4) end to end through `immerse run`:
-the embedded piston of cases/embedded_piston_sod made of SPH (taitwater) particles.
+the embedded piston of cases/embedded_piston_sod made of SPH (tait: pair sph/taitwater) particles.
 
 A slab 1.5 zones thick (6 x 8 particles, dx = 0.000625, h = 3 dx; rho0 = 1, c0 = 3 m/s: its mass
 per area and compressibility are the FE block's) across Sod's shock tube at the diaphragm, tied to
@@ -41,7 +41,7 @@ spacing = 0.000625
 smoothing_length = 0.001875
 domain = { lower = [0.0, 0.0], upper = [1.0, 0.005] }
 boundaries = { x_lower = "open", x_upper = "open", y_lower = "periodic", y_upper = "periodic" }
-materials.piston = { model = "taitwater", density = 1.0, sound_speed = 3.0, viscosity = 0.3 }
+materials.piston = { model = "tait", density = 1.0, sound_speed = 3.0, viscosity = 0.3 }
 bodies = [ { name = "piston", material = "piston", region = { box = { lower = [0.498125, 0.0], upper = [0.501875, 0.005] } }, density = 1.0 } ]
 
 [coupling]

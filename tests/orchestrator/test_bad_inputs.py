@@ -265,7 +265,7 @@ spacing = 0.01
 smoothing_length = 0.03
 domain = { lower = [0.0, 0.0], upper = [0.2, 0.2] }
 boundaries = { x_lower = "wall", x_upper = "wall", y_lower = "wall", y_upper = "wall" }
-materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }
+materials.water = { model = "tait", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }
 bodies = [ { material = "water", region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }, density = 1000.0 } ]
 lammps_commands = ["fix drag all viscous 0.01"]
 """

@@ -38,3 +38,28 @@ def test_both_spellings_at_once_are_refused(tmp_path):
     with pytest.raises(CaseError) as ei:
         load_case(_water(tmp_path, "rho0 = 1000.0, density = 1000.0"))
     assert ei.value.key == "ale.materials.water.rho0" and "give only density" in str(ei.value)
+
+
+@pytest.mark.parametrize("name, new, old", [("dam_break", "tait", "taitwater"), ("sph_shock_tube", "ideal_gas", "idealgas")])
+def test_the_particles_older_model_names_are_the_same_case_with_a_note(tmp_path, name, new, old):
+    """sph.materials' model takes the background's EOS names (tait, ideal_gas); LAMMPS's pair-style
+    names (taitwater, idealgas) are read under them with a note, the normalised case equal (its
+    model the pair style the SPH group runs) and an unknown name refused naming the allowed ones."""
+    text = (CASES / name / "case.toml").read_text()
+    assert f'model = "{new}"' in text
+    cases = {}
+    for spelling in (new, old, "water"):
+        d = tmp_path / spelling
+        d.mkdir()
+        (d / "case.toml").write_text(text.replace(f'model = "{new}"', f'model = "{spelling}"', 1))
+        if spelling == "water":
+            with pytest.raises(CaseError) as ei:
+                load_case(d)
+            assert ei.value.key.endswith(".model") and "'tait', 'ideal_gas', 'tlsph'" in str(ei.value), str(ei.value)
+        else:
+            cases[spelling] = load_case(d)
+    material = next(iter(cases[new]["sph"]["materials"]))
+    assert cases[new]["_notes"] == [] and cases[old]["_notes"] == [
+        f"note: sph.materials.{material}.model = '{old}' is read as '{new}': the background's EOS name for the same "
+        "law (sph.materials model names LAMMPS's pair style before)"]
+    assert cases[old]["sph"] == cases[new]["sph"] and cases[new]["sph"]["materials"][material]["model"] == old

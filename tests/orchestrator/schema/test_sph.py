@@ -8,10 +8,10 @@ from orchestrator.case import load_case
 from orchestrator.schema.rules import CaseError
 from tests.orchestrator.test_bad_inputs import SPH, edit
 
-SOLID = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
+SOLID = edit(SPH, 'materials.water = { model = "tait", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
              'materials.water = { model = "tlsph", density = 1000.0, youngs_modulus = 1e9, poisson_ratio = 0.3 }')
-GAS = edit(SPH, 'materials.water = { model = "taitwater", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
-           'materials.water = { model = "idealgas", viscosity = 0.5 }')
+GAS = edit(SPH, 'materials.water = { model = "tait", density = 1000.0, sound_speed = 20.0, viscosity = 0.1 }',
+           'materials.water = { model = "ideal_gas", viscosity = 0.5 }')
 REGION = "region = { box = { lower = [0.0, 0.0], upper = [0.1, 0.1] } }"  # the water body's, in SPH
 FROM_FILE = edit(SPH, REGION, 'data_file = "water.data"')  # the same body from a LAMMPS data file
 
@@ -33,12 +33,12 @@ BAD = [
     ("gas_without_state", GAS.replace("density = 1000.0 } ]", "density = 1.0 } ]"), "sph.bodies[0]",
      "exactly one of pressure, specific_internal_energy"),
     ("gas_key_of_water", edit(GAS, 'viscosity = 0.5 }', 'viscosity = 0.5, sound_speed = 3.0 }'),
-     "sph.materials.water.sound_speed", "unknown key for model = 'idealgas'"),
+     "sph.materials.water.sound_speed", "unknown key for model = 'ideal_gas'"),
     ("tension_cutoff_positive", edit(SPH, 'viscosity = 0.1 }', 'viscosity = 0.1, pressure_cutoff = 1.0 }'),
      "sph.materials.water.pressure_cutoff", "<= 0"),
     ("tension_cutoff_beyond_tait", edit(SPH, 'viscosity = 0.1 }', 'viscosity = 0.1, pressure_cutoff = -6.0e4 }'),
      "sph.materials.water.pressure_cutoff", "must be > -B = -c0^2 rho0 / 7 = -57142.9 Pa"),
-    ("two_models", edit(SPH, 'viscosity = 0.1 }', 'viscosity = 0.1 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
+    ("two_models", edit(SPH, 'viscosity = 0.1 }', 'viscosity = 0.1 }\nmaterials.air = { model = "ideal_gas", viscosity = 0.5 }'),
      "sph.materials", "one material model per case"),
     ("cylinder_in_2d", edit(SPH, REGION,
                             'region = { cylinder = { base = [0.1, 0.1], axis = "z", radius = 0.05, length = 0.1 } }'),
@@ -85,7 +85,7 @@ BAD = [
     ("data_file_and_region", edit(SPH, REGION,
                                   REGION + ', data_file = "water.data"'),
      "sph.bodies[0]", "exactly one of region"),
-    ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "idealgas", viscosity = 0.5 }'),
+    ("solid_and_fluid", edit(SOLID, "poisson_ratio = 0.3 }", 'poisson_ratio = 0.3 }\nmaterials.air = { model = "ideal_gas", viscosity = 0.5 }'),
      "sph.materials", "all tlsph"),
     ("coupled_sph_outside_grid", SPH.replace("[sph]", '[ale]\ngrid = { lower = [0.0, 0.0], upper = [0.05, 0.2], cells = [5, 20] }\n'
                                               'materials.air = { eos = "ideal_gas", gamma = 1.4 }\n'
