@@ -326,8 +326,8 @@ def _render_pyvista(pv, sink, path: Path, grid, label: str, field: str, values, 
         plotter.set_background("white")
         plotter.add_mesh(grid, scalars=label, preference=preference, cmap="viridis",
                          clim=(lo, hi), show_edges=edges, edge_color="grey",
-                         # unlit: a colour reads as the bar's value on every face of a 3-D view
-                         lighting=planar,
+                         # unlit: a colour reads as the bar's value (on every face of a 3-D view)
+                         lighting=False,
                          scalar_bar_args={"title": bar_title, "color": "black",
                                           "fmt": "%.3g", "n_labels": 3 if small else 5,
                                           "title_font_size": font, "label_font_size": font,
