@@ -97,6 +97,12 @@ class SolverAdapter(ABC):
         background's zones, orchestrator/coupling/multirate.py pays): e.g. the group's element count."""
         return 1.0
 
+    def substep_h_prev(self) -> float | None:
+        """A central-difference group's last step (0 before its first): its substeps' kicks then take
+        the coupling force at their own times (adapters/substeps.py); None (the default): the force
+        ramp sampled at the substeps' middles."""
+        return None
+
     def snapshot(self):
         """The group's whole state at the start of a coupling step (in memory), for restore()."""
         raise NotImplementedError(f"{self.role}: no substeps")

@@ -68,6 +68,10 @@ class LagrangeAdapter(SolverAdapter):
         self.solver.restore(state[0])
         self._step, self._time = state[1]
 
+    def substep_h_prev(self) -> float:
+        """The solver's last step (0 before its first): its next kick is (h_prev + h) / 2 long."""
+        return 0.0 if self.solver.first_step else float(self.solver.dt_prev)
+
     def predict(self, dt: float, step: int, time: float) -> None:
         self._step, self._time = step, time
         self.solver.predict(dt)

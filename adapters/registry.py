@@ -20,10 +20,11 @@ _SIDES: dict[str, str] = {}
 _SUBSTEPS: dict[str, str] = {}
 # roles whose groups substep only when the case asks (run.multirate = true), never by default
 _SUBSTEPS_ON_REQUEST: set[str] = set()
+_SUBSTEP_KICKS: set[str] = set()   # (roles whose substeps kick at their start times: substep_kicks)
 
 
 def declare(role: str, module: str, case_table: str, coupling_side: str | None = None,
-            substeps: str | None = None, substeps_by_default: bool = True) -> None:
+            substeps: str | None = None, substeps_by_default: bool = True, substep_kicks: bool = False) -> None:
     """Make a role known without importing its (heavy) module; ``substeps``: "module:function"
     (case -> reason or None) when its group can take substeps; ``substeps_by_default`` False: only
     when the case asks (run.multirate = true), not where multi-rate's default finds that it pays."""
@@ -34,6 +35,14 @@ def declare(role: str, module: str, case_table: str, coupling_side: str | None =
         _SUBSTEPS[role] = substeps
     if not substeps_by_default:
         _SUBSTEPS_ON_REQUEST.add(role)
+    if substep_kicks:
+        _SUBSTEP_KICKS.add(role)
+
+
+def substep_kicks(role: str) -> bool:
+    """Whether the role's substeps kick at their start times (a central-difference group: its adapter
+    gives substep_h_prev; adapters/substeps.py), so that the coupler's ramp counts their kicks so."""
+    return role in _SUBSTEP_KICKS
 
 
 def substeps_by_default(role: str) -> bool:
@@ -80,7 +89,7 @@ def adapter_class(role: str) -> type:
 
 # The solvers this project ships. A new solver adds one line here and an adapter module.
 declare("lagrange", "adapters.lagrange", "lagrange", coupling_side="foreground",
-        substeps="solvers.lagrange.integrators:substep_refusal")
+        substeps="solvers.lagrange.integrators:substep_refusal", substep_kicks=True)
 declare("ale", "adapters.ale", "ale", coupling_side="background")
 declare("sph", "adapters.sph", "sph", coupling_side="foreground",  # LAMMPS particles
         substeps="adapters.registry:sph_substep_refusal", substeps_by_default=False)

@@ -101,6 +101,7 @@ def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: floa
     t0 = _time.perf_counter()
     snap = adapter.snapshot()
     v0 = adapter.velocities()
+    h_prev = adapter.substep_h_prev()   # (substeps.py: where its kicks sample the force ramp)
     shape, n = v0.shape, v0.size
 
     def one(h, t_k, imp):
@@ -116,7 +117,7 @@ def _substepped_step(adapter, comm, ic, dt: float, m: int, step: int, time: floa
             adapter.restore(snap)
         first = False
         v_mean, w, _ = substeps(one, adapter.velocities, m, dt, time, ramp[:n].reshape(shape),
-                                ramp[n: 2 * n].reshape(shape), v0)
+                                ramp[n: 2 * n].reshape(shape), v0, h_prev)
         if rank == 0:
             P.send(ic, v_mean, 0, P.TAG_VSTAR)
         work += _time.perf_counter() - t0

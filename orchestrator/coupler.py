@@ -234,12 +234,17 @@ class Coupler:
         m = [int(subs.get(r, 1)) for r in self.fgs]
         predicted, ramps = [None] * len(self.fgs), [None] * len(self.fgs)
         if any(k > 1 for k in m):   # the substepping groups' predictor passes (multirate.py)
+            from adapters.registry import substep_kicks
             from orchestrator.coupling.multirate import Ramp
 
             for i, (fg, k) in enumerate(zip(fgs, m)):
                 if k > 1:
                     mem = c.members[i]
-                    ramps[i] = Ramp(k, dt, self.dt_prev, dt_avg, mem.force_prev)
+                    # (a central-difference group's kicks sample the ramp at their times: its last
+                    # step, the last coupling step over its substeps then, adapters/substeps.py)
+                    h_prev = (self.dt_prev / self._m_last.get(self.fgs[i], 1)
+                              if substep_kicks(self.fgs[i]) else None)
+                    ramps[i] = Ramp(k, dt, self.dt_prev, dt_avg, mem.force_prev, h_prev)
                     predicted[i] = ramps[i].predicted(mem.force_prev, mem.imp_f)
                     P.send(fg, ramps[i].shape(predicted[i]), 0, P.TAG_PREDICT)
         vstars = [P.recv(fg, 0, P.TAG_VSTAR).reshape(-1, c.dim) for fg in fgs]
@@ -670,6 +675,8 @@ class Coupler:
             # the step control (step_control.py): outputs and checkpoints never change a step
             dt, t_new, done = self.clock.next(self.t, proposed)
             if self.multirate:
+                # (the last step's substeps: a restart has them back from the checkpointed counts)
+                self._m_last = dict(self.counts.m)
                 subs = self.counts.update(self.clock.dt, {r: self.dt_scale * groups[r] for r in self.multirate})
             self._watch_step(self.clock.dt)
             self.step += 1

@@ -253,9 +253,12 @@ def test_time_integrators_where_each_fails(tmp_path, run_immerse):
 def test_multirate_campaign_charts_the_same_errors_at_a_fraction_of_the_steps(tmp_path, run_immerse):
     """The campaign multirate on its reduced matrix (the piston at ratios 1 and 4, the solid block at
     4): every multi-rate run passes its case's check, in the gas's 213 / 263 coupling steps against the
-    single-rate 405 / 1617 / 1046; the piston's face pressure error alike (measured 2.31e-5 and 2.25e-5
-    multi-rate, 2.22e-5 and 2.25e-5 single-rate), the block's transmission better multi-rate (4.5e-5
-    against 1.8e-3: the water stepped 4 times below its own limit fails the case's 1e-3 single-rate)."""
+    single-rate 405 / 1617 / 1046; the piston's face pressure error (measured 3.68e-5 and 2.36e-5
+    multi-rate, 2.22e-5 and 2.25e-5 single-rate: at ratio 1, 2-4 substeps a step, the substeps' kicks
+    taking the force at their own times (adapters/substeps.py) moved the pressure from 2.31e-5 to
+    3.68e-5 and the piston's velocity error from 8.59e-5 to 2.55e-5, against its case's 1e-4), the
+    block's transmission better multi-rate (4.5e-5 against 1.8e-3: the water stepped 4 times below its
+    own limit fails the case's 1e-3 single-rate)."""
     out = tmp_path / "out"
     r = run_immerse("campaign", CAMPAIGNS / "multirate", "--out", out, "--only", "ratio=1,4", "block_ratio=4")
     assert r.returncode in (0, 1), r.stdout + r.stderr
@@ -265,9 +268,9 @@ def test_multirate_campaign_charts_the_same_errors_at_a_fraction_of_the_steps(tm
     for k in ("multi-rate-ratio1", "multi-rate-ratio4", "block_multi-rate-block_ratio4"):
         assert rows[k]["status"] == "passed", rows[k]
     assert int(rows["multi-rate-ratio4"]["steps"]) == 213 and int(rows["single-rate-ratio4"]["steps"]) == 1617
-    for ratio in (1, 4):
+    for ratio, share in ((1, 2.0), (4, 1.2)):
         m, s = (float(rows[f"{k}-ratio{ratio}"]["error"]) for k in ("multi-rate", "single-rate"))
-        assert m < 1.2 * s and m < 3e-5, (ratio, m, s)   # (measured 1.04 and 1.00 of it)
+        assert m < share * s and m < 5e-5, (ratio, m, s)   # (measured 1.66 and 1.05 of it)
     blk = {k: float(rows[f"block_{k}-block_ratio4"]["error"]) for k in ("multi-rate", "single-rate")}
     assert blk["multi-rate"] < 2e-4 < blk["single-rate"], blk
     assert (out / "figures" / "multirate_cost.png").is_file() and (out / "figures" / "solid_block_in_water_cost.png").is_file()
