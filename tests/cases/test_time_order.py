@@ -102,8 +102,12 @@ def test_the_coupled_fe_ale_path_is_second_order_in_time(tmp_path, ratio):
     2.2e-12: order 2.02); multi-rate 1.97677447e-6, ...377e-6, ...371e-6 (7.1e-13, 5.7e-14: 3.6,
     its answers within 1.5e-12 of single-rate's limit).
 
-    The planted slip it guards: the substeps sampling the coupling force at their middles, (k + 1/2)
-    / m, with a whole substep's impulse in the run's first kick (the first multi-rate scheme): the
+    The planted slips it guards.  Single-rate: the body's predictor velocity handed to the
+    constraint without its own kick (solvers/lagrange/solver.py constraint_velocity giving v^{n-1/2}
+    instead of v*, the slip issue 46 names on the SPH side): 1.97674241e-6, ...76108e-6, ...76786e-6
+    (differences 1.9e-11, 6.8e-12: order 1.46, failed).  Multi-rate: the substeps sampling the
+    coupling force at their middles, (k + 1/2) / m, with a whole substep's impulse in the run's first
+    kick (the first multi-rate scheme): the
     multi-rate answers 1.97719122e-6, ...698199e-6, ...687779e-6 (differences 2.1e-10, 1.0e-10:
     order 1.01, 400 times further from the limit); the first kick's half impulse alone still 0.96."""
     values = [_displacement(tmp_path, cap, ratio) for cap in CAPS]
