@@ -613,11 +613,13 @@ def render(out_dir, fields: Sequence[str] | None = None, steps: Sequence = ("las
         for time, step, index in chosen:
             pictures.mkdir(parents=True, exist_ok=True)
             if axis is not None:
+                # the bodies in the background along the axis at this step: read once for all its fields
+                spans = ([(b, lo, hi) for b in bodies for lo, hi in _intervals(out_dir, b, index, axis)]
+                         if _is_background(r) else [])
                 for name in names:
                     path = _picture_path(pictures, r, name, index)
                     prof = profiles[name, index]
-                    if _is_background(r):
-                        prof.bodies = [(b, lo, hi) for b in bodies for lo, hi in _intervals(out_dir, b, index, axis)]
+                    prof.bodies = spans
                     fig = line_figure(prof, window_size, ranges.get(name))
                     fig.savefig(path)
                     outdir.record_written(out_dir, path)

@@ -5,6 +5,10 @@ The reference density of a material is ``density`` in every table ([materials] o
 [sph] materials and bodies, [ale.materials]); the background's equations of state (tait, jwl,
 mie_gruneisen) used to call it ``rho0``.  A case that gives both for one material is refused (one
 line): which one it means is not ours to guess.
+
+The particles' material laws take the background's EOS names where the law is the same
+(``sph.materials.<name>.model = "tait"`` / ``"ideal_gas"``); LAMMPS's pair-style names
+``taitwater`` / ``idealgas`` are read under them with a note (VALUE_SPELLINGS).
 """
 from __future__ import annotations
 
@@ -28,15 +32,20 @@ VALUE_SPELLINGS = (
 )
 
 
+def _table_at(data: dict, path: tuple) -> dict | None:
+    """The table at ``path`` in the raw case, or None where it is absent or not a table."""
+    table = data
+    for k in path:
+        table = table.get(k) if isinstance(table, dict) else None
+    return table if isinstance(table, dict) else None
+
+
 def respell(data: dict) -> list[str]:
     """Rename every older spelling in the raw case ``data`` in place (before the schema sees it);
     returns the notes, one line each."""
     notes = []
     for path, named, old, new, why in SPELLINGS:
-        table = data
-        for k in path:
-            table = table.get(k) if isinstance(table, dict) else None
-        if not isinstance(table, dict):
+        if (table := _table_at(data, path)) is None:
             continue
         for name, m in (table.items() if named else [(None, table)]):
             if not isinstance(m, dict) or old not in m:
@@ -48,10 +57,7 @@ def respell(data: dict) -> list[str]:
             m[new] = m.pop(old)
             notes.append(f"note: {key}.{old} is read as {new}: {why}")
     for path, key, old, new, why in VALUE_SPELLINGS:
-        table = data
-        for k in path:
-            table = table.get(k) if isinstance(table, dict) else None
-        if not isinstance(table, dict):
+        if (table := _table_at(data, path)) is None:
             continue
         for name, m in table.items():
             if isinstance(m, dict) and m.get(key) == old:
