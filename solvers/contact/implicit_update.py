@@ -22,8 +22,8 @@ velocity change along the released rows' forces f = G_rel^T k (k_A: the energy e
     vbarbar = vbar + s M^-1 f,   s >= 0 the root of  1/2 s^2 f.M^-1 f + s vbar.f = K,
 
 so that 1/2 vbarbar.M vbarbar - 1/2 vbar.M vbar = K exactly (the seed's alpha^2 is s, there with
-vbar.f = 0). f sums to zero and to zero torque like every contact force of the dual pass (its rows
-balance), so the momenta are unchanged.
+vbar.f = 0). f sums to zero, and to zero moment about the positions its rows were built at (the
+caller builds them where the velocities change, x_{n+1}), so the momenta are unchanged.
 
 M is the lumped (diagonal) mass, given as its inverse per dof (0 on held dofs); G a scipy sparse
 matrix (rows x dofs). The normal system is singular as a rule (dependent rows: the dual pass's two
@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-__all__ = ["GapRateUpdate", "remove_gap_rate", "return_energy"]
+__all__ = ["GapRateUpdate", "release_impulse", "remove_gap_rate", "return_energy"]
 
 
 @dataclass
@@ -97,22 +97,29 @@ def remove_gap_rate(G, inv_mass: np.ndarray, v: np.ndarray) -> GapRateUpdate:
 
 def return_energy(G_released, inv_mass: np.ndarray, v: np.ndarray, stored: np.ndarray) -> np.ndarray:
     """Step 3 (module docstring): velocities with the energy K = sum(stored) given back along the
-    released rows' forces f = G_released^T stored (K > 0: pushing the sides apart, the positive root
-    s; K < 0, an episode that gained energy: taken out, the root nearest zero). Where the direction
-    cannot take out that much (b^2 + 2 a K < 0), as much as it can (s = -b / a); the caller books
-    the change it got."""
+    released rows' forces (release_impulse's)."""
+    return np.asarray(v, dtype=np.float64) + np.asarray(inv_mass, dtype=np.float64) * release_impulse(
+        G_released, inv_mass, v, stored)
+
+
+def release_impulse(G_released, inv_mass: np.ndarray, v: np.ndarray, stored: np.ndarray) -> np.ndarray:
+    """Step 3's impulse s f on every dof, held ones included (there the supports take it), f =
+    G_released^T stored: K = sum(stored) > 0 pushes the sides apart, the positive root s; K < 0, an
+    episode that gained energy, is taken out, the root nearest zero. Where the direction cannot take
+    out that much (b^2 + 2 a K < 0), as much as it can (s = -b / a); the caller books the change it
+    got. Zeros where nothing can be given back."""
     G = sp.csr_matrix(G_released)
     v = np.asarray(v, dtype=np.float64)
     k = np.asarray(stored, dtype=np.float64)
     total = float(k.sum())
     if G.shape[0] == 0 or total == 0.0:
-        return v.copy()
+        return np.zeros_like(v)
     f = G.T @ k
     mf = np.asarray(inv_mass, dtype=np.float64) * f
     a = float(f @ mf)               # f.M^-1 f
     b = float(v @ f)                # vbar.f
     if a <= 0.0:
-        return v.copy()             # (no free dof along the released rows: nothing to give back)
+        return np.zeros_like(v)     # (no free dof along the released rows: nothing to give back)
     disc = b * b + 2.0 * a * total
     if disc < 0.0:                  # (K < 0 beyond this direction's reach: its most)
         s = -b / a
@@ -120,4 +127,4 @@ def return_energy(G_released, inv_mass: np.ndarray, v: np.ndarray, stored: np.nd
         s = 2.0 * total / (b + np.sqrt(disc)) if b > 0.0 else (np.sqrt(disc) - b) / a
     else:
         s = 2.0 * total / (b + np.copysign(np.sqrt(disc), b)) if b != 0.0 else 0.0
-    return v + s * mf
+    return s * f

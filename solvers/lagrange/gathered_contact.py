@@ -59,6 +59,27 @@ class GatheredContact:
 
         return self._stacked(x, weighed)
 
+    def rows_at(self, x: np.ndarray, keys: np.ndarray, fallback) -> sp.csr_matrix:
+        """B's rows of the given keys rebuilt at positions x (n, d), in the keys' order; a key the
+        operator no longer has there (its node outside the capture, or projecting off the other side)
+        keeps its row of ``fallback`` (same rows as keys). The implicit contact update's velocity
+        changes at x_{n+1} take their rows from here: a row is torque-free about the positions it is
+        built at, and only those (implicit_dynamic.py _contact_update)."""
+        keys = np.asarray(keys, dtype=np.int64)
+        if not len(keys):
+            return sp.csr_matrix(fallback)
+        B, _, k = self._stacked(x, lambda c, b, e: sp.csr_matrix((b.shape[0], b.shape[0])))
+        if len(np.unique(k)) < len(k):   # (keys not a row's name here: keep the rows as they were)
+            return sp.csr_matrix(fallback)
+        order = np.argsort(k, kind="stable")
+        at = np.searchsorted(k[order], keys).clip(max=max(len(k) - 1, 0))
+        found = (k[order][at] == keys) if len(k) else np.zeros(len(keys), bool)
+        rows = sp.vstack([B[order[at[found]]], sp.csr_matrix(fallback)[~found]], format="csr")
+        place = np.empty(len(keys), dtype=np.int64)   # each key's row in the stack
+        place[found] = np.arange(int(found.sum()))
+        place[~found] = int(found.sum()) + np.arange(int((~found).sum()))
+        return rows[place]
+
     def _stacked(self, x: np.ndarray, stabilization):
         """Every pair's (B, stabilization(contact, B, E), keys) at positions x, stacked."""
         from solvers.contact import methods
