@@ -193,12 +193,8 @@ def test_the_implicit_schemes_alone_are_second_order_in_time(tmp_path, integrato
     coarsest steps and the differences grew, order -3.4, failed.  Newmark's velocity with the end's
     acceleration only, v0 + dt a1 instead of v0 + dt (a0 + a1) / 2: differences 8.4e-6, 4.3e-6,
     order 0.97, failed."""
-    values = []
-    for dt in IMPLICIT_STEPS:
-        text = ELASTIC_BAR.format(cap=1.0).replace(
-            "group_dt_max = { lagrange = 1.0 }\n", "").replace(
-            "[lagrange]\n", f'[lagrange]\nintegrator = "{integrator}"\ntime_step = {dt}\n')
-        values.append(_probe_at_end(tmp_path, f"{integrator}_{dt:g}", text))
+    values = [_probe_at_end(tmp_path, f"{integrator}_{dt:g}", _implicit(ELASTIC_BAR.format(cap=1.0), integrator, dt))
+              for dt in IMPLICIT_STEPS]
     p, d1, d2 = _order(values)
     assert p > 1.8, (p, d1, d2, values)
 
@@ -250,3 +246,35 @@ def test_explicit_contact_is_second_order_in_time(tmp_path):
     assert p > 1.8, (p, d1, d2, values)
     uncut = _probe_at_end(tmp_path, "uncut", ELASTIC_BAR.format(cap=CAPS[-1]))
     assert abs(values[-1] - uncut) < 2e-10, (values[-1], uncut)
+
+
+def _implicit(text: str, integrator: str, dt: float) -> str:
+    """A case text of this module run with an implicit scheme at a fixed step (no cap)."""
+    return text.replace("group_dt_max = { lagrange = 1.0 }\n", "").replace(
+        "[lagrange]\n", f'[lagrange]\nintegrator = "{integrator}"\ntime_step = {dt}\n')
+
+
+@pytest.mark.parametrize("integrator", ["midpoint", "newmark"])
+def test_the_implicit_schemes_with_contact_are_second_order_in_time(tmp_path, integrator):
+    """The implicit schemes with their contact (implicit_step.py _newton_contact; the midpoint
+    scheme's steps 2 and 3 after it) on the bonded bars (alpha 1e-6), observed order at least 1.8,
+    and the finest answer the uncut bar's to within 5e-10 m.  Measured: midpoint -3.96702348e-4,
+    ...571906e-4, ...547301e-4 m (differences 9.8e-10, 2.5e-10: order 2.00; the uncut bar's
+    1.2e-10 away); Newmark -3.96705473e-4, ...571977e-4, ...547315e-4 (2.00; 6.3e-11 away).
+
+    Planted slip: the midpoint scheme's end velocity taken as the step's mean (as in the test without
+    contact): order 0.97, failed.  What this problem cannot see, measured: the contact operator's
+    time (the cut is flat and does not turn: B is the same at x_n, x_{n+1/2} and x_{n+1}; that slip is
+    the angular-momentum balance's, tests/cases/test_implicit_cases.py), and Newmark's start
+    acceleration without the last step's contact force (f_contact0; the multiplier of a held contact
+    takes up the difference: answers changed by 2e-10).  With the default alpha = 1 the implicit
+    stabilization, weighed against the step's matrix 2 M / dt^2 + K, is a compliance that grows with
+    the step: -6.78e-4, -5.69e-4, -4.89e-4 m against the uncut -3.95e-4 (order 0.46, 24 % off at the
+    finest step)."""
+    values = [_probe_at_end(tmp_path, f"bonded_{integrator}_{dt:g}",
+                            _implicit(BONDED_BARS.format(cap=1.0, alpha=1e-6), integrator, dt)) for dt in IMPLICIT_STEPS]
+    p, d1, d2 = _order(values)
+    assert p > 1.8, (p, d1, d2, values)
+    uncut = _probe_at_end(tmp_path, f"uncut_{integrator}", _implicit(ELASTIC_BAR.format(cap=1.0), integrator,
+                                                                    IMPLICIT_STEPS[-1]))
+    assert abs(values[-1] - uncut) < 5e-10, (values[-1], uncut)
