@@ -1,8 +1,8 @@
 """Two-node shells of 2-D scenes (issue 45, its first piece): a plane-strain strip of a plate (a unit
 depth of a shell in cylindrical bending), as a corotational Timoshenko beam with one-point quadrature
-along it and integration points through its thickness. The element kernel only: internal forces and
-moments, lumped masses with their rotary inertia, the stable step. Not yet in the solver, the case
-file or the coupling.
+along it and integration points through its thickness, elastic or J2-plastic (strip_plasticity.py).
+The element kernel only: internal forces and moments, lumped masses with their rotary inertia, the
+stable step. Not yet in the solver, the case file or the coupling.
 
 Why this element. A thin wall bends; a solid needs several elements through its thickness to bend
 and zones smaller than the wall. A shell carries the bending in its rotations: one element through
@@ -49,7 +49,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BeamSection", "internal_forces", "lumped_masses", "stable_step", "SHEAR_FACTOR"]
+__all__ = ["BeamSection", "internal_forces", "lumped_masses", "plastic_state", "stable_step", "SHEAR_FACTOR"]
 
 SHEAR_FACTOR = 5.0 / 6.0
 """k_s: the shear correction of a rectangular section (Reissner-Mindlin's)."""
@@ -57,10 +57,14 @@ SHEAR_FACTOR = 5.0 / 6.0
 
 class BeamSection:
     """The elements' material and section: E, nu, rho (scalars or (ne,)), thickness h (ne,),
-    ``points`` Gauss points through the thickness (5: exact for any linear-elastic profile and
-    enough to resolve a yield front later)."""
+    ``points`` Gauss points through the thickness (5: exact for any linear-elastic profile);
+    ``yield_stress`` (None: elastic) and linear isotropic ``hardening`` make the points J2-plastic
+    (strip_plasticity.py)."""
 
-    def __init__(self, youngs_modulus, poisson_ratio, density, thickness, points: int = 5):
+    def __init__(self, youngs_modulus, poisson_ratio, density, thickness, points: int = 5,
+                 yield_stress=None, hardening=0.0):
+        self.yield_stress = None if yield_stress is None else np.asarray(yield_stress, float)
+        self.hardening = np.asarray(hardening, float)
         self.e = np.asarray(youngs_modulus, float)
         self.nu = np.asarray(poisson_ratio, float)
         self.rho = np.asarray(density, float)
@@ -81,12 +85,21 @@ def _chords(X: np.ndarray, x: np.ndarray, elements: np.ndarray):
     return d / L[:, None], L0, L, beta
 
 
+def plastic_state(n_elements: int, section: BeamSection):
+    """The points' plastic state at rest: (plastic strains (ne, nz, 2) xx and yy, equivalent plastic
+    strains (ne, nz))."""
+    nz = len(section.z_unit)
+    return np.zeros((n_elements, nz, 2)), np.zeros((n_elements, nz))
+
+
 def internal_forces(X: np.ndarray, x: np.ndarray, theta: np.ndarray, elements: np.ndarray,
-                    section: BeamSection, theta0: np.ndarray | None = None):
+                    section: BeamSection, theta0: np.ndarray | None = None, plastic=None):
     """(f (n, 2), m (n,), resultants (ne, 3): N, M, Q) of the elements at positions x (n, 2) and
     rotations theta (n,), reference positions X and rotations theta0 (default 0): the forces the
     elements exert on the nodes are -f and -m (f, m are the internal forces, as the solids' kernels
-    give them: M a = f_ext - f)."""
+    give them: M a = f_ext - f). With a plastic section, ``plastic`` is the points' state at the
+    last step (plastic_state's layout) and a fourth item, the state at this one, is returned (the
+    caller keeps it: nothing is changed in place)."""
     e, L0, L, beta = _chords(X, x, elements)
     th = theta - (0.0 if theta0 is None else theta0)
     t1 = th[elements[:, 0]] - beta
@@ -97,7 +110,20 @@ def internal_forces(X: np.ndarray, x: np.ndarray, theta: np.ndarray, elements: n
     h = np.broadcast_to(section.h, L0.shape)
     z = section.z_unit[None, :] * h[:, None]                    # (ne, nz)
     e_p = np.broadcast_to(section.e_plane, L0.shape)
-    sigma = e_p[:, None] * (eps[:, None] - z * kappa[:, None])  # (ne, nz): the points' stress
+    strain = eps[:, None] - z * kappa[:, None]                  # (ne, nz): the points' eps_xx
+    if section.yield_stress is None:
+        sigma = e_p[:, None] * strain
+        new_state = None
+    else:
+        from solvers.lagrange.strip_plasticity import strip_return
+
+        if plastic is None:
+            raise ValueError("a plastic section needs the points' state (beam2d.plastic_state)")
+        ne = len(L0)
+        col = lambda a: np.broadcast_to(a, (ne,))[:, None]   # noqa: E731  (per element, to the points)
+        sigma, _, ep, al = strip_return(strain, plastic[0], plastic[1], col(section.e), col(section.nu),
+                                        col(section.yield_stress), col(section.hardening))
+        new_state = (ep, al)
     wz = section.w_unit[None, :] * h[:, None]
     N = np.sum(wz * sigma, axis=1)
     M = -np.sum(wz * z * sigma, axis=1)
@@ -110,6 +136,8 @@ def internal_forces(X: np.ndarray, x: np.ndarray, theta: np.ndarray, elements: n
     m = np.zeros(len(x))
     np.add.at(m, elements[:, 0], -M + 0.5 * Q * L0)
     np.add.at(m, elements[:, 1], M + 0.5 * Q * L0)
+    if plastic is not None or section.yield_stress is not None:
+        return f, m, np.stack([N, M, Q], axis=1), new_state
     return f, m, np.stack([N, M, Q], axis=1)
 
 
