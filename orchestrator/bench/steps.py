@@ -93,6 +93,46 @@ def memory_per_element(case: dict) -> float:
     return peak / s.n_cells_global
 
 
+def time_shell2d(n: int, plastic: bool, steps: int, repeats: int) -> float:
+    """Median seconds per element-cycle of the two-node plane-strain shell (solvers/lagrange/beam2d.py:
+    issue 45's first piece, not yet a solver): a free 1 m steel strip of n elements, 10 mm thick,
+    swinging in its first mode; a cycle is the kernel's forces and moments (5 points through the
+    thickness; plastic: J2 at them) and the central difference's kick and drift, vectorised numpy."""
+    from solvers.lagrange import beam2d
+
+    s = np.linspace(0.0, 1.0, n + 1)
+    X = np.stack([s, np.zeros_like(s)], axis=1)
+    el = np.stack([np.arange(n), np.arange(1, n + 1)], axis=1)
+    sec = beam2d.BeamSection(2.0e11, 0.3, 7800.0, np.full(n, 0.01), yield_stress=2.5e8 if plastic else None)
+    m, ir = beam2d.lumped_masses(X, el, sec)
+    dt = 0.9 * beam2d.stable_step(X, el, sec)
+    x, th = X.copy(), np.zeros(n + 1)
+    v = np.zeros_like(X)
+    v[:, 1] = 10.0 * np.sin(np.pi * s)
+    w = np.zeros(n + 1)
+    state = beam2d.plastic_state(n, sec) if plastic else None
+
+    def cycle():
+        nonlocal x, th, v, w, state
+        out = beam2d.internal_forces(X, x, th, el, sec, plastic=state)
+        if plastic:
+            state = out[3]
+        v = v - dt * out[0] / m[:, None]
+        w = w - dt * out[1] / ir
+        x = x + dt * v
+        th = th + dt * w
+
+    for _ in range(3):
+        cycle()
+    samples = []
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for _ in range(steps):
+            cycle()
+        samples.append((time.perf_counter() - t0) / (steps * n))
+    return float(np.median(samples))
+
+
 @bench("lagrange")
 def bench_lagrange(out: Path, quick: bool = False) -> Path:
     from mpi4py import MPI
@@ -126,6 +166,15 @@ def bench_lagrange(out: Path, quick: bool = False) -> Path:
                             "params": {"elements": ne, "ranks": 1, "steps": steps, "repeats": 5}})
         results.append({"name": f"lagrange_{label}_assumed_strain_vs_viscous", "metric": "cost_ratio",
                         "value": cost["assumed_strain"] / cost["viscous"], "unit": "", "params": {"elements": ne_n}})
+    # the plane-strain shell strip's kernel (issue 45: not yet a solver step), elastic and J2
+    for label, plastic in (("elastic", False), ("j2", True)):
+        for n in ((1000, 10000) if quick else (10000, 100000)):
+            steps = 5 if quick else max(5, int(2e6 / n))
+            sec = time_shell2d(n, plastic, steps, repeats=5)
+            results.append({"name": f"shell2d_strip_{label}", "metric": "time_per_element_cycle",
+                            "value": sec * 1e6, "unit": "us",
+                            "params": {"elements": n, "ranks": 1, "steps": steps, "repeats": 5,
+                                       "points_through_thickness": 5, "kernel": "beam2d, vectorised numpy"}})
     # 2-rank speed-up at the largest size, measured in one run of mpiexec -n 2 against 1 rank
     for label, mat, vel in (("elastic", ELASTIC, 1.0),):
         n = sizes[-1]

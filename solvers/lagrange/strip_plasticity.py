@@ -13,7 +13,7 @@ isotropic hardening), small strain, sigma = C (eps - eps_p) with C the plane-str
     alpha(dg) = alpha_n + dg sqrt(2/3 (s1^2 / 3 + s2^2)),
 
 solved for the consistency parameter dg >= 0 by Newton on the scalar f from dg = 0, clipped at 0
-(vectorised over all points, a fixed number of iterations); eps_p += dg P sigma. The von Mises stress sqrt(sigma_xx^2 - sigma_xx sigma_yy +
+(vectorised over the yielding points, until every one has converged); eps_p += dg P sigma. The von Mises stress sqrt(sigma_xx^2 - sigma_xx sigma_yy +
 sigma_yy^2) is then sigma_y + H alpha. Fully plastic in uniaxial plane strain the flow is
 incompressible: sigma_yy = sigma_xx / 2 and sigma_xx = 2 sigma_y / sqrt 3 (the plane-strain yield
 stress)."""
@@ -24,8 +24,8 @@ import numpy as np
 __all__ = ["strip_return", "plane_strain_yield"]
 
 NEWTON_ITERATIONS = 30
-"""Newton steps on the scalar consistency condition (quadratic convergence: 5-8 suffice; the extra
-ones cost nothing vectorised and the residual is checked by the tests)."""
+"""The most Newton steps on the scalar consistency condition (it converges quadratically: 3-6; the
+loop ends when every yielding point's f is within 1e-15 of k^2)."""
 
 
 def plane_strain_yield(yield_stress: float) -> float:
@@ -38,18 +38,18 @@ def strip_return(eps_xx: np.ndarray, eps_p: np.ndarray, alpha: np.ndarray, young
     """(sigma_xx, sigma_yy, eps_p new (..., 2), alpha new) at the points with total strain (eps_xx, 0),
     plastic strains eps_p (..., 2) (xx, yy) and equivalent plastic strains alpha (...), after the
     return mapping (module docstring). Inputs broadcast; nothing is changed in place."""
-    e = np.asarray(youngs_modulus, float)
-    nu = np.asarray(poisson_ratio, float)
+    shape = np.broadcast_shapes(np.shape(eps_xx), eps_p.shape[:-1], np.shape(alpha))
+    full = lambda a: np.broadcast_to(np.asarray(a, float), shape)   # noqa: E731
+    e, nu, alpha = full(youngs_modulus), full(poisson_ratio), full(alpha)
     g = e / (2.0 * (1.0 + nu))
     c = e / (1.0 - nu * nu)
-    ex = np.asarray(eps_xx, float) - eps_p[..., 0]
-    ey = -eps_p[..., 1]
+    ex = full(eps_xx) - eps_p[..., 0]
+    ey = -np.broadcast_to(eps_p[..., 1], shape)
     sx, sy = c * (ex + nu * ey), c * (ey + nu * ex)            # the elastic trial
     r2 = np.sqrt(2.0)
     s1t, s2t = (sx + sy) / r2, (sx - sy) / r2
     a1, a2 = e / (3.0 * (1.0 - nu)), 2.0 * g
-    sy0 = np.asarray(yield_stress, float)
-    hard = np.asarray(hardening, float)
+    sy0, hard = full(yield_stress), full(hardening)
 
     def parts(dg):
         s1, s2 = s1t / (1.0 + a1 * dg), s2t / (1.0 + a2 * dg)
@@ -57,19 +57,26 @@ def strip_return(eps_xx: np.ndarray, eps_p: np.ndarray, alpha: np.ndarray, young
         return s1, s2, q
 
     q_trial = s1t * s1t / 3.0 + s2t * s2t
-    plastic = 0.5 * q_trial - (sy0 + hard * alpha) ** 2 / 3.0 > 0.0
-    dg = np.zeros(np.broadcast(ex, alpha).shape)
-    for _ in range(NEWTON_ITERATIONS):   # (scalar Newton per point, all points at once)
-        s1, s2, q = parts(dg)
-        k = sy0 + hard * (alpha + dg * np.sqrt(2.0 / 3.0 * q))
-        f = 0.5 * q - k * k / 3.0
-        # df/d(dg) = q'/2 - 2 k k'/3: q' from the two eigen-parts, k' = H (sqrt(2q/3) + dg (q'/3) / sqrt(2q/3))
-        dq = -2.0 * (a1 * s1 * s1 / 3.0 / (1.0 + a1 * dg) + a2 * s2 * s2 / (1.0 + a2 * dg))
-        root = np.sqrt(2.0 / 3.0 * np.maximum(q, 1e-300))
-        dk = hard * (root + dg * (2.0 / 3.0) * dq / (2.0 * root))
-        df = 0.5 * dq - 2.0 * k * dk / 3.0
-        step = np.where(plastic, f / np.where(df != 0.0, df, -1.0), 0.0)
-        dg = np.maximum(dg - step, 0.0)
+    dg = np.zeros(shape)
+    on = np.flatnonzero(0.5 * q_trial - (sy0 + hard * alpha) ** 2 / 3.0 > 0.0)   # the points beyond yield
+    if len(on):
+        S1, S2 = s1t.ravel()[on], s2t.ravel()[on]
+        A1, A2 = a1.ravel()[on], a2.ravel()[on]
+        Y, Hh, Al = sy0.ravel()[on], hard.ravel()[on], alpha.ravel()[on]
+        d = np.zeros(len(on))
+        for _ in range(NEWTON_ITERATIONS):   # (scalar Newton per point, the yielding points at once)
+            s1, s2 = S1 / (1.0 + A1 * d), S2 / (1.0 + A2 * d)
+            q = s1 * s1 / 3.0 + s2 * s2
+            root = np.sqrt(2.0 / 3.0 * np.maximum(q, 1e-300))
+            k = Y + Hh * (Al + d * root)
+            f = 0.5 * q - k * k / 3.0
+            if np.all(np.abs(f) <= 1e-15 * k * k):
+                break
+            # df/d(dg) = q'/2 - 2 k k'/3: q' from the two eigen-parts, k' = H (root + dg (q'/3) / root)
+            dq = -2.0 * (A1 * s1 * s1 / 3.0 / (1.0 + A1 * d) + A2 * s2 * s2 / (1.0 + A2 * d))
+            dk = Hh * (root + d * (2.0 / 3.0) * dq / (2.0 * root))
+            d = np.maximum(d - f / (0.5 * dq - 2.0 * k * dk / 3.0), 0.0)
+        dg.ravel()[on] = d
     s1, s2, q = parts(dg)
     sx, sy = (s1 + s2) / r2, (s1 - s2) / r2
     flow = np.stack([(2.0 * sx - sy) / 3.0, (2.0 * sy - sx) / 3.0], axis=-1)   # P sigma
