@@ -13,8 +13,8 @@ isotropic hardening), small strain, sigma = C (eps - eps_p) with C the plane-str
     alpha(dg) = alpha_n + dg sqrt(2/3 (s1^2 / 3 + s2^2)),
 
 solved for the consistency parameter dg >= 0 by Newton on the scalar f from dg = 0, clipped at 0
-(vectorised over the yielding points, until every one has converged); eps_p += dg P sigma. The von Mises stress sqrt(sigma_xx^2 - sigma_xx sigma_yy +
-sigma_yy^2) is then sigma_y + H alpha. Fully plastic in uniaxial plane strain the flow is
+(vectorised over the yielding points, until every one has converged); eps_p += dg P sigma. The von
+Mises stress sqrt(sigma_xx^2 - sigma_xx sigma_yy + sigma_yy^2) is then sigma_y + H alpha. Fully plastic in uniaxial plane strain the flow is
 incompressible: sigma_yy = sigma_xx / 2 and sigma_xx = 2 sigma_y / sqrt 3 (the plane-strain yield
 stress)."""
 from __future__ import annotations
