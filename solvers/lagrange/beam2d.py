@@ -28,10 +28,10 @@ cannot contract across the depth); the resultants per unit depth N = sum w_k sig
 (k_s = 5/6) made softer by MacNeal's residual bending flexibility: Q = gamma / (1 / (k_s G h) + L0^2 /
 (12 E' I)), I = h^3 / 12. One-point quadrature holds the curvature constant in the element, which
 makes it too stiff by exactly the flexibility a linear moment over L0 would add; put into the shear,
-that flexibility makes the element's stiffness the exact beam's (MacNeal, Nucl. Eng. Des. 70, 1982;
-Computers & Structures 8, 1978): nodal displacements under nodal loads exact (a cantilever's tip to
-1.5e-8, a clamped strip's midspan under pressure to 4e-9; without it -1 / (4 n^2) and -1.6 % at 16
-elements, tests). It does not change bending (kappa) or stretching, nor a thick wall's shear much
+that flexibility makes the element's stiffness the exact beam's (MacNeal's "residual bending
+flexibility", Computers & Structures 8, 1978): nodal displacements under nodal loads exact (a
+cantilever's tip to 1.5e-8, a clamped strip's midspan under pressure to 3.6e-9; without it
+-1 / (4 n^2) and -1.56 % at 16 elements, tests). It does not change bending (kappa) or stretching, nor a thick wall's shear much
 (L0^2 / (12 E' I) against 1 / (k_s G h)). Virtual work L0 (N d eps + M d kappa + Q d gamma) gives
 the nodal forces and moments
 
