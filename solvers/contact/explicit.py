@@ -162,6 +162,7 @@ class ExplicitContact:
         self.last_sliding = 0
         self.last_pressure = np.zeros(len(self.multiplier_nodes))
         self._gap_rows, self._gap_op, self._dim = np.zeros(len(self.multiplier_nodes)), None, dim
+        self.last_held_impulse = out
         if B is None:
             self._remember(np.zeros(0))
             self._measure_penetration(x + dt * np.asarray(v, float), zone)
@@ -199,6 +200,9 @@ class ExplicitContact:
         self._gap_rows, self._gap_op = g0 + floor + B @ u, B
         self._remember(scale * (J1 @ sol.p))
         impulse = np.repeat(self.mass, dim) * u / dt
+        # the pair's share on held components (0 in the impulse: the contact cannot move them), which
+        # the supports take: the balances book its reaction (the contact itself is an internal pair)
+        self.last_held_impulse = (dt * (BT @ sol.p) * (1.0 - self.free.reshape(-1))).reshape(ns, dim)
         if T is not None and self.last_active:
             # Coulomb: the tangential impulses on the velocities after the normal ones, bounded by mu
             # times each row's normal impulse dt p_A (friction.py)
