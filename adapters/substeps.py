@@ -11,7 +11,7 @@ stands for, as the solver's own forces are.  Sampling the ramp at the substeps' 
 (k + 1/2) / m with weights h (the first scheme, kept for groups that give no ``h_prev``: SPH through
 LAMMPS), put the force h/2 early at every kick and a whole h/2 F too much into the first step: the
 multi-rate scheme was first order in the coupling step (issue 46's order test: the piston on a gas
-spring, observed order 1.01 against 2.87 now; tests/cases/test_time_order.py).  Returned:
+spring, observed order 1.01 against 3.6 now; tests/cases/test_time_order.py).  Returned:
 
 * ``v_mean`` (per surface node): the mean of the substeps' velocities v^{k+1/2}, the surface's
   displacement over the coupling step divided by dt (the velocity the constraint ties to the

@@ -45,6 +45,7 @@ from solvers.contact import methods
 from solvers.contact.kkt import solve_schur_complement
 from solvers.contact.nodal_values import constraint_weights, nodal_mean, row_sums, scale_columns
 from solvers.contact.penetration import paired_penetration
+from solvers.sorted_ids import find_sorted
 
 __all__ = ["ExplicitContact"]
 
@@ -131,10 +132,8 @@ class ExplicitContact:
         """Each row's floor of the stabilized gap: min(B x^n + (J p)_last, 0) (module docstring)."""
         start = B @ x.reshape(-1)
         last = np.zeros(len(start))
-        if len(self._last_keys):
-            i = np.minimum(np.searchsorted(self._last_keys, self._keys), len(self._last_keys) - 1)
-            hit = self._last_keys[i] == self._keys
-            last[hit] = self._last_offset[i[hit]]
+        i, hit = find_sorted(self._last_keys, self._keys)
+        last[hit] = self._last_offset[i[hit]]
         return np.minimum(start + last, 0.0)
 
     def _remember(self, offset: np.ndarray) -> None:

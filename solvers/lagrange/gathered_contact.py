@@ -21,6 +21,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from solvers.lagrange.surface import exterior_facets
+from solvers.sorted_ids import find_sorted
 
 __all__ = ["GatheredContact"]
 
@@ -72,8 +73,7 @@ class GatheredContact:
         if len(np.unique(k)) < len(k):   # (keys not a row's name here: keep the rows as they were)
             return sp.csr_matrix(fallback)
         order = np.argsort(k, kind="stable")
-        at = np.searchsorted(k[order], keys).clip(max=max(len(k) - 1, 0))
-        found = (k[order][at] == keys) if len(k) else np.zeros(len(keys), bool)
+        at, found = find_sorted(k[order], keys)
         rows = sp.vstack([B[order[at[found]]], sp.csr_matrix(fallback)[~found]], format="csr")
         place = np.empty(len(keys), dtype=np.int64)   # each key's row in the stack
         place[found] = np.arange(int(found.sum()))

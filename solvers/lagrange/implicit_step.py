@@ -39,6 +39,7 @@ import scipy.sparse.linalg as spla
 from solvers.lagrange.discrete_gradient_nh import dg_elements
 from solvers.lagrange.finite_strain import _assemble_matrix, _assemble_vector, assembly_pattern
 from solvers.lagrange.midpoint_svk import midpoint_elements
+from solvers.sorted_ids import find_sorted
 
 __all__ = ["StepResult", "ContactState", "StepFailed", "midpoint_step", "newmark_step"]
 
@@ -195,8 +196,7 @@ def _last_pressures(keys: np.ndarray, active_keys: dict | None) -> np.ndarray:
         known = np.fromiter(active_keys.keys(), dtype=np.int64, count=len(active_keys))
         value = np.fromiter(active_keys.values(), dtype=np.float64, count=len(active_keys))
         order = np.argsort(known)
-        at = np.searchsorted(known[order], keys).clip(max=len(known) - 1)
-        hit = known[order][at] == keys
+        at, hit = find_sorted(known[order], keys)
         p[hit] = value[order][at[hit]]
     return p
 
